@@ -1,0 +1,79 @@
+#include "ldimesh/core/pipeline.hpp"
+
+#include <chrono>
+#include <stdexcept>
+
+#include "ldimesh/core/trim.hpp"
+
+namespace ldimesh {
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+float squared_distance(const glm::vec3& a, const glm::vec3& b) {
+  const glm::vec3 d = a - b;
+  return glm::dot(d, d);
+}
+
+}  // namespace
+
+MeshingResult mesh_ldis(std::span<const Ldi> ldis, const MeshingOptions& options) {
+  if (!(options.r >= 0.0 && options.r <= 1.0))
+    throw std::invalid_argument("trimming parameter r must lie in [0, 1]");
+  if (ldis.size() > 255) throw std::invalid_argument("at most 255 views");
+
+  MeshingResult result;
+  Mesh& mesh = result.mesh;
+  for (const Ldi& ldi : ldis) mesh.view_dirs.push_back(ldi.view.dir);
+
+  for (std::size_t k = 0; k < ldis.size(); ++k) {
+    const Ldi& ldi = ldis[k];
+    result.samples += ldi.sample_count();
+
+    auto start = std::chrono::steady_clock::now();
+    std::vector<std::uint32_t> quads = build_quads(ldi, options.matching);
+    result.quads_untrimmed += quads.size() / 4;
+    result.seconds.match += seconds_since(start);
+
+    start = std::chrono::steady_clock::now();
+    const std::vector<glm::vec3> positions = sample_positions(ldi);
+    result.quads += trim_by_view_quality(quads, positions, ldi.view.dir, mesh.view_dirs, options.r);
+    result.seconds.trim += seconds_since(start);
+
+    start = std::chrono::steady_clock::now();
+    // One vertex per sample used by a kept quad, in sample order.
+    constexpr std::uint32_t kUnused = UINT32_MAX;
+    std::vector<std::uint32_t> vertex_of(ldi.sample_count(), kUnused);
+    for (std::uint32_t s : quads) vertex_of[s] = 0;
+    const std::uint32_t base = std::uint32_t(mesh.positions.size());
+    std::uint32_t next = base;
+    for (std::size_t s = 0; s < vertex_of.size(); ++s) {
+      if (vertex_of[s] == kUnused) continue;
+      vertex_of[s] = next++;
+      mesh.positions.push_back(positions[s]);
+      mesh.normals.push_back(ldi.normal[s]);
+    }
+    const std::uint8_t view = std::uint8_t(k);
+    for (std::size_t q = 0; q < quads.size(); q += 4) {
+      const std::uint32_t a = vertex_of[quads[q]], b = vertex_of[quads[q + 1]],
+                          c = vertex_of[quads[q + 2]], d = vertex_of[quads[q + 3]];
+      if (options.faces == FaceType::quads) {
+        mesh.quads.insert(mesh.quads.end(), {a, b, c, d});
+        mesh.quad_view.push_back(view);
+      } else if (squared_distance(mesh.positions[a], mesh.positions[c]) <=
+                 squared_distance(mesh.positions[b], mesh.positions[d])) {
+        mesh.triangles.insert(mesh.triangles.end(), {a, b, c, a, c, d});
+        mesh.triangle_view.insert(mesh.triangle_view.end(), {view, view});
+      } else {
+        mesh.triangles.insert(mesh.triangles.end(), {a, b, d, b, c, d});
+        mesh.triangle_view.insert(mesh.triangle_view.end(), {view, view});
+      }
+    }
+    result.seconds.assemble += seconds_since(start);
+  }
+  return result;
+}
+
+}  // namespace ldimesh

@@ -1,0 +1,183 @@
+#include "ldimesh/core/raycaster.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+namespace ldimesh {
+namespace {
+
+// Sorts one ray's hits by depth and merges hits closer than `tolerance` (a root found by both
+// primitives that share a face). Ties in depth are broken by the normal so that the result
+// does not depend on the order in which Embree visited the primitives.
+void sort_and_merge(std::vector<RayHit>& hits, double tolerance) {
+  std::sort(hits.begin(), hits.end(), [](const RayHit& a, const RayHit& b) {
+    if (a.t != b.t) return a.t < b.t;
+    if (a.normal.x != b.normal.x) return a.normal.x < b.normal.x;
+    if (a.normal.y != b.normal.y) return a.normal.y < b.normal.y;
+    return a.normal.z < b.normal.z;
+  });
+  std::size_t kept = 0;
+  for (std::size_t k = 0; k < hits.size(); ++k)
+    if (kept == 0 || hits[k].t - hits[kept - 1].t > tolerance) hits[kept++] = hits[k];
+  hits.resize(kept);
+}
+
+// Hits of a run of consecutive rays, appended in ray order.
+struct HitRun {
+  std::vector<std::uint32_t> counts;
+  std::vector<float> depth;
+  std::vector<glm::vec3> normal;
+  std::vector<float> scalar;
+};
+
+}  // namespace
+
+RayCaster::RayCaster(const FieldSource& source, double isovalue) {
+  const auto start = std::chrono::steady_clock::now();
+  device_ = rtcNewDevice(nullptr);
+  if (!device_) throw std::runtime_error("Embree: cannot create a device");
+  scene_ = rtcNewScene(device_);
+  if (!scene_) {
+    rtcReleaseDevice(device_);
+    throw std::runtime_error("Embree: cannot create a scene");
+  }
+  rtcSetSceneBuildQuality(scene_, RTC_BUILD_QUALITY_HIGH);
+  try {
+    binding_ = source.bind(device_, isovalue);
+  } catch (...) {
+    rtcReleaseScene(scene_);
+    rtcReleaseDevice(device_);
+    throw;
+  }
+  rtcAttachGeometry(scene_, binding_->geometry());
+  rtcCommitScene(scene_);
+  if (const RTCError error = rtcGetDeviceError(device_); error != RTC_ERROR_NONE) {
+    binding_.reset();
+    rtcReleaseScene(scene_);
+    rtcReleaseDevice(device_);
+    throw std::runtime_error("Embree: scene build failed (RTCError " + std::to_string(int(error)) + ")");
+  }
+  duplicate_tolerance_ = source.duplicate_tolerance();
+  build_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+RayCaster::~RayCaster() {
+  rtcReleaseScene(scene_);
+  binding_.reset();
+  rtcReleaseDevice(device_);
+}
+
+std::size_t RayCaster::primitive_count() const { return binding_->primitive_count(); }
+
+void RayCaster::trace(const View& view, glm::dvec2 image_position,
+                      std::vector<RayHit>& hits) const {
+  hits.clear();
+  RayQuery q;
+  rtcInitIntersectContext(&q.context);
+  q.context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+  q.org = view.point(image_position.x, image_position.y, 0.0);
+  q.dir = view.dir;
+  q.t_min = 0.0;
+  q.t_max = view.depth_extent;
+  q.hits = &hits;
+
+  RTCRayHit rh;
+  rh.ray.org_x = float(q.org.x), rh.ray.org_y = float(q.org.y), rh.ray.org_z = float(q.org.z);
+  rh.ray.dir_x = float(q.dir.x), rh.ray.dir_y = float(q.dir.y), rh.ray.dir_z = float(q.dir.z);
+  // Embree traverses in float: widen its segment a little; the callbacks clip in double.
+  const float pad = float(1e-6 * (1.0 + view.depth_extent));
+  rh.ray.tnear = 0.0f;
+  rh.ray.tfar = float(view.depth_extent) + pad;
+  rh.ray.time = 0.0f;
+  rh.ray.mask = 0xFFFFFFFFu;  // Debian's Embree is built with ray masks: 0 would hit nothing
+  rh.ray.id = 0;
+  rh.ray.flags = 0;
+  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  rtcIntersect1(scene_, &q.context, &rh);
+  sort_and_merge(hits, duplicate_tolerance_);
+}
+
+Ldi RayCaster::cast(const View& view) const {
+  Ldi ldi = make_empty_ldi(view);
+  const int W = view.width, H = view.height;
+  const bool with_scalar = binding_->has_scalar();
+  std::vector<HitRun> rows(H);
+  tbb::parallel_for(tbb::blocked_range<int>(0, H), [&](const tbb::blocked_range<int>& range) {
+    std::vector<RayHit> hits;
+    for (int j = range.begin(); j != range.end(); ++j) {
+      HitRun& row = rows[j];
+      row.counts.resize(W);
+      for (int i = 0; i < W; ++i) {
+        trace(view, {i + 0.5, j + 0.5}, hits);
+        row.counts[i] = std::uint32_t(hits.size());
+        for (const RayHit& h : hits) {
+          row.depth.push_back(float(h.t));
+          row.normal.push_back(h.normal);
+          if (with_scalar) row.scalar.push_back(h.scalar);
+        }
+      }
+    }
+  });
+
+  // Concatenate rows in order: the LDI is the same whatever the thread count.
+  std::size_t total = 0;
+  for (const HitRun& row : rows) total += row.depth.size();
+  if (total > UINT32_MAX) throw std::runtime_error("LDI has more than 2^32 samples");
+  ldi.depth.reserve(total);
+  ldi.normal.reserve(total);
+  if (with_scalar) ldi.scalar.reserve(total);
+  std::uint32_t offset = 0;
+  for (int j = 0; j < H; ++j) {
+    const HitRun& row = rows[j];
+    for (int i = 0; i < W; ++i) {
+      ldi.offsets[std::size_t(j) * W + i] = offset;
+      offset += row.counts[i];
+    }
+    ldi.depth.insert(ldi.depth.end(), row.depth.begin(), row.depth.end());
+    ldi.normal.insert(ldi.normal.end(), row.normal.begin(), row.normal.end());
+    ldi.scalar.insert(ldi.scalar.end(), row.scalar.begin(), row.scalar.end());
+  }
+  ldi.offsets[view.pixel_count()] = offset;
+  return ldi;
+}
+
+RayHitList RayCaster::cast_points(const View& view,
+                                  std::span<const glm::dvec2> image_positions) const {
+  const std::size_t n = image_positions.size();
+  const bool with_scalar = binding_->has_scalar();
+  constexpr std::size_t kChunk = 256;
+  std::vector<HitRun> chunks((n + kChunk - 1) / kChunk);
+  tbb::parallel_for(std::size_t(0), chunks.size(), [&](std::size_t c) {
+    std::vector<RayHit> hits;
+    HitRun& run = chunks[c];
+    for (std::size_t k = c * kChunk; k < std::min(n, (c + 1) * kChunk); ++k) {
+      trace(view, image_positions[k], hits);
+      run.counts.push_back(std::uint32_t(hits.size()));
+      for (const RayHit& h : hits) {
+        run.depth.push_back(float(h.t));
+        run.normal.push_back(h.normal);
+        if (with_scalar) run.scalar.push_back(h.scalar);
+      }
+    }
+  });
+  RayHitList out;
+  out.offsets.reserve(n + 1);
+  out.offsets.push_back(0);
+  for (const HitRun& run : chunks) {
+    for (std::uint32_t c : run.counts) out.offsets.push_back(out.offsets.back() + c);
+    out.depth.insert(out.depth.end(), run.depth.begin(), run.depth.end());
+    out.normal.insert(out.normal.end(), run.normal.begin(), run.normal.end());
+    out.scalar.insert(out.scalar.end(), run.scalar.begin(), run.scalar.end());
+  }
+  return out;
+}
+
+}  // namespace ldimesh

@@ -1,0 +1,55 @@
+#!/usr/bin/env bash
+# The ldimesh command line as a user meets it: bad input gives one line on stderr and a
+# non-zero exit (never a crash); --json prints a summary with the figures; files get written.
+set -u
+ldimesh=$1
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+failures=0
+
+fail() { echo "FAIL: $*"; failures=$((failures + 1)); }
+
+# expect_error DESCRIPTION ARGS...: exit status 1 or 2, exactly one line on stderr, no stdout.
+expect_error() {
+  local what=$1; shift
+  "$ldimesh" "$@" >"$tmp/out" 2>"$tmp/err"
+  local status=$?
+  if [ "$status" -ne 1 ] && [ "$status" -ne 2 ]; then fail "$what: exit status $status"; fi
+  if [ "$(wc -l <"$tmp/err")" -ne 1 ]; then fail "$what: stderr is not one line:"; cat "$tmp/err"; fi
+  if ! grep -q '^ldimesh: error: ' "$tmp/err"; then fail "$what: no 'ldimesh: error:' line"; fi
+  if [ -s "$tmp/out" ]; then fail "$what: printed to stdout"; fi
+}
+
+expect_error "unknown surface" mesh --surface teapot --res 16
+expect_error "resolution 0" mesh --surface sphere --res 0
+expect_error "r above 1" mesh --surface sphere --res 16 --r 1.5
+expect_error "r below 0" mesh --surface sphere --res 16 --r -0.1
+expect_error "unwritable output" mesh --surface sphere --res 16 --out /proc/version/x.ply
+expect_error "unknown format" mesh --surface sphere --res 16 --out "$tmp/x.stl"
+expect_error "bad views" mesh --surface sphere --res 16 --views xq
+expect_error "no subcommand"
+expect_error "tri and quad" mesh --surface sphere --res 16 --tri --quad
+
+# ldimesh surfaces lists every built-in surface.
+"$ldimesh" surfaces >"$tmp/surfaces" || fail "surfaces: non-zero exit"
+for s in sphere torus barth klein marschner-lobb slices; do
+  grep -q "^$s " "$tmp/surfaces" || fail "surfaces: $s missing"
+done
+
+# --json: a parseable summary with the figures; the file is written and non-empty.
+"$ldimesh" mesh --surface klein --res 64 --json --out "$tmp/k.ply" >"$tmp/summary.json" || fail "json run failed"
+for key in '"samples"' '"quads"' '"triangles"' '"raycast"' '"match"' '"trim"'; do
+  grep -q "$key" "$tmp/summary.json" || fail "json: $key missing"
+done
+triangles=$(sed -n 's/^ *"triangles": \([0-9]*\),*$/\1/p' "$tmp/summary.json")
+[ "${triangles:-0}" -gt 1000 ] || fail "json: implausible triangle count '$triangles'"
+[ -s "$tmp/k.ply" ] || fail "json run wrote no PLY"
+grep -aq "element face $((triangles))" "$tmp/k.ply" || fail "PLY face count differs from the summary"
+
+# --quad writes quads only, into an OBJ.
+"$ldimesh" mesh --surface torus --res 32 --quad --out "$tmp/t.obj" >/dev/null || fail "quad obj run failed"
+grep -q '^f ' "$tmp/t.obj" || fail "obj has no faces"
+if grep '^f ' "$tmp/t.obj" | awk 'NF != 5 { bad = 1 } END { exit !bad }'; then fail "obj has non-quad faces"; fi
+
+if [ "$failures" -ne 0 ]; then echo "$failures check(s) failed"; exit 1; fi
+echo "all CLI checks passed"

@@ -1,0 +1,177 @@
+#include "ldimesh/core/raycaster.hpp"
+
+#include <cmath>
+
+#include <gtest/gtest.h>
+
+#include "ldimesh/core/analytic_fields.hpp"
+#include "ldimesh/core/analytic_source.hpp"
+#include "ldimesh/core/surfaces.hpp"
+
+namespace ldimesh {
+namespace {
+
+const Box kSphereBox{{-1.25, -1.25, -1.25}, {1.25, 1.25, 1.25}};
+
+// Two spheres, radius 1 and 0.7: f = (r² − 1)(r² − 0.49) = 0.
+struct ConcentricSpheres {
+  template <class T>
+  T operator()(const T& x, const T& y, const T& z) const {
+    const T r2 = sqr(x) + sqr(y) + sqr(z);
+    return (r2 - 1.0) * (r2 - 0.49);
+  }
+};
+
+// f = (r² − 1)² = ε² gives the shell 1 − ε ≤ r² ≤ 1 + ε, far thinner than a brick.
+struct SquaredSphere {
+  template <class T>
+  T operator()(const T& x, const T& y, const T& z) const {
+    return sqr(sqr(x) + sqr(y) + sqr(z) - 1.0);
+  }
+};
+
+// 64 roots along every ray in z: sin(32π(z + 1)) = 0.5 on z ∈ [−1, 1].
+struct Layers64 {
+  template <class T>
+  T operator()(const T&, const T&, const T& z) const {
+    using std::sin;
+    return sin((32.0 * std::numbers::pi) * (z + 1.0));
+  }
+};
+
+// Depths where the ray through pixel (i, j) of `view` crosses the sphere of radius R around
+// the origin; empty if it misses, nullopt-like flag `grazing` when within `margin` of tangent.
+struct SphereCrossing {
+  int count;
+  double t0, t1;
+  bool grazing;
+};
+SphereCrossing sphere_crossing(const View& view, int i, int j, double R, double margin) {
+  const glm::dvec3 o = view.pixel_point(i, j, 0.0);
+  const double b = glm::dot(o, view.dir);
+  const double dist = std::sqrt(std::max(0.0, glm::dot(o, o) - b * b));
+  if (std::abs(dist - R) < margin) return {0, 0, 0, true};
+  if (dist > R) return {0, 0, 0, false};
+  const double s = std::sqrt(R * R - dist * dist);
+  return {2, -b - s, -b + s, false};
+}
+
+std::vector<View> test_views(const Box& box, int res) {
+  std::vector<View> views = make_axis_views(box, res, "xyz");
+  views.push_back(make_view(box, {0.3, -0.5, 0.8}, res));
+  return views;
+}
+
+TEST(RayCaster, SphereHitsLieOnTheSphere) {
+  const AnalyticSource<fields::Sphere> source(fields::Sphere{}, kSphereBox);
+  const RayCaster caster(source, 1.0);
+  for (const View& view : test_views(kSphereBox, 48)) {
+    const Ldi ldi = caster.cast(view);
+    int through = 0, outside = 0;
+    for (int j = 0; j < view.height; ++j)
+      for (int i = 0; i < view.width; ++i) {
+        const std::size_t p = std::size_t(j) * view.width + i;
+        const SphereCrossing c = sphere_crossing(view, i, j, 1.0, 1e-6);
+        if (c.grazing) continue;
+        ASSERT_EQ(ldi.count(p), std::uint32_t(c.count)) << "pixel " << i << "," << j;
+        if (c.count == 0) {
+          ++outside;
+          continue;
+        }
+        ++through;
+        EXPECT_NEAR(ldi.depth[ldi.begin(p)], c.t0, 1e-5);
+        EXPECT_NEAR(ldi.depth[ldi.begin(p) + 1], c.t1, 1e-5);
+        // Normals are the outward unit radius.
+        const glm::dvec3 q = view.pixel_point(i, j, ldi.depth[ldi.begin(p)]);
+        EXPECT_NEAR(glm::length(glm::dvec3(ldi.normal[ldi.begin(p)]) - glm::normalize(q)), 0.0, 1e-4);
+      }
+    EXPECT_GT(through, 500);
+    EXPECT_GT(outside, 100);
+  }
+}
+
+TEST(RayCaster, TwoConcentricSpheresGiveFourHits) {
+  const AnalyticSource<ConcentricSpheres> source(ConcentricSpheres{}, kSphereBox);
+  const RayCaster caster(source, 0.0);
+  const View view = make_view(kSphereBox, {0.2, 0.1, 1.0}, 64);
+  const Ldi ldi = caster.cast(view);
+  int four = 0;
+  for (int j = 0; j < view.height; ++j)
+    for (int i = 0; i < view.width; ++i) {
+      const SphereCrossing outer = sphere_crossing(view, i, j, 1.0, 1e-6);
+      const SphereCrossing inner = sphere_crossing(view, i, j, 0.7, 1e-6);
+      if (outer.grazing || inner.grazing) continue;
+      const std::size_t p = std::size_t(j) * view.width + i;
+      ASSERT_EQ(ldi.count(p), std::uint32_t(outer.count + inner.count));
+      if (inner.count == 0) continue;
+      ++four;
+      const float* d = &ldi.depth[ldi.begin(p)];
+      EXPECT_NEAR(d[0], outer.t0, 1e-5);
+      EXPECT_NEAR(d[1], inner.t0, 1e-5);
+      EXPECT_NEAR(d[2], inner.t1, 1e-5);
+      EXPECT_NEAR(d[3], outer.t1, 1e-5);
+    }
+  EXPECT_GT(four, 500);
+}
+
+TEST(RayCaster, ShellThinnerThanABrickIsNeverMissed) {
+  // Shell of thickness ≈ 2e-4 against bricks of 2.5 / 8 = 0.31.
+  const double eps = 2e-4;
+  const AnalyticSource<SquaredSphere> source(SquaredSphere{}, kSphereBox, 0.0, 8);
+  const RayCaster caster(source, eps * eps);
+  const double r_in = std::sqrt(1 - eps), r_out = std::sqrt(1 + eps);
+  ASSERT_LT(r_out - r_in, 1e-3 * (2.5 / 8));
+  for (const View& view : test_views(kSphereBox, 40)) {
+    const Ldi ldi = caster.cast(view);
+    for (int j = 0; j < view.height; ++j)
+      for (int i = 0; i < view.width; ++i) {
+        const SphereCrossing outer = sphere_crossing(view, i, j, r_out, 1e-6);
+        const SphereCrossing inner = sphere_crossing(view, i, j, r_in, 1e-6);
+        if (outer.grazing || inner.grazing) continue;
+        const std::size_t p = std::size_t(j) * view.width + i;
+        ASSERT_EQ(ldi.count(p), std::uint32_t(outer.count + inner.count)) << "pixel " << i << "," << j;
+      }
+  }
+}
+
+TEST(RayCaster, SixtyFourLayersAlongEveryRay) {
+  const Box box{{-1, -1, -1}, {1, 1, 1}};
+  const AnalyticSource<Layers64> source(Layers64{}, box, 0.0, 4);
+  const RayCaster caster(source, 0.5);
+  const Ldi ldi = caster.cast(make_view(box, {0, 0, 1}, 8));
+  for (std::size_t p = 0; p < ldi.pixel_count(); ++p) {
+    ASSERT_EQ(ldi.count(p), 64u);
+    for (std::uint32_t k = 0; k < 64; ++k) {
+      const double phase = (k % 2 == 0 ? 1.0 / 6 : 5.0 / 6) + 2.0 * (k / 2);  // in units of π
+      EXPECT_NEAR(ldi.depth[ldi.begin(p) + k], phase / 32.0, 1e-5);
+    }
+  }
+}
+
+TEST(RayCaster, RaysBetweenPixelCentresMatchTheSphere) {
+  const AnalyticSource<fields::Sphere> source(fields::Sphere{}, kSphereBox);
+  const RayCaster caster(source, 1.0);
+  const View view = make_view(kSphereBox, {0, 0, 1}, 16);
+  const std::vector<glm::dvec2> points{{8.0, 8.0}, {0.25, 0.25}, {3.75, 9.5}};
+  const RayHitList hits = caster.cast_points(view, points);
+  ASSERT_EQ(hits.offsets.size(), points.size() + 1);
+  EXPECT_EQ(hits.offsets[1] - hits.offsets[0], 2u);  // through the centre: depth 0.25 and 2.25
+  EXPECT_NEAR(hits.depth[0], 0.25, 1e-6);
+  EXPECT_NEAR(hits.depth[1], 2.25, 1e-6);
+  EXPECT_EQ(hits.offsets[2] - hits.offsets[1], 0u);  // the corner misses
+}
+
+TEST(RayCaster, BuiltinSurfacesProduceHits) {
+  for (const SurfaceInfo& s : builtin_surfaces()) {
+    const auto source = make_surface_source(s.name, 16);
+    const RayCaster caster(*source, s.isovalue);
+    EXPECT_GT(caster.primitive_count(), 0u) << s.name;
+    std::size_t samples = 0;
+    for (const View& view : make_axis_views(s.domain, 32)) samples += caster.cast(view).sample_count();
+    EXPECT_GT(samples, 300u) << s.name;
+  }
+  EXPECT_THROW(make_surface_source("no-such-surface"), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace ldimesh
