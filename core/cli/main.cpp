@@ -4,8 +4,8 @@
 #include <cctype>
 #include <cerrno>
 #include <chrono>
-#include <cstring>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <iostream>
 #include <memory>
@@ -14,10 +14,10 @@
 #include <thread>
 #include <vector>
 
-#include <CLI/CLI.hpp>
-#include <nlohmann/json.hpp>
 #include <tbb/global_control.h>
 #include <tbb/info.h>
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 
 #include "ldimesh/core/mesh_io.hpp"
 #include "ldimesh/core/pipeline.hpp"
@@ -52,7 +52,9 @@ void check_writable(const std::string& path) {
   const fs::path p(path);
   std::error_code ec;
   if (p.has_parent_path()) fs::create_directories(p.parent_path(), ec);
-  if (ec) throw std::runtime_error("cannot create folder '" + p.parent_path().string() + "': " + ec.message());
+  if (ec)
+    throw std::runtime_error("cannot create folder '" + p.parent_path().string() +
+                             "': " + ec.message());
   std::FILE* f = std::fopen(path.c_str(), "ab");
   if (!f) throw std::runtime_error("cannot write '" + path + "': " + std::strerror(errno));
   std::fclose(f);
@@ -62,29 +64,35 @@ int run_surfaces() {
   for (const ldimesh::SurfaceInfo& s : ldimesh::builtin_surfaces()) {
     std::printf("%-15s %s\n", s.name.c_str(), s.formula.c_str());
     std::printf("%-15s domain [%g, %g] x [%g, %g] x [%g, %g], isovalue %g\n", "", s.domain.lo.x,
-                s.domain.hi.x, s.domain.lo.y, s.domain.hi.y, s.domain.lo.z, s.domain.hi.z, s.isovalue);
+                s.domain.hi.x, s.domain.lo.y, s.domain.hi.y, s.domain.lo.z, s.domain.hi.z,
+                s.isovalue);
   }
   return 0;
 }
 
 int run_mesh(const MeshArgs& args) {
   const ldimesh::SurfaceInfo* surface = ldimesh::find_surface(args.surface);
-  if (!surface) throw std::runtime_error("unknown surface '" + args.surface + "' (see 'ldimesh surfaces')");
+  if (!surface)
+    throw std::runtime_error("unknown surface '" + args.surface + "' (see 'ldimesh surfaces')");
   if (!args.out.empty()) {
     std::string ext = std::filesystem::path(args.out).extension().string();
-    for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    for (char& c : ext)
+      c = char(std::tolower(static_cast<unsigned char>(c)));
     if (ext != ".ply" && ext != ".obj")
-      throw std::runtime_error("cannot tell the format of '" + args.out + "': use a .ply or .obj file name");
+      throw std::runtime_error("cannot tell the format of '" + args.out +
+                               "': use a .ply or .obj file name");
     check_writable(args.out);
   }
 
   const int threads = args.threads > 0 ? args.threads : tbb::info::default_concurrency();
   tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
   const double iso = args.isovalue.value_or(surface->isovalue);
-  const std::vector<ldimesh::View> views = ldimesh::make_axis_views(surface->domain, args.res, args.views);
+  const std::vector<ldimesh::View> views =
+      ldimesh::make_axis_views(surface->domain, args.res, args.views);
 
   auto start = std::chrono::steady_clock::now();
-  const std::unique_ptr<ldimesh::FieldSource> source = ldimesh::make_surface_source(surface->name, args.bricks);
+  const std::unique_ptr<ldimesh::FieldSource> source =
+      ldimesh::make_surface_source(surface->name, args.bricks);
   const ldimesh::RayCaster caster(*source, iso);
   const double scene_seconds = seconds_since(start);
 
@@ -106,7 +114,8 @@ int run_mesh(const MeshArgs& args) {
   double write_seconds = 0.0;
   if (!args.out.empty()) {
     start = std::chrono::steady_clock::now();
-    if (const ldimesh::Status s = ldimesh::write_mesh(args.out, result.mesh); !s) throw std::runtime_error(s.message());
+    if (const ldimesh::Status s = ldimesh::write_mesh(args.out, result.mesh); !s)
+      throw std::runtime_error(s.message());
     write_seconds = seconds_since(start);
   }
 
@@ -130,21 +139,26 @@ int run_mesh(const MeshArgs& args) {
     j["faces"] = m.face_count();
     j["face_type"] = args.quads ? "quads" : "triangles";
     j["output"] = args.out.empty() ? nlohmann::json(nullptr) : nlohmann::json(args.out);
-    j["seconds"] = {{"scene", scene_seconds},          {"raycast", cast_seconds},
-                    {"match", result.seconds.match},   {"trim", result.seconds.trim},
-                    {"assemble", result.seconds.assemble}, {"write", write_seconds}};
+    j["seconds"] = {{"scene", scene_seconds},
+                    {"raycast", cast_seconds},
+                    {"match", result.seconds.match},
+                    {"trim", result.seconds.trim},
+                    {"assemble", result.seconds.assemble},
+                    {"write", write_seconds}};
     std::cout << j.dump(2) << "\n";
     return 0;
   }
-  std::printf("ldimesh: %s, isovalue %g, views %s at %d px, r = %g, %d threads\n", surface->name.c_str(),
-              iso, args.views.c_str(), args.res, args.r, threads);
-  std::printf("  scene      %8.3f s  %zu bricks hold the isovalue\n", scene_seconds, caster.primitive_count());
-  std::printf("  ray cast   %8.3f s  %zu rays, %zu samples (%.2f M rays/s, %.2f M hits/s)\n", cast_seconds, rays,
-              result.samples, rays / cast_seconds * 1e-6, result.samples / cast_seconds * 1e-6);
+  std::printf("ldimesh: %s, isovalue %g, views %s at %d px, r = %g, %d threads\n",
+              surface->name.c_str(), iso, args.views.c_str(), args.res, args.r, threads);
+  std::printf("  scene      %8.3f s  %zu bricks hold the isovalue\n", scene_seconds,
+              caster.primitive_count());
+  std::printf("  ray cast   %8.3f s  %zu rays, %zu samples (%.2f M rays/s, %.2f M hits/s)\n",
+              cast_seconds, rays, result.samples, rays / cast_seconds * 1e-6,
+              result.samples / cast_seconds * 1e-6);
   std::printf("  mesh       %8.3f s  %zu quads\n", result.seconds.match, result.quads_untrimmed);
   std::printf("  trim       %8.3f s  %zu quads kept\n", result.seconds.trim, result.quads);
-  std::printf("  assemble   %8.3f s  %zu vertices, %zu %s\n", result.seconds.assemble, m.vertex_count(),
-              m.face_count(), args.quads ? "quads" : "triangles");
+  std::printf("  assemble   %8.3f s  %zu vertices, %zu %s\n", result.seconds.assemble,
+              m.vertex_count(), m.face_count(), args.quads ? "quads" : "triangles");
   std::printf("  mesh+trim  %8.3f s\n", mesh_trim);
   if (!args.out.empty()) std::printf("  wrote      %8.3f s  %s\n", write_seconds, args.out.c_str());
   return 0;
@@ -156,22 +170,30 @@ int main(int argc, char** argv) {
   CLI::App app{"ldimesh: isosurface meshes from Layered Depth Images (Frey, Sadlo, Ertl)"};
   app.require_subcommand(1);
   CLI::App* surfaces = app.add_subcommand("surfaces", "list the built-in analytic surfaces");
-  CLI::App* mesh = app.add_subcommand("mesh", "ray cast a surface into LDIs and mesh them (paper §3)");
+  CLI::App* mesh =
+      app.add_subcommand("mesh", "ray cast a surface into LDIs and mesh them (paper §3)");
   MeshArgs args;
-  mesh->add_option("--surface", args.surface, "built-in surface (see 'ldimesh surfaces')")->required();
+  mesh->add_option("--surface", args.surface, "built-in surface (see 'ldimesh surfaces')")
+      ->required();
   mesh->add_option("--res", args.res, "pixels along the longer side of each view")
       ->check(CLI::Range(1, 16384))
       ->capture_default_str();
   mesh->add_option("--views", args.views, "view axes, a subset of xyz")->capture_default_str();
-  mesh->add_option("--r", args.r, "trimming parameter r (§3)")->check(CLI::Range(0.0, 1.0))->capture_default_str();
+  mesh->add_option("--r", args.r, "trimming parameter r (§3)")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
   mesh->add_option("--out", args.out, "write the mesh to this .ply or .obj file");
   bool triangles = false;
   CLI::Option* quad_flag = mesh->add_flag("--quad", args.quads, "output quads");
-  mesh->add_flag("--tri", triangles, "output triangles, each quad split along its shorter diagonal (default)")
+  mesh->add_flag("--tri", triangles,
+                 "output triangles, each quad split along its shorter diagonal (default)")
       ->excludes(quad_flag);
-  mesh->add_option("--threads", args.threads, "threads (default: all cores)")->check(CLI::Range(1, 4096));
+  mesh->add_option("--threads", args.threads, "threads (default: all cores)")
+      ->check(CLI::Range(1, 4096));
   mesh->add_flag("--json", args.json, "print a machine-readable summary");
-  mesh->add_option("--bricks", args.bricks, "culling bricks per axis")->check(CLI::Range(1, 512))->capture_default_str();
+  mesh->add_option("--bricks", args.bricks, "culling bricks per axis")
+      ->check(CLI::Range(1, 512))
+      ->capture_default_str();
   mesh->add_option("--iso", args.isovalue, "isovalue (default: the surface's)");
   mesh->add_option("--max-cost", args.max_cost, "§3 match rejection threshold in pixels")
       ->check(CLI::PositiveNumber)

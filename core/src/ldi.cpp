@@ -12,7 +12,8 @@ Ldi make_empty_ldi(const View& view) {
 std::vector<std::uint32_t> sample_pixels(const Ldi& ldi) {
   std::vector<std::uint32_t> pixel(ldi.sample_count());
   for (std::size_t p = 0; p < ldi.pixel_count(); ++p)
-    for (std::uint32_t s = ldi.begin(p); s < ldi.end(p); ++s) pixel[s] = std::uint32_t(p);
+    for (std::uint32_t s = ldi.begin(p); s < ldi.end(p); ++s)
+      pixel[s] = std::uint32_t(p);
   return pixel;
 }
 

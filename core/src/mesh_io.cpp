@@ -28,7 +28,8 @@ Status open_for_writing(const std::string& path, File& file) {
 Status finish(const std::string& path, File& file) {
   const bool failed = std::ferror(file.get()) != 0;
   const int closed = std::fclose(file.release());
-  if (failed || closed != 0) return Status::error("writing '" + path + "' failed: " + std::strerror(errno));
+  if (failed || closed != 0)
+    return Status::error("writing '" + path + "' failed: " + std::strerror(errno));
   return Status::ok();
 }
 
@@ -82,7 +83,8 @@ Status write_ply(const std::string& path, const Mesh& mesh) {
   {
     Writer w(file.get());
     std::string header = "ply\nformat binary_little_endian 1.0\ncomment written by ldimesh\n";
-    for (std::size_t k = 0; k < mesh.view_dirs.size(); ++k) header += view_comment(mesh.view_dirs[k], k);
+    for (std::size_t k = 0; k < mesh.view_dirs.size(); ++k)
+      header += view_comment(mesh.view_dirs[k], k);
     header += "element vertex " + std::to_string(mesh.vertex_count()) + "\n";
     header += "property float x\nproperty float y\nproperty float z\n";
     header += "property float nx\nproperty float ny\nproperty float nz\n";
@@ -113,7 +115,8 @@ Status write_obj(const std::string& path, const Mesh& mesh) {
   {
     Writer w(file.get());
     w.text("# written by ldimesh\n");
-    for (std::size_t k = 0; k < mesh.view_dirs.size(); ++k) w.text("# " + view_comment(mesh.view_dirs[k], k).substr(8));
+    for (std::size_t k = 0; k < mesh.view_dirs.size(); ++k)
+      w.text("# " + view_comment(mesh.view_dirs[k], k).substr(8));
     auto vec = [&](std::string_view tag, const glm::vec3& p) {
       w.text(tag);
       for (int a = 0; a < 3; ++a) {
@@ -122,8 +125,10 @@ Status write_obj(const std::string& path, const Mesh& mesh) {
       }
       w.text("\n");
     };
-    for (const glm::vec3& p : mesh.positions) vec("v", p);
-    for (const glm::vec3& n : mesh.normals) vec("vn", n);
+    for (const glm::vec3& p : mesh.positions)
+      vec("v", p);
+    for (const glm::vec3& n : mesh.normals)
+      vec("vn", n);
     int group = -1;
     auto face = [&](const std::uint32_t* idx, int n, std::uint8_t view) {
       if (view != group) {
@@ -141,7 +146,8 @@ Status write_obj(const std::string& path, const Mesh& mesh) {
       }
       w.text("\n");
     };
-    for (std::size_t f = 0; f < mesh.quad_count(); ++f) face(&mesh.quads[4 * f], 4, mesh.quad_view[f]);
+    for (std::size_t f = 0; f < mesh.quad_count(); ++f)
+      face(&mesh.quads[4 * f], 4, mesh.quad_view[f]);
     for (std::size_t f = 0; f < mesh.triangle_count(); ++f)
       face(&mesh.triangles[3 * f], 3, mesh.triangle_view[f]);
   }
@@ -150,7 +156,8 @@ Status write_obj(const std::string& path, const Mesh& mesh) {
 
 Status write_mesh(const std::string& path, const Mesh& mesh) {
   std::string ext = path.substr(std::min(path.size(), path.find_last_of('.')));
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return char(std::tolower(c)); });
   if (ext == ".ply") return write_ply(path, mesh);
   if (ext == ".obj") return write_obj(path, mesh);
   return Status::error("cannot tell the format of '" + path + "': use a .ply or .obj file name");

@@ -38,8 +38,8 @@ struct Match {
 
 // §3 best match of s0 (at image position (x, y)) among the samples of the pixel at
 // (x + a, y + b): minimises |e(s, x, y) − d(s0)| + |e(s0, x+a, y+b) − d(s)|.
-inline Match best_match(const Ldi& ldi, const glm::vec2* slope, std::uint32_t s0,
-                        std::size_t pixel, float a, float b, float max_cost) {
+inline Match best_match(const Ldi& ldi, const glm::vec2* slope, std::uint32_t s0, std::size_t pixel,
+                        float a, float b, float max_cost) {
   const float d0 = ldi.depth[s0];
   const float e0 = d0 + a * slope[s0].x + b * slope[s0].y;  // s0's prediction at the neighbour
   Match best{kNone, max_cost};
@@ -117,12 +117,14 @@ std::vector<std::uint32_t> build_quads(const Ldi& ldi, const MatchOptions& optio
   tbb::parallel_for(tbb::blocked_range<int>(0, H - 1), [&](const tbb::blocked_range<int>& rows) {
     for (int j = rows.begin(); j != rows.end(); ++j) {
       std::vector<std::uint32_t>& out = row_quads[j];
-      const std::uint32_t b = ldi.begin(std::size_t(j) * W), e = ldi.end(std::size_t(j) * W + W - 2);
+      const std::uint32_t b = ldi.begin(std::size_t(j) * W),
+                          e = ldi.end(std::size_t(j) * W + W - 2);
       for (std::uint32_t s0 = b; s0 < e; ++s0) {
         const std::int32_t sr = right[s0], st = top[s0], sg = diag[s0];
         if (sr == kNone || st == kNone || sg == kNone) continue;
         if (top[sr] != sg || right[st] != sg) continue;
-        const float facing = glm::dot(ldi.normal[s0] + ldi.normal[sr] + ldi.normal[sg] + ldi.normal[st], d);
+        const float facing =
+            glm::dot(ldi.normal[s0] + ldi.normal[sr] + ldi.normal[sg] + ldi.normal[st], d);
         // (s0, right, top-right, top) runs counter-clockwise around +dir.
         if (facing >= 0.0f) {
           out.insert(out.end(), {s0, std::uint32_t(sr), std::uint32_t(sg), std::uint32_t(st)});
@@ -133,10 +135,12 @@ std::vector<std::uint32_t> build_quads(const Ldi& ldi, const MatchOptions& optio
     }
   });
   std::size_t total = 0;
-  for (const auto& q : row_quads) total += q.size();
+  for (const auto& q : row_quads)
+    total += q.size();
   std::vector<std::uint32_t> quads;
   quads.reserve(total);
-  for (const auto& q : row_quads) quads.insert(quads.end(), q.begin(), q.end());
+  for (const auto& q : row_quads)
+    quads.insert(quads.end(), q.begin(), q.end());
   return quads;
 }
 

@@ -26,7 +26,8 @@ MeshingResult mesh_ldis(std::span<const Ldi> ldis, const MeshingOptions& options
 
   MeshingResult result;
   Mesh& mesh = result.mesh;
-  for (const Ldi& ldi : ldis) mesh.view_dirs.push_back(ldi.view.dir);
+  for (const Ldi& ldi : ldis)
+    mesh.view_dirs.push_back(ldi.view.dir);
 
   for (std::size_t k = 0; k < ldis.size(); ++k) {
     const Ldi& ldi = ldis[k];
@@ -46,7 +47,8 @@ MeshingResult mesh_ldis(std::span<const Ldi> ldis, const MeshingOptions& options
     // One vertex per sample used by a kept quad, in sample order.
     constexpr std::uint32_t kUnused = UINT32_MAX;
     std::vector<std::uint32_t> vertex_of(ldi.sample_count(), kUnused);
-    for (std::uint32_t s : quads) vertex_of[s] = 0;
+    for (std::uint32_t s : quads)
+      vertex_of[s] = 0;
     const std::uint32_t base = std::uint32_t(mesh.positions.size());
     std::uint32_t next = base;
     for (std::size_t s = 0; s < vertex_of.size(); ++s) {

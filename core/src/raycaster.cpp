@@ -61,7 +61,8 @@ RayCaster::RayCaster(const FieldSource& source, double isovalue) {
     binding_.reset();
     rtcReleaseScene(scene_);
     rtcReleaseDevice(device_);
-    throw std::runtime_error("Embree: scene build failed (RTCError " + std::to_string(int(error)) + ")");
+    throw std::runtime_error("Embree: scene build failed (RTCError " + std::to_string(int(error)) +
+                             ")");
   }
   duplicate_tolerance_ = source.duplicate_tolerance();
   build_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -73,7 +74,9 @@ RayCaster::~RayCaster() {
   rtcReleaseDevice(device_);
 }
 
-std::size_t RayCaster::primitive_count() const { return binding_->primitive_count(); }
+std::size_t RayCaster::primitive_count() const {
+  return binding_->primitive_count();
+}
 
 void RayCaster::trace(const View& view, glm::dvec2 image_position,
                       std::vector<RayHit>& hits) const {
@@ -129,7 +132,8 @@ Ldi RayCaster::cast(const View& view) const {
 
   // Concatenate rows in order: the LDI is the same whatever the thread count.
   std::size_t total = 0;
-  for (const HitRun& row : rows) total += row.depth.size();
+  for (const HitRun& row : rows)
+    total += row.depth.size();
   if (total > UINT32_MAX) throw std::runtime_error("LDI has more than 2^32 samples");
   ldi.depth.reserve(total);
   ldi.normal.reserve(total);
@@ -172,7 +176,8 @@ RayHitList RayCaster::cast_points(const View& view,
   out.offsets.reserve(n + 1);
   out.offsets.push_back(0);
   for (const HitRun& run : chunks) {
-    for (std::uint32_t c : run.counts) out.offsets.push_back(out.offsets.back() + c);
+    for (std::uint32_t c : run.counts)
+      out.offsets.push_back(out.offsets.back() + c);
     out.depth.insert(out.depth.end(), run.depth.begin(), run.depth.end());
     out.normal.insert(out.normal.end(), run.normal.begin(), run.normal.end());
     out.scalar.insert(out.scalar.end(), run.scalar.begin(), run.scalar.end());

@@ -10,7 +10,9 @@
 namespace ldimesh {
 namespace {
 
-Box cube(double h) { return {{-h, -h, -h}, {h, h, h}}; }
+Box cube(double h) {
+  return {{-h, -h, -h}, {h, h, h}};
+}
 
 template <class Field>
 std::unique_ptr<FieldSource> make(const SurfaceInfo& s, int bricks) {
@@ -19,25 +21,35 @@ std::unique_ptr<FieldSource> make(const SurfaceInfo& s, int bricks) {
 
 const std::array<SurfaceInfo, 6> kSurfaces{{
     {"sphere", "x^2 + y^2 + z^2 = 1", cube(1.25), 1.0, 0.0, &make<fields::Sphere>},
-    {"torus", "(x^2 + y^2 + z^2 + R^2 - a^2)^2 - 4 R^2 (x^2 + y^2) = 0, R = 1, a = 0.4",
-     {{-1.5, -1.5, -0.5}, {1.5, 1.5, 0.5}}, 0.0, 0.0, &make<fields::Torus>},
+    {"torus",
+     "(x^2 + y^2 + z^2 + R^2 - a^2)^2 - 4 R^2 (x^2 + y^2) = 0, R = 1, a = 0.4",
+     {{-1.5, -1.5, -0.5}, {1.5, 1.5, 0.5}},
+     0.0,
+     0.0,
+     &make<fields::Torus>},
     {"barth",
      "4 (p^2 x^2 - y^2)(p^2 y^2 - z^2)(p^2 z^2 - x^2) - (1 + 2p)(x^2 + y^2 + z^2 - 1)^2 = 0, "
      "p = golden ratio, clipped to the ball of radius 2",
      cube(2.0), 0.0, 2.0, &make<fields::BarthSextic>},
     {"klein",
      "(x^2+y^2+z^2+2y-1)((x^2+y^2+z^2-2y-1)^2 - 8z^2) + 16xz(x^2+y^2+z^2-2y-1) = 0",
-     {{-3.5, -3.0, -3.5}, {3.5, 4.0, 3.5}}, 0.0, 0.0, &make<fields::KleinBottle>},
+     {{-3.25, -2.75, -4.0}, {3.25, 3.25, 4.0}},
+     0.0,
+     0.0,
+     &make<fields::KleinBottle>},
     {"marschner-lobb",
      "(1 - sin(pi z/2) + a (1 + cos(2 pi fM cos(pi r/2)))) / (2 (1 + a)) = 0.5, "
      "r = sqrt(x^2 + y^2), fM = 6, a = 0.25",
      cube(1.0), 0.5, 0.0, &make<fields::MarschnerLobb>},
-    {"slices", "x^2 + y^2 + z^2 + sin(5x + 15y + 6z) - 1 = 0", cube(1.5), 0.0, 0.0, &make<fields::Slices>},
+    {"slices", "x^2 + y^2 + z^2 + sin(5x + 15y + 6z) - 1 = 0", cube(1.5), 0.0, 0.0,
+     &make<fields::Slices>},
 }};
 
 }  // namespace
 
-std::span<const SurfaceInfo> builtin_surfaces() { return kSurfaces; }
+std::span<const SurfaceInfo> builtin_surfaces() {
+  return kSurfaces;
+}
 
 const SurfaceInfo* find_surface(std::string_view name) {
   for (const SurfaceInfo& s : kSurfaces)

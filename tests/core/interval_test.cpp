@@ -62,7 +62,8 @@ TEST(Jet, GradientMatchesFiniteDifferences) {
   for (int a = 0; a < 3; ++a) {
     glm::dvec3 e(0.0);
     e[a] = h;
-    const double fd = (f((p + e).x, (p + e).y, (p + e).z) - f((p - e).x, (p - e).y, (p - e).z)) / (2 * h);
+    const double fd =
+        (f((p + e).x, (p + e).y, (p + e).z) - f((p - e).x, (p - e).y, (p - e).z)) / (2 * h);
     EXPECT_NEAR(g[a], fd, 1e-5 * (1.0 + std::abs(fd)));
   }
 }

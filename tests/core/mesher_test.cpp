@@ -6,7 +6,9 @@ namespace ldimesh {
 namespace {
 
 // A z view over the unit square with W × H pixels of spacing 1 / max(W, H).
-View square_view(int res) { return make_view(Box{{0, 0, 0}, {1, 1, 1}}, {0, 0, 1}, res); }
+View square_view(int res) {
+  return make_view(Box{{0, 0, 0}, {1, 1, 1}}, {0, 0, 1}, res);
+}
 
 // An LDI whose pixels hold the given depths (all facing the viewer: normal −z).
 Ldi ldi_from_layers(const View& view, const std::vector<std::vector<float>>& per_pixel) {
@@ -46,12 +48,14 @@ TEST(Mesher, SixtyFourLayersStaySeparate) {
   const View view = square_view(2);
   const float gap = float(3.0 * view.spacing);  // wider than the default rejection threshold
   std::vector<float> layers;
-  for (int k = 0; k < 64; ++k) layers.push_back(k * gap);
+  for (int k = 0; k < 64; ++k)
+    layers.push_back(k * gap);
   const Ldi ldi = ldi_from_layers(view, std::vector<std::vector<float>>(4, layers));
   const std::vector<std::uint32_t> quads = build_quads(ldi);
   ASSERT_EQ(quads.size(), 64u * 4u);
   for (std::size_t q = 0; q < quads.size(); q += 4)
-    for (int c = 1; c < 4; ++c) EXPECT_EQ(ldi.depth[quads[q + c]], ldi.depth[quads[q]]);
+    for (int c = 1; c < 4; ++c)
+      EXPECT_EQ(ldi.depth[quads[q + c]], ldi.depth[quads[q]]);
 }
 
 TEST(Mesher, SeparateLayersAreNeverJoined) {
@@ -65,7 +69,8 @@ TEST(Mesher, SeparateLayersAreNeverJoined) {
   const std::vector<std::uint32_t> quads = build_quads(both);
   ASSERT_EQ(quads.size(), 8u);
   for (std::size_t q = 0; q < quads.size(); q += 4)
-    for (int c = 1; c < 4; ++c) EXPECT_EQ(both.depth[quads[q + c]], both.depth[quads[q]]);
+    for (int c = 1; c < 4; ++c)
+      EXPECT_EQ(both.depth[quads[q + c]], both.depth[quads[q]]);
 }
 
 TEST(Mesher, SlopedPlaneIsMatchedThroughNormalPrediction) {

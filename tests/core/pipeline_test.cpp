@@ -22,7 +22,8 @@ namespace {
 std::vector<Ldi> cast_axis_views(const FieldSource& source, double iso, int res) {
   const RayCaster caster(source, iso);
   std::vector<Ldi> ldis;
-  for (const View& v : make_axis_views(source.bounds(), res)) ldis.push_back(caster.cast(v));
+  for (const View& v : make_axis_views(source.bounds(), res))
+    ldis.push_back(caster.cast(v));
   return ldis;
 }
 
@@ -34,7 +35,9 @@ MeshingResult mesh_surface(std::string_view name, int res, double r) {
   return mesh_ldis(cast_axis_views(*source, s->isovalue, res), options);
 }
 
-double sphere_distance(glm::dvec3 p) { return std::abs(glm::length(p) - 1.0); }
+double sphere_distance(glm::dvec3 p) {
+  return std::abs(glm::length(p) - 1.0);
+}
 double torus_distance(glm::dvec3 p) {
   const fields::Torus t;
   return std::abs(std::hypot(std::hypot(p.x, p.y) - t.R, p.z) - t.a);
@@ -43,13 +46,15 @@ double torus_distance(glm::dvec3 p) {
 template <class Distance>
 void expect_on_surface(const Mesh& mesh, Distance distance, double spacing) {
   ASSERT_GT(mesh.triangle_count(), 1000u);
-  for (const glm::vec3& p : mesh.positions) ASSERT_LT(distance(glm::dvec3(p)), 1e-4);
+  for (const glm::vec3& p : mesh.positions)
+    ASSERT_LT(distance(glm::dvec3(p)), 1e-4);
   // A face that joined two layers would cut through the inside: its centroid would lie far
   // from the surface. Faces of one layer deviate by their sagitta, a small fraction of a pixel.
   for (std::size_t f = 0; f < mesh.triangle_count(); ++f) {
     const std::uint32_t* t = &mesh.triangles[3 * f];
     const glm::dvec3 c = (glm::dvec3(mesh.positions[t[0]]) + glm::dvec3(mesh.positions[t[1]]) +
-                          glm::dvec3(mesh.positions[t[2]])) / 3.0;
+                          glm::dvec3(mesh.positions[t[2]])) /
+                         3.0;
     ASSERT_LT(distance(c), 0.25 * spacing) << "face " << f;
   }
 }
@@ -64,7 +69,8 @@ TEST(Pipeline, SphereMeshLiesOnTheSphereAndKeepsLayersApart) {
     const glm::vec3 d(mesh.view_dirs[mesh.triangle_view[f]]);
     const std::uint32_t* t = &mesh.triangles[3 * f];
     const bool front = glm::dot(mesh.normals[t[0]], d) < 0;
-    for (int c = 1; c < 3; ++c) ASSERT_EQ(glm::dot(mesh.normals[t[c]], d) < 0, front) << "face " << f;
+    for (int c = 1; c < 3; ++c)
+      ASSERT_EQ(glm::dot(mesh.normals[t[c]], d) < 0, front) << "face " << f;
   }
 }
 
@@ -90,13 +96,15 @@ MeshingOptions with_r(double r) {
 }
 
 TEST(Pipeline, ConcentricSpheresAreMeshedSeparately) {
-  const AnalyticSource<Concentric> source(Concentric{}, {{-1.25, -1.25, -1.25}, {1.25, 1.25, 1.25}});
+  const AnalyticSource<Concentric> source(Concentric{},
+                                          {{-1.25, -1.25, -1.25}, {1.25, 1.25, 1.25}});
   const Mesh mesh = mesh_ldis(cast_axis_views(source, 0.0, 64), with_r(0.0)).mesh;
   ASSERT_GT(mesh.triangle_count(), 1000u);
   for (std::size_t f = 0; f < mesh.triangle_count(); ++f) {
     const std::uint32_t* t = &mesh.triangles[3 * f];
     const bool outer = glm::length(mesh.positions[t[0]]) > 0.95f;
-    for (int c = 1; c < 3; ++c) ASSERT_EQ(glm::length(mesh.positions[t[c]]) > 0.95f, outer) << "face " << f;
+    for (int c = 1; c < 3; ++c)
+      ASSERT_EQ(glm::length(mesh.positions[t[c]]) > 0.95f, outer) << "face " << f;
   }
 }
 
@@ -122,7 +130,8 @@ TEST(Pipeline, WithoutTrimmingTheViewsCoverTheWholeTorus) {
     // From a point of the tube's core circle outward through the tube wall.
     const double phi = angle(rng), theta = angle(rng);
     const glm::dvec3 core{torus.R * std::cos(phi), torus.R * std::sin(phi), 0.0};
-    const glm::dvec3 out{std::cos(theta) * std::cos(phi), std::cos(theta) * std::sin(phi), std::sin(theta)};
+    const glm::dvec3 out{std::cos(theta) * std::cos(phi), std::cos(theta) * std::sin(phi),
+                         std::sin(theta)};
     if (!testing::ray_hits_mesh(mesh, core, out, 0.9 * torus.a, 1.1 * torus.a)) ++missed;
   }
   EXPECT_EQ(missed, 0);

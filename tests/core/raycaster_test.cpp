@@ -83,7 +83,8 @@ TEST(RayCaster, SphereHitsLieOnTheSphere) {
         EXPECT_NEAR(ldi.depth[ldi.begin(p) + 1], c.t1, 1e-5);
         // Normals are the outward unit radius.
         const glm::dvec3 q = view.pixel_point(i, j, ldi.depth[ldi.begin(p)]);
-        EXPECT_NEAR(glm::length(glm::dvec3(ldi.normal[ldi.begin(p)]) - glm::normalize(q)), 0.0, 1e-4);
+        EXPECT_NEAR(glm::length(glm::dvec3(ldi.normal[ldi.begin(p)]) - glm::normalize(q)), 0.0,
+                    1e-4);
       }
     EXPECT_GT(through, 500);
     EXPECT_GT(outside, 100);
@@ -129,7 +130,8 @@ TEST(RayCaster, ShellThinnerThanABrickIsNeverMissed) {
         const SphereCrossing inner = sphere_crossing(view, i, j, r_in, 1e-6);
         if (outer.grazing || inner.grazing) continue;
         const std::size_t p = std::size_t(j) * view.width + i;
-        ASSERT_EQ(ldi.count(p), std::uint32_t(outer.count + inner.count)) << "pixel " << i << "," << j;
+        ASSERT_EQ(ldi.count(p), std::uint32_t(outer.count + inner.count))
+            << "pixel " << i << "," << j;
       }
   }
 }
@@ -167,7 +169,8 @@ TEST(RayCaster, BuiltinSurfacesProduceHits) {
     const RayCaster caster(*source, s.isovalue);
     EXPECT_GT(caster.primitive_count(), 0u) << s.name;
     std::size_t samples = 0;
-    for (const View& view : make_axis_views(s.domain, 32)) samples += caster.cast(view).sample_count();
+    for (const View& view : make_axis_views(s.domain, 32))
+      samples += caster.cast(view).sample_count();
     EXPECT_GT(samples, 300u) << s.name;
   }
   EXPECT_THROW(make_surface_source("no-such-surface"), std::invalid_argument);

@@ -31,7 +31,8 @@ inline std::optional<double> ray_triangle(glm::dvec3 o, glm::dvec3 d, glm::dvec3
 inline bool ray_hits_mesh(const Mesh& mesh, glm::dvec3 o, glm::dvec3 d, double t_lo, double t_hi) {
   for (std::size_t f = 0; f < mesh.triangle_count(); ++f) {
     const std::uint32_t* t = &mesh.triangles[3 * f];
-    const auto hit = ray_triangle(o, d, mesh.positions[t[0]], mesh.positions[t[1]], mesh.positions[t[2]]);
+    const auto hit =
+        ray_triangle(o, d, mesh.positions[t[0]], mesh.positions[t[1]], mesh.positions[t[2]]);
     if (hit && *hit >= t_lo && *hit <= t_hi) return true;
   }
   return false;

@@ -35,7 +35,8 @@ TEST(View, AnyDirectionGivesAnOrthonormalFrameCoveringTheBox) {
   EXPECT_EQ(std::max(v.width, v.height), 100);
   // Every box corner projects into the image and into [0, depth_extent].
   for (int c = 0; c < 8; ++c) {
-    const glm::dvec3 p{c & 1 ? kBox.hi.x : kBox.lo.x, c & 2 ? kBox.hi.y : kBox.lo.y, c & 4 ? kBox.hi.z : kBox.lo.z};
+    const glm::dvec3 p{c & 1 ? kBox.hi.x : kBox.lo.x, c & 2 ? kBox.hi.y : kBox.lo.y,
+                       c & 4 ? kBox.hi.z : kBox.lo.z};
     const glm::dvec3 q = p - v.origin;
     EXPECT_GE(glm::dot(q, v.u) / v.spacing, -1e-9);
     EXPECT_LE(glm::dot(q, v.u) / v.spacing, v.width + 1e-9);

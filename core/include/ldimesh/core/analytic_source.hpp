@@ -73,7 +73,9 @@ Jet<double, 1> eval_on_ray(const Field& f, glm::dvec3 o, glm::dvec3 d, double t)
   return f(x, y, z);
 }
 
-inline bool positive(double v) { return v >= 0.0; }  // zero counts as positive: one root, not two
+inline bool positive(double v) {
+  return v >= 0.0;
+}  // zero counts as positive: one root, not two
 
 // Converges on the single root in [a, b], where g = f − iso changes sign, with Newton steps that
 // fall back to bisection whenever they leave the bracket.
@@ -181,7 +183,11 @@ class AnalyticBinding final : public GeometryBinding {
 
   AnalyticBinding(RTCDevice device, const Field& field, double isovalue, double clip_radius,
                   RootSearchTolerances tol, std::vector<Brick> bricks)
-      : field_(field), iso_(isovalue), clip_radius_(clip_radius), tol_(tol), bricks_(std::move(bricks)) {
+      : field_(field),
+        iso_(isovalue),
+        clip_radius_(clip_radius),
+        tol_(tol),
+        bricks_(std::move(bricks)) {
     geometry_ = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_USER);
     if (!geometry_) throw std::runtime_error("Embree: cannot create user geometry");
     rtcSetGeometryUserPrimitiveCount(geometry_, unsigned(bricks_.size()));
@@ -216,8 +222,11 @@ class AnalyticBinding final : public GeometryBinding {
     const Brick& b = self->bricks_[args->primID];
     double t0 = q->t_min, t1 = q->t_max;
     if (!analytic_detail::clip_to_box(q->org, q->dir, b.lo, b.hi, t0, t1)) return;
-    if (self->clip_radius_ > 0.0 && !analytic_detail::clip_to_ball(q->org, q->dir, self->clip_radius_, t0, t1)) return;
-    analytic_detail::find_roots(self->field_, self->iso_, q->org, q->dir, t0, t1, self->tol_, *q->hits);
+    if (self->clip_radius_ > 0.0 &&
+        !analytic_detail::clip_to_ball(q->org, q->dir, self->clip_radius_, t0, t1))
+      return;
+    analytic_detail::find_roots(self->field_, self->iso_, q->org, q->dir, t0, t1, self->tol_,
+                                *q->hits);
   }
 
   Field field_;
@@ -234,7 +243,10 @@ template <class Field>
 class AnalyticSource final : public FieldSource {
  public:
   AnalyticSource(Field field, Box domain, double clip_radius = 0.0, int bricks_per_axis = 32)
-      : field_(field), domain_(domain), clip_radius_(clip_radius), bricks_per_axis_(bricks_per_axis) {
+      : field_(field),
+        domain_(domain),
+        clip_radius_(clip_radius),
+        bricks_per_axis_(bricks_per_axis) {
     if (!domain.is_valid()) throw std::invalid_argument("analytic source: empty domain box");
     if (bricks_per_axis < 1) throw std::invalid_argument("analytic source: bricks_per_axis < 1");
   }
@@ -254,7 +266,8 @@ class AnalyticSource final : public FieldSource {
     for (int k = 0; k < n; ++k)
       for (int j = 0; j < n; ++j)
         for (int i = 0; i < n; ++i) {
-          Brick b{{face(0, i), face(1, j), face(2, k)}, {face(0, i + 1), face(1, j + 1), face(2, k + 1)}};
+          Brick b{{face(0, i), face(1, j), face(2, k)},
+                  {face(0, i + 1), face(1, j + 1), face(2, k + 1)}};
           if (clip_radius_ > 0.0) {
             glm::dvec3 nearest = glm::clamp(glm::dvec3(0.0), b.lo, b.hi);
             if (glm::dot(nearest, nearest) > clip_radius_ * clip_radius_) continue;

@@ -36,30 +36,47 @@ inline double mul0(double a, double b) {
 }
 }  // namespace interval_detail
 
-inline Interval operator+(Interval a, Interval b) { return {a.lo + b.lo, a.hi + b.hi}; }
-inline Interval operator-(Interval a, Interval b) { return {a.lo - b.hi, a.hi - b.lo}; }
-inline Interval operator-(Interval a) { return {-a.hi, -a.lo}; }
+inline Interval operator+(Interval a, Interval b) {
+  return {a.lo + b.lo, a.hi + b.hi};
+}
+inline Interval operator-(Interval a, Interval b) {
+  return {a.lo - b.hi, a.hi - b.lo};
+}
+inline Interval operator-(Interval a) {
+  return {-a.hi, -a.lo};
+}
 inline Interval operator*(Interval a, Interval b) {
   using interval_detail::mul0;
   double p0 = mul0(a.lo, b.lo), p1 = mul0(a.lo, b.hi), p2 = mul0(a.hi, b.lo), p3 = mul0(a.hi, b.hi);
-  return {std::min(std::min(p0, p1), std::min(p2, p3)), std::max(std::max(p0, p1), std::max(p2, p3))};
+  return {std::min(std::min(p0, p1), std::min(p2, p3)),
+          std::max(std::max(p0, p1), std::max(p2, p3))};
 }
 inline Interval operator*(double s, Interval a) {
   return s >= 0 ? Interval{s * a.lo, s * a.hi} : Interval{s * a.hi, s * a.lo};
 }
-inline Interval operator*(Interval a, double s) { return s * a; }
+inline Interval operator*(Interval a, double s) {
+  return s * a;
+}
 inline Interval operator/(Interval a, Interval b) {
   if (b.lo <= 0.0 && b.hi >= 0.0) return {-INFINITY, INFINITY};
   return a * Interval{1.0 / b.hi, 1.0 / b.lo};
 }
-inline Interval& operator+=(Interval& a, Interval b) { return a = a + b; }
-inline Interval& operator-=(Interval& a, Interval b) { return a = a - b; }
-inline Interval& operator*=(Interval& a, Interval b) { return a = a * b; }
+inline Interval& operator+=(Interval& a, Interval b) {
+  return a = a + b;
+}
+inline Interval& operator-=(Interval& a, Interval b) {
+  return a = a - b;
+}
+inline Interval& operator*=(Interval& a, Interval b) {
+  return a = a * b;
+}
 
 inline Interval intersect(Interval a, Interval b) {
   return {std::max(a.lo, b.lo), std::min(a.hi, b.hi)};
 }
-inline Interval hull(Interval a, Interval b) { return {std::min(a.lo, b.lo), std::max(a.hi, b.hi)}; }
+inline Interval hull(Interval a, Interval b) {
+  return {std::min(a.lo, b.lo), std::max(a.hi, b.hi)};
+}
 
 // x², tighter than x*x when x straddles zero.
 inline Interval sqr(Interval a) {
@@ -68,9 +85,13 @@ inline Interval sqr(Interval a) {
   if (a.hi <= 0) return {h, l};
   return {0.0, std::max(l, h)};
 }
-inline double sqr(double a) { return a * a; }
+inline double sqr(double a) {
+  return a * a;
+}
 
-inline Interval sqrt(Interval a) { return {std::sqrt(std::max(a.lo, 0.0)), std::sqrt(std::max(a.hi, 0.0))}; }
+inline Interval sqrt(Interval a) {
+  return {std::sqrt(std::max(a.lo, 0.0)), std::sqrt(std::max(a.hi, 0.0))};
+}
 
 inline Interval cos(Interval a) {
   constexpr double pi = std::numbers::pi, two_pi = 2 * std::numbers::pi;

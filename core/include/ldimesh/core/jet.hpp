@@ -33,35 +33,40 @@ template <class T, int N>
 Jet<T, N> operator+(const Jet<T, N>& a, const Jet<T, N>& b) {
   Jet<T, N> r;
   r.v = a.v + b.v;
-  for (int i = 0; i < N; ++i) r.d[i] = a.d[i] + b.d[i];
+  for (int i = 0; i < N; ++i)
+    r.d[i] = a.d[i] + b.d[i];
   return r;
 }
 template <class T, int N>
 Jet<T, N> operator-(const Jet<T, N>& a, const Jet<T, N>& b) {
   Jet<T, N> r;
   r.v = a.v - b.v;
-  for (int i = 0; i < N; ++i) r.d[i] = a.d[i] - b.d[i];
+  for (int i = 0; i < N; ++i)
+    r.d[i] = a.d[i] - b.d[i];
   return r;
 }
 template <class T, int N>
 Jet<T, N> operator-(const Jet<T, N>& a) {
   Jet<T, N> r;
   r.v = -a.v;
-  for (int i = 0; i < N; ++i) r.d[i] = -a.d[i];
+  for (int i = 0; i < N; ++i)
+    r.d[i] = -a.d[i];
   return r;
 }
 template <class T, int N>
 Jet<T, N> operator*(const Jet<T, N>& a, const Jet<T, N>& b) {
   Jet<T, N> r;
   r.v = a.v * b.v;
-  for (int i = 0; i < N; ++i) r.d[i] = a.d[i] * b.v + a.v * b.d[i];
+  for (int i = 0; i < N; ++i)
+    r.d[i] = a.d[i] * b.v + a.v * b.d[i];
   return r;
 }
 template <class T, int N>
 Jet<T, N> operator*(double s, const Jet<T, N>& a) {
   Jet<T, N> r;
   r.v = s * a.v;
-  for (int i = 0; i < N; ++i) r.d[i] = s * a.d[i];
+  for (int i = 0; i < N; ++i)
+    r.d[i] = s * a.d[i];
   return r;
 }
 template <class T, int N>
@@ -91,7 +96,8 @@ template <class T, int N>
 Jet<T, N> sqr(const Jet<T, N>& a) {
   Jet<T, N> r;
   r.v = sqr(a.v);
-  for (int i = 0; i < N; ++i) r.d[i] = 2.0 * (a.v * a.d[i]);
+  for (int i = 0; i < N; ++i)
+    r.d[i] = 2.0 * (a.v * a.d[i]);
   return r;
 }
 
@@ -106,7 +112,8 @@ Jet<T, N> sqrt(const Jet<T, N>& a) {
     // symmetric limit of the derivative is zero; avoid inf/NaN normals there.
     if (r.v == 0.0) return Jet<T, N>(0.0);
   }
-  for (int i = 0; i < N; ++i) r.d[i] = a.d[i] / (T(2.0) * r.v);
+  for (int i = 0; i < N; ++i)
+    r.d[i] = a.d[i] / (T(2.0) * r.v);
   return r;
 }
 
@@ -117,7 +124,8 @@ Jet<T, N> sin(const Jet<T, N>& a) {
   Jet<T, N> r;
   r.v = sin(a.v);
   T c = cos(a.v);
-  for (int i = 0; i < N; ++i) r.d[i] = c * a.d[i];
+  for (int i = 0; i < N; ++i)
+    r.d[i] = c * a.d[i];
   return r;
 }
 
@@ -128,7 +136,8 @@ Jet<T, N> cos(const Jet<T, N>& a) {
   Jet<T, N> r;
   r.v = cos(a.v);
   T s = sin(a.v);
-  for (int i = 0; i < N; ++i) r.d[i] = -(s * a.d[i]);
+  for (int i = 0; i < N; ++i)
+    r.d[i] = -(s * a.d[i]);
   return r;
 }
 

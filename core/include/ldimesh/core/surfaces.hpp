@@ -12,10 +12,10 @@ namespace ldimesh {
 
 struct SurfaceInfo {
   std::string name;
-  std::string formula;    // human-readable, as in docs/surfaces.md
-  Box domain;             // the box the views are laid over
-  double isovalue;        // the default isovalue
-  double clip_radius;     // > 0: the surface is clipped to this ball around the origin
+  std::string formula;  // human-readable, as in docs/surfaces.md
+  Box domain;           // the box the views are laid over
+  double isovalue;      // the default isovalue
+  double clip_radius;   // > 0: the surface is clipped to this ball around the origin
   std::unique_ptr<FieldSource> (*make_source)(const SurfaceInfo&, int bricks_per_axis);
 };
 
