@@ -160,6 +160,31 @@ TEST(Pipeline, QuadOutputHasOnlyQuads) {
   EXPECT_GT(result.quads, 100u);
 }
 
+TEST(Pipeline, ObliqueViewsWork) {
+  const auto source = make_surface_source("sphere");
+  const RayCaster caster(*source, 1.0);
+  std::vector<Ldi> ldis;
+  for (glm::dvec3 d : {glm::dvec3(1, 1, 0), glm::dvec3(1, -1, 0.5), glm::dvec3(0.2, 0.1, -1)})
+    ldis.push_back(caster.cast(make_view(source->bounds(), d, 64)));
+  const Mesh mesh = mesh_ldis(ldis, {}).mesh;
+  expect_on_surface(mesh, sphere_distance, 2.5 * std::sqrt(2.0) / 64);
+}
+
+TEST(Pipeline, EmptyAndOneSampleLdisGiveAnEmptyMesh) {
+  const View view = make_view({{0, 0, 0}, {1, 1, 1}}, {0, 0, 1}, 4);
+  Ldi one = make_empty_ldi(view);
+  one.depth = {0.5f};
+  one.normal = {{0, 0, -1}};
+  for (std::size_t p = 6; p < one.offsets.size(); ++p)
+    one.offsets[p] = 1;  // pixel 5 holds it
+  for (const Ldi& ldi : {make_empty_ldi(view), one}) {
+    const MeshingResult result = mesh_ldis(std::span<const Ldi>(&ldi, 1), {});
+    EXPECT_EQ(result.mesh.face_count(), 0u);
+    EXPECT_EQ(result.mesh.vertex_count(), 0u);
+  }
+  EXPECT_EQ(mesh_ldis({}, {}).mesh.face_count(), 0u);
+}
+
 std::string read_file(const std::filesystem::path& path) {
   std::ifstream in(path, std::ios::binary);
   return {std::istreambuf_iterator<char>(in), {}};
