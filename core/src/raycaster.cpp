@@ -1,6 +1,7 @@
 #include "ldimesh/core/raycaster.hpp"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <stdexcept>
@@ -38,7 +39,11 @@ struct HitRun {
 
 }  // namespace
 
-RayCaster::RayCaster(const FieldSource& source, double isovalue) {
+RayCaster::RayCaster(const FieldSource& source, double isovalue)
+    : RayCaster(std::span<const FieldSource* const>(std::array{&source}), isovalue) {}
+
+RayCaster::RayCaster(std::span<const FieldSource* const> sources, double isovalue) {
+  if (sources.empty()) throw std::invalid_argument("ray caster needs at least one field source");
   const auto start = std::chrono::steady_clock::now();
   device_ = rtcNewDevice(nullptr);
   if (!device_) throw std::runtime_error("Embree: cannot create a device");
@@ -49,33 +54,36 @@ RayCaster::RayCaster(const FieldSource& source, double isovalue) {
   }
   rtcSetSceneBuildQuality(scene_, RTC_BUILD_QUALITY_HIGH);
   try {
-    binding_ = source.bind(device_, isovalue);
+    for (const FieldSource* source : sources) {
+      bindings_.push_back(source->bind(device_, isovalue));
+      rtcAttachGeometry(scene_, bindings_.back()->geometry());
+      has_scalar_ = has_scalar_ || bindings_.back()->has_scalar();
+      duplicate_tolerance_ = std::max(duplicate_tolerance_, source->duplicate_tolerance());
+    }
+    rtcCommitScene(scene_);
+    if (const RTCError error = rtcGetDeviceError(device_); error != RTC_ERROR_NONE)
+      throw std::runtime_error("Embree: scene build failed (RTCError " +
+                               std::to_string(int(error)) + ")");
   } catch (...) {
     rtcReleaseScene(scene_);
+    bindings_.clear();
     rtcReleaseDevice(device_);
     throw;
   }
-  rtcAttachGeometry(scene_, binding_->geometry());
-  rtcCommitScene(scene_);
-  if (const RTCError error = rtcGetDeviceError(device_); error != RTC_ERROR_NONE) {
-    binding_.reset();
-    rtcReleaseScene(scene_);
-    rtcReleaseDevice(device_);
-    throw std::runtime_error("Embree: scene build failed (RTCError " + std::to_string(int(error)) +
-                             ")");
-  }
-  duplicate_tolerance_ = source.duplicate_tolerance();
   build_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
 RayCaster::~RayCaster() {
   rtcReleaseScene(scene_);
-  binding_.reset();
+  bindings_.clear();
   rtcReleaseDevice(device_);
 }
 
 std::size_t RayCaster::primitive_count() const {
-  return binding_->primitive_count();
+  std::size_t n = 0;
+  for (const auto& b : bindings_)
+    n += b->primitive_count();
+  return n;
 }
 
 void RayCaster::trace(const View& view, glm::dvec2 image_position,
@@ -111,7 +119,7 @@ void RayCaster::trace(const View& view, glm::dvec2 image_position,
 Ldi RayCaster::cast(const View& view) const {
   Ldi ldi = make_empty_ldi(view);
   const int W = view.width, H = view.height;
-  const bool with_scalar = binding_->has_scalar();
+  const bool with_scalar = has_scalar_;
   std::vector<HitRun> rows(H);
   tbb::parallel_for(tbb::blocked_range<int>(0, H), [&](const tbb::blocked_range<int>& range) {
     std::vector<RayHit> hits;
@@ -156,7 +164,7 @@ Ldi RayCaster::cast(const View& view) const {
 RayHitList RayCaster::cast_points(const View& view,
                                   std::span<const glm::dvec2> image_positions) const {
   const std::size_t n = image_positions.size();
-  const bool with_scalar = binding_->has_scalar();
+  const bool with_scalar = has_scalar_;
   constexpr std::size_t kChunk = 256;
   std::vector<HitRun> chunks((n + kChunk - 1) / kChunk);
   tbb::parallel_for(std::size_t(0), chunks.size(), [&](std::size_t c) {

@@ -29,6 +29,9 @@ class RayCaster {
  public:
   // Throws std::runtime_error when Embree cannot create a device or scene.
   RayCaster(const FieldSource& source, double isovalue);
+  // One scene of several sources (e.g. the blocks of one rank); a root that two sources both
+  // report (on a face they share) counts once. `sources` must not be empty.
+  RayCaster(std::span<const FieldSource* const> sources, double isovalue);
   ~RayCaster();
   RayCaster(const RayCaster&) = delete;
   RayCaster& operator=(const RayCaster&) = delete;
@@ -41,7 +44,7 @@ class RayCaster {
   // View::point). Used for extra samples between pixel centres.
   RayHitList cast_points(const View& view, std::span<const glm::dvec2> image_positions) const;
 
-  // Primitives in the scene (those whose value range may contain the isovalue).
+  // Primitives in the scene (those whose value range may contain the isovalue), all sources.
   std::size_t primitive_count() const;
   // Seconds spent building the scene.
   double build_seconds() const { return build_seconds_; }
@@ -51,7 +54,8 @@ class RayCaster {
 
   RTCDevice device_ = nullptr;
   RTCScene scene_ = nullptr;
-  std::unique_ptr<GeometryBinding> binding_;
+  std::vector<std::unique_ptr<GeometryBinding>> bindings_;
+  bool has_scalar_ = false;
   double duplicate_tolerance_ = 0.0;
   double build_seconds_ = 0.0;
 };
