@@ -73,10 +73,6 @@ Jet<double, 1> eval_on_ray(const Field& f, glm::dvec3 o, glm::dvec3 d, double t)
   return f(x, y, z);
 }
 
-inline bool positive(double v) {
-  return v >= 0.0;
-}  // zero counts as positive: one root, not two
-
 // Converges on the single root in [a, b], where g = f − iso changes sign, with Newton steps that
 // fall back to bisection whenever they leave the bracket.
 template <class Field>
@@ -144,23 +140,6 @@ void find_roots(const Field& f, double iso, glm::dvec3 o, glm::dvec3 d, double t
   }
 }
 
-// Clips the ray o + t·d to the closed box [lo, hi]; returns false if it misses.
-inline bool clip_to_box(glm::dvec3 o, glm::dvec3 d, glm::dvec3 lo, glm::dvec3 hi, double& t0,
-                        double& t1) {
-  for (int a = 0; a < 3; ++a) {
-    if (d[a] == 0.0) {
-      if (o[a] < lo[a] || o[a] > hi[a]) return false;
-      continue;
-    }
-    double inv = 1.0 / d[a];
-    double ta = (lo[a] - o[a]) * inv, tb = (hi[a] - o[a]) * inv;
-    if (ta > tb) std::swap(ta, tb);
-    t0 = std::max(t0, ta);
-    t1 = std::min(t1, tb);
-  }
-  return t0 < t1;
-}
-
 // Clips the ray to the ball of radius R around the origin; returns false if it misses.
 inline bool clip_to_ball(glm::dvec3 o, glm::dvec3 d, double R, double& t0, double& t1) {
   double b = glm::dot(o, d), c = glm::dot(o, o) - R * R;
@@ -205,14 +184,7 @@ class AnalyticBinding final : public GeometryBinding {
   static void bounds(const RTCBoundsFunctionArguments* args) {
     const auto* self = static_cast<const AnalyticBinding*>(args->geometryUserPtr);
     const Brick& b = self->bricks_[args->primID];
-    // Padded so that Embree's float traversal never culls a brick the double ray touches;
-    // the callback clips exactly.
-    const glm::dvec3 pad = 1e-6 * (glm::abs(b.lo) + glm::abs(b.hi)) + 1e-12;
-    RTCBounds* out = args->bounds_o;
-    out->lower_x = float(b.lo.x - pad.x), out->lower_y = float(b.lo.y - pad.y);
-    out->lower_z = float(b.lo.z - pad.z);
-    out->upper_x = float(b.hi.x + pad.x), out->upper_y = float(b.hi.y + pad.y);
-    out->upper_z = float(b.hi.z + pad.z);
+    write_padded_bounds(b.lo, b.hi, args->bounds_o);
   }
 
   static void intersect(const RTCIntersectFunctionNArguments* args) {
@@ -221,7 +193,7 @@ class AnalyticBinding final : public GeometryBinding {
     auto* q = reinterpret_cast<RayQuery*>(args->context);
     const Brick& b = self->bricks_[args->primID];
     double t0 = q->t_min, t1 = q->t_max;
-    if (!analytic_detail::clip_to_box(q->org, q->dir, b.lo, b.hi, t0, t1)) return;
+    if (!clip_ray_to_box(q->org, q->dir, b.lo, b.hi, t0, t1)) return;
     if (self->clip_radius_ > 0.0 &&
         !analytic_detail::clip_to_ball(q->org, q->dir, self->clip_radius_, t0, t1))
       return;

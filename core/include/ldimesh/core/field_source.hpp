@@ -5,8 +5,10 @@
 // inside one primitive in its intersect callback.
 #pragma once
 
+#include <algorithm>
 #include <cstddef>
 #include <memory>
+#include <utility>
 #include <vector>
 
 #include <embree3/rtcore.h>
@@ -46,6 +48,41 @@ class GeometryBinding {
   // Whether hits carry a meaningful RayHit::scalar.
   virtual bool has_scalar() const { return false; }
 };
+
+// Helpers for intersect callbacks.
+
+// Zero counts as positive, so that a root exactly at the end of one segment and the start of
+// the next is reported once, not twice.
+inline bool positive(double v) {
+  return v >= 0.0;
+}
+
+// Clips the ray o + t·d to the closed box [lo, hi], narrowing [t0, t1]; false if it misses.
+inline bool clip_ray_to_box(glm::dvec3 o, glm::dvec3 d, glm::dvec3 lo, glm::dvec3 hi, double& t0,
+                            double& t1) {
+  for (int a = 0; a < 3; ++a) {
+    if (d[a] == 0.0) {
+      if (o[a] < lo[a] || o[a] > hi[a]) return false;
+      continue;
+    }
+    const double inv = 1.0 / d[a];
+    double ta = (lo[a] - o[a]) * inv, tb = (hi[a] - o[a]) * inv;
+    if (ta > tb) std::swap(ta, tb);
+    t0 = std::max(t0, ta);
+    t1 = std::min(t1, tb);
+  }
+  return t0 < t1;
+}
+
+// Embree bounds of a box, padded so that Embree's float traversal never culls a primitive the
+// double-precision ray touches (the callbacks clip exactly).
+inline void write_padded_bounds(glm::dvec3 lo, glm::dvec3 hi, RTCBounds* out) {
+  const glm::dvec3 pad = 1e-6 * (glm::abs(lo) + glm::abs(hi)) + 1e-12;
+  out->lower_x = float(lo.x - pad.x), out->lower_y = float(lo.y - pad.y);
+  out->lower_z = float(lo.z - pad.z);
+  out->upper_x = float(hi.x + pad.x), out->upper_y = float(hi.y + pad.y);
+  out->upper_z = float(hi.z + pad.z);
+}
 
 class FieldSource {
  public:

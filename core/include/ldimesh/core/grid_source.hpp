@@ -1,0 +1,80 @@
+// Structured-grid blocks as ray-caster sources (finite volume / finite difference codes): point
+// data on a uniform or rectilinear grid, read in place from the solver's array, intersected
+// exactly with the trilinear interpolant of each cell.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+
+#include "ldimesh/core/field_source.hpp"
+#include "ldimesh/core/scalar_type.hpp"
+
+namespace ldimesh {
+
+// One rank-local block of point data. Nothing is copied: `values` (and `coords` for a
+// rectilinear grid) must stay valid, and unchanged during a cast, while a source built on
+// them is used.
+//
+// Ghost layers: the first ghost_lo[a] and last ghost_hi[a] point layers along axis a belong to
+// neighbouring blocks. A cell produces hits only if this block owns its lowest corner point,
+// so ghost points are read for interpolation of the cells between the last owned point and
+// the first ghost point, and blocks whose owned points tile a grid produce every cell exactly
+// once: no duplicate and no missing surface where blocks meet. Blocks that instead share
+// their interface points (no ghosts) tile it as well.
+struct GridBlock {
+  std::array<std::int64_t, 3> dims{0, 0, 0};  // points per axis, ghost layers included
+  const void* values = nullptr;
+  ScalarType type = ScalarType::float32;
+  // Distance in values between neighbouring points along x, y, z; {0, 0, 0} means contiguous
+  // with x fastest: {1, nx, nx·ny}.
+  std::array<std::int64_t, 3> strides{0, 0, 0};
+  // Uniform geometry: point (i, j, k) at origin + (i, j, k)·spacing (ghost points included).
+  glm::dvec3 origin{0.0};
+  glm::dvec3 spacing{1.0};
+  // Rectilinear geometry, used instead when all three are set: dims[a] strictly increasing
+  // coordinates per axis.
+  std::array<const double*, 3> coords{nullptr, nullptr, nullptr};
+  std::array<int, 3> ghost_lo{0, 0, 0};
+  std::array<int, 3> ghost_hi{0, 0, 0};
+};
+
+class GridSource final : public FieldSource {
+ public:
+  // Validates the block (positive dims, at least one owned cell per axis, non-null values,
+  // non-zero strides, positive spacing or increasing coordinates); throws
+  // std::invalid_argument naming the problem. Bricks of brick_cells³ owned cells are the
+  // ray-caster primitives.
+  explicit GridSource(const GridBlock& block, int brick_cells = 8);
+
+  // The owned region: the cells this block produces hits in.
+  Box bounds() const override;
+  // Computes every brick's value range from the current values (so a new time step in the same
+  // arrays needs only a new bind) and puts the bricks whose range holds `isovalue` into an
+  // Embree user geometry. Runs on all cores.
+  std::unique_ptr<GeometryBinding> bind(RTCDevice device, double isovalue) const override;
+
+  // Bricks before culling.
+  std::size_t brick_count() const;
+  // The value at point (i, j, k) (ghosts included), as a double.
+  double value(std::int64_t i, std::int64_t j, std::int64_t k) const;
+  // The coordinate of point index i along axis a.
+  double coordinate(int axis, std::int64_t i) const;
+  // Owned cells along each axis: lower corner indices first_cell[a] … last_cell[a].
+  std::array<std::int64_t, 3> first_cell() const { return first_cell_; }
+  std::array<std::int64_t, 3> last_cell() const { return last_cell_; }
+
+ private:
+  GridBlock block_;
+  int brick_cells_;
+  std::array<std::int64_t, 3> first_cell_{}, last_cell_{}, bricks_{};
+};
+
+// The roots of the trilinear interpolant minus `iso` along a segment of one cell, by the cubic
+// it restricts to (Marmitt et al. 2004: split at the cubic's extrema, then one bracketed root
+// per monotone piece). `corner` holds the 8 values minus iso, index = x + 2y + 4z; `a` and `b`
+// are the segment's ends in the cell's local coordinates [0, 1]³. Writes the roots as segment
+// parameters s ∈ [0, 1] in increasing order to `roots` and returns how many (at most 3).
+int trilinear_segment_roots(const double corner[8], glm::dvec3 a, glm::dvec3 b, double roots[3]);
+
+}  // namespace ldimesh

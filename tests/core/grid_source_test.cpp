@@ -1,0 +1,376 @@
+#include "ldimesh/core/grid_source.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <set>
+
+#include <gtest/gtest.h>
+#include <tbb/info.h>
+#include <tbb/task_arena.h>
+
+#include "ldimesh/core/raycaster.hpp"
+
+namespace ldimesh {
+namespace {
+
+// Point values of f on an n³ grid over [lo, hi]³, x fastest.
+template <class T, class F>
+std::vector<T> sample(int n, double lo, double hi, F f) {
+  std::vector<T> v(std::size_t(n) * n * n);
+  const double h = (hi - lo) / (n - 1);
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i)
+        v[(std::size_t(k) * n + j) * n + i] = T(f(lo + i * h, lo + j * h, lo + k * h));
+  return v;
+}
+
+double sphere_field(double x, double y, double z) {
+  return x * x + y * y + z * z;
+}
+// Smooth but wiggly: several roots per ray at isovalue 0.
+double wavy_field(double x, double y, double z) {
+  return std::sin(3.1 * x + 0.4) * std::cos(2.3 * y - 0.2) + 0.6 * std::sin(2.7 * z + 1.9 * x) -
+         0.1;
+}
+
+GridBlock uniform_block(const void* values, ScalarType type, int n, double lo, double hi) {
+  GridBlock b;
+  b.dims = {n, n, n};
+  b.values = values;
+  b.type = type;
+  b.origin = glm::dvec3(lo);
+  b.spacing = glm::dvec3((hi - lo) / (n - 1));
+  return b;
+}
+
+// The trilinear interpolant of `grid` at p (p inside the owned region).
+double interpolate(const GridSource& grid, glm::dvec3 p) {
+  std::array<std::int64_t, 3> c;
+  glm::dvec3 w;
+  for (int a = 0; a < 3; ++a) {
+    std::int64_t i = grid.first_cell()[a];
+    while (i < grid.last_cell()[a] && grid.coordinate(a, i + 1) <= p[a])
+      ++i;
+    c[a] = i;
+    w[a] = (p[a] - grid.coordinate(a, i)) / (grid.coordinate(a, i + 1) - grid.coordinate(a, i));
+  }
+  double v = 0.0;
+  for (int n = 0; n < 8; ++n) {
+    const int x = n & 1, y = (n >> 1) & 1, z = (n >> 2) & 1;
+    v += (x ? w.x : 1 - w.x) * (y ? w.y : 1 - w.y) * (z ? w.z : 1 - w.z) *
+         grid.value(c[0] + x, c[1] + y, c[2] + z);
+  }
+  return v;
+}
+
+std::vector<View> views_of(const Box& box, int res) {
+  std::vector<View> views = make_axis_views(box, res);
+  views.push_back(make_view(box, {0.3, -0.6, 0.75}, res));
+  return views;
+}
+
+TEST(GridSource, HitsLieOnTheTrilinearSurface) {
+  for (int n : {32, 64}) {
+    const std::vector<float> values = sample<float>(n, -1.25, 1.25, sphere_field);
+    const GridSource grid(uniform_block(values.data(), ScalarType::float32, n, -1.25, 1.25));
+    const RayCaster caster(grid, 1.0);
+    const auto [mn, mx] = std::minmax_element(values.begin(), values.end());
+    const double range = *mx - *mn;
+    std::size_t hits = 0;
+    for (const View& view : views_of(grid.bounds(), 48)) {
+      const Ldi ldi = caster.cast(view);
+      hits += ldi.sample_count();
+      for (int j = 0; j < view.height; ++j)
+        for (int i = 0; i < view.width; ++i) {
+          const std::size_t p = std::size_t(j) * view.width + i;
+          for (std::uint32_t s = ldi.begin(p); s < ldi.end(p); ++s) {
+            // The stored depth is a float: allow for its rounding along the gradient (≤ 2.5).
+            const glm::dvec3 x = view.pixel_point(i, j, ldi.depth[s]);
+            ASSERT_LT(std::abs(interpolate(grid, x) - 1.0), 1e-5 * range + 2.5 * 2.4e-7)
+                << "n " << n;
+            // And close to the sphere the grid samples (trilinear error ~ h²).
+            ASSERT_NEAR(glm::length(x), 1.0, 0.01);
+          }
+        }
+    }
+    EXPECT_GT(hits, 4000u);
+  }
+}
+
+// Roots of the trilinear interpolant along o + t d, found by brute force: every cell near the
+// ray is clipped and its interpolant scanned densely, sign changes refined by bisection.
+std::vector<double> brute_force_roots(const GridSource& grid, glm::dvec3 o, glm::dvec3 d,
+                                      double iso, double t_max, double h, bool& ambiguous) {
+  std::set<std::array<std::int64_t, 3>> cells;
+  const auto first = grid.first_cell(), last = grid.last_cell();
+  for (double t = 0.0; t <= t_max; t += h / 8) {
+    const glm::dvec3 p = o + t * d;
+    std::array<std::int64_t, 3> c;
+    for (int a = 0; a < 3; ++a)
+      c[a] = std::int64_t(std::floor((p[a] - grid.coordinate(a, 0)) / h));
+    for (int dz = -1; dz <= 1; ++dz)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const std::array<std::int64_t, 3> n{c[0] + dx, c[1] + dy, c[2] + dz};
+          bool ok = true;
+          for (int a = 0; a < 3; ++a)
+            ok = ok && n[a] >= first[a] && n[a] <= last[a];
+          if (ok) cells.insert(n);
+        }
+  }
+  std::vector<double> roots;
+  ambiguous = false;
+  for (const auto& c : cells) {
+    glm::dvec3 lo, hi;
+    for (int a = 0; a < 3; ++a)
+      lo[a] = grid.coordinate(a, c[a]), hi[a] = grid.coordinate(a, c[a] + 1);
+    double t0 = 0.0, t1 = t_max;
+    if (!clip_ray_to_box(o, d, lo, hi, t0, t1)) continue;
+    auto f = [&](double t) {
+      const glm::dvec3 w = glm::clamp((o + t * d - lo) / (hi - lo), 0.0, 1.0);
+      double v = 0.0;
+      for (int n = 0; n < 8; ++n) {
+        const int x = n & 1, y = (n >> 1) & 1, z = (n >> 2) & 1;
+        v += (x ? w.x : 1 - w.x) * (y ? w.y : 1 - w.y) * (z ? w.z : 1 - w.z) *
+             grid.value(c[0] + x, c[1] + y, c[2] + z);
+      }
+      return v - iso;
+    };
+    const int steps = 200;
+    double ta = t0, fa = f(t0);
+    int last_change = -10;
+    for (int k = 1; k <= steps; ++k) {
+      const double tb = t0 + (t1 - t0) * k / steps, fb = f(tb);
+      if ((fa >= 0) != (fb >= 0)) {
+        if (k - last_change < 3) ambiguous = true;
+        last_change = k;
+        double a = ta, b = tb, ga = fa;
+        for (int it = 0; it < 80; ++it) {
+          const double m = 0.5 * (a + b), gm = f(m);
+          if ((gm >= 0) == (ga >= 0))
+            a = m, ga = gm;
+          else
+            b = m;
+        }
+        roots.push_back(0.5 * (a + b));
+      }
+      if (std::abs(fb) < 1e-9) ambiguous = true;  // grazing or exactly on a face
+      ta = tb, fa = fb;
+    }
+  }
+  std::sort(roots.begin(), roots.end());
+  std::vector<double> merged;
+  for (double r : roots)
+    if (merged.empty() || r - merged.back() > 1e-9) merged.push_back(r);
+  return merged;
+}
+
+TEST(GridSource, TenThousandRandomRaysMatchABruteForceCellSolver) {
+  const int n = 24;
+  const std::vector<double> values = sample<double>(n, -1.0, 1.0, wavy_field);
+  const GridSource grid(uniform_block(values.data(), ScalarType::float64, n, -1.0, 1.0));
+  const RayCaster caster(grid, 0.0);
+  const double h = 2.0 / (n - 1);
+  std::mt19937 rng(11);
+  std::normal_distribution<double> normal;
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  int compared = 0, roots = 0;
+  for (int v = 0; v < 100; ++v) {
+    const View view = make_view(grid.bounds(), {normal(rng), normal(rng), normal(rng)}, 64);
+    std::vector<glm::dvec2> points(100);
+    for (auto& p : points)
+      p = {unit(rng) * view.width, unit(rng) * view.height};
+    const RayHitList hits = caster.cast_points(view, points);
+    for (std::size_t k = 0; k < points.size(); ++k) {
+      bool ambiguous = false;
+      const glm::dvec3 o = view.point(points[k].x, points[k].y, 0.0);
+      const std::vector<double> expected =
+          brute_force_roots(grid, o, view.dir, 0.0, view.depth_extent, h, ambiguous);
+      if (ambiguous) continue;
+      ++compared;
+      roots += int(expected.size());
+      ASSERT_EQ(hits.offsets[k + 1] - hits.offsets[k], expected.size())
+          << "view " << v << " ray " << k;
+      for (std::size_t r = 0; r < expected.size(); ++r)
+        ASSERT_NEAR(hits.depth[hits.offsets[k] + r], expected[r], 1e-6);
+    }
+  }
+  EXPECT_GT(compared, 9800);
+  EXPECT_GT(roots, 5000);  // most rays cross the surface: the comparison is not vacuous
+}
+
+TEST(GridSource, TwoBlocksWithGhostLayersGiveTheSameHitsAsOneBlock) {
+  const int n = 33;
+  const std::vector<double> values = sample<double>(n, -1.0, 1.0, [](double x, double y, double z) {
+    return sphere_field(x - 0.07, y + 0.03, z);  // the surface crosses the blocks' interface
+  });
+  std::vector<double> coords(n);
+  for (int i = 0; i < n; ++i)
+    coords[i] = -1.0 + 2.0 * i / (n - 1);
+  GridBlock whole;
+  whole.dims = {n, n, n};
+  whole.values = values.data();
+  whole.type = ScalarType::float64;
+  whole.coords = {coords.data(), coords.data(), coords.data()};
+  // Split along x: A owns points 0…15 and reads point 16 as a ghost; B owns 16…32 and reads
+  // point 15 as a ghost. Both read the solver's array in place (offset pointer, full strides).
+  GridBlock a = whole, b = whole;
+  a.dims[0] = 17;
+  a.ghost_hi[0] = 1;
+  a.strides = {1, n, n * n};
+  b.dims[0] = 18;
+  b.ghost_lo[0] = 1;
+  b.strides = {1, n, n * n};
+  b.values = values.data() + 15;
+  b.coords[0] = coords.data() + 15;
+  const GridSource one(whole), block_a(a), block_b(b);
+  EXPECT_EQ(block_a.bounds().hi.x, coords[16]);
+  EXPECT_EQ(block_b.bounds().lo.x, coords[16]);
+  const RayCaster single(one, 0.5);
+  const std::array<const FieldSource*, 2> pair{&block_a, &block_b};
+  const RayCaster split(pair, 0.5);
+  std::size_t samples = 0;
+  for (const View& view : views_of(one.bounds(), 64)) {
+    const Ldi x = single.cast(view), y = split.cast(view);
+    ASSERT_EQ(x.offsets, y.offsets);
+    for (std::size_t s = 0; s < x.sample_count(); ++s)
+      ASSERT_NEAR(x.depth[s], y.depth[s], 1e-6);
+    samples += x.sample_count();
+  }
+  EXPECT_GT(samples, 5000u);
+  // Either block alone misses the other's half: the ghost cells add nothing of their own.
+  const RayCaster only_a(block_a, 0.5);
+  const View vx = make_axis_views(one.bounds(), 64, "x")[0];
+  EXPECT_LT(only_a.cast(vx).sample_count(), single.cast(vx).sample_count());
+}
+
+TEST(GridSource, FloatStridedAndRectilinearInputsReadTheSameField) {
+  const int n = 20;
+  const std::vector<double> dense = sample<double>(n, -1.25, 1.25, sphere_field);
+  // z fastest instead of x fastest, padded rows: strides {n·(n+3), n+3, 1}.
+  std::vector<float> transposed(std::size_t(n) * n * (n + 3), -99.0f);
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i)
+        transposed[std::size_t(i) * n * (n + 3) + std::size_t(j) * (n + 3) + k] =
+            float(dense[(std::size_t(k) * n + j) * n + i]);
+  GridBlock strided = uniform_block(transposed.data(), ScalarType::float32, n, -1.25, 1.25);
+  strided.strides = {std::int64_t(n) * (n + 3), n + 3, 1};
+  std::vector<double> coords(n);
+  for (int i = 0; i < n; ++i)
+    coords[i] = -1.25 + 2.5 * i / (n - 1);
+  GridBlock rect;
+  rect.dims = {n, n, n};
+  rect.values = dense.data();
+  rect.type = ScalarType::float64;
+  rect.coords = {coords.data(), coords.data(), coords.data()};
+  const GridSource a(uniform_block(dense.data(), ScalarType::float64, n, -1.25, 1.25)), b(strided),
+      c(rect);
+  const RayCaster ca(a, 1.0), cb(b, 1.0), cc(c, 1.0);
+  for (const View& view : views_of(a.bounds(), 40)) {
+    const Ldi la = ca.cast(view), lb = cb.cast(view), lc = cc.cast(view);
+    ASSERT_EQ(la.offsets, lb.offsets);
+    ASSERT_EQ(la.offsets, lc.offsets);
+    for (std::size_t s = 0; s < la.sample_count(); ++s) {
+      EXPECT_NEAR(la.depth[s], lb.depth[s], 1e-6);
+      EXPECT_NEAR(la.depth[s], lc.depth[s], 1e-6);
+    }
+  }
+}
+
+TEST(GridSource, NonUniformRectilinearHitsLieOnItsInterpolant) {
+  const int n = 24;
+  std::vector<double> coords(n);
+  for (int i = 0; i < n; ++i)
+    coords[i] = 1.3 * std::sinh(2.0 * (double(i) / (n - 1) - 0.5)) / std::sinh(1.0);
+  std::vector<double> values(std::size_t(n) * n * n);
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i)
+        values[(std::size_t(k) * n + j) * n + i] = sphere_field(coords[i], coords[j], coords[k]);
+  GridBlock block;
+  block.dims = {n, n, n};
+  block.values = values.data();
+  block.type = ScalarType::float64;
+  block.coords = {coords.data(), coords.data(), coords.data()};
+  const GridSource grid(block);
+  const RayCaster caster(grid, 1.0);
+  std::size_t hits = 0;
+  for (const View& view : views_of(grid.bounds(), 40)) {
+    const Ldi ldi = caster.cast(view);
+    hits += ldi.sample_count();
+    for (int j = 0; j < view.height; ++j)
+      for (int i = 0; i < view.width; ++i)
+        for (std::uint32_t s = ldi.begin(std::size_t(j) * view.width + i);
+             s < ldi.end(std::size_t(j) * view.width + i); ++s)
+          ASSERT_NEAR(interpolate(grid, view.pixel_point(i, j, ldi.depth[s])), 1.0, 1e-5);
+  }
+  EXPECT_GT(hits, 2000u);
+}
+
+TEST(GridSource, SameLdiForOneThreadAndManyThreads) {
+  const int n = 48;
+  const std::vector<float> values = sample<float>(n, -1.0, 1.0, wavy_field);
+  const GridSource grid(uniform_block(values.data(), ScalarType::float32, n, -1.0, 1.0));
+  auto cast = [&](int threads) {
+    Ldi ldi;
+    tbb::task_arena(threads).execute([&] {
+      ldi = RayCaster(grid, 0.0).cast(make_view(grid.bounds(), {1, 2, 3}, 96));
+    });
+    return ldi;
+  };
+  const Ldi one = cast(1), many = cast(tbb::info::default_concurrency());
+  EXPECT_GT(one.sample_count(), 5000u);
+  EXPECT_EQ(one.offsets, many.offsets);
+  EXPECT_EQ(one.depth, many.depth);
+  EXPECT_TRUE(one.normal == many.normal);
+}
+
+TEST(GridSource, RejectsBadBlocks) {
+  const std::vector<float> v(64, 0.0f);
+  GridBlock ok = uniform_block(v.data(), ScalarType::float32, 4, 0.0, 1.0);
+  EXPECT_NO_THROW(GridSource{ok});
+  GridBlock b = ok;
+  b.values = nullptr;
+  EXPECT_THROW(GridSource{b}, std::invalid_argument);
+  b = ok;
+  b.dims = {1, 4, 4};
+  EXPECT_THROW(GridSource{b}, std::invalid_argument);
+  b = ok;
+  b.spacing.y = 0.0;
+  EXPECT_THROW(GridSource{b}, std::invalid_argument);
+  b = ok;
+  b.ghost_lo = {2, 0, 0};
+  b.ghost_hi = {2, 0, 0};
+  EXPECT_THROW(GridSource{b}, std::invalid_argument);
+  const std::vector<double> decreasing{0.0, 1.0, 0.5, 2.0};
+  b = ok;
+  b.coords = {decreasing.data(), decreasing.data(), decreasing.data()};
+  EXPECT_THROW(GridSource{b}, std::invalid_argument);
+}
+
+TEST(GridSource, CubicRootsOfACellSegment) {
+  double roots[3];
+  // Corners −1 except +1 at (1,1,1): along the diagonal f(s) = −1 + 2s³, one root at 2^(−1/3).
+  const double corner[8] = {-1, -1, -1, -1, -1, -1, -1, 1};
+  ASSERT_EQ(trilinear_segment_roots(corner, {0, 0, 0}, {1, 1, 1}, roots), 1);
+  EXPECT_NEAR(roots[0], std::cbrt(0.5), 1e-12);
+  // f = −0.64 + 5.28x − 12xy + 8xyz is 8(s − 0.2)(s − 0.5)(s − 0.8) on the diagonal: three roots.
+  const double three[8] = {-0.64, 4.64, -0.64, -7.36, -0.64, 4.64, -0.64, 0.64};
+  ASSERT_EQ(trilinear_segment_roots(three, {0, 0, 0}, {1, 1, 1}, roots), 3);
+  EXPECT_NEAR(roots[0], 0.2, 1e-12);
+  EXPECT_NEAR(roots[1], 0.5, 1e-12);
+  EXPECT_NEAR(roots[2], 0.8, 1e-12);
+  // The saddle (1 − 2x)(1 − 2y) from (0, 0.9) to (1, 0.3): roots at s = 0.5 and s = 2/3.
+  const double saddle[8] = {1, -1, -1, 1, 1, -1, -1, 1};
+  ASSERT_EQ(trilinear_segment_roots(saddle, {0.0, 0.9, 0.5}, {1.0, 0.3, 0.5}, roots), 2);
+  EXPECT_NEAR(roots[0], 0.5, 1e-12);
+  EXPECT_NEAR(roots[1], 2.0 / 3.0, 1e-12);
+  // A segment inside one quadrant of the saddle never crosses zero.
+  ASSERT_EQ(trilinear_segment_roots(saddle, {0.0, 0.1, 0.5}, {0.4, 0.3, 0.9}, roots), 0);
+}
+
+}  // namespace
+}  // namespace ldimesh
