@@ -12,6 +12,7 @@ packages=(
   nlohmann-json3-dev            # JSON summaries
   libgtest-dev                  # tests
   clang-format                  # formatting (.clang-format)
+  python3                       # test data generation in tests/cli
 )
 
 missing=()

@@ -21,6 +21,7 @@
 
 #include "ldimesh/core/mesh_io.hpp"
 #include "ldimesh/core/pipeline.hpp"
+#include "ldimesh/core/raw_volume.hpp"
 #include "ldimesh/core/raycaster.hpp"
 #include "ldimesh/core/surfaces.hpp"
 
@@ -30,6 +31,11 @@ using ldimesh::FaceType;
 
 struct MeshArgs {
   std::string surface;
+  std::string grid;  // raw volume file
+  std::vector<std::int64_t> dims;
+  std::string type = "float32";
+  std::vector<double> spacing{1.0, 1.0, 1.0};
+  std::vector<double> origin{0.0, 0.0, 0.0};
   int res = 256;
   std::string views = "xyz";
   double r = 0.5;
@@ -70,10 +76,41 @@ int run_surfaces() {
   return 0;
 }
 
+// What is meshed: a built-in surface or a raw volume, with its source and default isovalue.
+struct Input {
+  std::string name;
+  std::unique_ptr<ldimesh::FieldSource> source;
+  double default_isovalue = 0.0;
+  ldimesh::RawVolume volume;  // owns the values of a --grid input
+};
+
+void load_input(const MeshArgs& args, Input& input) {
+  if (args.surface.empty() == args.grid.empty())
+    throw std::runtime_error("give either --surface NAME or --grid FILE --dims NX,NY,NZ");
+  if (!args.surface.empty()) {
+    const ldimesh::SurfaceInfo* surface = ldimesh::find_surface(args.surface);
+    if (!surface)
+      throw std::runtime_error("unknown surface '" + args.surface + "' (see 'ldimesh surfaces')");
+    input.name = surface->name;
+    input.source = ldimesh::make_surface_source(surface->name, args.bricks);
+    input.default_isovalue = surface->isovalue;
+    return;
+  }
+  if (args.dims.size() != 3) throw std::runtime_error("--grid needs --dims NX,NY,NZ");
+  const ldimesh::ScalarType type =
+      args.type == "float64" ? ldimesh::ScalarType::float64 : ldimesh::ScalarType::float32;
+  const ldimesh::Status status =
+      ldimesh::read_raw_volume(args.grid, {args.dims[0], args.dims[1], args.dims[2]}, type,
+                               {args.origin[0], args.origin[1], args.origin[2]},
+                               {args.spacing[0], args.spacing[1], args.spacing[2]}, input.volume);
+  if (!status) throw std::runtime_error(status.message());
+  input.name = args.grid;
+  input.source = std::make_unique<ldimesh::GridSource>(input.volume.block);
+  // Without --iso: the middle of the value range.
+  input.default_isovalue = 0.5 * (input.volume.min_value + input.volume.max_value);
+}
+
 int run_mesh(const MeshArgs& args) {
-  const ldimesh::SurfaceInfo* surface = ldimesh::find_surface(args.surface);
-  if (!surface)
-    throw std::runtime_error("unknown surface '" + args.surface + "' (see 'ldimesh surfaces')");
   if (!args.out.empty()) {
     std::string ext = std::filesystem::path(args.out).extension().string();
     for (char& c : ext)
@@ -86,14 +123,17 @@ int run_mesh(const MeshArgs& args) {
 
   const int threads = args.threads > 0 ? args.threads : tbb::info::default_concurrency();
   tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
-  const double iso = args.isovalue.value_or(surface->isovalue);
-  const std::vector<ldimesh::View> views =
-      ldimesh::make_axis_views(surface->domain, args.res, args.views);
 
   auto start = std::chrono::steady_clock::now();
-  const std::unique_ptr<ldimesh::FieldSource> source =
-      ldimesh::make_surface_source(surface->name, args.bricks);
-  const ldimesh::RayCaster caster(*source, iso);
+  Input input;
+  load_input(args, input);
+  const double load_seconds = seconds_since(start);
+  const double iso = args.isovalue.value_or(input.default_isovalue);
+  const std::vector<ldimesh::View> views =
+      ldimesh::make_axis_views(input.source->bounds(), args.res, args.views);
+
+  start = std::chrono::steady_clock::now();
+  const ldimesh::RayCaster caster(*input.source, iso);
   const double scene_seconds = seconds_since(start);
 
   start = std::chrono::steady_clock::now();
@@ -123,7 +163,7 @@ int run_mesh(const MeshArgs& args) {
   const double mesh_trim = result.seconds.match + result.seconds.trim;
   if (args.json) {
     nlohmann::json j;
-    j["surface"] = surface->name;
+    j[args.grid.empty() ? "surface" : "grid"] = input.name;
     j["isovalue"] = iso;
     j["resolution"] = args.res;
     j["views"] = args.views;
@@ -139,17 +179,19 @@ int run_mesh(const MeshArgs& args) {
     j["faces"] = m.face_count();
     j["face_type"] = args.quads ? "quads" : "triangles";
     j["output"] = args.out.empty() ? nlohmann::json(nullptr) : nlohmann::json(args.out);
-    j["seconds"] = {{"scene", scene_seconds},
-                    {"raycast", cast_seconds},
-                    {"match", result.seconds.match},
-                    {"trim", result.seconds.trim},
-                    {"assemble", result.seconds.assemble},
+    j["seconds"] = {{"load", load_seconds},        {"scene", scene_seconds},
+                    {"raycast", cast_seconds},     {"match", result.seconds.match},
+                    {"trim", result.seconds.trim}, {"assemble", result.seconds.assemble},
                     {"write", write_seconds}};
     std::cout << j.dump(2) << "\n";
     return 0;
   }
   std::printf("ldimesh: %s, isovalue %g, views %s at %d px, r = %g, %d threads\n",
-              surface->name.c_str(), iso, args.views.c_str(), args.res, args.r, threads);
+              input.name.c_str(), iso, args.views.c_str(), args.res, args.r, threads);
+  if (!args.grid.empty())
+    std::printf("  load       %8.3f s  %lldx%lldx%lld %s, values in [%g, %g]\n", load_seconds,
+                (long long)args.dims[0], (long long)args.dims[1], (long long)args.dims[2],
+                args.type.c_str(), input.volume.min_value, input.volume.max_value);
   std::printf("  scene      %8.3f s  %zu bricks hold the isovalue\n", scene_seconds,
               caster.primitive_count());
   std::printf("  ray cast   %8.3f s  %zu rays, %zu samples (%.2f M rays/s, %.2f M hits/s)\n",
@@ -173,8 +215,23 @@ int main(int argc, char** argv) {
   CLI::App* mesh =
       app.add_subcommand("mesh", "ray cast a surface into LDIs and mesh them (paper §3)");
   MeshArgs args;
-  mesh->add_option("--surface", args.surface, "built-in surface (see 'ldimesh surfaces')")
-      ->required();
+  CLI::Option* surface_opt =
+      mesh->add_option("--surface", args.surface, "built-in surface (see 'ldimesh surfaces')");
+  mesh->add_option("--grid", args.grid, "raw volume file: point values, x fastest, little-endian")
+      ->excludes(surface_opt);
+  mesh->add_option("--dims", args.dims, "points per axis of --grid, NX,NY,NZ")
+      ->delimiter(',')
+      ->expected(3);
+  mesh->add_option("--type", args.type, "value type of --grid")
+      ->check(CLI::IsMember({"float32", "float64"}))
+      ->capture_default_str();
+  mesh->add_option("--spacing", args.spacing, "point spacing of --grid, SX,SY,SZ (default 1,1,1)")
+      ->delimiter(',')
+      ->expected(3)
+      ->check(CLI::PositiveNumber);
+  mesh->add_option("--origin", args.origin, "position of the first point of --grid (default 0,0,0)")
+      ->delimiter(',')
+      ->expected(3);
   mesh->add_option("--res", args.res, "pixels along the longer side of each view")
       ->check(CLI::Range(1, 16384))
       ->capture_default_str();
@@ -194,7 +251,8 @@ int main(int argc, char** argv) {
   mesh->add_option("--bricks", args.bricks, "culling bricks per axis")
       ->check(CLI::Range(1, 512))
       ->capture_default_str();
-  mesh->add_option("--iso", args.isovalue, "isovalue (default: the surface's)");
+  mesh->add_option("--iso", args.isovalue,
+                   "isovalue (default: the surface's; for --grid the middle of the value range)");
   mesh->add_option("--max-cost", args.max_cost, "§3 match rejection threshold in pixels")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();

@@ -51,5 +51,21 @@ grep -aq "element face $((triangles))" "$tmp/k.ply" || fail "PLY face count diff
 grep -q '^f ' "$tmp/t.obj" || fail "obj has no faces"
 if grep '^f ' "$tmp/t.obj" | awk 'NF != 5 { bad = 1 } END { exit !bad }'; then fail "obj has non-quad faces"; fi
 
+# --grid: a raw float32 volume (f = x + y + z on 12³ points) is meshed; size mismatches are errors.
+python3 - "$tmp/v.raw" <<'PY'
+import array, sys
+n = 12
+a = array.array('f', [float(i + j + k) for k in range(n) for j in range(n) for i in range(n)])
+open(sys.argv[1], 'wb').write(a.tobytes())
+PY
+"$ldimesh" mesh --grid "$tmp/v.raw" --dims 12,12,12 --iso 16.5 --res 32 --json --out "$tmp/g.ply" >"$tmp/grid.json" \
+  || fail "grid run failed"
+grid_tris=$(sed -n 's/^ *"triangles": \([0-9]*\),*$/\1/p' "$tmp/grid.json")
+[ "${grid_tris:-0}" -gt 100 ] || fail "grid: implausible triangle count '$grid_tris'"
+expect_error "grid size mismatch" mesh --grid "$tmp/v.raw" --dims 12,12,13
+expect_error "grid without dims" mesh --grid "$tmp/v.raw"
+expect_error "grid and surface" mesh --grid "$tmp/v.raw" --dims 12,12,12 --surface sphere
+expect_error "neither grid nor surface" mesh --res 16
+
 if [ "$failures" -ne 0 ]; then echo "$failures check(s) failed"; exit 1; fi
 echo "all CLI checks passed"

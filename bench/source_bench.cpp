@@ -1,0 +1,149 @@
+// Ray casting simulation data: a 256³ structured grid and 16³ high-order elements of order 4,
+// both holding the Marschner–Lobb signal, isovalue 0.5. Reports primitives before and after
+// culling, scene build times (for a new isovalue and for new values in the same arrays, i.e. a
+// new time step), and rays/s and hits/s with all hits, on one thread and on all cores.
+//
+//   build/bin/ldimesh_bench_sources [--grid-points 256] [--elements 16] [--order 4] [--res 512]
+#include <chrono>
+#include <cstdio>
+#include <vector>
+
+#include <tbb/global_control.h>
+#include <tbb/info.h>
+#include <tbb/parallel_for.h>
+#include <CLI/CLI.hpp>
+
+#include "ldimesh/core/analytic_fields.hpp"
+#include "ldimesh/core/grid_source.hpp"
+#include "ldimesh/core/hex_source.hpp"
+#include "ldimesh/core/raycaster.hpp"
+
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+// Casts the three axis views of `source` at `res` on `threads` threads; prints one table row.
+void cast_row(const char* label, const ldimesh::FieldSource& source, double iso, int res,
+              int threads) {
+  tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
+  const ldimesh::RayCaster caster(source, iso);
+  const std::vector<ldimesh::View> views = ldimesh::make_axis_views(source.bounds(), res);
+  double best = 1e30;
+  std::size_t rays = 0, hits = 0;
+  for (int run = 0; run < 3; ++run) {  // best of 3
+    rays = hits = 0;
+    const auto start = std::chrono::steady_clock::now();
+    for (const ldimesh::View& v : views) {
+      hits += caster.cast(v).sample_count();
+      rays += v.pixel_count();
+    }
+    best = std::min(best, seconds_since(start));
+  }
+  std::printf("| %s | %d | %d² × 3 | %.3f | %.2f | %.2f | %zu |\n", label, threads, res, best,
+              rays / best * 1e-6, hits / best * 1e-6, hits);
+}
+
+// Scene build for `iso`: primitives kept and seconds (median of 5), all cores.
+void build_row(const char* label, const ldimesh::FieldSource& source, std::size_t before,
+               double iso) {
+  std::vector<double> t;
+  std::size_t kept = 0;
+  for (int k = 0; k < 5; ++k) {
+    const auto start = std::chrono::steady_clock::now();
+    const ldimesh::RayCaster caster(source, iso);
+    t.push_back(seconds_since(start));
+    kept = caster.primitive_count();
+  }
+  std::sort(t.begin(), t.end());
+  std::printf("| %s | %g | %zu | %zu | %.4f |\n", label, iso, before, kept, t[2]);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"ldimesh ray casting benchmark on grid blocks and high-order elements"};
+  int n = 256, elements = 16, order = 4, res = 512;
+  app.add_option("--grid-points", n, "grid points per axis")->check(CLI::Range(8, 1024));
+  app.add_option("--elements", elements, "elements per axis")->check(CLI::Range(1, 128));
+  app.add_option("--order", order, "element order p")->check(CLI::Range(1, ldimesh::kMaxHexOrder));
+  app.add_option("--res", res, "pixels per view side")->check(CLI::Range(8, 8192));
+  CLI11_PARSE(app, argc, argv);
+  const int all = tbb::info::default_concurrency();
+  const ldimesh::fields::MarschnerLobb ml;
+
+  // Grid: n³ points over [−1, 1]³, float32, x fastest.
+  std::vector<float> values(std::size_t(n) * n * n);
+  auto fill_grid = [&](double shift) {
+    tbb::parallel_for(0, n, [&](int k) {
+      for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i) {
+          const double h = 2.0 / (n - 1);
+          values[(std::size_t(k) * n + j) * n + i] =
+              float(ml(-1 + i * h, -1 + j * h, -1 + k * h) + shift);
+        }
+    });
+  };
+  fill_grid(0.0);
+  ldimesh::GridBlock block;
+  block.dims = {n, n, n};
+  block.values = values.data();
+  block.type = ldimesh::ScalarType::float32;
+  block.origin = glm::dvec3(-1.0);
+  block.spacing = glm::dvec3(2.0 / (n - 1));
+  const ldimesh::GridSource grid(block);
+
+  // Elements: elements³ cubes over [−1, 1]³, order p, GLL nodes, float64.
+  const int p1 = order + 1;
+  const std::size_t count = std::size_t(elements) * elements * elements;
+  std::vector<double> corners(count * 24), nodal(count * p1 * p1 * p1);
+  const std::vector<double> nodes =
+      ldimesh::node_positions(order, ldimesh::NodeSet::gauss_lobatto_legendre);
+  const double size = 2.0 / elements;
+  for (std::size_t e = 0; e < count; ++e) {
+    const glm::dvec3 lo{-1 + size * double(e % elements),
+                        -1 + size * double((e / elements) % elements),
+                        -1 + size * double(e / (std::size_t(elements) * elements))};
+    for (int c = 0; c < 8; ++c)
+      for (int a = 0; a < 3; ++a)
+        corners[e * 24 + c * 3 + a] = lo[a] + size * ((c >> a) & 1);
+    for (int k = 0; k < p1; ++k)
+      for (int j = 0; j < p1; ++j)
+        for (int i = 0; i < p1; ++i)
+          nodal[e * p1 * p1 * p1 + (std::size_t(k) * p1 + j) * p1 + i] =
+              ml(lo.x + size * nodes[i], lo.y + size * nodes[j], lo.z + size * nodes[k]);
+  }
+  ldimesh::HexBlock hex;
+  hex.order = order;
+  hex.nodes = ldimesh::NodeSet::gauss_lobatto_legendre;
+  hex.element_count = count;
+  hex.corners = corners.data();
+  hex.values = nodal.data();
+  hex.type = ldimesh::ScalarType::float64;
+  const ldimesh::HexElementSource elems(hex);
+
+  std::printf("Marschner–Lobb on [-1, 1]^3; %d cores\n\n", all);
+  std::printf(
+      "| source | isovalue | primitives | after culling | scene build s "
+      "|\n|---|---|---|---|---|\n");
+  char grid_label[96], hex_label[96];
+  std::snprintf(grid_label, sizeof grid_label, "grid %d³ float32, 8³-cell bricks", n);
+  std::snprintf(hex_label, sizeof hex_label, "%d³ elements, p = %d, GLL", elements, order);
+  build_row(grid_label, grid, grid.brick_count(), 0.5);
+  build_row(grid_label, grid, grid.brick_count(), 0.4);
+  fill_grid(0.01);  // a new time step in the same array
+  build_row("same grid, new values", grid, grid.brick_count(), 0.5);
+  fill_grid(0.0);
+  build_row(hex_label, elems, count, 0.5);
+  build_row(hex_label, elems, count, 0.4);
+
+  std::printf(
+      "\n| source | threads | rays | seconds | Mrays/s | Mhits/s | hits "
+      "|\n|---|---|---|---|---|---|---|\n");
+  for (int threads : {1, all})
+    cast_row(grid_label, grid, 0.5, res, threads);
+  for (int threads : {1, all})
+    cast_row(hex_label, elems, 0.5, res, threads);
+  return 0;
+}
