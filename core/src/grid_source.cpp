@@ -5,6 +5,7 @@
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include <tbb/parallel_for.h>
@@ -67,17 +68,11 @@ template <class T>
 class GridBinding final : public GeometryBinding {
  public:
   GridBinding(RTCDevice device, const GridView<T>& grid, double iso, std::vector<Brick> bricks)
-      : grid_(grid), iso_(iso), bricks_(std::move(bricks)) {
-    geometry_ = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_USER);
-    if (!geometry_) throw std::runtime_error("Embree: cannot create user geometry");
-    rtcSetGeometryUserPrimitiveCount(geometry_, unsigned(bricks_.size()));
-    rtcSetGeometryUserData(geometry_, this);
-    rtcSetGeometryBoundsFunction(geometry_, &GridBinding::bounds, nullptr);
-    rtcSetGeometryIntersectFunction(geometry_, &GridBinding::intersect);
-    rtcCommitGeometry(geometry_);
-  }
-  ~GridBinding() override { rtcReleaseGeometry(geometry_); }
-  RTCGeometry geometry() const override { return geometry_; }
+      : grid_(grid),
+        iso_(iso),
+        bricks_(std::move(bricks)),
+        geometry_(device, bricks_.size(), this, &GridBinding::bounds, &GridBinding::intersect) {}
+  RTCGeometry geometry() const override { return geometry_.get(); }
   std::size_t primitive_count() const override { return bricks_.size(); }
 
  private:
@@ -174,7 +169,7 @@ class GridBinding final : public GeometryBinding {
   GridView<T> grid_;
   double iso_;
   std::vector<Brick> bricks_;
-  RTCGeometry geometry_ = nullptr;
+  UserGeometry geometry_;  // last: its callbacks read the members above
 };
 
 template <class T>
@@ -331,23 +326,15 @@ std::size_t GridSource::brick_count() const {
 }
 
 std::unique_ptr<GeometryBinding> GridSource::bind(RTCDevice device, double isovalue) const {
-  const bool rectilinear = block_.coords[0] != nullptr;
-  if (block_.type == ScalarType::float32) {
-    const GridView<float> g{static_cast<const float*>(block_.values),
-                            block_.strides,
-                            block_.origin,
-                            block_.spacing,
-                            block_.coords,
-                            rectilinear};
+  auto bind_typed = [&](const auto* values) {
+    using T = std::remove_cv_t<std::remove_pointer_t<decltype(values)>>;
+    const GridView<T> g{values,         block_.strides, block_.origin,
+                        block_.spacing, block_.coords,  block_.coords[0] != nullptr};
     return bind_grid(device, g, isovalue, first_cell_, last_cell_, bricks_, brick_cells_);
-  }
-  const GridView<double> g{static_cast<const double*>(block_.values),
-                           block_.strides,
-                           block_.origin,
-                           block_.spacing,
-                           block_.coords,
-                           rectilinear};
-  return bind_grid(device, g, isovalue, first_cell_, last_cell_, bricks_, brick_cells_);
+  };
+  if (block_.type == ScalarType::float32)
+    return bind_typed(static_cast<const float*>(block_.values));
+  return bind_typed(static_cast<const double*>(block_.values));
 }
 
 }  // namespace ldimesh

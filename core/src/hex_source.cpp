@@ -457,18 +457,10 @@ class HexBinding final : public GeometryBinding {
       : order_(order),
         values_per_element_(nodes_per_element(order)),
         elements_(std::move(elements)),
-        coefficients_(std::move(coefficients)) {
-    geometry_ = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_USER);
-    if (!geometry_) throw std::runtime_error("Embree: cannot create user geometry");
-    rtcSetGeometryUserPrimitiveCount(geometry_, unsigned(elements_.size()));
-    rtcSetGeometryUserData(geometry_, this);
-    rtcSetGeometryBoundsFunction(geometry_, &HexBinding::bounds, nullptr);
-    rtcSetGeometryIntersectFunction(geometry_, &HexBinding::intersect);
-    rtcCommitGeometry(geometry_);
-  }
-  ~HexBinding() override { rtcReleaseGeometry(geometry_); }
+        coefficients_(std::move(coefficients)),
+        geometry_(device, elements_.size(), this, &HexBinding::bounds, &HexBinding::intersect) {}
 
-  RTCGeometry geometry() const override { return geometry_; }
+  RTCGeometry geometry() const override { return geometry_.get(); }
   std::size_t primitive_count() const override { return elements_.size(); }
 
  private:
@@ -509,7 +501,7 @@ class HexBinding final : public GeometryBinding {
   std::size_t values_per_element_;
   std::vector<ActiveElement> elements_;
   std::vector<double> coefficients_;  // iso subtracted, values_per_element_ per active element
-  RTCGeometry geometry_ = nullptr;
+  UserGeometry geometry_;             // last: its callbacks read the members above
 };
 
 }  // namespace

@@ -10,6 +10,7 @@
 #include <tbb/task_arena.h>
 
 #include "ldimesh/core/raycaster.hpp"
+#include "test_helpers.hpp"
 
 namespace ldimesh {
 namespace {
@@ -65,11 +66,7 @@ double interpolate(const GridSource& grid, glm::dvec3 p) {
   return v;
 }
 
-std::vector<View> views_of(const Box& box, int res) {
-  std::vector<View> views = make_axis_views(box, res);
-  views.push_back(make_view(box, {0.3, -0.6, 0.75}, res));
-  return views;
-}
+using testing::axis_and_oblique_views;
 
 TEST(GridSource, HitsLieOnTheTrilinearSurface) {
   for (int n : {32, 64}) {
@@ -79,7 +76,7 @@ TEST(GridSource, HitsLieOnTheTrilinearSurface) {
     const auto [mn, mx] = std::minmax_element(values.begin(), values.end());
     const double range = *mx - *mn;
     std::size_t hits = 0;
-    for (const View& view : views_of(grid.bounds(), 48)) {
+    for (const View& view : axis_and_oblique_views(grid.bounds(), 48)) {
       const Ldi ldi = caster.cast(view);
       hits += ldi.sample_count();
       for (int j = 0; j < view.height; ++j)
@@ -232,7 +229,7 @@ TEST(GridSource, TwoBlocksWithGhostLayersGiveTheSameHitsAsOneBlock) {
   const std::array<const FieldSource*, 2> pair{&block_a, &block_b};
   const RayCaster split(pair, 0.5);
   std::size_t samples = 0;
-  for (const View& view : views_of(one.bounds(), 64)) {
+  for (const View& view : axis_and_oblique_views(one.bounds(), 64)) {
     const Ldi x = single.cast(view), y = split.cast(view);
     ASSERT_EQ(x.offsets, y.offsets);
     for (std::size_t s = 0; s < x.sample_count(); ++s)
@@ -269,7 +266,7 @@ TEST(GridSource, FloatStridedAndRectilinearInputsReadTheSameField) {
   const GridSource a(uniform_block(dense.data(), ScalarType::float64, n, -1.25, 1.25)), b(strided),
       c(rect);
   const RayCaster ca(a, 1.0), cb(b, 1.0), cc(c, 1.0);
-  for (const View& view : views_of(a.bounds(), 40)) {
+  for (const View& view : axis_and_oblique_views(a.bounds(), 40)) {
     const Ldi la = ca.cast(view), lb = cb.cast(view), lc = cc.cast(view);
     ASSERT_EQ(la.offsets, lb.offsets);
     ASSERT_EQ(la.offsets, lc.offsets);
@@ -298,7 +295,7 @@ TEST(GridSource, NonUniformRectilinearHitsLieOnItsInterpolant) {
   const GridSource grid(block);
   const RayCaster caster(grid, 1.0);
   std::size_t hits = 0;
-  for (const View& view : views_of(grid.bounds(), 40)) {
+  for (const View& view : axis_and_oblique_views(grid.bounds(), 40)) {
     const Ldi ldi = caster.cast(view);
     hits += ldi.sample_count();
     for (int j = 0; j < view.height; ++j)

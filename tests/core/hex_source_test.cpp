@@ -13,6 +13,7 @@
 
 #include "ldimesh/core/raycaster.hpp"
 #include "ldimesh/core/view.hpp"
+#include "test_helpers.hpp"
 
 namespace ldimesh {
 namespace {
@@ -110,28 +111,9 @@ glm::dmat3 skew_map() {
 
 const Box kSphereBox{{-1.25, -1.25, -1.25}, {1.25, 1.25, 1.25}};
 
-// As in raycaster_test: where the ray through pixel (i, j) crosses the sphere of radius R
-// around the origin; `grazing` within `margin` of tangency.
-struct SphereCrossing {
-  int count;
-  double t0, t1;
-  bool grazing;
-};
-SphereCrossing sphere_crossing(const View& view, int i, int j, double R, double margin) {
-  const glm::dvec3 o = view.pixel_point(i, j, 0.0);
-  const double b = glm::dot(o, view.dir);
-  const double dist = std::sqrt(std::max(0.0, glm::dot(o, o) - b * b));
-  if (std::abs(dist - R) < margin) return {0, 0, 0, true};
-  if (dist > R) return {0, 0, 0, false};
-  const double s = std::sqrt(R * R - dist * dist);
-  return {2, -b - s, -b + s, false};
-}
-
-std::vector<View> test_views(const Box& box, int res) {
-  std::vector<View> views = make_axis_views(box, res, "xyz");
-  views.push_back(make_view(box, {0.3, -0.5, 0.8}, res));
-  return views;
-}
+using testing::axis_and_oblique_views;
+using testing::sphere_crossing;
+using testing::SphereCrossing;
 
 // Legendre P_n(x) and P'_n(x) on (−1, 1), by the three-term recurrence.
 glm::dvec2 legendre(int n, double x) {
@@ -197,7 +179,7 @@ TEST(HexElementSource, SphereFromQuadraticNodalValuesIsExact) {
         const HexElementSource source(make_block(order, nodes, corners, values));
         const RayCaster caster(source, 1.0);
         EXPECT_EQ(caster.primitive_count(), 56u);  // the 8 corner elements miss the sphere
-        for (const View& view : test_views(source.bounds(), 24)) {
+        for (const View& view : axis_and_oblique_views(source.bounds(), 24)) {
           const Ldi ldi = caster.cast(view);
           int through = 0, outside = 0;
           for (int j = 0; j < view.height; ++j)

@@ -7,6 +7,7 @@
 #include "ldimesh/core/analytic_fields.hpp"
 #include "ldimesh/core/analytic_source.hpp"
 #include "ldimesh/core/surfaces.hpp"
+#include "test_helpers.hpp"
 
 namespace ldimesh {
 namespace {
@@ -39,33 +40,14 @@ struct Layers64 {
   }
 };
 
-// Depths where the ray through pixel (i, j) of `view` crosses the sphere of radius R around
-// the origin; empty if it misses, nullopt-like flag `grazing` when within `margin` of tangent.
-struct SphereCrossing {
-  int count;
-  double t0, t1;
-  bool grazing;
-};
-SphereCrossing sphere_crossing(const View& view, int i, int j, double R, double margin) {
-  const glm::dvec3 o = view.pixel_point(i, j, 0.0);
-  const double b = glm::dot(o, view.dir);
-  const double dist = std::sqrt(std::max(0.0, glm::dot(o, o) - b * b));
-  if (std::abs(dist - R) < margin) return {0, 0, 0, true};
-  if (dist > R) return {0, 0, 0, false};
-  const double s = std::sqrt(R * R - dist * dist);
-  return {2, -b - s, -b + s, false};
-}
-
-std::vector<View> test_views(const Box& box, int res) {
-  std::vector<View> views = make_axis_views(box, res, "xyz");
-  views.push_back(make_view(box, {0.3, -0.5, 0.8}, res));
-  return views;
-}
+using testing::axis_and_oblique_views;
+using testing::sphere_crossing;
+using testing::SphereCrossing;
 
 TEST(RayCaster, SphereHitsLieOnTheSphere) {
   const AnalyticSource<fields::Sphere> source(fields::Sphere{}, kSphereBox);
   const RayCaster caster(source, 1.0);
-  for (const View& view : test_views(kSphereBox, 48)) {
+  for (const View& view : axis_and_oblique_views(kSphereBox, 48)) {
     const Ldi ldi = caster.cast(view);
     int through = 0, outside = 0;
     for (int j = 0; j < view.height; ++j)
@@ -122,7 +104,7 @@ TEST(RayCaster, ShellThinnerThanABrickIsNeverMissed) {
   const RayCaster caster(source, eps * eps);
   const double r_in = std::sqrt(1 - eps), r_out = std::sqrt(1 + eps);
   ASSERT_LT(r_out - r_in, 1e-3 * (2.5 / 8));
-  for (const View& view : test_views(kSphereBox, 40)) {
+  for (const View& view : axis_and_oblique_views(kSphereBox, 40)) {
     const Ldi ldi = caster.cast(view);
     for (int j = 0; j < view.height; ++j)
       for (int i = 0; i < view.width; ++i) {

@@ -1,12 +1,15 @@
 // Shared by the core tests: small meshes and LDIs built by hand, geometric checks.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <optional>
+#include <vector>
 
 #include <glm/glm.hpp>
 
 #include "ldimesh/core/mesh.hpp"
+#include "ldimesh/core/view.hpp"
 
 namespace ldimesh::testing {
 
@@ -36,6 +39,31 @@ inline bool ray_hits_mesh(const Mesh& mesh, glm::dvec3 o, glm::dvec3 d, double t
     if (hit && *hit >= t_lo && *hit <= t_hi) return true;
   }
   return false;
+}
+
+// Where the ray through pixel (i, j) of `view` crosses the sphere of radius R around the
+// origin: count 2 with the two depths, or 0; `grazing` when within `margin` of tangency (such
+// rays are skipped by tests: a tangent ray may legitimately report 0, 1 or 2 hits).
+struct SphereCrossing {
+  int count;
+  double t0, t1;
+  bool grazing;
+};
+inline SphereCrossing sphere_crossing(const View& view, int i, int j, double R, double margin) {
+  const glm::dvec3 o = view.pixel_point(i, j, 0.0);
+  const double b = glm::dot(o, view.dir);
+  const double dist = std::sqrt(std::max(0.0, glm::dot(o, o) - b * b));
+  if (std::abs(dist - R) < margin) return {0, 0, 0, true};
+  if (dist > R) return {0, 0, 0, false};
+  const double s = std::sqrt(R * R - dist * dist);
+  return {2, -b - s, -b + s, false};
+}
+
+// The three axis views of `box` plus one oblique view, at `res`.
+inline std::vector<View> axis_and_oblique_views(const Box& box, int res) {
+  std::vector<View> views = make_axis_views(box, res, "xyz");
+  views.push_back(make_view(box, {0.3, -0.5, 0.8}, res));
+  return views;
 }
 
 }  // namespace ldimesh::testing

@@ -166,18 +166,11 @@ class AnalyticBinding final : public GeometryBinding {
         iso_(isovalue),
         clip_radius_(clip_radius),
         tol_(tol),
-        bricks_(std::move(bricks)) {
-    geometry_ = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_USER);
-    if (!geometry_) throw std::runtime_error("Embree: cannot create user geometry");
-    rtcSetGeometryUserPrimitiveCount(geometry_, unsigned(bricks_.size()));
-    rtcSetGeometryUserData(geometry_, this);
-    rtcSetGeometryBoundsFunction(geometry_, &AnalyticBinding::bounds, nullptr);
-    rtcSetGeometryIntersectFunction(geometry_, &AnalyticBinding::intersect);
-    rtcCommitGeometry(geometry_);
-  }
-  ~AnalyticBinding() override { rtcReleaseGeometry(geometry_); }
+        bricks_(std::move(bricks)),
+        geometry_(device, bricks_.size(), this, &AnalyticBinding::bounds,
+                  &AnalyticBinding::intersect) {}
 
-  RTCGeometry geometry() const override { return geometry_; }
+  RTCGeometry geometry() const override { return geometry_.get(); }
   std::size_t primitive_count() const override { return bricks_.size(); }
 
  private:
@@ -206,7 +199,7 @@ class AnalyticBinding final : public GeometryBinding {
   double clip_radius_;
   RootSearchTolerances tol_;
   std::vector<Brick> bricks_;
-  RTCGeometry geometry_ = nullptr;
+  UserGeometry geometry_;  // last: its callbacks read the members above
 };
 
 // An analytic field over a box, optionally clipped to the ball of radius clip_radius around the

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cstddef>
 #include <memory>
+#include <stdexcept>
 #include <utility>
 #include <vector>
 
@@ -83,6 +84,30 @@ inline void write_padded_bounds(glm::dvec3 lo, glm::dvec3 hi, RTCBounds* out) {
   out->upper_x = float(hi.x + pad.x), out->upper_y = float(hi.y + pad.y);
   out->upper_z = float(hi.z + pad.z);
 }
+
+// An Embree user geometry with `count` primitives whose bounds and intersect callbacks receive
+// `user` as geometryUserPtr, committed; released on destruction. Declare it after the members
+// the callbacks read, so that they exist first. Throws std::runtime_error if Embree fails.
+class UserGeometry {
+ public:
+  UserGeometry(RTCDevice device, std::size_t count, void* user, RTCBoundsFunction bounds,
+               RTCIntersectFunctionN intersect)
+      : geometry_(rtcNewGeometry(device, RTC_GEOMETRY_TYPE_USER)) {
+    if (!geometry_) throw std::runtime_error("Embree: cannot create user geometry");
+    rtcSetGeometryUserPrimitiveCount(geometry_, unsigned(count));
+    rtcSetGeometryUserData(geometry_, user);
+    rtcSetGeometryBoundsFunction(geometry_, bounds, nullptr);
+    rtcSetGeometryIntersectFunction(geometry_, intersect);
+    rtcCommitGeometry(geometry_);
+  }
+  ~UserGeometry() { rtcReleaseGeometry(geometry_); }
+  UserGeometry(const UserGeometry&) = delete;
+  UserGeometry& operator=(const UserGeometry&) = delete;
+  RTCGeometry get() const { return geometry_; }
+
+ private:
+  RTCGeometry geometry_;
+};
 
 class FieldSource {
  public:
