@@ -10,7 +10,10 @@ packages=(
   libtbb-dev                    # threads
   libcli11-dev                  # command line
   nlohmann-json3-dev            # JSON summaries
+  libzstd-dev                   # fragment compression
+  libopenmpi-dev openmpi-bin    # the distributed pipeline
   libgtest-dev                  # tests
+  clang libclang-rt-14-dev      # libFuzzer target for the fragment decoder
   clang-format                  # formatting (.clang-format)
   python3                       # test data generation in tests/cli
 )

@@ -19,9 +19,24 @@ double eval_cubic(const double c[4], double s) {
   return ((c[3] * s + c[2]) * s + c[1]) * s + c[0];
 }
 
+// The trilinear interpolant at local point p: Σ w_n · corner[n] with w_n = wx·wy·wz, summed in
+// corner order. Where p lies on a face (a coordinate exactly 0 or 1) the other side's weights
+// are exact zeros, and the cell on the other side of that face computes the same sum of the
+// same products: the value on a shared face does not depend on the cell.
+double trilinear_value(const double corner[8], glm::dvec3 p) {
+  double v = 0.0;
+  for (int n = 0; n < 8; ++n) {
+    const double wx = (n & 1) ? p.x : 1.0 - p.x, wy = (n & 2) ? p.y : 1.0 - p.y,
+                 wz = (n & 4) ? p.z : 1.0 - p.z;
+    v += wx * wy * wz * corner[n];
+  }
+  return v;
+}
+
 // The single root of the cubic in [a, b] where it changes sign: Newton steps kept inside the
 // bracket, bisection when a step leaves it.
-double converge_cubic(const double c[4], double a, double b, double fa) {
+double converge_cubic(const double c[4], double a, double b, double fa, double fb) {
+  if (fb == 0.0) return b;  // exactly at the end: keep it exact (the half-open rule needs it)
   double t = 0.5 * (a + b);
   for (int iter = 0; iter < 60 && b - a > 1e-15; ++iter) {
     const double ft = eval_cubic(c, t);
@@ -95,7 +110,11 @@ class GridBinding final : public GeometryBinding {
     const GridView<T>& g = grid_;
     std::array<std::int64_t, 3> cell;
     std::array<int, 3> step;
-    std::array<double, 3> t_next;
+    std::array<double, 3> t_next, inv;
+    // Axes along which the current cell's entry point lies exactly on a face. A face point is
+    // then evaluated by the same arithmetic in both cells that share the face (and in both
+    // bricks or ranks), so the sign tests at segment ends agree and no root is lost or doubled.
+    std::array<bool, 3> on_entry_face{false, false, false};
     const glm::dvec3 entry = q.org + t0 * q.dir;
     for (int a = 0; a < 3; ++a) {
       std::int64_t i = b.lo[a];
@@ -105,29 +124,39 @@ class GridBinding final : public GeometryBinding {
       if (q.dir[a] < 0.0 && i > b.lo[a] && g.coord(a, i) == entry[a]) --i;
       cell[a] = i;
       step[a] = q.dir[a] > 0.0 ? 1 : (q.dir[a] < 0.0 ? -1 : 0);
+      // t at a face as clip_ray_to_box computes it: (face − o) · (1 / d).
+      inv[a] = step[a] == 0 ? 0.0 : 1.0 / q.dir[a];
       t_next[a] =
-          step[a] == 0 ? INFINITY : (g.coord(a, step[a] > 0 ? i + 1 : i) - q.org[a]) / q.dir[a];
+          step[a] == 0 ? INFINITY : (g.coord(a, step[a] > 0 ? i + 1 : i) - q.org[a]) * inv[a];
+      on_entry_face[a] =
+          step[a] != 0 && (g.coord(a, step[a] > 0 ? i : i + 1) - q.org[a]) * inv[a] == t0;
     }
     double t = t0;
     while (t < t1) {
       const double t_exit = std::min({t_next[0], t_next[1], t_next[2], t1});
-      if (t_exit > t) solve_cell(q, cell, t, t_exit);
+      std::array<bool, 3> on_exit_face;
+      for (int a = 0; a < 3; ++a)
+        on_exit_face[a] = t_next[a] == t_exit;
+      if (t_exit > t) solve_cell(q, cell, step, t, t_exit, on_entry_face, on_exit_face);
       t = std::max(t, t_exit);  // a face behind t (rounding at the entry) moves nothing back
       // Advance along every axis whose face the ray leaves through (several at an edge).
       bool inside = true;
       for (int a = 0; a < 3; ++a) {
-        if (t_next[a] > t_exit) continue;
+        on_entry_face[a] = on_exit_face[a];
+        if (!on_exit_face[a]) continue;
         cell[a] += step[a];
         if (cell[a] < b.lo[a] || cell[a] > b.hi[a])
           inside = false;
         else
-          t_next[a] = (g.coord(a, step[a] > 0 ? cell[a] + 1 : cell[a]) - q.org[a]) / q.dir[a];
+          t_next[a] = (g.coord(a, step[a] > 0 ? cell[a] + 1 : cell[a]) - q.org[a]) * inv[a];
       }
       if (!inside) break;
     }
   }
 
-  void solve_cell(RayQuery& q, const std::array<std::int64_t, 3>& c, double ta, double tb) const {
+  void solve_cell(RayQuery& q, const std::array<std::int64_t, 3>& c, const std::array<int, 3>& step,
+                  double ta, double tb, const std::array<bool, 3>& entry_face,
+                  const std::array<bool, 3>& exit_face) const {
     const GridView<T>& g = grid_;
     double corner[8];
     bool any_positive = false, any_negative = false;
@@ -137,12 +166,16 @@ class GridBinding final : public GeometryBinding {
     }
     if (!any_positive || !any_negative) return;  // the interpolant lies between its corners
     glm::dvec3 lo, size, a, b;
+    const glm::dvec3 pa = q.org + ta * q.dir, pb = q.org + tb * q.dir;
     for (int k = 0; k < 3; ++k) {
       lo[k] = g.coord(k, c[k]);
       size[k] = g.coord(k, c[k] + 1) - lo[k];
+      // Exactly 0 or 1 on the face the ray enters or leaves through.
+      a[k] = entry_face[k] ? (step[k] > 0 ? 0.0 : 1.0)
+                           : std::clamp((pa[k] - lo[k]) / size[k], 0.0, 1.0);
+      b[k] = exit_face[k] ? (step[k] > 0 ? 1.0 : 0.0)
+                          : std::clamp((pb[k] - lo[k]) / size[k], 0.0, 1.0);
     }
-    a = glm::clamp((q.org + ta * q.dir - lo) / size, 0.0, 1.0);
-    b = glm::clamp((q.org + tb * q.dir - lo) / size, 0.0, 1.0);
     double roots[3];
     const int n = trilinear_segment_roots(corner, a, b, roots);
     for (int r = 0; r < n; ++r) {
@@ -161,8 +194,9 @@ class GridBinding final : public GeometryBinding {
         grad[axis] = sum / size[axis];
       }
       const double len = glm::length(grad);
-      q.hits->push_back(
-          {ta + roots[r] * (tb - ta), len > 0.0 ? glm::vec3(grad / len) : glm::vec3(-q.dir), 0.0f});
+      // A root at the very end of the segment keeps tb exactly (the half-open rule compares it).
+      const double t = roots[r] == 1.0 ? tb : ta + roots[r] * (tb - ta);
+      q.hits->push_back({t, len > 0.0 ? glm::vec3(grad / len) : glm::vec3(-q.dir), 0.0f});
     }
   }
 
@@ -256,13 +290,56 @@ int trilinear_segment_roots(const double corner[8], glm::dvec3 a, glm::dvec3 b, 
   cuts[n_cuts++] = 1.0;
 
   int n = 0;
-  double fa = eval_cubic(c, 0.0);
+  // The end values by direct interpolation, not from the cubic: on a shared face both cells
+  // compute them with the same arithmetic (see trilinear_value).
+  double fa = trilinear_value(corner, a);
+  if (fa == 0.0) {
+    // A root exactly at the start belongs to this segment (the caster's half-open rule drops
+    // one exactly at a shared end). Continue with the sign just after it, so that it is not
+    // found again by the first piece.
+    roots[n++] = 0.0;
+    fa = c[1] != 0.0 ? c[1] : (c[2] != 0.0 ? c[2] : c[3]);
+  }
+  const double f_end = trilinear_value(corner, b);
   for (int k = 0; k + 1 < n_cuts; ++k) {
-    const double fb = eval_cubic(c, cuts[k + 1]);
-    if (positive(fa) != positive(fb)) roots[n++] = converge_cubic(c, cuts[k], cuts[k + 1], fa);
+    const double fb = k + 2 == n_cuts ? f_end : eval_cubic(c, cuts[k + 1]);
+    if (positive(fa) != positive(fb)) roots[n++] = converge_cubic(c, cuts[k], cuts[k + 1], fa, fb);
     fa = fb;
   }
   return n;
+}
+
+GridPart grid_part(const GridBlock& whole, std::array<int, 3> blocks, std::array<int, 3> index) {
+  const GridSource source(whole);  // validates `whole`; its coordinates define the faces
+  GridPart part{whole, {}};
+  GridBlock& b = part.block;
+  if (b.strides == std::array<std::int64_t, 3>{0, 0, 0})
+    b.strides = {1, whole.dims[0], whole.dims[0] * whole.dims[1]};
+  std::int64_t offset = 0;
+  for (int a = 0; a < 3; ++a) {
+    const std::int64_t first = source.first_cell()[a];
+    const std::int64_t cells = source.last_cell()[a] - first + 1;
+    const std::int64_t c0 = first + cells * index[a] / blocks[a];
+    const std::int64_t c1 = first + cells * (index[a] + 1) / blocks[a];  // one past the last cell
+    if (c1 <= c0) throw std::invalid_argument("grid block: more parts than cells along an axis");
+    const bool last_part = index[a] + 1 == blocks[a];
+    // Points c0 … c1, where c1 belongs to the next part (a ghost here); the last part keeps
+    // whatever `whole` has above.
+    b.dims[a] = last_part ? whole.dims[a] - c0 : c1 - c0 + 1;
+    b.ghost_lo[a] = 0;
+    b.ghost_hi[a] = last_part ? whole.ghost_hi[a] : 1;
+    offset += c0 * b.strides[a];
+    if (whole.coords[0]) {
+      b.coords[a] = whole.coords[a] + c0;
+    } else {
+      b.origin[a] = whole.origin[a] + double(c0) * whole.spacing[a];
+    }
+    part.owned.lo[a] = source.coordinate(a, c0);
+    part.owned.hi[a] = source.coordinate(a, c1);
+  }
+  b.values =
+      static_cast<const char*>(whole.values) + offset * std::int64_t(scalar_size(whole.type));
+  return part;
 }
 
 GridSource::GridSource(const GridBlock& block, int brick_cells)

@@ -375,6 +375,7 @@ int sign_variations(const double* c, int n) {
 // The single root in [0, 1] of c[0..n], whose end values c[0] and c[n] differ in sign: Newton
 // steps from a regula falsi start, falling back to bisection whenever they leave the bracket.
 double converge(const double* c, int n, double tol) {
+  if (c[n] == 0.0) return 1.0;  // exactly at the end: keep it exact (the half-open rule needs it)
   double a = 0.0, b = 1.0, ga = c[0];
   double u = c[0] / (c[0] - c[n]);
   if (!(u > a && u < b)) u = 0.5;
@@ -409,6 +410,9 @@ void bernstein_roots(const double* c, int n, Found found) {
   };
   // Depth-first with the right half pushed first: at most one pending interval per level, and
   // kMinWidth = 1e-12 > 2^-40 bounds the levels.
+  // A root exactly at the start belongs to this segment (the caster's half-open rule drops one
+  // exactly at a shared end); the caster merges it with the same root found by subdivision.
+  if (c[0] == 0.0) found(0.0);
   Piece stack[64];
   int top = 0;
   stack[top].s0 = 0.0, stack[top].s1 = 1.0;
@@ -436,7 +440,8 @@ void bernstein_roots(const double* c, int n, Found found) {
     // One variation: one root. Too small (or out of budget): a root only where the ends differ
     // in sign, so a touching double root without a sign change is dropped.
     if (positive(iv.c[0]) == positive(iv.c[n])) continue;
-    found(iv.s0 + w * converge(iv.c, n, kConverged / w));
+    const double u = converge(iv.c, n, kConverged / w);
+    found(u == 1.0 ? iv.s1 : iv.s0 + w * u);
   }
 }
 
@@ -493,7 +498,7 @@ class HexBinding final : public GeometryBinding {
       const double len = glm::length(g);
       // At singular points (∇f = 0) the normal faces the viewer, as for analytic sources.
       const glm::vec3 normal = len > 0.0 ? glm::vec3(g / len) : glm::vec3(-q->dir);
-      q->hits->push_back({t0 + s * (t1 - t0), normal, 0.0f});
+      q->hits->push_back({s == 1.0 ? t1 : t0 + s * (t1 - t0), normal, 0.0f});
     });
   }
 

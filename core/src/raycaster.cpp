@@ -29,14 +29,6 @@ void sort_and_merge(std::vector<RayHit>& hits, double tolerance) {
   hits.resize(kept);
 }
 
-// Hits of a run of consecutive rays, appended in ray order.
-struct HitRun {
-  std::vector<std::uint32_t> counts;
-  std::vector<float> depth;
-  std::vector<glm::vec3> normal;
-  std::vector<float> scalar;
-};
-
 }  // namespace
 
 RayCaster::RayCaster(const FieldSource& source, double isovalue)
@@ -86,7 +78,34 @@ std::size_t RayCaster::primitive_count() const {
   return n;
 }
 
-void RayCaster::trace(const View& view, glm::dvec2 image_position,
+bool subdomain_segment(const Subdomain& sub, glm::dvec3 o, glm::dvec3 d, RaySegment& segment) {
+  // Where the ray leaves the global box: the end of the last segment is closed there.
+  double g0 = -INFINITY, g1 = INFINITY;
+  if (!clip_ray_to_box(o, d, sub.global.lo, sub.global.hi, g0, g1)) return false;
+  double t0 = -INFINITY, t1 = INFINITY;
+  for (int a = 0; a < 3; ++a) {
+    const bool closed_hi = sub.box.hi[a] >= sub.global.hi[a];
+    if (d[a] == 0.0) {
+      // A ray in a face plane: the spatial rule decides.
+      if (o[a] < sub.box.lo[a] || o[a] > sub.box.hi[a] || (o[a] == sub.box.hi[a] && !closed_hi))
+        return false;
+      continue;
+    }
+    // The same expression as clip_ray_to_box, so that the value at a shared face is the same
+    // double in both subdomains.
+    const double inv = 1.0 / d[a];
+    double ta = (sub.box.lo[a] - o[a]) * inv, tb = (sub.box.hi[a] - o[a]) * inv;
+    if (ta > tb) std::swap(ta, tb);
+    t0 = std::max(t0, ta);
+    t1 = std::min(t1, tb);
+  }
+  segment.t0 = std::max(t0, g0);
+  segment.t1 = std::min(t1, g1);
+  segment.closed_end = segment.t1 >= g1;
+  return segment.t0 < segment.t1 || (segment.closed_end && segment.t0 == segment.t1);
+}
+
+void RayCaster::trace(const View& view, glm::dvec2 image_position, const RaySegment& segment,
                       std::vector<RayHit>& hits) const {
   hits.clear();
   RayQuery q;
@@ -94,8 +113,8 @@ void RayCaster::trace(const View& view, glm::dvec2 image_position,
   q.context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
   q.org = view.point(image_position.x, image_position.y, 0.0);
   q.dir = view.dir;
-  q.t_min = 0.0;
-  q.t_max = view.depth_extent;
+  q.t_min = segment.t0;
+  q.t_max = segment.t1;
   q.hits = &hits;
 
   RTCRayHit rh;
@@ -103,8 +122,8 @@ void RayCaster::trace(const View& view, glm::dvec2 image_position,
   rh.ray.dir_x = float(q.dir.x), rh.ray.dir_y = float(q.dir.y), rh.ray.dir_z = float(q.dir.z);
   // Embree traverses in float: widen its segment a little; the callbacks clip in double.
   const float pad = float(1e-6 * (1.0 + view.depth_extent));
-  rh.ray.tnear = 0.0f;
-  rh.ray.tfar = float(view.depth_extent) + pad;
+  rh.ray.tnear = std::max(0.0f, float(segment.t0) - pad);
+  rh.ray.tfar = float(segment.t1) + pad;
   rh.ray.time = 0.0f;
   rh.ray.mask = 0xFFFFFFFFu;  // Debian's Embree is built with ray masks: 0 would hit nothing
   rh.ray.id = 0;
@@ -114,43 +133,53 @@ void RayCaster::trace(const View& view, glm::dvec2 image_position,
   rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
   rtcIntersect1(scene_, &q.context, &rh);
   sort_and_merge(hits, duplicate_tolerance_);
+  // Sources report roots on the closed segment; the half-open rule keeps a root on the face
+  // two subdomains share in exactly one of them.
+  std::erase_if(hits, [&](const RayHit& h) {
+    return h.t < segment.t0 || h.t > segment.t1 || (h.t == segment.t1 && !segment.closed_end);
+  });
+}
+
+template <class Segment>
+std::vector<RayCaster::HitRun> RayCaster::cast_rows(const View& view, Segment segment_of) const {
+  std::vector<RayCaster::HitRun> rows(view.height);
+  tbb::parallel_for(tbb::blocked_range<int>(0, view.height),
+                    [&](const tbb::blocked_range<int>& range) {
+                      std::vector<RayHit> hits;
+                      for (int j = range.begin(); j != range.end(); ++j)
+                        for (int i = 0; i < view.width; ++i) {
+                          const glm::dvec2 position{i + 0.5, j + 0.5};
+                          RaySegment segment;
+                          if (segment_of(position, segment)) {
+                            trace(view, position, segment, hits);
+                          } else {
+                            hits.clear();
+                          }
+                          rows[j].append(hits, has_scalar_);
+                        }
+                    });
+  return rows;
 }
 
 Ldi RayCaster::cast(const View& view) const {
-  Ldi ldi = make_empty_ldi(view);
-  const int W = view.width, H = view.height;
-  const bool with_scalar = has_scalar_;
-  std::vector<HitRun> rows(H);
-  tbb::parallel_for(tbb::blocked_range<int>(0, H), [&](const tbb::blocked_range<int>& range) {
-    std::vector<RayHit> hits;
-    for (int j = range.begin(); j != range.end(); ++j) {
-      HitRun& row = rows[j];
-      row.counts.resize(W);
-      for (int i = 0; i < W; ++i) {
-        trace(view, {i + 0.5, j + 0.5}, hits);
-        row.counts[i] = std::uint32_t(hits.size());
-        for (const RayHit& h : hits) {
-          row.depth.push_back(float(h.t));
-          row.normal.push_back(h.normal);
-          if (with_scalar) row.scalar.push_back(h.scalar);
-        }
-      }
-    }
+  const std::vector<RayCaster::HitRun> rows = cast_rows(view, [&](glm::dvec2, RaySegment& segment) {
+    segment = {0.0, view.depth_extent, true};
+    return true;
   });
-
   // Concatenate rows in order: the LDI is the same whatever the thread count.
+  Ldi ldi = make_empty_ldi(view);
   std::size_t total = 0;
-  for (const HitRun& row : rows)
+  for (const RayCaster::HitRun& row : rows)
     total += row.depth.size();
   if (total > UINT32_MAX) throw std::runtime_error("LDI has more than 2^32 samples");
   ldi.depth.reserve(total);
   ldi.normal.reserve(total);
-  if (with_scalar) ldi.scalar.reserve(total);
+  if (has_scalar_) ldi.scalar.reserve(total);
   std::uint32_t offset = 0;
-  for (int j = 0; j < H; ++j) {
-    const HitRun& row = rows[j];
-    for (int i = 0; i < W; ++i) {
-      ldi.offsets[std::size_t(j) * W + i] = offset;
+  for (int j = 0; j < view.height; ++j) {
+    const RayCaster::HitRun& row = rows[j];
+    for (int i = 0; i < view.width; ++i) {
+      ldi.offsets[std::size_t(j) * view.width + i] = offset;
       offset += row.counts[i];
     }
     ldi.depth.insert(ldi.depth.end(), row.depth.begin(), row.depth.end());
@@ -161,29 +190,50 @@ Ldi RayCaster::cast(const View& view) const {
   return ldi;
 }
 
-RayHitList RayCaster::cast_points(const View& view,
-                                  std::span<const glm::dvec2> image_positions) const {
+LdiFragment RayCaster::cast_fragment(const View& view, std::uint32_t view_index,
+                                     const Subdomain& sub) const {
+  const std::vector<RayCaster::HitRun> rows =
+      cast_rows(view, [&](glm::dvec2 position, RaySegment& segment) {
+        return subdomain_segment(sub, view.point(position.x, position.y, 0.0), view.dir, segment);
+      });
+  LdiFragment fragment = make_empty_fragment(view, view_index);
+  for (int j = 0; j < view.height; ++j) {
+    const RayCaster::HitRun& row = rows[j];
+    for (int i = 0; i < view.width; ++i)
+      if (row.counts[i] > 0) {
+        fragment.pixels.push_back(std::uint32_t(std::size_t(j) * view.width + i));
+        fragment.counts.push_back(row.counts[i]);
+      }
+    fragment.depth.insert(fragment.depth.end(), row.depth.begin(), row.depth.end());
+    fragment.normal.insert(fragment.normal.end(), row.normal.begin(), row.normal.end());
+    fragment.scalar.insert(fragment.scalar.end(), row.scalar.begin(), row.scalar.end());
+  }
+  return fragment;
+}
+
+RayHitList RayCaster::cast_points(const View& view, std::span<const glm::dvec2> image_positions,
+                                  const Subdomain* sub) const {
   const std::size_t n = image_positions.size();
-  const bool with_scalar = has_scalar_;
   constexpr std::size_t kChunk = 256;
-  std::vector<HitRun> chunks((n + kChunk - 1) / kChunk);
+  std::vector<RayCaster::HitRun> chunks((n + kChunk - 1) / kChunk);
   tbb::parallel_for(std::size_t(0), chunks.size(), [&](std::size_t c) {
     std::vector<RayHit> hits;
-    HitRun& run = chunks[c];
     for (std::size_t k = c * kChunk; k < std::min(n, (c + 1) * kChunk); ++k) {
-      trace(view, image_positions[k], hits);
-      run.counts.push_back(std::uint32_t(hits.size()));
-      for (const RayHit& h : hits) {
-        run.depth.push_back(float(h.t));
-        run.normal.push_back(h.normal);
-        if (with_scalar) run.scalar.push_back(h.scalar);
+      const glm::dvec2 position = image_positions[k];
+      RaySegment segment{0.0, view.depth_extent, true};
+      if (!sub ||
+          subdomain_segment(*sub, view.point(position.x, position.y, 0.0), view.dir, segment)) {
+        trace(view, position, segment, hits);
+      } else {
+        hits.clear();
       }
+      chunks[c].append(hits, has_scalar_);
     }
   });
   RayHitList out;
   out.offsets.reserve(n + 1);
   out.offsets.push_back(0);
-  for (const HitRun& run : chunks) {
+  for (const RayCaster::HitRun& run : chunks) {
     for (std::uint32_t c : run.counts)
       out.offsets.push_back(out.offsets.back() + c);
     out.depth.insert(out.depth.end(), run.depth.begin(), run.depth.end());

@@ -78,6 +78,7 @@ Jet<double, 1> eval_on_ray(const Field& f, glm::dvec3 o, glm::dvec3 d, double t)
 template <class Field>
 double converge(const Field& f, double iso, glm::dvec3 o, glm::dvec3 d, double a, double b,
                 double ga, double gb, double tol) {
+  if (gb == 0.0) return b;  // exactly at the end: return it exactly (the half-open rule needs it)
   double t = a - ga * (b - a) / (gb - ga);  // regula falsi start
   if (!(t > a && t < b)) t = 0.5 * (a + b);
   for (int iter = 0; iter < 64 && b - a > tol; ++iter) {
@@ -105,9 +106,18 @@ void find_roots(const Field& f, double iso, glm::dvec3 o, glm::dvec3 d, double t
   struct Segment {
     double ta, tb, ga, gb;
   };
+  // The hit at t with its unit normal; at singular points (∇f = 0) the normal faces the viewer.
+  auto report = [&](double t) {
+    const glm::dvec3 n = gradient(f, o + t * d);
+    const double len = glm::length(n);
+    hits.push_back({t, len > 0.0 ? glm::vec3(n / len) : glm::vec3(-d), 0.0f});
+  };
   Segment stack[128];
   int top = 0;
   stack[top++] = {t0, t1, value(f, o + t0 * d) - iso, value(f, o + t1 * d) - iso};
+  // A root exactly at the start belongs to this segment (the caster's half-open rule drops one
+  // exactly at a shared end); zero counts as positive below, so it is not found twice.
+  if (stack[0].ga == 0.0) report(t0);
   while (top > 0) {
     const Segment s = stack[--top];
     const double w = s.tb - s.ta;
@@ -124,12 +134,7 @@ void find_roots(const Field& f, double iso, glm::dvec3 o, glm::dvec3 d, double t
       // Monotone: a sign change means exactly one root, none otherwise. Tiny: a sign change
       // means at least one root; a touching double root without sign change is dropped.
       if (sign_change) {
-        double t = converge(f, iso, o, d, s.ta, s.tb, s.ga, s.gb, tol.converged);
-        glm::dvec3 n = gradient(f, o + t * d);
-        double len = glm::length(n);
-        // At singular points (∇f = 0) the normal faces the viewer.
-        glm::vec3 unit = len > 0.0 ? glm::vec3(n / len) : glm::vec3(-d);
-        hits.push_back({t, unit, 0.0f});
+        report(converge(f, iso, o, d, s.ta, s.tb, s.ga, s.gb, tol.converged));
       }
       continue;
     }

@@ -70,6 +70,18 @@ class GridSource final : public FieldSource {
   std::array<std::int64_t, 3> first_cell_{}, last_cell_{}, bricks_{};
 };
 
+// Part `index` of `whole` split into blocks[0] × blocks[1] × blocks[2] blocks of cells (as
+// evenly as possible): a block of the same arrays (nothing copied) with its owned points plus
+// the ghost layer of point values above it that its last cells need, and the box its cells
+// cover, computed from `whole`'s coordinates so that neighbouring parts share faces exactly
+// (use it as the part's Subdomain box). The parts' owned cells tile `whole`'s. Throws
+// std::invalid_argument if a part would have no cell.
+struct GridPart {
+  GridBlock block;
+  Box owned;
+};
+GridPart grid_part(const GridBlock& whole, std::array<int, 3> blocks, std::array<int, 3> index);
+
 // The roots of the trilinear interpolant minus `iso` along a segment of one cell, by the cubic
 // it restricts to (Marmitt et al. 2004: split at the cubic's extrema, then one bracketed root
 // per monotone piece). `corner` holds the 8 values minus iso, index = x + 2y + 4z; `a` and `b`

@@ -8,6 +8,7 @@
 #include <embree3/rtcore.h>
 
 #include "ldimesh/core/field_source.hpp"
+#include "ldimesh/core/fragment.hpp"
 #include "ldimesh/core/ldi.hpp"
 #include "ldimesh/core/view.hpp"
 
@@ -21,6 +22,26 @@ struct RayHitList {
   std::vector<glm::vec3> normal;
   std::vector<float> scalar;  // empty unless the source has a scalar
 };
+
+// The part of the global domain one rank ray casts. A point belongs to it iff lo ≤ p < hi on
+// every axis, with ≤ hi where the box reaches the global box's upper face, so that boxes tiling
+// the global box own every point exactly once.
+struct Subdomain {
+  Box box;
+  Box global;
+};
+
+// The part [t0, t1) of a ray o + t·d of `view` that `sub` owns (t1 included when the ray leaves
+// the global box there). Along the ray the rule is half-open in t: a hit exactly on a face two
+// subdomains share belongs to the one the ray enters there. A ray lying in a face plane belongs
+// to the subdomain on the upper side (the spatial rule above). Returns false if the ray does
+// not cross `sub`.
+struct RaySegment {
+  double t0 = 0.0;
+  double t1 = 0.0;
+  bool closed_end = true;
+};
+bool subdomain_segment(const Subdomain& sub, glm::dvec3 o, glm::dvec3 d, RaySegment& segment);
 
 // An Embree scene of one field source at one isovalue. Building it is the only costly part of
 // construction; casting is thread-safe and runs on all cores of the current TBB arena (limit
@@ -40,9 +61,16 @@ class RayCaster {
   // sorted by depth, with roots found twice where primitives touch merged.
   Ldi cast(const View& view) const;
 
+  // The part of the LDI of `view` that `sub` owns: only the pixels whose rays cross it, each ray
+  // clipped to its segment (subdomain_segment), as a fragment (view index `view_index`). The
+  // fragments of subdomains tiling the global box merge into the LDI of the whole box.
+  LdiFragment cast_fragment(const View& view, std::uint32_t view_index, const Subdomain& sub) const;
+
   // All hits along the rays of `view` through the given image positions (pixel units, see
-  // View::point). Used for extra samples between pixel centres.
-  RayHitList cast_points(const View& view, std::span<const glm::dvec2> image_positions) const;
+  // View::point), optionally only those `sub` owns. Used for extra samples between pixel
+  // centres (§4).
+  RayHitList cast_points(const View& view, std::span<const glm::dvec2> image_positions,
+                         const Subdomain* sub = nullptr) const;
 
   // Primitives in the scene (those whose value range may contain the isovalue), all sources.
   std::size_t primitive_count() const;
@@ -50,7 +78,29 @@ class RayCaster {
   double build_seconds() const { return build_seconds_; }
 
  private:
-  void trace(const View& view, glm::dvec2 image_position, std::vector<RayHit>& hits) const;
+  // Hits of a run of consecutive rays, appended in ray order.
+  struct HitRun {
+    std::vector<std::uint32_t> counts;
+    std::vector<float> depth;
+    std::vector<glm::vec3> normal;
+    std::vector<float> scalar;
+    void append(const std::vector<RayHit>& hits, bool with_scalar) {
+      counts.push_back(std::uint32_t(hits.size()));
+      for (const RayHit& h : hits) {
+        depth.push_back(float(h.t));
+        normal.push_back(h.normal);
+        if (with_scalar) scalar.push_back(h.scalar);
+      }
+    }
+  };
+
+  // Every pixel's ray on the segment `segment_of(position, segment)` gives (none if it returns
+  // false), in parallel over rows; one run per row.
+  template <class Segment>
+  std::vector<HitRun> cast_rows(const View& view, Segment segment_of) const;
+  // Hits along the ray through `image_position` on its segment `segment`.
+  void trace(const View& view, glm::dvec2 image_position, const RaySegment& segment,
+             std::vector<RayHit>& hits) const;
 
   RTCDevice device_ = nullptr;
   RTCScene scene_ = nullptr;

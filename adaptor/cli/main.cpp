@@ -1,6 +1,7 @@
-// ldimesh: the command-line front end of the core pipeline.
+// ldimesh: the command line of the pipeline, in one process or over MPI ranks.
 //   ldimesh surfaces
 //   ldimesh mesh --surface barth --res 512 --views xyz --r 0.5 --out out/barth.ply [--json]
+//   mpiexec -n 4 ldimesh mesh --surface barth --res 256 --out out/barth.ply
 #include <cctype>
 #include <cerrno>
 #include <chrono>
@@ -14,16 +15,20 @@
 #include <thread>
 #include <vector>
 
+#include <mpi.h>
 #include <tbb/global_control.h>
 #include <tbb/info.h>
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include "ldimesh/core/decomposition.hpp"
+#include "ldimesh/core/grid_source.hpp"
 #include "ldimesh/core/mesh_io.hpp"
 #include "ldimesh/core/pipeline.hpp"
 #include "ldimesh/core/raw_volume.hpp"
 #include "ldimesh/core/raycaster.hpp"
 #include "ldimesh/core/surfaces.hpp"
+#include "ldimesh/transport/distributed.hpp"
 
 namespace {
 
@@ -46,6 +51,9 @@ struct MeshArgs {
   int bricks = 32;
   std::optional<double> isovalue;
   double max_cost = ldimesh::MatchOptions{}.max_cost;
+  bool lossless = false;
+  int depth_bits = ldimesh::FragmentEncoding{}.depth_bits;
+  int normal_bits = ldimesh::FragmentEncoding{}.normal_bits;
 };
 
 double seconds_since(std::chrono::steady_clock::time_point start) {
@@ -76,15 +84,17 @@ int run_surfaces() {
   return 0;
 }
 
-// What is meshed: a built-in surface or a raw volume, with its source and default isovalue.
+// What this rank meshes: a built-in surface or a raw volume, its source (for a volume: this
+// rank's part of it), its subdomain and the default isovalue.
 struct Input {
   std::string name;
   std::unique_ptr<ldimesh::FieldSource> source;
+  ldimesh::Subdomain subdomain;
   double default_isovalue = 0.0;
   ldimesh::RawVolume volume;  // owns the values of a --grid input
 };
 
-void load_input(const MeshArgs& args, Input& input) {
+void load_input(const MeshArgs& args, int rank, int ranks, Input& input) {
   if (args.surface.empty() == args.grid.empty())
     throw std::runtime_error("give either --surface NAME or --grid FILE --dims NX,NY,NZ");
   if (!args.surface.empty()) {
@@ -92,7 +102,9 @@ void load_input(const MeshArgs& args, Input& input) {
     if (!surface)
       throw std::runtime_error("unknown surface '" + args.surface + "' (see 'ldimesh surfaces')");
     input.name = surface->name;
+    // Every rank can evaluate the whole field; it casts only its block of the domain.
     input.source = ldimesh::make_surface_source(surface->name, args.bricks);
+    input.subdomain = {ldimesh::decompose_box(surface->domain, ranks)[rank], surface->domain};
     input.default_isovalue = surface->isovalue;
     return;
   }
@@ -105,13 +117,53 @@ void load_input(const MeshArgs& args, Input& input) {
                                {args.spacing[0], args.spacing[1], args.spacing[2]}, input.volume);
   if (!status) throw std::runtime_error(status.message());
   input.name = args.grid;
-  input.source = std::make_unique<ldimesh::GridSource>(input.volume.block);
+  // Each rank reads the file and takes its block of cells (with the ghost layer it needs),
+  // as a solver's rank would hold its own block.
+  const ldimesh::Box whole = ldimesh::GridSource(input.volume.block).bounds();
+  const std::array<int, 3> blocks = ldimesh::block_grid(whole, ranks);
+  const std::array<int, 3> index{rank % blocks[0], (rank / blocks[0]) % blocks[1],
+                                 rank / (blocks[0] * blocks[1])};
+  const ldimesh::GridPart part = ldimesh::grid_part(input.volume.block, blocks, index);
+  input.source = std::make_unique<ldimesh::GridSource>(part.block);
+  input.subdomain = {part.owned, whole};
   // Without --iso: the middle of the value range.
   input.default_isovalue = 0.5 * (input.volume.min_value + input.volume.max_value);
 }
 
+// Runs `step` on every rank; if it throws on any, every rank throws the first failing rank's
+// message (so that no rank waits in a collective call the others never reach).
+template <class Step>
+void on_all_ranks(MPI_Comm comm, Step step) {
+  int rank = 0, size = 1;
+  MPI_Comm_rank(comm, &rank);
+  MPI_Comm_size(comm, &size);
+  std::string error;
+  try {
+    step();
+  } catch (const std::exception& e) {
+    error = e.what();
+    if (error.empty()) error = "unknown error";
+  }
+  int failed = error.empty() ? size : rank, first = size;
+  MPI_Allreduce(&failed, &first, 1, MPI_INT, MPI_MIN, comm);
+  if (first == size) return;
+  int length = int(error.size());
+  MPI_Bcast(&length, 1, MPI_INT, first, comm);
+  error.resize(std::size_t(length));
+  MPI_Bcast(error.data(), length, MPI_CHAR, first, comm);
+  throw std::runtime_error(size > 1 && first != 0 ? "rank " + std::to_string(first) + ": " + error
+                                                  : error);
+}
+
 int run_mesh(const MeshArgs& args) {
-  if (!args.out.empty()) {
+  const MPI_Comm comm = MPI_COMM_WORLD;
+  int rank = 0, ranks = 1;
+  MPI_Comm_rank(comm, &rank);
+  MPI_Comm_size(comm, &ranks);
+  const bool root = rank == 0;
+
+  on_all_ranks(comm, [&] {
+    if (!root || args.out.empty()) return;
     std::string ext = std::filesystem::path(args.out).extension().string();
     for (char& c : ext)
       c = char(std::tolower(static_cast<unsigned char>(c)));
@@ -119,38 +171,42 @@ int run_mesh(const MeshArgs& args) {
       throw std::runtime_error("cannot tell the format of '" + args.out +
                                "': use a .ply or .obj file name");
     check_writable(args.out);
-  }
+  });
 
   const int threads = args.threads > 0 ? args.threads : tbb::info::default_concurrency();
   tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
 
   auto start = std::chrono::steady_clock::now();
   Input input;
-  load_input(args, input);
-  const double load_seconds = seconds_since(start);
-  const double iso = args.isovalue.value_or(input.default_isovalue);
-  const std::vector<ldimesh::View> views =
-      ldimesh::make_axis_views(input.source->bounds(), args.res, args.views);
+  std::unique_ptr<ldimesh::RayCaster> caster;
+  std::vector<ldimesh::View> views;
+  double iso = 0.0, load_seconds = 0.0, scene_seconds = 0.0;
+  on_all_ranks(comm, [&] {
+    load_input(args, rank, ranks, input);
+    load_seconds = seconds_since(start);
+    iso = args.isovalue.value_or(input.default_isovalue);
+    views = ldimesh::make_axis_views(input.subdomain.global, args.res, args.views);
+    start = std::chrono::steady_clock::now();
+    caster = std::make_unique<ldimesh::RayCaster>(*input.source, iso);
+    scene_seconds = seconds_since(start);
+  });
 
-  start = std::chrono::steady_clock::now();
-  const ldimesh::RayCaster caster(*input.source, iso);
-  const double scene_seconds = seconds_since(start);
+  ldimesh::DistributedOptions options;
+  options.encoding.lossless = args.lossless;
+  options.encoding.depth_bits = args.depth_bits;
+  options.encoding.normal_bits = args.normal_bits;
+  options.meshing.r = args.r;
+  options.meshing.faces = args.quads ? FaceType::quads : FaceType::triangles;
+  options.meshing.matching.max_cost = args.max_cost;
+  ldimesh::DistributedResult step;
+  const ldimesh::Status status =
+      ldimesh::mesh_distributed(comm, *caster, input.subdomain, views, options, step);
+  if (!status) throw std::runtime_error(status.message());
+  double max_scene = 0.0;
+  MPI_Reduce(&scene_seconds, &max_scene, 1, MPI_DOUBLE, MPI_MAX, 0, comm);
+  if (!root) return 0;
 
-  start = std::chrono::steady_clock::now();
-  std::vector<ldimesh::Ldi> ldis;
-  std::size_t rays = 0;
-  for (const ldimesh::View& view : views) {
-    ldis.push_back(caster.cast(view));
-    rays += view.pixel_count();
-  }
-  const double cast_seconds = seconds_since(start);
-
-  ldimesh::MeshingOptions options;
-  options.r = args.r;
-  options.faces = args.quads ? FaceType::quads : FaceType::triangles;
-  options.matching.max_cost = args.max_cost;
-  const ldimesh::MeshingResult result = ldimesh::mesh_ldis(ldis, options);
-
+  const ldimesh::MeshingResult& result = step.meshing;
   double write_seconds = 0.0;
   if (!args.out.empty()) {
     start = std::chrono::steady_clock::now();
@@ -159,8 +215,11 @@ int run_mesh(const MeshArgs& args) {
     write_seconds = seconds_since(start);
   }
 
+  std::size_t rays = 0;
+  for (const ldimesh::View& view : views)
+    rays += view.pixel_count();
   const auto& m = result.mesh;
-  const double mesh_trim = result.seconds.match + result.seconds.trim;
+  const auto& t = step.seconds;
   if (args.json) {
     nlohmann::json j;
     j[args.grid.empty() ? "surface" : "grid"] = input.name;
@@ -168,8 +227,9 @@ int run_mesh(const MeshArgs& args) {
     j["resolution"] = args.res;
     j["views"] = args.views;
     j["r"] = args.r;
+    j["ranks"] = ranks;
     j["threads"] = threads;
-    j["bricks"] = caster.primitive_count();
+    j["encoding"] = args.lossless ? "lossless" : "quantized";
     j["rays"] = rays;
     j["samples"] = result.samples;
     j["quads_untrimmed"] = result.quads_untrimmed;
@@ -178,30 +238,44 @@ int run_mesh(const MeshArgs& args) {
     j["vertices"] = m.vertex_count();
     j["faces"] = m.face_count();
     j["face_type"] = args.quads ? "quads" : "triangles";
+    j["bytes_to_root"] = step.bytes_to_root;
+    j["bytes_moved"] = step.bytes_moved;
     j["output"] = args.out.empty() ? nlohmann::json(nullptr) : nlohmann::json(args.out);
-    j["seconds"] = {{"load", load_seconds},        {"scene", scene_seconds},
-                    {"raycast", cast_seconds},     {"match", result.seconds.match},
-                    {"trim", result.seconds.trim}, {"assemble", result.seconds.assemble},
+    j["seconds"] = {{"load", load_seconds},
+                    {"scene", max_scene},
+                    {"raycast", t.cast},
+                    {"encode", t.encode},
+                    {"reduce", t.reduce},
+                    {"decode", t.decode},
+                    {"match", result.seconds.match},
+                    {"trim", result.seconds.trim},
+                    {"assemble", result.seconds.assemble},
                     {"write", write_seconds}};
     std::cout << j.dump(2) << "\n";
     return 0;
   }
-  std::printf("ldimesh: %s, isovalue %g, views %s at %d px, r = %g, %d threads\n",
-              input.name.c_str(), iso, args.views.c_str(), args.res, args.r, threads);
+  std::printf("ldimesh: %s, isovalue %g, views %s at %d px, r = %g, %d rank%s x %d threads\n",
+              input.name.c_str(), iso, args.views.c_str(), args.res, args.r, ranks,
+              ranks == 1 ? "" : "s", threads);
   if (!args.grid.empty())
     std::printf("  load       %8.3f s  %lldx%lldx%lld %s, values in [%g, %g]\n", load_seconds,
                 (long long)args.dims[0], (long long)args.dims[1], (long long)args.dims[2],
                 args.type.c_str(), input.volume.min_value, input.volume.max_value);
-  std::printf("  scene      %8.3f s  %zu bricks hold the isovalue\n", scene_seconds,
-              caster.primitive_count());
-  std::printf("  ray cast   %8.3f s  %zu rays, %zu samples (%.2f M rays/s, %.2f M hits/s)\n",
-              cast_seconds, rays, result.samples, rays / cast_seconds * 1e-6,
-              result.samples / cast_seconds * 1e-6);
+  std::printf("  scene      %8.3f s  (slowest rank)\n", max_scene);
+  std::printf("  ray cast   %8.3f s  %zu rays, %zu samples (%.2f M rays/s)\n", t.cast, rays,
+              result.samples, rays / t.cast * 1e-6);
+  std::printf("  encode     %8.3f s  %s\n", t.encode,
+              args.lossless ? "lossless" : "quantized depths and normals, zstd");
+  std::printf("  reduce     %8.3f s  %llu bytes moved, %llu to the root (%.2f bytes/sample)\n",
+              t.reduce, (unsigned long long)step.bytes_moved,
+              (unsigned long long)step.bytes_to_root,
+              result.samples ? double(step.bytes_moved) / double(result.samples) : 0.0);
+  std::printf("  decode     %8.3f s\n", t.decode);
   std::printf("  mesh       %8.3f s  %zu quads\n", result.seconds.match, result.quads_untrimmed);
   std::printf("  trim       %8.3f s  %zu quads kept\n", result.seconds.trim, result.quads);
   std::printf("  assemble   %8.3f s  %zu vertices, %zu %s\n", result.seconds.assemble,
               m.vertex_count(), m.face_count(), args.quads ? "quads" : "triangles");
-  std::printf("  mesh+trim  %8.3f s\n", mesh_trim);
+  std::printf("  mesh+trim  %8.3f s\n", result.seconds.match + result.seconds.trim);
   if (!args.out.empty()) std::printf("  wrote      %8.3f s  %s\n", write_seconds, args.out.c_str());
   return 0;
 }
@@ -257,21 +331,40 @@ int main(int argc, char** argv) {
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
 
+  mesh->add_flag("--lossless", args.lossless,
+                 "send fragments to the root losslessly (default: quantized depths and normals)");
+  mesh->add_option("--depth-bits", args.depth_bits, "bits per quantized depth")
+      ->check(CLI::Range(1, 24))
+      ->capture_default_str();
+  mesh->add_option("--normal-bits", args.normal_bits, "bits per octahedral normal coordinate")
+      ->check(CLI::Range(2, 16))
+      ->capture_default_str();
+
+  // MPI is initialised for every command, so that `mpiexec -n N ldimesh mesh …` splits the
+  // work; run without mpiexec it is a job of one rank. Only the root prints.
+  int provided = 0;
+  MPI_Init_thread(&argc, &argv, MPI_THREAD_FUNNELED, &provided);
+  int rank = 0;
+  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+  int code = 0;
   try {
     app.parse(argc, argv);
+    if (*surfaces) {
+      if (rank == 0) code = run_surfaces();
+    } else {
+      code = run_mesh(args);
+    }
   } catch (const CLI::CallForHelp& e) {
-    return app.exit(e);
+    code = rank == 0 ? app.exit(e) : 0;
   } catch (const CLI::CallForAllHelp& e) {
-    return app.exit(e);
+    code = rank == 0 ? app.exit(e) : 0;
   } catch (const CLI::ParseError& e) {
-    std::fprintf(stderr, "ldimesh: error: %s\n", e.what());
-    return 2;
-  }
-  try {
-    if (*surfaces) return run_surfaces();
-    return run_mesh(args);
+    if (rank == 0) std::fprintf(stderr, "ldimesh: error: %s\n", e.what());
+    code = 2;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "ldimesh: error: %s\n", e.what());
-    return 1;
+    if (rank == 0) std::fprintf(stderr, "ldimesh: error: %s\n", e.what());
+    code = 1;
   }
+  MPI_Finalize();
+  return code;
 }

@@ -1,0 +1,73 @@
+// The wire format of LDI fragments: quantized, predicted and zstd-compressed, behind a
+// versioned, checksummed header. The decoder is safe for untrusted input.
+//
+// Layout (docs/method.md, "LDI fragments on the wire"), all integers little-endian:
+//
+//   offset size  field
+//        0    4  magic "LDIF"
+//        4    1  format version (1)
+//        5    1  flags: bit 0 lossless, bit 1 has_scalar
+//        6    1  depth_bits (0..24 lossy, 0 lossless)
+//        7    1  normal_bits (2..16 lossy, 0 lossless)
+//        8    4  view index
+//       12    8  pixel_count
+//       20    8  depth_lo (IEEE 754 double)
+//       28    8  depth_hi (IEEE 754 double)
+//       36    8  listed pixels
+//       44    8  samples
+//       52    8  payload size before zstd
+//       60    8  payload size after zstd (= bytes after the header)
+//       68    4  CRC-32 of the compressed payload
+//       72    4  CRC-32 of bytes 0..71
+//       76       one zstd frame: pixel ids, counts, depths, normals, scalars (separate streams)
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "ldimesh/core/fragment.hpp"
+#include "ldimesh/core/status.hpp"
+
+namespace ldimesh {
+
+struct FragmentEncoding {
+  // Lossless: depths, normals and scalars as raw floats (for tests and comparisons).
+  bool lossless = false;
+  // Depth quantized to this many bits over the fragment's [depth_lo, depth_hi] (1..24). The
+  // encoder uses fewer where a step would fall below two float spacings at the interval's
+  // larger end (a finer step cannot be held by a float depth); the header records the bits used.
+  int depth_bits = 20;
+  // Normals octahedral-encoded with this many bits per coordinate (2..16).
+  int normal_bits = 12;
+  // zstd level, ZSTD_minCLevel()..ZSTD_maxCLevel(); not stored, the decoder does not need it.
+  int zstd_level = 3;
+};
+
+// Encodes `fragment`. It must satisfy validate_fragment, have finite non-zero normals, a depth
+// interval within ±1e30, at most 65536 samples per pixel and at most 2³¹ samples; throws
+// std::invalid_argument otherwise or for out-of-range encoding settings. Lossy encoding clamps
+// depths outside [depth_lo, depth_hi] to the interval. Scalars are always stored bit-exactly.
+// Deterministic, and idempotent: encoding the decoded fragment again with the same `encoding`
+// gives the same bytes (so a rank may decode, merge and re-encode without drift).
+std::vector<std::uint8_t> encode_fragment(const LdiFragment& fragment,
+                                          const FragmentEncoding& encoding = {});
+
+// Decodes `bytes` into `out`. Validates the header, every size and count, the checksum and the
+// decoded fragment's invariants before use: truncated, corrupted or hostile input returns an
+// error Status ("fragment: ...") and never reads out of bounds, never throws, and allocates
+// at most a small multiple of what the zstd frame really holds (never what a header claims).
+// On error `out` is left unchanged. Every fragment it accepts is accepted by encode_fragment.
+Status decode_fragment(std::span<const std::uint8_t> bytes, LdiFragment& out);
+
+// The largest depth error of `encoding` for a depth in [lo, hi]:
+// (hi − lo) / (2·(2^b − 1)) + u, with b the depth bits the encoder uses and u the float
+// spacing at max(|lo|, |hi|) (the decoded depth is a float); (hi − lo) + u when b = 0
+// (hi − lo below two float spacings); 0 for lossless encoding.
+double depth_error_bound(const FragmentEncoding& encoding, double lo, double hi);
+// The largest angle (radians) between a unit normal and its decoded value:
+// 3·√2 / (2^n − 2) + 2⁻²², with n the normal bits; 0 for lossless encoding. The axes are
+// encoded exactly.
+double normal_error_bound(const FragmentEncoding& encoding);
+
+}  // namespace ldimesh

@@ -1,0 +1,37 @@
+// Reducing the ranks' LDI fragments to the root over MPI.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include <mpi.h>
+
+#include "ldimesh/core/fragment.hpp"
+#include "ldimesh/core/status.hpp"
+#include "ldimesh/transport/fragment_codec.hpp"
+
+namespace ldimesh {
+
+struct ReductionStats {
+  double encode_seconds = 0.0;  // this rank, encoding what it sends
+  double decode_seconds = 0.0;  // this rank, decoding what it receives (and, on the root, last)
+  double merge_seconds = 0.0;   // this rank, merging
+  double wall_seconds = 0.0;    // this rank, from entry to return
+  std::uint64_t bytes_sent = 0;
+  std::uint64_t bytes_received = 0;
+  int messages_received = 0;
+};
+
+// Collective over `comm`. Every rank passes its fragments, one per view, in the same view
+// order on all ranks. On `root` the result is the merged fragment of every view (samples of
+// all ranks per pixel, sorted, duplicates closer than `tolerance` merged); on the other ranks
+// it is left empty. The reduction is a binomial tree: in round k a rank receives from the rank
+// 2^k above it, decodes, merges and forwards one message to the rank below it, so the root
+// receives ⌈log2 P⌉ messages whose total size is that of the merged data, not P of them.
+// Merging decodes and re-encodes, which the codec keeps exact (re-encoding decoded data gives
+// the same bytes). A fragment that does not decode makes the result an error Status on the
+// rank that received it and on the root; no rank blocks.
+Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragments,
+                        const FragmentEncoding& encoding, double tolerance, ReductionStats& stats);
+
+}  // namespace ldimesh

@@ -1,0 +1,166 @@
+#include "ldimesh/transport/mpi_reduce.hpp"
+
+#include <chrono>
+#include <climits>
+#include <cstring>
+#include <stdexcept>
+#include <string>
+
+namespace ldimesh {
+namespace {
+
+constexpr int kTag = 7301;
+constexpr std::uint32_t kEnvelopeMagic = 0x4549444c;  // "LDIE"
+constexpr std::uint32_t kUpstreamError = 1;
+
+double seconds_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+void put_u32(std::vector<std::uint8_t>& out, std::uint32_t v) {
+  for (int i = 0; i < 4; ++i)
+    out.push_back(std::uint8_t(v >> (8 * i)));
+}
+void put_u64(std::vector<std::uint8_t>& out, std::uint64_t v) {
+  for (int i = 0; i < 8; ++i)
+    out.push_back(std::uint8_t(v >> (8 * i)));
+}
+bool get_u32(std::span<const std::uint8_t> in, std::size_t& at, std::uint32_t& v) {
+  if (in.size() - at < 4) return false;
+  v = 0;
+  for (int i = 0; i < 4; ++i)
+    v |= std::uint32_t(in[at + i]) << (8 * i);
+  at += 4;
+  return true;
+}
+bool get_u64(std::span<const std::uint8_t> in, std::size_t& at, std::uint64_t& v) {
+  if (in.size() - at < 8) return false;
+  v = 0;
+  for (int i = 0; i < 8; ++i)
+    v |= std::uint64_t(in[at + i]) << (8 * i);
+  at += 8;
+  return true;
+}
+
+// One message up the tree: the sender's fragments (one per view), each encoded, and whether
+// anything below it failed.
+std::vector<std::uint8_t> pack(const std::vector<LdiFragment>& fragments,
+                               const FragmentEncoding& encoding, bool upstream_error) {
+  std::vector<std::uint8_t> out;
+  put_u32(out, kEnvelopeMagic);
+  put_u32(out, upstream_error ? kUpstreamError : 0);
+  put_u32(out, std::uint32_t(fragments.size()));
+  for (const LdiFragment& f : fragments) {
+    const std::vector<std::uint8_t> bytes = encode_fragment(f, encoding);
+    put_u64(out, bytes.size());
+    out.insert(out.end(), bytes.begin(), bytes.end());
+  }
+  return out;
+}
+
+Status unpack(std::span<const std::uint8_t> in, std::size_t views, std::vector<LdiFragment>& out,
+              bool& upstream_error) {
+  std::size_t at = 0;
+  std::uint32_t magic = 0, flags = 0, count = 0;
+  if (!get_u32(in, at, magic) || !get_u32(in, at, flags) || !get_u32(in, at, count))
+    return Status::error("reduction: truncated message");
+  if (magic != kEnvelopeMagic) return Status::error("reduction: not a fragment message");
+  if (count != views)
+    return Status::error("reduction: message holds " + std::to_string(count) + " views, expected " +
+                         std::to_string(views));
+  upstream_error = (flags & kUpstreamError) != 0;
+  out.resize(count);
+  for (std::uint32_t k = 0; k < count; ++k) {
+    std::uint64_t size = 0;
+    if (!get_u64(in, at, size) || size > in.size() - at)
+      return Status::error("reduction: truncated message");
+    if (Status s = decode_fragment(in.subspan(at, size), out[k]); !s) return s;
+    at += size;
+  }
+  if (at != in.size()) return Status::error("reduction: trailing bytes in message");
+  return Status::ok();
+}
+
+}  // namespace
+
+Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragments,
+                        const FragmentEncoding& encoding, double tolerance, ReductionStats& stats) {
+  const auto start = std::chrono::steady_clock::now();
+  stats = {};
+  int rank = 0, size = 1;
+  MPI_Comm_rank(comm, &rank);
+  MPI_Comm_size(comm, &size);
+  const int vrank = (rank - root + size) % size;
+  Status status = Status::ok();
+  bool upstream_error = false;
+
+  // Quantize this rank's own samples first, as they would arrive from any other rank, so that
+  // the result does not depend on which rank a sample came from (nor on the number of ranks).
+  {
+    const auto t = std::chrono::steady_clock::now();
+    for (LdiFragment& f : fragments) {
+      const std::vector<std::uint8_t> bytes = encode_fragment(f, encoding);
+      if (Status s = decode_fragment(bytes, f); !s) status = s;
+    }
+    stats.encode_seconds += seconds_since(t);
+  }
+
+  for (int mask = 1; mask < size; mask <<= 1) {
+    if (vrank & mask) {
+      const int parent = ((vrank ^ mask) + root) % size;
+      auto t = std::chrono::steady_clock::now();
+      const std::vector<std::uint8_t> message =
+          pack(fragments, encoding, upstream_error || !status);
+      stats.encode_seconds += seconds_since(t);
+      if (message.size() > std::size_t(INT_MAX)) {
+        // Still send a (small) error message so that the parent does not wait forever.
+        const std::vector<std::uint8_t> failed = pack({}, encoding, true);
+        MPI_Send(failed.data(), int(failed.size()), MPI_BYTE, parent, kTag, comm);
+        status = Status::error("reduction: a message over 2 GiB is not supported");
+      } else {
+        MPI_Send(message.data(), int(message.size()), MPI_BYTE, parent, kTag, comm);
+        stats.bytes_sent += message.size();
+      }
+      fragments.clear();
+      break;
+    }
+    const int child_v = vrank | mask;
+    if (child_v >= size) continue;
+    const int child = (child_v + root) % size;
+    MPI_Status probe;
+    MPI_Probe(child, kTag, comm, &probe);
+    int count = 0;
+    MPI_Get_count(&probe, MPI_BYTE, &count);
+    std::vector<std::uint8_t> message(std::size_t(std::max(count, 0)));
+    MPI_Recv(message.data(), count, MPI_BYTE, child, kTag, comm, MPI_STATUS_IGNORE);
+    stats.bytes_received += message.size();
+    ++stats.messages_received;
+
+    auto t = std::chrono::steady_clock::now();
+    std::vector<LdiFragment> received;
+    bool child_error = false;
+    const Status unpacked = unpack(message, fragments.size(), received, child_error);
+    stats.decode_seconds += seconds_since(t);
+    if (!unpacked) {
+      status = unpacked;
+      continue;
+    }
+    if (child_error) upstream_error = true;
+    t = std::chrono::steady_clock::now();
+    try {
+      for (std::size_t v = 0; v < fragments.size(); ++v) {
+        const LdiFragment pair[2] = {std::move(fragments[v]), std::move(received[v])};
+        fragments[v] = merge_fragments(pair, tolerance);
+      }
+    } catch (const std::invalid_argument& e) {  // ranks disagree about the views
+      status = Status::error(std::string("reduction: ") + e.what());
+    }
+    stats.merge_seconds += seconds_since(t);
+  }
+  stats.wall_seconds = seconds_since(start);
+  if (status && upstream_error && rank == root)
+    status = Status::error("reduction: a fragment failed to decode on another rank");
+  return status;
+}
+
+}  // namespace ldimesh
