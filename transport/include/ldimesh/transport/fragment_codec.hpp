@@ -56,8 +56,9 @@ std::vector<std::uint8_t> encode_fragment(const LdiFragment& fragment,
 // Decodes `bytes` into `out`. Validates the header, every size and count, the checksum and the
 // decoded fragment's invariants before use: truncated, corrupted or hostile input returns an
 // error Status ("fragment: ...") and never reads out of bounds, never throws, and allocates
-// at most a small multiple of what the zstd frame really holds (never what a header claims).
-// On error `out` is left unchanged. Every fragment it accepts is accepted by encode_fragment.
+// at most a small multiple of what the zstd frame really holds, never what a header claims
+// (zstd's own window buffer stays within its default limit of 2²⁷ bytes). On error `out` is
+// left unchanged. Every fragment it accepts is accepted by encode_fragment.
 Status decode_fragment(std::span<const std::uint8_t> bytes, LdiFragment& out);
 
 // The largest depth error of `encoding` for a depth in [lo, hi]:
