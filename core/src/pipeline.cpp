@@ -56,6 +56,7 @@ MeshingResult mesh_ldis(std::span<const Ldi> ldis, const MeshingOptions& options
       vertex_of[s] = next++;
       mesh.positions.push_back(positions[s]);
       mesh.normals.push_back(ldi.normal[s]);
+      if (!ldi.scalar.empty()) mesh.scalars.push_back(ldi.scalar[s]);
     }
     const std::uint8_t view = std::uint8_t(k);
     for (std::size_t q = 0; q < quads.size(); q += 4) {

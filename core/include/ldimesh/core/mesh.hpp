@@ -14,6 +14,7 @@ namespace ldimesh {
 struct Mesh {
   std::vector<glm::vec3> positions;
   std::vector<glm::vec3> normals;
+  std::vector<float> scalars;            // empty, or one value per vertex (a field to colour by)
   std::vector<std::uint32_t> quads;      // 4 vertex indices per quad
   std::vector<std::uint32_t> triangles;  // 3 vertex indices per triangle
   std::vector<std::uint8_t> quad_view;
