@@ -16,7 +16,21 @@ packages=(
   clang libclang-rt-14-dev      # libFuzzer target for the fragment decoder
   clang-format                  # formatting (.clang-format)
   python3                       # test data generation in tests/cli
+  chromium                      # browser test of the viewer (driven by playwright-core)
 )
+# Node.js and npm for the viewer's three.js and the browser test driver, unless a node is there.
+if ! command -v node >/dev/null 2>&1 || ! command -v npm >/dev/null 2>&1; then
+  packages+=(nodejs npm)
+fi
+
+# The viewer's JavaScript dependencies (npm registry), whenever the lock file changed.
+install_node_modules() {
+  cd "$(dirname "$0")/.."
+  if [ ! -f node_modules/.package-lock.json ] || [ package-lock.json -nt node_modules/.package-lock.json ]; then
+    echo "setup: npm ci (three, playwright-core)"
+    npm ci --no-audit --no-fund --loglevel=error
+  fi
+}
 
 missing=()
 for p in "${packages[@]}"; do
@@ -25,6 +39,7 @@ for p in "${packages[@]}"; do
   fi
 done
 if [ ${#missing[@]} -eq 0 ]; then
+  install_node_modules
   exit 0
 fi
 
@@ -39,3 +54,4 @@ fi
 export DEBIAN_FRONTEND=noninteractive
 "${sudo[@]}" apt-get update -qq
 "${sudo[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}"
+install_node_modules

@@ -1,0 +1,250 @@
+// The ldimesh viewer: shows the isosurface meshes a running job publishes (docs/api.md).
+// Everything comes from the job's own server: the API, the GLB meshes and three.js itself.
+import * as THREE from 'three';
+import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
+import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
+import { DRACOLoader } from 'three/addons/loaders/DRACOLoader.js';
+
+const token = new URLSearchParams(window.location.search).get('token') || '';
+const $ = (id) => document.getElementById(id);
+
+// ---------------------------------------------------------------------------------------------
+// Scene
+
+const canvas = $('view');
+// preserveDrawingBuffer: the browser test reads the pixels back to check the canvas is not blank.
+const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });
+renderer.setPixelRatio(window.devicePixelRatio);
+const background = new THREE.Color(0x1d2026);
+renderer.setClearColor(background);
+const scene = new THREE.Scene();
+const camera = new THREE.PerspectiveCamera(40, 1, 0.01, 1000);
+camera.position.set(3, 2.2, 3.5);
+const controls = new OrbitControls(camera, canvas);
+controls.enableDamping = true;
+
+// Shape shows best with a sky/ground fill and a light that moves with the camera.
+scene.add(new THREE.HemisphereLight(0xdfe8ff, 0x2a2420, 0.9));
+const headlight = new THREE.DirectionalLight(0xffffff, 1.6);
+headlight.position.set(0.4, 0.7, 1.0);
+camera.add(headlight);
+scene.add(camera);
+
+const material = new THREE.MeshStandardMaterial({
+  vertexColors: true, roughness: 0.55, metalness: 0.05, side: THREE.DoubleSide,
+});
+
+function resize() {
+  const w = canvas.clientWidth, h = canvas.clientHeight;
+  renderer.setSize(w, h, false);
+  camera.aspect = w / Math.max(h, 1);
+  camera.updateProjectionMatrix();
+}
+window.addEventListener('resize', resize);
+resize();
+renderer.setAnimationLoop(() => {
+  controls.update();
+  renderer.render(scene, camera);
+});
+
+// ---------------------------------------------------------------------------------------------
+// State shown to the person (the panel) and to tests (data attributes on <body>)
+
+const state = { steps: [], loaded: null, loading: 0, mesh: null, framed: false };
+window.ldimesh = state;
+
+function setStatus(text, isError = false) {
+  $('status').textContent = text;
+  $('status').classList.toggle('error', isError);
+  document.body.dataset.status = text;
+}
+
+function formatBytes(n) {
+  if (n >= 1 << 20) return (n / (1 << 20)).toFixed(2) + ' MiB';
+  if (n >= 1 << 10) return (n / (1 << 10)).toFixed(1) + ' KiB';
+  return n + ' B';
+}
+
+function showMetadata(meta, triangles) {
+  $('step').textContent = meta.step;
+  $('time').textContent = meta.time !== undefined ? Number(meta.time).toPrecision(6) : '–';
+  $('triangles').textContent = triangles.toLocaleString('en');
+  $('bytes').textContent = meta.bytes !== undefined ? formatBytes(meta.bytes) : '–';
+  $('isovalues').textContent = (meta.isovalues || []).join(', ') || '–';
+  const rows = Object.entries(meta.seconds || {}).map(
+    ([stage, s]) => `<tr><th>${stage}</th><td>${Number(s).toFixed(3)}</td></tr>`);
+  $('stages').innerHTML = rows.join('');
+  $('colour').querySelector('option[value=scalar]').disabled = !meta.scalar;
+}
+
+// ---------------------------------------------------------------------------------------------
+// The API
+
+async function api(path) {
+  const response = await fetch(path, { headers: { Authorization: `Bearer ${token}` } });
+  if (response.status === 401) {
+    throw new Error('the server refused the token: open the URL the job printed (…/?token=…)');
+  }
+  return response;
+}
+
+async function json(path) {
+  const response = await api(path);
+  if (!response.ok) throw new Error(`${path}: HTTP ${response.status}`);
+  return response.json();
+}
+
+// ---------------------------------------------------------------------------------------------
+// Meshes
+
+const draco = new DRACOLoader();
+draco.setDecoderPath('/vendor/three/examples/jsm/libs/draco/');
+const loader = new GLTFLoader();
+loader.setDRACOLoader(draco);
+
+// Viridis, sampled (matplotlib's colour map, public domain).
+const viridis = [[0.267, 0.005, 0.329], [0.283, 0.141, 0.458], [0.254, 0.265, 0.530],
+  [0.207, 0.372, 0.553], [0.164, 0.471, 0.558], [0.128, 0.567, 0.551], [0.135, 0.659, 0.518],
+  [0.267, 0.749, 0.441], [0.478, 0.821, 0.318], [0.741, 0.873, 0.150], [0.993, 0.906, 0.144]];
+
+function colourmap(u) {
+  const x = Math.min(Math.max(u, 0), 1) * (viridis.length - 1);
+  const i = Math.min(Math.floor(x), viridis.length - 2), f = x - i;
+  return viridis[i].map((c, k) => c + f * (viridis[i + 1][k] - c));
+}
+
+// Colours by view (the GLB's COLOR_0), by scalar (TEXCOORD_0.u through viridis) or plain.
+function applyColouring(root) {
+  const mode = $('colour').value;
+  root.traverse((object) => {
+    if (!object.isMesh) return;
+    const g = object.geometry;
+    if (!g.userData.viewColours && g.attributes.color) g.userData.viewColours = g.attributes.color.clone();
+    if (mode === 'scalar' && g.attributes.uv) {
+      const uv = g.attributes.uv, colours = new Float32Array(uv.count * 3);
+      for (let i = 0; i < uv.count; ++i) colours.set(colourmap(uv.getX(i)), 3 * i);
+      g.setAttribute('color', new THREE.BufferAttribute(colours, 3));
+    } else if (mode !== 'plain' && g.userData.viewColours) {
+      g.setAttribute('color', g.userData.viewColours);
+    }
+    object.material = material;
+    material.vertexColors = mode !== 'plain' && !!g.attributes.color;
+    material.color.set(material.vertexColors ? 0xffffff : 0xb8c4d6);
+    material.needsUpdate = true;
+  });
+}
+
+function countTriangles(root) {
+  let n = 0;
+  root.traverse((object) => {
+    if (!object.isMesh) return;
+    const g = object.geometry;
+    n += (g.index ? g.index.count : g.attributes.position.count) / 3;
+  });
+  return n;
+}
+
+function frame(root) {
+  const sphere = new THREE.Box3().setFromObject(root).getBoundingSphere(new THREE.Sphere());
+  if (!(sphere.radius > 0)) return;
+  controls.target.copy(sphere.center);
+  const distance = sphere.radius / Math.sin(THREE.MathUtils.degToRad(camera.fov / 2));
+  camera.position.copy(sphere.center).add(new THREE.Vector3(0.55, 0.45, 0.7).normalize().multiplyScalar(distance));
+  camera.near = distance / 100;
+  camera.far = distance * 10;
+  camera.updateProjectionMatrix();
+}
+
+async function loadStep(step) {
+  const ticket = ++state.loading;  // a newer request wins over one still in flight
+  setStatus(`loading step ${step}…`);
+  const meta = await json(`/api/v1/steps/${step}`);
+  const response = await api(`/api/v1/steps/${step}/mesh.glb`);
+  if (!response.ok) throw new Error(`mesh of step ${step}: HTTP ${response.status}`);
+  const buffer = await response.arrayBuffer();
+  const gltf = await loader.parseAsync(buffer, '');
+  if (ticket !== state.loading) return;
+  if (state.mesh) {
+    scene.remove(state.mesh);
+    state.mesh.traverse((o) => o.isMesh && o.geometry.dispose());
+  }
+  state.mesh = gltf.scene;
+  applyColouring(state.mesh);
+  scene.add(state.mesh);
+  if (!state.framed) {
+    frame(state.mesh);
+    state.framed = true;
+  }
+  const triangles = countTriangles(state.mesh);
+  state.loaded = meta;
+  showMetadata(meta, triangles);
+  syncSlider();
+  document.body.dataset.loadedStep = String(meta.step);
+  document.body.dataset.triangles = String(triangles);
+  setStatus($('follow').checked ? `step ${meta.step} (following)` : `step ${meta.step}`);
+}
+
+function load(step) {
+  loadStep(step).catch((e) => setStatus(e.message, true));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Steps: the slider over the stored ones, following the newest
+
+function syncSlider() {
+  const slider = $('slider');
+  slider.max = String(Math.max(state.steps.length - 1, 0));
+  slider.disabled = state.steps.length < 2;
+  const at = state.loaded ? state.steps.indexOf(state.loaded.step) : -1;
+  if (at >= 0) slider.value = String(at);
+  $('slider-step').textContent = state.loaded ? `#${state.loaded.step}` : '';
+}
+
+function addStep(meta) {
+  if (!state.steps.includes(meta.step)) state.steps.push(meta.step);
+  state.steps.sort((a, b) => a - b);
+  syncSlider();
+}
+
+$('slider').addEventListener('input', () => {
+  $('follow').checked = false;
+  load(state.steps[Number($('slider').value)]);
+});
+$('follow').addEventListener('change', () => {
+  if ($('follow').checked && state.steps.length) load(state.steps[state.steps.length - 1]);
+});
+$('colour').addEventListener('change', () => state.mesh && applyColouring(state.mesh));
+$('reset').addEventListener('click', () => state.mesh && frame(state.mesh));
+
+function listen() {
+  // Server-sent events: the newest step first, then each new one. EventSource reconnects by
+  // itself after a dropped connection.
+  const events = new EventSource(`/api/v1/events?token=${encodeURIComponent(token)}`);
+  events.addEventListener('step', (event) => {
+    const meta = JSON.parse(event.data);
+    addStep(meta);
+    if ($('follow').checked && (!state.loaded || meta.step > state.loaded.step)) load(meta.step);
+  });
+  events.onerror = () => {
+    if (!state.loaded) setStatus('waiting for the job…');
+  };
+}
+
+async function start() {
+  if (!token) {
+    setStatus('no token in the URL: open the URL the job printed (…/?token=…)', true);
+    return;
+  }
+  try {
+    const list = await json('/api/v1/steps');
+    for (const meta of list.steps || []) addStep(meta);
+    if (state.steps.length) await loadStep(state.steps[state.steps.length - 1]);
+    else setStatus('waiting for the first step…');
+  } catch (e) {
+    setStatus(e.message, true);
+    if (e.message.startsWith('the server refused')) return;
+  }
+  listen();
+}
+
+start();
