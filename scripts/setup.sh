@@ -11,6 +11,7 @@ packages=(
   libcli11-dev                  # command line
   nlohmann-json3-dev            # JSON summaries
   libzstd-dev                   # fragment compression
+  libdraco-dev libeigen3-dev draco  # GLB meshes (Draco glTF encoder; draco_decoder CLI)
   libopenmpi-dev openmpi-bin    # the distributed pipeline
   libgtest-dev                  # tests
   clang libclang-rt-14-dev      # libFuzzer target for the fragment decoder

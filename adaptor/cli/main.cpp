@@ -29,6 +29,8 @@
 #include "ldimesh/core/raycaster.hpp"
 #include "ldimesh/core/surfaces.hpp"
 #include "ldimesh/transport/distributed.hpp"
+#include "ldimesh/transport/glb.hpp"
+#include "ldimesh/transport/snapshot_store.hpp"
 
 namespace {
 
@@ -52,6 +54,9 @@ struct MeshArgs {
   std::optional<double> isovalue;
   double max_cost = ldimesh::MatchOptions{}.max_cost;
   bool lossless = false;
+  std::string steps_dir;
+  std::uint64_t step = 1;
+  double time = 0.0;
   int depth_bits = ldimesh::FragmentEncoding{}.depth_bits;
   int normal_bits = ldimesh::FragmentEncoding{}.normal_bits;
 };
@@ -72,6 +77,14 @@ void check_writable(const std::string& path) {
   std::FILE* f = std::fopen(path.c_str(), "ab");
   if (!f) throw std::runtime_error("cannot write '" + path + "': " + std::strerror(errno));
   std::fclose(f);
+}
+
+// Whether `path` ends in `ext` (".ply"), in any letter case.
+bool has_extension(const std::string& path, const std::string& ext) {
+  std::string e = std::filesystem::path(path).extension().string();
+  for (char& c : e)
+    c = char(std::tolower(static_cast<unsigned char>(c)));
+  return e == ext;
 }
 
 int run_surfaces() {
@@ -164,12 +177,10 @@ int run_mesh(const MeshArgs& args) {
 
   on_all_ranks(comm, [&] {
     if (!root || args.out.empty()) return;
-    std::string ext = std::filesystem::path(args.out).extension().string();
-    for (char& c : ext)
-      c = char(std::tolower(static_cast<unsigned char>(c)));
-    if (ext != ".ply" && ext != ".obj")
+    if (!has_extension(args.out, ".ply") && !has_extension(args.out, ".obj") &&
+        !has_extension(args.out, ".glb"))
       throw std::runtime_error("cannot tell the format of '" + args.out +
-                               "': use a .ply or .obj file name");
+                               "': use a .ply, .obj or .glb file name");
     check_writable(args.out);
   });
 
@@ -207,12 +218,55 @@ int run_mesh(const MeshArgs& args) {
   if (!root) return 0;
 
   const ldimesh::MeshingResult& result = step.meshing;
-  double write_seconds = 0.0;
+  double write_seconds = 0.0, glb_seconds = 0.0;
+  std::vector<std::uint8_t> glb;
+  ldimesh::GlbInfo glb_info;
+  const bool want_glb = has_extension(args.out, ".glb") || !args.steps_dir.empty();
+  if (want_glb) {
+    start = std::chrono::steady_clock::now();
+    ldimesh::GlbOptions glb_options;
+    glb_options.pixel_size = views.front().spacing;
+    if (const ldimesh::Status s = ldimesh::encode_glb(result.mesh, glb_options, glb, &glb_info); !s)
+      throw std::runtime_error(s.message());
+    glb_seconds = seconds_since(start);
+  }
   if (!args.out.empty()) {
     start = std::chrono::steady_clock::now();
-    if (const ldimesh::Status s = ldimesh::write_mesh(args.out, result.mesh); !s)
+    if (has_extension(args.out, ".glb")) {
+      std::FILE* f = std::fopen(args.out.c_str(), "wb");
+      const bool ok = f && std::fwrite(glb.data(), 1, glb.size(), f) == glb.size();
+      if (f && std::fclose(f) != 0) throw std::runtime_error("writing '" + args.out + "' failed");
+      if (!ok) throw std::runtime_error("cannot write '" + args.out + "'");
+    } else if (const ldimesh::Status s = ldimesh::write_mesh(args.out, result.mesh); !s) {
       throw std::runtime_error(s.message());
+    }
     write_seconds = seconds_since(start);
+  }
+  if (!args.steps_dir.empty()) {
+    // A step as the job's server would publish it, for `ldimesh-serve --dir`.
+    ldimesh::StepMetadata meta;
+    meta.step = args.step;
+    meta.time = args.time;
+    meta.isovalues = {iso};
+    meta.triangles = glb_info.triangles;
+    meta.vertices = glb_info.vertices;
+    meta.samples = result.samples;
+    meta.quads = result.quads;
+    meta.bytes = glb.size();
+    for (const ldimesh::View& v : views)
+      meta.views.push_back({v.dir.x, v.dir.y, v.dir.z});
+    meta.resolution = std::uint32_t(args.res);
+    meta.r = args.r;
+    meta.seconds = {{"cast", step.seconds.cast},     {"encode", step.seconds.encode},
+                    {"reduce", step.seconds.reduce}, {"decode", step.seconds.decode},
+                    {"mesh", step.seconds.mesh},     {"glb", glb_seconds}};
+    ldimesh::Snapshot snapshot;
+    snapshot.step = args.step;
+    snapshot.metadata_json = ldimesh::metadata_to_json(meta);
+    snapshot.glb = std::make_shared<const std::vector<std::uint8_t>>(std::move(glb));
+    std::filesystem::create_directories(args.steps_dir);
+    if (const ldimesh::Status s = ldimesh::write_step_files(args.steps_dir, snapshot); !s)
+      throw std::runtime_error(s.message());
   }
 
   std::size_t rays = 0;
@@ -313,7 +367,14 @@ int main(int argc, char** argv) {
   mesh->add_option("--r", args.r, "trimming parameter r (§3)")
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
-  mesh->add_option("--out", args.out, "write the mesh to this .ply or .obj file");
+  mesh->add_option(
+      "--out", args.out,
+      "write the mesh to this file: .ply (binary), .obj or .glb (Draco-compressed glTF)");
+  mesh->add_option("--steps-dir", args.steps_dir,
+                   "also write the mesh as a published step (step_NNNNNN.glb + .json) into this "
+                   "folder, for ldimesh-serve --dir");
+  mesh->add_option("--step", args.step, "step number for --steps-dir")->capture_default_str();
+  mesh->add_option("--time", args.time, "simulation time for --steps-dir")->capture_default_str();
   bool triangles = false;
   CLI::Option* quad_flag = mesh->add_flag("--quad", args.quads, "output quads");
   mesh->add_flag("--tri", triangles,

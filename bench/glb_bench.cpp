@@ -1,0 +1,130 @@
+// Mesh delivery: the Draco GLB the job publishes against the binary PLY the CLI writes, on
+// every built-in analytic surface at each --res: three axis views, r = 0.5, triangles. Reports
+// triangles, GLB bytes (and per triangle), PLY bytes (and per triangle), the position bits
+// chosen (automatic: step ≤ a tenth of the LDI pixel) with glb_position_error_bound in pixels,
+// and the single-thread encode and decode times (median of --repeat). Prints a Markdown table.
+//
+//   build/bin/ldimesh_bench_glb [--res 256 512] [--repeat 5] [--level 7] [--normal-bits 10]
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+#include <tbb/global_control.h>
+#include <unistd.h>
+
+#include "ldimesh/core/mesh_io.hpp"
+#include "ldimesh/core/pipeline.hpp"
+#include "ldimesh/core/raycaster.hpp"
+#include "ldimesh/core/surfaces.hpp"
+#include "ldimesh/transport/glb.hpp"
+
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v[v.size() / 2];
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"ldimesh mesh delivery benchmark: Draco GLB against binary PLY"};
+  std::vector<int> resolutions = {256, 512};
+  int repeat = 5;
+  ldimesh::GlbOptions options;
+  app.add_option("--res", resolutions, "pixels per view side (several allowed)")
+      ->check(CLI::Range(8, 8192));
+  app.add_option("--repeat", repeat, "encodes and decodes per mesh; the median is reported")
+      ->check(CLI::Range(1, 1000));
+  app.add_option("--level", options.compression_level, "Draco compression level")
+      ->check(CLI::Range(0, 10));
+  app.add_option("--normal-bits", options.normal_bits, "normal quantization bits")
+      ->check(CLI::Range(2, 30));
+  CLI11_PARSE(app, argc, argv);
+
+  std::printf(
+      "Three axis views per surface, r = 0.5, triangles; GLB: Draco level %d, automatic "
+      "position bits (step ≤ 0.1 pixel), %d normal bits, colours; PLY: binary, "
+      "ldimesh::write_ply (float position + normal, uint indices, view byte); encode and "
+      "decode on one thread, median of %d\n\n",
+      options.compression_level, options.normal_bits, repeat);
+  std::printf(
+      "| surface | res | triangles | vertices | GLB bytes | GLB B/tri | PLY bytes | PLY B/tri | "
+      "PLY / GLB | position bits | error bound (pixels) | encode s | decode s |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+  const std::filesystem::path ply =
+      std::filesystem::temp_directory_path() / ("ldimesh_bench_glb_" + std::to_string(getpid()) + ".ply");
+  for (const int res : resolutions) {
+    std::size_t total_triangles = 0, total_glb = 0, total_ply = 0;
+    for (const ldimesh::SurfaceInfo& s : ldimesh::builtin_surfaces()) {
+      ldimesh::Mesh mesh;
+      double pixel = 0.0;
+      {
+        const auto source = ldimesh::make_surface_source(s.name);
+        const ldimesh::RayCaster caster(*source, s.isovalue);
+        std::vector<ldimesh::Ldi> ldis;
+        const std::vector<ldimesh::View> views = ldimesh::make_axis_views(s.domain, res);
+        for (const ldimesh::View& v : views)
+          ldis.push_back(caster.cast(v));
+        pixel = views[0].spacing;
+        mesh = ldimesh::mesh_ldis(ldis).mesh;
+      }
+      ldimesh::GlbOptions o = options;
+      o.pixel_size = pixel;
+
+      // Encoding and decoding on one thread (Draco is single-threaded anyway).
+      const tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
+      std::vector<double> enc, dec;
+      std::vector<std::uint8_t> glb;
+      ldimesh::GlbInfo info;
+      ldimesh::Mesh back;
+      for (int r = 0; r < repeat; ++r) {
+        auto start = std::chrono::steady_clock::now();
+        if (ldimesh::Status st = ldimesh::encode_glb(mesh, o, glb, &info); !st) {
+          std::fprintf(stderr, "%s\n", st.message().c_str());
+          return 1;
+        }
+        enc.push_back(seconds_since(start));
+        start = std::chrono::steady_clock::now();
+        if (ldimesh::Status st = ldimesh::decode_glb(glb, back); !st) {
+          std::fprintf(stderr, "%s\n", st.message().c_str());
+          return 1;
+        }
+        dec.push_back(seconds_since(start));
+      }
+      if (back.triangle_count() != mesh.triangle_count()) {
+        std::fprintf(stderr, "%s: decoded %zu triangles of %zu\n", s.name.c_str(),
+                     back.triangle_count(), mesh.triangle_count());
+        return 1;
+      }
+      if (ldimesh::Status st = ldimesh::write_ply(ply.string(), mesh); !st) {
+        std::fprintf(stderr, "%s\n", st.message().c_str());
+        return 1;
+      }
+      const std::size_t ply_bytes = std::filesystem::file_size(ply);
+      const double t = double(mesh.triangle_count());
+      std::printf("| %s | %d² | %zu | %zu | %zu | %.2f | %zu | %.2f | %.1f | %d | %.3f | %.4f | %.4f |\n",
+                  s.name.c_str(), res, mesh.triangle_count(), mesh.vertex_count(), glb.size(),
+                  double(glb.size()) / t, ply_bytes, double(ply_bytes) / t,
+                  double(ply_bytes) / double(glb.size()), info.position_bits,
+                  info.position_error_bound / pixel, median(enc), median(dec));
+      total_triangles += mesh.triangle_count();
+      total_glb += glb.size();
+      total_ply += ply_bytes;
+    }
+    std::printf("| **all** | %d² | %zu | | %zu | %.2f | %zu | %.2f | %.1f | | | | |\n", res,
+                total_triangles, total_glb, double(total_glb) / double(total_triangles),
+                total_ply, double(total_ply) / double(total_triangles),
+                double(total_ply) / double(total_glb));
+  }
+  std::filesystem::remove(ply);
+  return 0;
+}

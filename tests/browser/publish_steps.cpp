@@ -1,0 +1,96 @@
+// A job's server for the browser test, without the job: publishes real meshes as the root rank
+// would. Step 1 (the torus) is published at start; each line "next" on standard input publishes
+// the next step (the Barth sextic, then Klein bottle …); "quit" or the end of input stops.
+// Prints "url URL" once the server listens and "published STEP TRIANGLES" after each step.
+//
+//   ldimesh_test_publisher REPO_ROOT
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <memory>
+#include <string>
+
+#include "ldimesh/core/pipeline.hpp"
+#include "ldimesh/core/raycaster.hpp"
+#include "ldimesh/core/surfaces.hpp"
+#include "ldimesh/transport/glb.hpp"
+#include "ldimesh/transport/http_server.hpp"
+#include "ldimesh/transport/snapshot_store.hpp"
+
+namespace {
+
+// Meshes `surface` at `res` and publishes it as step `step`; returns the GLB's triangle count.
+std::size_t publish(ldimesh::SnapshotStore& store, std::uint64_t step, const char* surface,
+                    int res) {
+  const ldimesh::SurfaceInfo* s = ldimesh::find_surface(surface);
+  const auto source = ldimesh::make_surface_source(surface);
+  const ldimesh::RayCaster caster(*source, s->isovalue);
+  std::vector<ldimesh::Ldi> ldis;
+  for (const ldimesh::View& v : ldimesh::make_axis_views(s->domain, res))
+    ldis.push_back(caster.cast(v));
+  const ldimesh::MeshingResult result = ldimesh::mesh_ldis(ldis, {});
+  ldimesh::GlbOptions options;
+  options.pixel_size = ldis.front().view.spacing;
+  std::vector<std::uint8_t> glb;
+  ldimesh::GlbInfo info;
+  if (const ldimesh::Status st = ldimesh::encode_glb(result.mesh, options, glb, &info); !st)
+    throw std::runtime_error(st.message());
+  ldimesh::StepMetadata meta;
+  meta.step = step;
+  meta.time = 0.1 * double(step);
+  meta.isovalues = {s->isovalue};
+  meta.triangles = info.triangles;
+  meta.vertices = info.vertices;
+  meta.samples = result.samples;
+  meta.quads = result.quads;
+  meta.bytes = glb.size();
+  for (const ldimesh::Ldi& l : ldis)
+    meta.views.push_back({l.view.dir.x, l.view.dir.y, l.view.dir.z});
+  meta.resolution = std::uint32_t(res);
+  meta.r = 0.5;
+  meta.seconds = {{"mesh", result.seconds.match + result.seconds.trim + result.seconds.assemble}};
+  ldimesh::Snapshot snapshot;
+  snapshot.step = step;
+  snapshot.metadata_json = ldimesh::metadata_to_json(meta);
+  snapshot.glb = std::make_shared<const std::vector<std::uint8_t>>(std::move(glb));
+  if (const ldimesh::Status st = store.publish(std::move(snapshot)); !st)
+    throw std::runtime_error(st.message());
+  return info.triangles;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc != 2) {
+    std::fprintf(stderr, "usage: %s REPO_ROOT\n", argv[0]);
+    return 2;
+  }
+  try {
+    const std::filesystem::path root = argv[1];
+    ldimesh::SnapshotStore store;
+    ldimesh::HttpServerOptions options;
+    options.static_dir = root / "viewer" / "web";
+    options.vendor_three_dir = root / "node_modules" / "three";
+    ldimesh::HttpServer server(store, options);
+    if (const ldimesh::Status st = server.start(); !st) throw std::runtime_error(st.message());
+    std::printf("url %s\n", server.url().c_str());
+    std::fflush(stdout);
+    const char* surfaces[] = {"torus", "barth", "klein", "sphere"};
+    std::uint64_t step = 1;
+    std::printf("published %llu %zu\n", (unsigned long long)step,
+                publish(store, step, surfaces[0], 96));
+    std::fflush(stdout);
+    for (std::string line; std::getline(std::cin, line) && line != "quit";) {
+      if (line != "next") continue;
+      ++step;
+      const std::size_t triangles = publish(store, step, surfaces[(step - 1) % 4], 96);
+      std::printf("published %llu %zu\n", (unsigned long long)step, triangles);
+      std::fflush(stdout);
+    }
+    server.stop();
+    return 0;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "publisher: %s\n", e.what());
+    return 1;
+  }
+}

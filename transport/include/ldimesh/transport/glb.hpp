@@ -1,0 +1,112 @@
+// Meshes as glTF 2.0 binary (.glb) with KHR_draco_mesh_compression, the format the job
+// publishes to the browser viewer (docs/api.md, "The GLB"). Encoding goes through libdraco's
+// own glTF encoder (draco::GltfEncoder); decoding parses the GLB container and decodes the
+// Draco buffer with draco::Decoder. docs/method.md, "Mesh encoding", explains the choices.
+//
+// One primitive of triangles with the attributes
+//   POSITION    float VEC3, quantized by Draco to `position_bits` over the bounding cube;
+//   NORMAL      float VEC3, octahedral, `normal_bits`;
+//   COLOR_0     unsigned byte VEC3 (normalized), the colour of the view each vertex's faces
+//               came from: views along ±x red, ±y yellow, ±z green, any other view k
+//               view_colour(k, ·) from a fixed palette; stored exactly (not quantized);
+//   TEXCOORD_0  float VEC2, u = (scalar − min) / (max − min) clamped to [0, 1], v = 0; only
+//               when the mesh has scalars; quantized to `scalar_bits`.
+// and meshes[0].extras.ldimesh = {"view_dirs": [[x,y,z], …], "scalar_range": [min, max]}
+// (scalar_range only with scalars), so that a client can recover views and scalar units.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <vector>
+
+#include "ldimesh/core/mesh.hpp"
+#include "ldimesh/core/status.hpp"
+
+namespace ldimesh {
+
+struct GlbOptions {
+  // Position quantization bits, 1..30; 0 = automatic: the fewest bits (at most 24, a float's
+  // precision) whose quantization step is at most a tenth of `pixel_size`.
+  int position_bits = 0;
+  // The LDI pixel size (world units) for the automatic choice; 0 = take a step of 10⁻⁴ of the
+  // bounding-box diagonal instead.
+  double pixel_size = 0.0;
+  // Octahedral normal quantization bits, 2..30 (Draco's octahedron transform needs ≥ 2).
+  int normal_bits = 10;
+  // TEXCOORD_0 (normalized scalar) quantization bits, 1..30.
+  int scalar_bits = 12;
+  // Draco compression level 0..10 (GltfEncoder maps it to speed 10 − level; 0 = sequential
+  // encoding that keeps the vertex order, ≥ 1 = Edgebreaker, which reorders vertices).
+  int compression_level = 7;
+  // The scalar values mapped to u = 0 and u = 1 (min < max, both finite), e.g. fixed over a
+  // run so that colours mean the same at every step; unset = the mesh's own min and max.
+  std::optional<std::array<float, 2>> scalar_range;
+};
+
+// What a GLB holds, as encode_glb wrote it or decode_glb read it.
+struct GlbInfo {
+  std::size_t triangles = 0;  // triangles in the GLB (after Draco dropped degenerate ones)
+  std::size_t vertices = 0;   // vertices in the GLB (Draco may split non-manifold ones)
+  int position_bits = 0;      // encode only: the bits used
+  double position_error_bound = 0.0;  // encode only: glb_position_error_bound
+  bool has_scalar = false;
+  float scalar_min = 0.0f;  // the scalar range behind u ∈ [0, 1] (when has_scalar)
+  float scalar_max = 0.0f;
+};
+
+// Encodes `mesh` into `out` (replaced). Quads are split into two triangles along their shorter
+// diagonal (same winding); the triangles follow, quads' triangles first. A vertex takes the
+// colour of the view of the first face that uses it (quads first); our meshes never share a
+// vertex between views. A mesh without faces gives a valid GLB without meshes (a scene with
+// no nodes, no extension used) that decode_glb reads as an empty mesh.
+// Errors (Status, `out` unchanged): options out of range; a mesh whose arrays disagree in
+// size (normals, scalars, quad_view, triangle_view), an index out of range, non-finite
+// positions, normals or scalars, more than 2³¹ − 1 vertices or triangles; Draco failing.
+// Deterministic: the same mesh and options give the same bytes. `info`, when given, is
+// filled on success. Never throws (allocation failure included).
+Status encode_glb(const Mesh& mesh, const GlbOptions& options, std::vector<std::uint8_t>& out,
+                  GlbInfo* info = nullptr);
+
+// The position quantization bits encode_glb uses for `mesh` and `options`.
+int glb_position_bits(const Mesh& mesh, const GlbOptions& options);
+
+// The largest distance between a vertex of `mesh` and its decoded position. Draco quantizes
+// each coordinate over the bounding cube: range r = the largest side of the bounding box,
+// q = ⌊(x − min)·(2^b − 1)/r + ½⌋, x' = q·r/(2^b − 1) + min (draco/attributes/
+// attribute_quantization_transform.cc, draco/core/quantization_utils.cc, Draco 1.5.5), so a
+// coordinate moves by at most r / (2·(2^b − 1)) and a point by √3 times that; plus 8 float
+// spacings of max(r, |coordinate|) for Draco's float arithmetic. b = glb_position_bits.
+double glb_position_error_bound(const Mesh& mesh, const GlbOptions& options);
+
+// The largest angle (radians) between a unit normal and its decoded value, for Draco's
+// octahedral quantization with n = options.normal_bits (step 2/(2^n − 2) on the octahedron,
+// draco/compression/attributes/normal_compression_utils.h): 3·√2 / (2^n − 2) + 2⁻²⁰.
+double glb_normal_error_bound(const GlbOptions& options);
+
+// The largest error of a decoded TEXCOORD_0.u (normalized scalar): 1 / (2·(2^s − 1)) + 2⁻²⁰,
+// s = options.scalar_bits (u ∈ [0, 1], quantized like positions).
+double glb_scalar_error_bound(const GlbOptions& options);
+
+// The colour (8-bit RGB) COLOR_0 gives the faces of view `k` with direction `dir`: ±x red
+// (255, 0, 0), ±y yellow (255, 215, 0), ±z green (0, 170, 0), other directions the fixed
+// palette entry k mod 8 (blue, magenta, cyan, orange, purple, teal, pink, grey).
+std::array<std::uint8_t, 3> view_colour(std::size_t k, const glm::dvec3& dir);
+
+// Decodes a GLB into `out` (replaced): positions, unit normals, triangles, per-vertex scalars
+// = TEXCOORD_0.u (normalized, in [0, 1]) when present, view_dirs from extras.ldimesh when
+// present, and per triangle the view whose view_colour matches the colour of its first
+// vertex (view 0 when none does). Vertices come in Draco's decoding order, which for
+// Edgebreaker (compression level ≥ 1) differs from the encoder's input order.
+// Accepts GLBs whose every primitive (of every mesh; they are concatenated; node transforms
+// are ignored) is a KHR_draco_mesh_compression triangle primitive with POSITION and NORMAL;
+// a GLB without meshes gives an empty mesh. Validates the container, the JSON, every index,
+// offset and count against the bytes there are, and Draco's output (attribute types, counts,
+// finite values, face indices): garbage, truncated or hostile input returns an error Status
+// and never crashes; Draco's decoder itself is fuzzed upstream (OSS-Fuzz) and guarded here
+// against exceptions. `info`, when given, gets counts and the scalar range from extras.
+// On error `out` is left unchanged.
+Status decode_glb(std::span<const std::uint8_t> glb, Mesh& out, GlbInfo* info = nullptr);
+
+}  // namespace ldimesh

@@ -1,0 +1,688 @@
+// Mesh ⇄ glTF 2.0 binary with KHR_draco_mesh_compression (docs/method.md, "Mesh encoding").
+//
+// References: glTF 2.0 specification §4.4 (GLB container: 12-byte header, JSON chunk first,
+// optional BIN chunk, chunks 4-byte aligned), KHR_draco_mesh_compression (the extension's
+// bufferView holds one Draco mesh; its "attributes" map glTF attribute names to Draco unique
+// ids; accessor counts must equal the decoded ones), Draco 1.5.5 sources (gltf_encoder.cc,
+// attribute_quantization_transform.cc, normal_compression_utils.h).
+#include "ldimesh/transport/glb.hpp"
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <memory>
+#include <new>
+#include <string>
+#include <unordered_map>
+
+#include <draco/compression/decode.h>
+#include <draco/compression/draco_compression_options.h>
+#include <draco/core/decoder_buffer.h>
+#include <draco/core/encoder_buffer.h>
+#include <draco/io/gltf_encoder.h>
+#include <draco/mesh/mesh.h>
+#include <nlohmann/json.hpp>
+
+namespace ldimesh {
+namespace {
+
+using Json = nlohmann::json;
+
+constexpr std::uint32_t kGlbMagic = 0x46546C67u;  // "glTF", little-endian
+constexpr std::uint32_t kGlbVersion = 2;
+constexpr std::uint32_t kChunkJson = 0x4E4F534Au;  // "JSON"
+constexpr std::uint32_t kChunkBin = 0x004E4942u;   // "BIN\0"
+constexpr std::size_t kGlbHeader = 12, kChunkHeader = 8;
+constexpr const char* kDraco = "KHR_draco_mesh_compression";
+constexpr int kMaxAutoPositionBits = 24;  // a float has 24 significant bits
+constexpr std::size_t kMaxIndex = std::numeric_limits<std::int32_t>::max();  // Draco: int32
+
+static_assert(std::endian::native == std::endian::little, "GLB is little-endian");
+
+std::uint32_t read_u32(const std::uint8_t* p) {
+  std::uint32_t v;
+  std::memcpy(&v, p, 4);
+  return v;
+}
+
+void append_u32(std::vector<std::uint8_t>& out, std::uint32_t v) {
+  const auto* p = reinterpret_cast<const std::uint8_t*>(&v);
+  out.insert(out.end(), p, p + 4);
+}
+
+// The GLB container around `json` and (when non-empty) `bin`, both padded to 4 bytes as
+// §4.4.3 asks: JSON with spaces, BIN with zeros.
+std::vector<std::uint8_t> assemble_glb(const std::string& json,
+                                       std::span<const std::uint8_t> bin) {
+  const std::size_t json_len = (json.size() + 3) & ~std::size_t(3);
+  const std::size_t bin_len = (bin.size() + 3) & ~std::size_t(3);
+  const std::size_t total =
+      kGlbHeader + kChunkHeader + json_len + (bin.empty() ? 0 : kChunkHeader + bin_len);
+  std::vector<std::uint8_t> out;
+  out.reserve(total);
+  append_u32(out, kGlbMagic);
+  append_u32(out, kGlbVersion);
+  append_u32(out, std::uint32_t(total));
+  append_u32(out, std::uint32_t(json_len));
+  append_u32(out, kChunkJson);
+  out.insert(out.end(), json.begin(), json.end());
+  out.resize(out.size() + (json_len - json.size()), ' ');
+  if (!bin.empty()) {
+    append_u32(out, std::uint32_t(bin_len));
+    append_u32(out, kChunkBin);
+    out.insert(out.end(), bin.begin(), bin.end());
+    out.resize(out.size() + (bin_len - bin.size()), 0);
+  }
+  return out;
+}
+
+// The JSON and BIN chunks of a GLB; every length checked against the bytes there are.
+struct GlbChunks {
+  Json json;
+  std::span<const std::uint8_t> bin;
+};
+
+Status parse_glb(std::span<const std::uint8_t> glb, GlbChunks& chunks) {
+  if (glb.size() < kGlbHeader + kChunkHeader) return Status::error("glb: too short for a GLB");
+  if (read_u32(glb.data()) != kGlbMagic) return Status::error("glb: no glTF magic");
+  if (read_u32(glb.data() + 4) != kGlbVersion) return Status::error("glb: not glTF version 2");
+  const std::uint32_t length = read_u32(glb.data() + 8);
+  if (length != glb.size())
+    return Status::error("glb: header length " + std::to_string(length) + " but " +
+                         std::to_string(glb.size()) + " bytes (truncated or padded)");
+  std::size_t pos = kGlbHeader;
+  bool first = true, have_bin = false;
+  while (pos < glb.size()) {
+    if (glb.size() - pos < kChunkHeader) return Status::error("glb: truncated chunk header");
+    const std::uint32_t chunk_len = read_u32(glb.data() + pos);
+    const std::uint32_t type = read_u32(glb.data() + pos + 4);
+    pos += kChunkHeader;
+    if (chunk_len > glb.size() - pos) return Status::error("glb: chunk runs past the end");
+    const std::span<const std::uint8_t> data = glb.subspan(pos, chunk_len);
+    pos += chunk_len;
+    if (first) {
+      if (type != kChunkJson) return Status::error("glb: first chunk is not JSON");
+      chunks.json = Json::parse(data.begin(), data.end(), nullptr, /*allow_exceptions=*/false);
+      if (chunks.json.is_discarded() || !chunks.json.is_object())
+        return Status::error("glb: JSON chunk is not a JSON object");
+      first = false;
+    } else if (type == kChunkBin && !have_bin) {
+      chunks.bin = data;
+      have_bin = true;
+    }  // §4.4.3.1: chunks of unknown types are ignored
+  }
+  if (first) return Status::error("glb: no JSON chunk");
+  return Status::ok();
+}
+
+// A non-negative integer member of `object` that fits `limit`, or an error naming `what`.
+Status get_index(const Json& object, const char* key, std::size_t limit, std::size_t& value,
+                 const std::string& what) {
+  const auto it = object.find(key);
+  if (it == object.end() || !it->is_number_integer() || it->get<std::int64_t>() < 0 ||
+      std::uint64_t(it->get<std::int64_t>()) >= limit)
+    return Status::error("glb: " + what + " '" + key + "' missing or out of range");
+  value = std::size_t(it->get<std::int64_t>());
+  return Status::ok();
+}
+
+const Json* array_member(const Json& object, const char* key) {
+  const auto it = object.find(key);
+  return it != object.end() && it->is_array() ? &*it : nullptr;
+}
+
+struct BoundingBox {
+  glm::dvec3 lo{0.0}, hi{0.0};
+  bool empty = true;
+};
+
+BoundingBox bounding_box(const std::vector<glm::vec3>& positions) {
+  BoundingBox b;
+  for (const glm::vec3& p : positions) {
+    const glm::dvec3 d(p);
+    if (b.empty) {
+      b.lo = b.hi = d;
+      b.empty = false;
+    } else {
+      b.lo = glm::min(b.lo, d);
+      b.hi = glm::max(b.hi, d);
+    }
+  }
+  return b;
+}
+
+// Draco's quantization range: the largest side of the bounding box, 1 for a point
+// (AttributeQuantizationTransform::ComputeParameters).
+double quantization_range(const BoundingBox& b) {
+  const glm::dvec3 e = b.hi - b.lo;
+  const double r = std::max({e.x, e.y, e.z});
+  return r > 0.0 ? r : 1.0;
+}
+
+Status check_options(const GlbOptions& o) {
+  if (o.position_bits < 0 || o.position_bits > 30)
+    return Status::error("glb: position_bits must be 0 (automatic) or 1..30");
+  if (!std::isfinite(o.pixel_size) || o.pixel_size < 0.0)
+    return Status::error("glb: pixel_size must be finite and ≥ 0");
+  if (o.normal_bits < 2 || o.normal_bits > 30)
+    return Status::error("glb: normal_bits must be 2..30");
+  if (o.scalar_bits < 1 || o.scalar_bits > 30)
+    return Status::error("glb: scalar_bits must be 1..30");
+  if (o.compression_level < 0 || o.compression_level > 10)
+    return Status::error("glb: compression_level must be 0..10");
+  if (o.scalar_range) {
+    const auto [lo, hi] = *o.scalar_range;
+    if (!std::isfinite(lo) || !std::isfinite(hi) || !(lo < hi))
+      return Status::error("glb: scalar_range must be finite with min < max");
+  }
+  return Status::ok();
+}
+
+bool all_finite(const std::vector<glm::vec3>& v) {
+  return std::all_of(v.begin(), v.end(), [](const glm::vec3& p) {
+    return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
+  });
+}
+
+Status check_mesh(const Mesh& m) {
+  const std::size_t n = m.vertex_count();
+  if (n > kMaxIndex) return Status::error("glb: more than 2^31 - 1 vertices");
+  if (m.normals.size() != n) return Status::error("glb: normals and positions differ in count");
+  if (!m.scalars.empty() && m.scalars.size() != n)
+    return Status::error("glb: scalars and positions differ in count");
+  if (m.quads.size() % 4 != 0 || m.triangles.size() % 3 != 0)
+    return Status::error("glb: quads or triangles not a multiple of 4 or 3 indices");
+  if (m.quad_view.size() != m.quad_count() || m.triangle_view.size() != m.triangle_count())
+    return Status::error("glb: quad_view or triangle_view differ from the face counts");
+  if (2 * m.quad_count() + m.triangle_count() > kMaxIndex)
+    return Status::error("glb: more than 2^31 - 1 triangles");
+  const auto in_range = [n](std::uint32_t i) { return i < n; };
+  if (!std::all_of(m.quads.begin(), m.quads.end(), in_range) ||
+      !std::all_of(m.triangles.begin(), m.triangles.end(), in_range))
+    return Status::error("glb: a face index is out of range");
+  if (!all_finite(m.positions) || !all_finite(m.normals))
+    return Status::error("glb: a position or normal is not finite");
+  if (!std::all_of(m.scalars.begin(), m.scalars.end(), [](float s) { return std::isfinite(s); }))
+    return Status::error("glb: a scalar is not finite");
+  return Status::ok();
+}
+
+// Quads split along the shorter diagonal: of the two ways to fold a non-planar quad, it keeps
+// the triangles closer to equilateral and the fold closer to the surface (the longer diagonal
+// spans the larger gap). Ties take a–c, so the split is deterministic.
+void triangulate(const Mesh& m, std::vector<std::uint32_t>& tris, std::vector<std::uint8_t>& view) {
+  tris.clear();
+  view.clear();
+  tris.reserve(6 * m.quad_count() + m.triangles.size());
+  view.reserve(2 * m.quad_count() + m.triangle_count());
+  for (std::size_t q = 0; q < m.quad_count(); ++q) {
+    const std::uint32_t* v = &m.quads[4 * q];
+    const auto dist2 = [&](int a, int b) {
+      const glm::dvec3 d = glm::dvec3(m.positions[v[a]]) - glm::dvec3(m.positions[v[b]]);
+      return glm::dot(d, d);
+    };
+    if (dist2(0, 2) <= dist2(1, 3))
+      tris.insert(tris.end(), {v[0], v[1], v[2], v[0], v[2], v[3]});
+    else
+      tris.insert(tris.end(), {v[0], v[1], v[3], v[1], v[2], v[3]});
+    view.insert(view.end(), {m.quad_view[q], m.quad_view[q]});
+  }
+  tris.insert(tris.end(), m.triangles.begin(), m.triangles.end());
+  view.insert(view.end(), m.triangle_view.begin(), m.triangle_view.end());
+}
+
+glm::dvec3 view_dir(const Mesh& m, std::size_t k) {
+  return k < m.view_dirs.size() ? m.view_dirs[k] : glm::dvec3(0.0);
+}
+
+// The minimal valid glTF for a mesh without faces: an asset and an empty scene (§5.26: a
+// scene's "nodes" must have at least one entry when present, so it is left out).
+std::vector<std::uint8_t> empty_glb() {
+  return assemble_glb(
+      R"({"asset":{"generator":"ldimesh","version":"2.0"},"scene":0,"scenes":[{}]})", {});
+}
+
+// Builds the Draco mesh GltfEncoder writes: one point per vertex, identity-mapped attributes.
+Status build_draco_mesh(const Mesh& m, const std::vector<std::uint32_t>& tris,
+                        const std::vector<std::uint8_t>& tri_view, const GlbOptions& options,
+                        int position_bits, float scalar_lo, float scalar_hi, draco::Mesh& dm) {
+  const std::size_t n = m.vertex_count();
+  dm.set_num_points(std::uint32_t(n));
+  const auto add = [&](draco::GeometryAttribute::Type type, int components, draco::DataType dt,
+                       bool normalized) -> draco::PointAttribute* {
+    draco::GeometryAttribute ga;
+    ga.Init(type, nullptr, std::uint8_t(components), dt, normalized,
+            std::int64_t(draco::DataTypeLength(dt)) * components, 0);
+    const int id = dm.AddAttribute(ga, /*identity_mapping=*/true, std::uint32_t(n));
+    return id >= 0 ? dm.attribute(id) : nullptr;
+  };
+  draco::PointAttribute* pos = add(draco::GeometryAttribute::POSITION, 3, draco::DT_FLOAT32, false);
+  draco::PointAttribute* nrm = add(draco::GeometryAttribute::NORMAL, 3, draco::DT_FLOAT32, false);
+  draco::PointAttribute* col = add(draco::GeometryAttribute::COLOR, 3, draco::DT_UINT8, true);
+  if (!pos || !nrm || !col) return Status::error("glb: Draco could not add an attribute");
+  static_assert(sizeof(glm::vec3) == 3 * sizeof(float));
+  pos->buffer()->Write(0, m.positions.data(), n * sizeof(glm::vec3));
+  nrm->buffer()->Write(0, m.normals.data(), n * sizeof(glm::vec3));
+
+  // A vertex takes the colour of the first face that uses it; unused vertices (which Draco's
+  // Edgebreaker drops) white.
+  std::vector<std::array<std::uint8_t, 3>> colour(n, {255, 255, 255});
+  std::vector<bool> coloured(n, false);
+  std::array<std::array<std::uint8_t, 3>, 256> view_colours;
+  for (std::size_t k = 0; k < view_colours.size(); ++k)
+    view_colours[k] = view_colour(k, view_dir(m, k));
+  for (std::size_t f = 0; f < tri_view.size(); ++f)
+    for (int c = 0; c < 3; ++c) {
+      const std::uint32_t v = tris[3 * f + c];
+      if (!coloured[v]) {
+        coloured[v] = true;
+        colour[v] = view_colours[tri_view[f]];
+      }
+    }
+  col->buffer()->Write(0, colour.data(), n * 3);
+
+  if (!m.scalars.empty()) {
+    draco::PointAttribute* uv =
+        add(draco::GeometryAttribute::TEX_COORD, 2, draco::DT_FLOAT32, false);
+    if (!uv) return Status::error("glb: Draco could not add an attribute");
+    // GltfEncoder flips v (v ↦ 1 − v, draco::MeshUtils::FlipTextureUvValues) because Draco
+    // keeps texture coordinates upside down relative to glTF: v = 1 here is v = 0 in the GLB.
+    std::vector<std::array<float, 2>> uvs(n);
+    const double scale = scalar_hi > scalar_lo ? 1.0 / (double(scalar_hi) - scalar_lo) : 0.0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const double u = (double(m.scalars[i]) - scalar_lo) * scale;
+      uvs[i] = {float(std::clamp(u, 0.0, 1.0)), 1.0f};
+    }
+    uv->buffer()->Write(0, uvs.data(), n * sizeof(uvs[0]));
+  }
+
+  const std::size_t t = tri_view.size();
+  dm.SetNumFaces(t);
+  for (std::size_t f = 0; f < t; ++f)
+    dm.SetFace(draco::FaceIndex(std::uint32_t(f)),
+               {draco::PointIndex(tris[3 * f]), draco::PointIndex(tris[3 * f + 1]),
+                draco::PointIndex(tris[3 * f + 2])});
+
+  draco::DracoCompressionOptions compression;
+  compression.compression_level = options.compression_level;
+  compression.quantization_position.SetQuantizationBits(position_bits);
+  compression.quantization_bits_normal = options.normal_bits;
+  compression.quantization_bits_tex_coord = options.scalar_bits;
+  // COLOR needs no setting: GltfEncoder does not quantize colours (no COLOR case in
+  // GltfAsset::CompressMeshWithDraco), so 8-bit colours travel exactly.
+  dm.SetCompressionEnabled(true);
+  dm.SetCompressionOptions(compression);
+  return Status::ok();
+}
+
+// Counts (vertices, triangles) of the single primitive encode_glb wrote, from its accessors.
+void primitive_counts(const Json& json, GlbInfo& info) {
+  const Json& accessors = json.at("accessors");
+  const Json& primitive = json.at("meshes").at(0).at("primitives").at(0);
+  info.vertices = accessors.at(primitive.at("attributes").at("POSITION").get<std::size_t>())
+                      .at("count")
+                      .get<std::size_t>();
+  info.triangles =
+      accessors.at(primitive.at("indices").get<std::size_t>()).at("count").get<std::size_t>() /
+      3;
+}
+
+Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
+                            std::vector<std::uint8_t>& out, GlbInfo* info) {
+  if (Status s = check_options(options); !s) return s;
+  if (Status s = check_mesh(mesh); !s) return s;
+  GlbInfo result;
+  result.position_bits = glb_position_bits(mesh, options);
+  result.position_error_bound = glb_position_error_bound(mesh, options);
+
+  std::vector<std::uint32_t> tris;
+  std::vector<std::uint8_t> tri_view;
+  triangulate(mesh, tris, tri_view);
+  if (tri_view.empty()) {
+    out = empty_glb();
+    if (info) *info = result;
+    return Status::ok();
+  }
+
+  float scalar_lo = 0.0f, scalar_hi = 0.0f;
+  if (!mesh.scalars.empty()) {
+    if (options.scalar_range) {
+      scalar_lo = (*options.scalar_range)[0];
+      scalar_hi = (*options.scalar_range)[1];
+    } else {
+      const auto [lo, hi] = std::minmax_element(mesh.scalars.begin(), mesh.scalars.end());
+      scalar_lo = *lo;
+      scalar_hi = *hi;
+    }
+    result.has_scalar = true;
+    result.scalar_min = scalar_lo;
+    result.scalar_max = scalar_hi;
+  }
+
+  draco::Mesh dm;
+  if (Status s = build_draco_mesh(mesh, tris, tri_view, options, result.position_bits,
+                                  scalar_lo, scalar_hi, dm);
+      !s)
+    return s;
+  draco::GltfEncoder encoder;
+  draco::EncoderBuffer buffer;
+  if (const draco::Status s = encoder.EncodeToBuffer(dm, &buffer); !s.ok())
+    return Status::error("glb: Draco's glTF encoder failed: " + s.error_msg_string());
+
+  // Add what a client needs beyond glTF's attributes, in the place glTF reserves for
+  // application data (extras, §5.23), and name the writer (Draco writes "draco_decoder").
+  GlbChunks chunks;
+  const std::span<const std::uint8_t> encoded(
+      reinterpret_cast<const std::uint8_t*>(buffer.data()), buffer.size());
+  if (Status s = parse_glb(encoded, chunks); !s)
+    return Status::error("glb: Draco's glTF encoder wrote an unreadable GLB: " + s.message());
+  Json& json = chunks.json;
+  json["asset"]["generator"] = "ldimesh (Draco glTF encoder)";
+  Json extras;
+  extras["view_dirs"] = Json::array();
+  for (const glm::dvec3& d : mesh.view_dirs)
+    extras["view_dirs"].push_back({d.x, d.y, d.z});
+  if (result.has_scalar) extras["scalar_range"] = {result.scalar_min, result.scalar_max};
+  json["meshes"][0]["extras"]["ldimesh"] = std::move(extras);
+  primitive_counts(json, result);
+  out = assemble_glb(json.dump(), chunks.bin);
+  if (info) *info = result;
+  return Status::ok();
+}
+
+// Appends the Draco primitive `primitive` (already checked to be a JSON object) to `out`.
+Status decode_primitive(const Json& json, const Json& primitive,
+                        std::span<const std::uint8_t> bin, Mesh& out, GlbInfo& info,
+                        const std::vector<std::array<std::uint8_t, 3>>& view_colours) {
+  if (const auto mode = primitive.find("mode");
+      mode != primitive.end() && !(mode->is_number_integer() && mode->get<std::int64_t>() == 4))
+    return Status::error("glb: a primitive is not made of triangles");
+  const auto extensions = primitive.find("extensions");
+  if (extensions == primitive.end() || !extensions->is_object() || !extensions->contains(kDraco) ||
+      !(*extensions)[kDraco].is_object())
+    return Status::error("glb: a primitive is not Draco-compressed (unsupported)");
+  const Json& draco_ext = (*extensions)[kDraco];
+  const Json* views = array_member(json, "bufferViews");
+  if (!views) return Status::error("glb: no bufferViews");
+  std::size_t view_index = 0, buffer_index = 0, length = 0, offset = 0;
+  if (Status s = get_index(draco_ext, "bufferView", views->size(), view_index, kDraco); !s)
+    return s;
+  const Json& view = (*views)[view_index];
+  if (!view.is_object()) return Status::error("glb: a bufferView is not an object");
+  if (Status s = get_index(view, "buffer", 1, buffer_index, "bufferView"); !s)
+    return Status::error("glb: the Draco bufferView is not in the GLB's BIN chunk (buffer 0)");
+  if (Status s = get_index(view, "byteLength", bin.size() + 1, length, "bufferView"); !s)
+    return s;
+  if (view.contains("byteOffset")) {
+    if (Status s = get_index(view, "byteOffset", bin.size() + 1, offset, "bufferView"); !s)
+      return s;
+  }
+  if (length > bin.size() - offset)
+    return Status::error("glb: the Draco bufferView runs past the BIN chunk");
+  const auto attributes = draco_ext.find("attributes");
+  const auto gltf_attributes = primitive.find("attributes");
+  if (attributes == draco_ext.end() || !attributes->is_object() ||
+      gltf_attributes == primitive.end() || !gltf_attributes->is_object())
+    return Status::error("glb: a Draco primitive has no attribute map");
+
+  draco::DecoderBuffer buffer;
+  buffer.Init(reinterpret_cast<const char*>(bin.data() + offset), length);
+  draco::Decoder decoder;
+  auto decoded = decoder.DecodeMeshFromBuffer(&buffer);
+  if (!decoded.ok())
+    return Status::error("glb: Draco could not decode the mesh: " +
+                         decoded.status().error_msg_string());
+  const std::unique_ptr<draco::Mesh> dm = std::move(decoded).value();
+  if (!dm) return Status::error("glb: Draco returned no mesh");
+  const std::size_t n = dm->num_points(), t = dm->num_faces();
+
+  // The glTF accessors must agree with the Draco data (KHR_draco_mesh_compression).
+  const Json* accessors = array_member(json, "accessors");
+  if (!accessors) return Status::error("glb: no accessors");
+  const auto accessor_count = [&](const Json& index, std::size_t& count) {
+    if (!index.is_number_integer() || index.get<std::int64_t>() < 0 ||
+        std::uint64_t(index.get<std::int64_t>()) >= accessors->size())
+      return false;
+    const Json& a = (*accessors)[std::size_t(index.get<std::int64_t>())];
+    const auto c = a.is_object() ? a.find("count") : a.end();
+    if (!a.is_object() || c == a.end() || !c->is_number_unsigned()) return false;
+    count = c->get<std::size_t>();
+    return true;
+  };
+  for (const auto& [name, index] : gltf_attributes->items()) {
+    std::size_t count = 0;
+    if (!accessor_count(index, count) || count != n)
+      return Status::error("glb: accessor of " + name + " disagrees with the Draco data");
+  }
+  if (const auto indices = primitive.find("indices"); indices != primitive.end()) {
+    std::size_t count = 0;
+    if (!accessor_count(*indices, count) || count != 3 * t)
+      return Status::error("glb: the index accessor disagrees with the Draco data");
+  }
+
+  const auto attribute = [&](const char* name, int min_components) -> const draco::PointAttribute* {
+    const auto it = attributes->find(name);
+    if (it == attributes->end() || !it->is_number_unsigned() ||
+        it->get<std::uint64_t>() > std::numeric_limits<std::uint32_t>::max())
+      return nullptr;
+    const draco::PointAttribute* a = dm->GetAttributeByUniqueId(it->get<std::uint32_t>());
+    return a && a->num_components() >= min_components && a->size() > 0 ? a : nullptr;
+  };
+  const draco::PointAttribute* pos = attribute("POSITION", 3);
+  const draco::PointAttribute* nrm = attribute("NORMAL", 3);
+  const draco::PointAttribute* col = attribute("COLOR_0", 3);
+  const draco::PointAttribute* tex = attribute("TEXCOORD_0", 2);
+  if (!pos || !nrm) return Status::error("glb: a Draco primitive lacks POSITION or NORMAL");
+  if (!out.positions.empty() && !out.scalars.empty() != (tex != nullptr))
+    return Status::error("glb: primitives disagree on TEXCOORD_0");
+  const std::size_t base = out.positions.size();
+  if (base + n > kMaxIndex || out.triangle_count() + t > kMaxIndex)
+    return Status::error("glb: more than 2^31 - 1 vertices or triangles");
+
+  // Values of point i; a point mapped outside its attribute, or a value Draco cannot convert,
+  // is an error rather than a read out of bounds.
+  const auto value = [&](const draco::PointAttribute* a, std::size_t i, auto* v) {
+    const draco::AttributeValueIndex avi = a->mapped_index(draco::PointIndex(std::uint32_t(i)));
+    return avi.value() < a->size() && a->ConvertValue(avi, std::int8_t(3), v);
+  };
+  std::unordered_map<std::uint32_t, std::uint8_t> view_of_colour;
+  for (std::size_t k = view_colours.size(); k-- > 0;) {
+    const auto& c = view_colours[k];
+    view_of_colour[std::uint32_t(c[0]) << 16 | std::uint32_t(c[1]) << 8 | c[2]] = std::uint8_t(k);
+  }
+  std::vector<std::uint8_t> vertex_view(n, 0);
+  out.positions.resize(base + n);
+  out.normals.resize(base + n);
+  if (tex) out.scalars.resize(base + n);
+  for (std::size_t i = 0; i < n; ++i) {
+    float p[3], q[3];
+    if (!value(pos, i, p) || !value(nrm, i, q))
+      return Status::error("glb: Draco point " + std::to_string(i) + " has no value");
+    const glm::vec3 position(p[0], p[1], p[2]), normal(q[0], q[1], q[2]);
+    const float len = glm::length(normal);
+    if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]) ||
+        !std::isfinite(len) || len <= 0.0f)
+      return Status::error("glb: a decoded position or normal is not finite or zero");
+    out.positions[base + i] = position;
+    out.normals[base + i] = normal / len;
+    if (tex) {
+      float uv[3];
+      if (!value(tex, i, uv) || !std::isfinite(uv[0]))
+        return Status::error("glb: a decoded TEXCOORD_0 is missing or not finite");
+      out.scalars[base + i] = uv[0];
+    }
+    if (col) {
+      std::uint32_t key = 0;
+      if (col->data_type() == draco::DT_UINT8) {
+        std::uint8_t c[3];
+        if (!value(col, i, c)) return Status::error("glb: a decoded COLOR_0 is missing");
+        key = std::uint32_t(c[0]) << 16 | std::uint32_t(c[1]) << 8 | c[2];
+      } else {
+        float c[3];
+        if (!value(col, i, c)) return Status::error("glb: a decoded COLOR_0 is missing");
+        for (float x : c)
+          key = key << 8 | std::uint32_t(std::lround(std::clamp(x, 0.0f, 1.0f) * 255.0f));
+      }
+      if (const auto it = view_of_colour.find(key); it != view_of_colour.end())
+        vertex_view[i] = it->second;
+    }
+  }
+  out.triangles.reserve(out.triangles.size() + 3 * t);
+  out.triangle_view.reserve(out.triangle_view.size() + t);
+  for (std::size_t f = 0; f < t; ++f) {
+    const draco::Mesh::Face& face = dm->face(draco::FaceIndex(std::uint32_t(f)));
+    for (int c = 0; c < 3; ++c) {
+      if (face[c].value() >= n) return Status::error("glb: a decoded face index is out of range");
+      out.triangles.push_back(std::uint32_t(base + face[c].value()));
+    }
+    out.triangle_view.push_back(vertex_view[face[0].value()]);
+  }
+
+  info.has_scalar = tex != nullptr;
+  return Status::ok();
+}
+
+Status decode_glb_unguarded(std::span<const std::uint8_t> glb, Mesh& out, GlbInfo* info) {
+  GlbChunks chunks;
+  if (Status s = parse_glb(glb, chunks); !s) return s;
+  const Json& json = chunks.json;
+  const auto asset = json.find("asset");
+  if (asset == json.end() || !asset->is_object() || !asset->contains("version") ||
+      (*asset)["version"] != "2.0")
+    return Status::error("glb: asset.version is not \"2.0\"");
+
+  Mesh mesh;
+  GlbInfo result;
+  const Json* meshes = array_member(json, "meshes");
+  if (json.contains("meshes") && !meshes) return Status::error("glb: meshes is not an array");
+  // View directions and scalar range from extras.ldimesh of the first mesh, when there.
+  if (meshes && !meshes->empty() && (*meshes)[0].is_object()) {
+    const Json& m0 = (*meshes)[0];
+    const auto extras = m0.find("extras");
+    if (extras != m0.end() && extras->is_object() && extras->contains("ldimesh") &&
+        (*extras)["ldimesh"].is_object()) {
+      const Json& ours = (*extras)["ldimesh"];
+      if (const Json* dirs = array_member(ours, "view_dirs"); dirs && dirs->size() <= 256) {
+        for (const Json& d : *dirs) {
+          if (!d.is_array() || d.size() != 3 ||
+              !std::all_of(d.begin(), d.end(), [](const Json& x) { return x.is_number(); }))
+            return Status::error("glb: extras.ldimesh.view_dirs is malformed");
+          const glm::dvec3 v(d[0].get<double>(), d[1].get<double>(), d[2].get<double>());
+          if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z))
+            return Status::error("glb: extras.ldimesh.view_dirs is not finite");
+          mesh.view_dirs.push_back(v);
+        }
+      }
+      if (const Json* range = array_member(ours, "scalar_range");
+          range && range->size() == 2 && (*range)[0].is_number() && (*range)[1].is_number()) {
+        result.scalar_min = (*range)[0].get<float>();
+        result.scalar_max = (*range)[1].get<float>();
+      }
+    }
+  }
+  std::vector<std::array<std::uint8_t, 3>> view_colours;
+  for (std::size_t k = 0; k < mesh.view_dirs.size(); ++k)
+    view_colours.push_back(view_colour(k, mesh.view_dirs[k]));
+
+  if (meshes) {
+    for (const Json& m : *meshes) {
+      const Json* primitives = m.is_object() ? array_member(m, "primitives") : nullptr;
+      if (!primitives) return Status::error("glb: a mesh has no primitives array");
+      for (const Json& p : *primitives) {
+        if (!p.is_object()) return Status::error("glb: a primitive is not an object");
+        if (Status s = decode_primitive(json, p, chunks.bin, mesh, result, view_colours); !s)
+          return s;
+      }
+    }
+  }
+  if (!result.has_scalar) result.scalar_min = result.scalar_max = 0.0f;
+  result.vertices = mesh.vertex_count();
+  result.triangles = mesh.triangle_count();
+  out = std::move(mesh);
+  if (info) *info = result;
+  return Status::ok();
+}
+
+}  // namespace
+
+int glb_position_bits(const Mesh& mesh, const GlbOptions& options) {
+  if (options.position_bits > 0) return options.position_bits;
+  const BoundingBox box = bounding_box(mesh.positions);
+  if (box.empty) return kMaxAutoPositionBits;
+  const double diagonal = glm::length(box.hi - box.lo);
+  const double step = options.pixel_size > 0.0 ? 0.1 * options.pixel_size : 1e-4 * diagonal;
+  if (!(step > 0.0)) return 1;  // a single point: any step holds it exactly
+  // Draco's step is r / (2^b − 1) (attribute_quantization_transform.cc).
+  const double r = quantization_range(box);
+  for (int b = 1; b < kMaxAutoPositionBits; ++b)
+    if (r / double((std::uint64_t(1) << b) - 1) <= step) return b;
+  return kMaxAutoPositionBits;
+}
+
+double glb_position_error_bound(const Mesh& mesh, const GlbOptions& options) {
+  const BoundingBox box = bounding_box(mesh.positions);
+  if (box.empty) return 0.0;
+  const int b = glb_position_bits(mesh, options);
+  const double r = quantization_range(box);
+  const double magnitude =
+      std::max({r, glm::length(glm::max(glm::abs(box.lo), glm::abs(box.hi)))});
+  const double per_coordinate =
+      r / (2.0 * double((std::uint64_t(1) << b) - 1)) + 8.0 * std::ldexp(magnitude, -23);
+  return std::sqrt(3.0) * per_coordinate;
+}
+
+double glb_normal_error_bound(const GlbOptions& options) {
+  // Draco rounds the two free coordinates of the L1-normalized normal to steps of
+  // 2/(2^n − 2) (OctahedronToolBox::FloatVectorToQuantizedOctahedralCoords); the third takes
+  // the remainder, so the octahedron point moves by at most √6/(2^n − 2) and, lying at least
+  // 1/√3 from the origin, turns by at most 3√2/(2^n − 2). 2⁻²⁰ covers float arithmetic.
+  return 3.0 * std::sqrt(2.0) / double((std::uint64_t(1) << options.normal_bits) - 2) +
+         std::ldexp(1.0, -20);
+}
+
+double glb_scalar_error_bound(const GlbOptions& options) {
+  return 1.0 / (2.0 * double((std::uint64_t(1) << options.scalar_bits) - 1)) +
+         std::ldexp(1.0, -20);
+}
+
+std::array<std::uint8_t, 3> view_colour(std::size_t k, const glm::dvec3& dir) {
+  static constexpr std::array<std::array<std::uint8_t, 3>, 3> kAxis = {
+      {{255, 0, 0}, {255, 215, 0}, {0, 170, 0}}};
+  static constexpr std::array<std::array<std::uint8_t, 3>, 8> kPalette = {{{40, 100, 255},
+                                                                           {220, 0, 220},
+                                                                           {0, 200, 220},
+                                                                           {255, 130, 0},
+                                                                           {130, 60, 200},
+                                                                           {0, 128, 128},
+                                                                           {255, 120, 170},
+                                                                           {128, 128, 128}}};
+  const double len2 = glm::dot(dir, dir);
+  for (int a = 0; a < 3; ++a)
+    if (len2 > 0.0 && dir[a] * dir[a] >= (1.0 - 1e-12) * len2) return kAxis[a];
+  return kPalette[k % kPalette.size()];
+}
+
+Status encode_glb(const Mesh& mesh, const GlbOptions& options, std::vector<std::uint8_t>& out,
+                  GlbInfo* info) {
+  try {
+    return encode_glb_unguarded(mesh, options, out, info);
+  } catch (const std::bad_alloc&) {
+    return Status::error("glb: out of memory while encoding");
+  } catch (const std::exception& e) {
+    return Status::error(std::string("glb: encoding failed: ") + e.what());
+  }
+}
+
+Status decode_glb(std::span<const std::uint8_t> glb, Mesh& out, GlbInfo* info) {
+  try {
+    return decode_glb_unguarded(glb, out, info);
+  } catch (const std::bad_alloc&) {
+    return Status::error("glb: out of memory while decoding");
+  } catch (const std::exception& e) {
+    return Status::error(std::string("glb: decoding failed: ") + e.what());
+  }
+}
+
+}  // namespace ldimesh
