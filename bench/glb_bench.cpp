@@ -12,9 +12,9 @@
 #include <string>
 #include <vector>
 
-#include <CLI/CLI.hpp>
 #include <tbb/global_control.h>
 #include <unistd.h>
+#include <CLI/CLI.hpp>
 
 #include "ldimesh/core/mesh_io.hpp"
 #include "ldimesh/core/pipeline.hpp"
@@ -60,8 +60,8 @@ int main(int argc, char** argv) {
       "| surface | res | triangles | vertices | GLB bytes | GLB B/tri | PLY bytes | PLY B/tri | "
       "PLY / GLB | position bits | error bound (pixels) | encode s | decode s |\n");
   std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
-  const std::filesystem::path ply =
-      std::filesystem::temp_directory_path() / ("ldimesh_bench_glb_" + std::to_string(getpid()) + ".ply");
+  const std::filesystem::path ply = std::filesystem::temp_directory_path() /
+                                    ("ldimesh_bench_glb_" + std::to_string(getpid()) + ".ply");
   for (const int res : resolutions) {
     std::size_t total_triangles = 0, total_glb = 0, total_ply = 0;
     for (const ldimesh::SurfaceInfo& s : ldimesh::builtin_surfaces()) {
@@ -111,19 +111,19 @@ int main(int argc, char** argv) {
       }
       const std::size_t ply_bytes = std::filesystem::file_size(ply);
       const double t = double(mesh.triangle_count());
-      std::printf("| %s | %d² | %zu | %zu | %zu | %.2f | %zu | %.2f | %.1f | %d | %.3f | %.4f | %.4f |\n",
-                  s.name.c_str(), res, mesh.triangle_count(), mesh.vertex_count(), glb.size(),
-                  double(glb.size()) / t, ply_bytes, double(ply_bytes) / t,
-                  double(ply_bytes) / double(glb.size()), info.position_bits,
-                  info.position_error_bound / pixel, median(enc), median(dec));
+      std::printf(
+          "| %s | %d² | %zu | %zu | %zu | %.2f | %zu | %.2f | %.1f | %d | %.3f | %.4f | %.4f |\n",
+          s.name.c_str(), res, mesh.triangle_count(), mesh.vertex_count(), glb.size(),
+          double(glb.size()) / t, ply_bytes, double(ply_bytes) / t,
+          double(ply_bytes) / double(glb.size()), info.position_bits,
+          info.position_error_bound / pixel, median(enc), median(dec));
       total_triangles += mesh.triangle_count();
       total_glb += glb.size();
       total_ply += ply_bytes;
     }
     std::printf("| **all** | %d² | %zu | | %zu | %.2f | %zu | %.2f | %.1f | | | | |\n", res,
-                total_triangles, total_glb, double(total_glb) / double(total_triangles),
-                total_ply, double(total_ply) / double(total_triangles),
-                double(total_ply) / double(total_glb));
+                total_triangles, total_glb, double(total_glb) / double(total_triangles), total_ply,
+                double(total_ply) / double(total_triangles), double(total_ply) / double(total_glb));
   }
   std::filesystem::remove(ply);
   return 0;

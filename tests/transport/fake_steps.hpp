@@ -16,12 +16,13 @@ inline std::vector<std::uint8_t> fake_glb(std::uint64_t step, std::size_t paddin
   std::string json = R"({"asset":{"version":"2.0"},"extras":{"step":)" + std::to_string(step) +
                      R"(,"pad":")" + std::string(padding, static_cast<char>('a' + step % 26)) +
                      "\"}}";
-  while (json.size() % 4 != 0) json += ' ';  // chunks are 4-byte aligned
-  std::vector<std::uint8_t> glb;
+  while (json.size() % 4 != 0)
+    json += ' ';  // chunks are 4-byte aligned
+  std::vector<std::uint8_t> glb{'g', 'l', 'T', 'F'};
   const auto put32 = [&glb](std::uint32_t v) {
-    for (int i = 0; i < 4; ++i) glb.push_back(static_cast<std::uint8_t>(v >> (8 * i)));
+    for (int i = 0; i < 4; ++i)
+      glb.push_back(static_cast<std::uint8_t>(v >> (8 * i)));
   };
-  glb.insert(glb.end(), {'g', 'l', 'T', 'F'});
   put32(2);
   put32(static_cast<std::uint32_t>(12 + 8 + json.size()));
   put32(static_cast<std::uint32_t>(json.size()));

@@ -104,8 +104,7 @@ std::string raw_exchange(int port, const std::string& request) {
 }
 
 std::string raw_get(int port, const std::string& target) {
-  return raw_exchange(port,
-                      "GET " + target + " HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n");
+  return raw_exchange(port, "GET " + target + " HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n");
 }
 
 int status_of(const std::string& answer) {
@@ -131,13 +130,15 @@ int closed_port() {
 
 std::vector<std::uint64_t> kept_steps(const SnapshotStore& store) {
   std::vector<std::uint64_t> steps;
-  for (const auto& s : store.list()) steps.push_back(s->step);
+  for (const auto& s : store.list())
+    steps.push_back(s->step);
   return steps;
 }
 
 TEST(SnapshotStore, KeepsTheLatestNSteps) {
   SnapshotStore store({.max_snapshots = 3});
-  for (std::uint64_t step = 1; step <= 5; ++step) ASSERT_TRUE(store.publish(fake_snapshot(step)));
+  for (std::uint64_t step = 1; step <= 5; ++step)
+    ASSERT_TRUE(store.publish(fake_snapshot(step)));
   EXPECT_EQ(kept_steps(store), (std::vector<std::uint64_t>{3, 4, 5}));
   EXPECT_EQ(store.find(2), nullptr);
   ASSERT_NE(store.find(4), nullptr);
@@ -146,12 +147,13 @@ TEST(SnapshotStore, KeepsTheLatestNSteps) {
 }
 
 TEST(SnapshotStore, StaysUnderTheMemoryCapAndKeepsTheNewest) {
-  const std::size_t one = fake_snapshot(1, 100000).memory_bytes();
-  SnapshotStore store({.max_snapshots = 100, .max_bytes = 3 * one});
+  // Room for three steps (the JSON of step 10 is a few bytes longer than step 1's), not four.
+  const std::size_t cap = 3 * fake_snapshot(1, 100000).memory_bytes() + 100;
+  SnapshotStore store({.max_snapshots = 100, .max_bytes = cap});
   for (std::uint64_t step = 1; step <= 10; ++step)
     ASSERT_TRUE(store.publish(fake_snapshot(step, 100000)));
   EXPECT_EQ(kept_steps(store), (std::vector<std::uint64_t>{8, 9, 10}));
-  EXPECT_LE(store.memory_bytes(), 3 * one);
+  EXPECT_LE(store.memory_bytes(), cap);
   // A step larger than the whole cap evicts every other one, but is itself kept.
   ASSERT_TRUE(store.publish(fake_snapshot(11, 1000000)));
   EXPECT_EQ(kept_steps(store), (std::vector<std::uint64_t>{11}));
@@ -235,7 +237,7 @@ TEST(SnapshotStore, ShutdownAndStopTokensReleaseWaiters) {
   EXPECT_EQ(released, 2);
   EXPECT_LT(seconds_since(start), 5.0);
   EXPECT_EQ(store.wait_for_newer(std::nullopt, 30s), nullptr);  // at once after shutdown
-  EXPECT_TRUE(store.publish(fake_snapshot(1)));                   // publishing still works
+  EXPECT_TRUE(store.publish(fake_snapshot(1)));                 // publishing still works
 }
 
 TEST(SnapshotStore, MetadataJsonIsTheDocumentedObjectAndRoundTrips) {
@@ -243,14 +245,17 @@ TEST(SnapshotStore, MetadataJsonIsTheDocumentedObjectAndRoundTrips) {
   m.time = 0.42;
   m.bytes = 1234567;
   m.scalar = ScalarRange{"temperature", 0.0, 1.0};
+  m.seconds = {{"glb", 0.1}, {"mesh", 0.04}, {"cast", 0.25}, {"encode", 0.03}, {"extra", 1.0}};
   const std::string json = metadata_to_json(m);
   // docs/api.md's key order.
   EXPECT_EQ(json.rfind(R"({"step":42,"time":0.42,"isovalues":[0.5],"triangles":1042,)", 0), 0u)
       << json;
-  EXPECT_NE(json.find(R"("views":[[1.0,0.0,0.0],[0.0,1.0,0.0],[0.0,0.0,1.0]],)"
-                      R"("resolution":64,"r":0.5,)"
-                      R"("scalar":{"name":"temperature","min":0.0,"max":1.0},"seconds":{)"),
-            std::string::npos)
+  EXPECT_NE(
+      json.find(R"("views":[[1.0,0.0,0.0],[0.0,1.0,0.0],[0.0,0.0,1.0]],)"
+                R"("resolution":64,"r":0.5,)"
+                R"("scalar":{"name":"temperature","min":0.0,"max":1.0},)"
+                R"("seconds":{"cast":0.25,"encode":0.03,"mesh":0.04,"glb":0.1,"extra":1.0}})"),
+      std::string::npos)
       << json;
   EXPECT_EQ(json.find('\n'), std::string::npos);
   StepMetadata back;
@@ -546,10 +551,10 @@ TEST_F(Http, EventsSendTheNewestStepThenEachNewOne) {
   if (publisher.joinable()) publisher.join();
   // The newest step first (not the older ones), then the new one, each a complete event.
   EXPECT_EQ(stream.find("\"step\":1,"), std::string::npos);
-  const std::size_t three = stream.find("id: 3\nevent: step\ndata: " + store_.find(3)->metadata_json +
-                                        "\n\n");
-  const std::size_t four = stream.find("id: 4\nevent: step\ndata: " + store_.find(4)->metadata_json +
-                                       "\n\n");
+  const std::size_t three =
+      stream.find("id: 3\nevent: step\ndata: " + store_.find(3)->metadata_json + "\n\n");
+  const std::size_t four =
+      stream.find("id: 4\nevent: step\ndata: " + store_.find(4)->metadata_json + "\n\n");
   EXPECT_NE(three, std::string::npos) << stream;
   EXPECT_NE(four, std::string::npos) << stream;
   EXPECT_LT(three, four);
@@ -567,7 +572,8 @@ TEST_F(Http, ConcurrentDownloadsAreNeverTorn) {
   // exactly the one published under its step number.
   std::mutex mutex;
   std::map<std::uint64_t, std::vector<std::uint8_t>> published;
-  for (std::uint64_t step = 1; step <= 3; ++step) published[step] = *store_.find(step)->glb;
+  for (std::uint64_t step = 1; step <= 3; ++step)
+    published[step] = *store_.find(step)->glb;
   std::atomic<bool> stop{false};
   std::atomic<int> downloads{0};
   std::atomic<int> evicted{0};
@@ -601,15 +607,16 @@ TEST_F(Http, ConcurrentDownloadsAreNeverTorn) {
     std::this_thread::sleep_for(10ms);
   }
   stop = true;
-  for (auto& c : clients) c.join();
+  for (auto& c : clients)
+    c.join();
   EXPECT_GT(downloads, 20);
   EXPECT_EQ(kept_steps(store_), (std::vector<std::uint64_t>{57, 58, 59, 60}));
 }
 
 TEST_F(Http, AClientLeavingMidDownloadHarmsNothing) {
   ASSERT_TRUE(store_.publish(fake_snapshot(4, 8 << 20)));  // 8 MiB: far beyond socket buffers
-  const std::string request = "GET /api/v1/steps/4/mesh.glb?token=" + server_->token() +
-                              " HTTP/1.1\r\nHost: x\r\n\r\n";
+  const std::string request =
+      "GET /api/v1/steps/4/mesh.glb?token=" + server_->token() + " HTTP/1.1\r\nHost: x\r\n\r\n";
   for (int i = 0; i < 10; ++i) {
     const int fd = connect_loopback(port_);
     ASSERT_GE(fd, 0);
@@ -626,16 +633,54 @@ TEST_F(Http, AClientLeavingMidDownloadHarmsNothing) {
   EXPECT_EQ(glb, fake_glb(4, 8 << 20));
 }
 
+TEST_F(Http, ADownloadOutlivesTheEvictionOfItsStep) {
+  ASSERT_TRUE(store_.publish(fake_snapshot(4, 8 << 20)));
+  const int fd = connect_loopback(port_);
+  ASSERT_GE(fd, 0);
+  ASSERT_TRUE(send_all(fd, "GET /api/v1/steps/4/mesh.glb?token=" + server_->token() +
+                               " HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"));
+  char buffer[65536];
+  const ssize_t first = ::recv(fd, buffer, 1000, 0);
+  ASSERT_GT(first, 0);
+  std::string answer(buffer, static_cast<std::size_t>(first));
+  // Steps 5 to 8 push step 4 out of the store (it keeps 4) while its download is under way.
+  for (std::uint64_t step = 5; step <= 8; ++step)
+    ASSERT_TRUE(store_.publish(fake_snapshot(step)));
+  ASSERT_EQ(store_.find(4), nullptr);
+  for (ssize_t n; (n = ::recv(fd, buffer, sizeof buffer, 0)) > 0;)
+    answer.append(buffer, static_cast<std::size_t>(n));
+  ::close(fd);
+  const std::size_t body = answer.find("\r\n\r\n");
+  ASSERT_NE(body, std::string::npos);
+  const auto expected = fake_glb(4, 8 << 20);
+  ASSERT_EQ(answer.size() - body - 4, expected.size());
+  EXPECT_TRUE(std::equal(expected.begin(), expected.end(),
+                         reinterpret_cast<const std::uint8_t*>(answer.data() + body + 4)));
+}
+
 TEST_F(Http, PathTraversalNeverReachesAFileOutsideTheRoots) {
-  for (const char* target :
-       {"/../secret.txt", "/../CMakeLists.txt", "/viewer/../secret.txt", "/viewer/../../secret.txt",
-        "/viewer/%2e%2e/secret.txt", "/viewer/%2E%2E/%2e%2e/secret.txt",
-        "/%2e%2e/%2e%2e/etc/passwd", "/vendor/three/../../secret.txt",
-        "/vendor/three/../../CMakeLists.txt", "/vendor/three/%2e%2e/%2e%2e/secret.txt",
-        "/vendor/three/..%2f..%2fsecret.txt", "//etc/passwd", "/viewer//etc/passwd",
-        "/viewer/%2fetc%2fpasswd", "/vendor/three//etc/passwd", "/viewer/escape",
-        "/viewer/./escape", "/viewer/..\\secret.txt", "/viewer/%00secret.txt",
-        "/viewer/%5c..%5csecret.txt", "/viewer/index.html/..", "/viewer/.."}) {
+  for (const char* target : {"/../secret.txt",
+                             "/../CMakeLists.txt",
+                             "/viewer/../secret.txt",
+                             "/viewer/../../secret.txt",
+                             "/viewer/%2e%2e/secret.txt",
+                             "/viewer/%2E%2E/%2e%2e/secret.txt",
+                             "/%2e%2e/%2e%2e/etc/passwd",
+                             "/vendor/three/../../secret.txt",
+                             "/vendor/three/../../CMakeLists.txt",
+                             "/vendor/three/%2e%2e/%2e%2e/secret.txt",
+                             "/vendor/three/..%2f..%2fsecret.txt",
+                             "//etc/passwd",
+                             "/viewer//etc/passwd",
+                             "/viewer/%2fetc%2fpasswd",
+                             "/vendor/three//etc/passwd",
+                             "/viewer/escape",
+                             "/viewer/./escape",
+                             "/viewer/..\\secret.txt",
+                             "/viewer/%00secret.txt",
+                             "/viewer/%5c..%5csecret.txt",
+                             "/viewer/index.html/..",
+                             "/viewer/.."}) {
     const std::string answer = raw_get(port_, target);
     const int status = status_of(answer);
     EXPECT_TRUE(status == 400 || status == 403 || status == 404) << target << ": " << status;
@@ -646,12 +691,14 @@ TEST_F(Http, PathTraversalNeverReachesAFileOutsideTheRoots) {
 }
 
 TEST_F(Http, HugeRequestsAreRefused) {
-  const std::string big_body = raw_exchange(
-      port_, "GET /api/v1/steps HTTP/1.1\r\nHost: x\r\nContent-Length: 1000000000\r\n"
-             "Connection: close\r\n\r\nabc");
+  const std::string big_body =
+      raw_exchange(port_,
+                   "GET /api/v1/steps HTTP/1.1\r\nHost: x\r\nContent-Length: 1000000000\r\n"
+                   "Connection: close\r\n\r\nabc");
   EXPECT_EQ(status_of(big_body), 413) << big_body.substr(0, 100);
   std::string headers = "GET / HTTP/1.1\r\nHost: x\r\nConnection: close\r\n";
-  for (int i = 0; i < 40; ++i) headers += "X-Filler-" + std::to_string(i) + ": " + std::string(1000, 'f') + "\r\n";
+  for (int i = 0; i < 40; ++i)
+    headers += "X-Filler-" + std::to_string(i) + ": " + std::string(1000, 'f') + "\r\n";
   const std::string big_headers = raw_exchange(port_, headers + "\r\n");
   const int status = status_of(big_headers);
   EXPECT_TRUE(status == 431 || status == 413 || status == 400) << status;
@@ -663,9 +710,8 @@ TEST_F(Http, StopIsPromptWithOpenStreamsAndLongPolls) {
   options_.event_keep_alive = 15s;
   server_.reset();
   start();
-  std::thread stream([&] { read_events(port_, server_->token(), [](const std::string&) {
-    return false;
-  }); });
+  std::thread stream(
+      [&] { read_events(port_, server_->token(), [](const std::string&) { return false; }); });
   std::thread poll([&] {
     HttpClient c = client();
     std::optional<RemoteStep> got;
@@ -689,7 +735,7 @@ TEST_F(Http, TooManyStreamsGet503) {
   std::thread poll([&] {
     HttpClient c = client();
     std::optional<RemoteStep> got;
-    c.wait_for_newer(3, 2s, got);
+    c.wait_for_newer(3, 1s, got);
   });
   std::this_thread::sleep_for(300ms);
   httplib::Client raw("127.0.0.1", port_);
@@ -721,16 +767,16 @@ TEST_F(Http, StartReportsAPortInUseAndBadOptions) {
   EXPECT_FALSE(third.start());  // already running
 }
 
-TEST(HttpClient, ReportsConnectionRefusedAndBadUrls) {
+TEST_F(Http, ClientReportsConnectionRefusedAndBadUrls) {
   const int port = closed_port();
   HttpClient c("http://127.0.0.1:" + std::to_string(port), "t");
   RemoteStep step;
   const Status s = c.latest(step);
   EXPECT_FALSE(s);
-  EXPECT_EQ(s.message().rfind("cannot connect to http://127.0.0.1:" + std::to_string(port) +
-                                  ": connection refused",
-                              0),
-            0u)
+  EXPECT_EQ(
+      s.message().rfind(
+          "cannot connect to http://127.0.0.1:" + std::to_string(port) + ": connection refused", 0),
+      0u)
       << s.message();
 
   ServerUrl url;
@@ -752,7 +798,7 @@ TEST(HttpClient, ReportsConnectionRefusedAndBadUrls) {
   EXPECT_THROW(HttpClient("http://host:0"), std::invalid_argument);
 }
 
-TEST(HttpClient, DetectsCorruptDownloads) {
+TEST_F(Http, ClientDetectsCorruptDownloads) {
   // A server that answers like ours but sends bytes that are not the step's GLB.
   httplib::Server fake;
   const auto good = fake_glb(1);
@@ -762,15 +808,15 @@ TEST(HttpClient, DetectsCorruptDownloads) {
   fake.Get("/api/v1/steps/2/mesh.glb", [&](const httplib::Request&, httplib::Response& res) {
     auto bytes = good;
     bytes[8] ^= 1;  // the header's length field
-    res.set_content(reinterpret_cast<const char*>(bytes.data()), bytes.size(),
-                    "model/gltf-binary");
+    res.set_content(reinterpret_cast<const char*>(bytes.data()), bytes.size(), "model/gltf-binary");
   });
   fake.Get("/api/v1/steps/3/mesh.glb", [&](const httplib::Request&, httplib::Response& res) {
     res.set_content(reinterpret_cast<const char*>(good.data()), good.size(), "model/gltf-binary");
   });
   const int port = fake.bind_to_any_port("127.0.0.1");
   std::thread serving([&] { fake.listen_after_bind(); });
-  while (!fake.is_running()) std::this_thread::sleep_for(1ms);
+  while (!fake.is_running())
+    std::this_thread::sleep_for(1ms);
 
   HttpClient c("http://127.0.0.1:" + std::to_string(port), "t");
   std::vector<std::uint8_t> glb;

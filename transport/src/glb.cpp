@@ -1,10 +1,11 @@
 // Mesh ⇄ glTF 2.0 binary with KHR_draco_mesh_compression (docs/method.md, "Mesh encoding").
 //
-// References: glTF 2.0 specification §4.4 (GLB container: 12-byte header, JSON chunk first,
-// optional BIN chunk, chunks 4-byte aligned), KHR_draco_mesh_compression (the extension's
-// bufferView holds one Draco mesh; its "attributes" map glTF attribute names to Draco unique
-// ids; accessor counts must equal the decoded ones), Draco 1.5.5 sources (gltf_encoder.cc,
-// attribute_quantization_transform.cc, normal_compression_utils.h).
+// References: the glTF 2.0 specification, "GLB File Format Specification" (12-byte header,
+// JSON chunk first, optional BIN chunk, chunks 4-byte aligned, unknown chunks ignored),
+// KHR_draco_mesh_compression (the extension's bufferView holds one Draco mesh; its "attributes" map
+// glTF attribute names to Draco unique ids; accessor counts must equal the decoded ones),
+// Draco 1.5.5 sources (gltf_encoder.cc, attribute_quantization_transform.cc,
+// normal_compression_utils.h).
 #include "ldimesh/transport/glb.hpp"
 
 #include <algorithm>
@@ -53,9 +54,8 @@ void append_u32(std::vector<std::uint8_t>& out, std::uint32_t v) {
 }
 
 // The GLB container around `json` and (when non-empty) `bin`, both padded to 4 bytes as
-// §4.4.3 asks: JSON with spaces, BIN with zeros.
-std::vector<std::uint8_t> assemble_glb(const std::string& json,
-                                       std::span<const std::uint8_t> bin) {
+// the GLB format asks: JSON with spaces, BIN with zeros.
+std::vector<std::uint8_t> assemble_glb(const std::string& json, std::span<const std::uint8_t> bin) {
   const std::size_t json_len = (json.size() + 3) & ~std::size_t(3);
   const std::size_t bin_len = (bin.size() + 3) & ~std::size_t(3);
   const std::size_t total =
@@ -111,7 +111,7 @@ Status parse_glb(std::span<const std::uint8_t> glb, GlbChunks& chunks) {
     } else if (type == kChunkBin && !have_bin) {
       chunks.bin = data;
       have_bin = true;
-    }  // §4.4.3.1: chunks of unknown types are ignored
+    }  // chunks of unknown types are ignored, as the GLB format asks
   }
   if (first) return Status::error("glb: no JSON chunk");
   return Status::ok();
@@ -209,9 +209,10 @@ Status check_mesh(const Mesh& m) {
   return Status::ok();
 }
 
-// Quads split along the shorter diagonal: of the two ways to fold a non-planar quad, it keeps
-// the triangles closer to equilateral and the fold closer to the surface (the longer diagonal
-// spans the larger gap). Ties take a–c, so the split is deterministic.
+// glTF has no quads (primitive modes are points, lines and triangles). Quads split along the
+// shorter diagonal, the rule mesh_ldis uses for FaceType::triangles (ties take a–c), so the GLB of
+// a quad mesh holds the same triangles as that of the triangle mesh; the shorter diagonal also cuts
+// the obtuse corners of a skewed quad, leaving the smaller largest angle.
 void triangulate(const Mesh& m, std::vector<std::uint32_t>& tris, std::vector<std::uint8_t>& view) {
   tris.clear();
   view.clear();
@@ -237,8 +238,8 @@ glm::dvec3 view_dir(const Mesh& m, std::size_t k) {
   return k < m.view_dirs.size() ? m.view_dirs[k] : glm::dvec3(0.0);
 }
 
-// The minimal valid glTF for a mesh without faces: an asset and an empty scene (§5.26: a
-// scene's "nodes" must have at least one entry when present, so it is left out).
+// The minimal valid glTF for a mesh without faces: an asset and an empty scene (a scene's
+// "nodes", when present, must have at least one entry, so it is left out).
 std::vector<std::uint8_t> empty_glb() {
   return assemble_glb(
       R"({"asset":{"generator":"ldimesh","version":"2.0"},"scene":0,"scenes":[{}]})", {});
@@ -325,8 +326,7 @@ void primitive_counts(const Json& json, GlbInfo& info) {
                       .at("count")
                       .get<std::size_t>();
   info.triangles =
-      accessors.at(primitive.at("indices").get<std::size_t>()).at("count").get<std::size_t>() /
-      3;
+      accessors.at(primitive.at("indices").get<std::size_t>()).at("count").get<std::size_t>() / 3;
 }
 
 Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
@@ -362,8 +362,8 @@ Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
   }
 
   draco::Mesh dm;
-  if (Status s = build_draco_mesh(mesh, tris, tri_view, options, result.position_bits,
-                                  scalar_lo, scalar_hi, dm);
+  if (Status s = build_draco_mesh(mesh, tris, tri_view, options, result.position_bits, scalar_lo,
+                                  scalar_hi, dm);
       !s)
     return s;
   draco::GltfEncoder encoder;
@@ -372,10 +372,10 @@ Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
     return Status::error("glb: Draco's glTF encoder failed: " + s.error_msg_string());
 
   // Add what a client needs beyond glTF's attributes, in the place glTF reserves for
-  // application data (extras, §5.23), and name the writer (Draco writes "draco_decoder").
+  // application data ("extras"), and name the writer (Draco writes "draco_decoder").
   GlbChunks chunks;
-  const std::span<const std::uint8_t> encoded(
-      reinterpret_cast<const std::uint8_t*>(buffer.data()), buffer.size());
+  const std::span<const std::uint8_t> encoded(reinterpret_cast<const std::uint8_t*>(buffer.data()),
+                                              buffer.size());
   if (Status s = parse_glb(encoded, chunks); !s)
     return Status::error("glb: Draco's glTF encoder wrote an unreadable GLB: " + s.message());
   Json& json = chunks.json;
@@ -387,14 +387,17 @@ Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
   if (result.has_scalar) extras["scalar_range"] = {result.scalar_min, result.scalar_max};
   json["meshes"][0]["extras"]["ldimesh"] = std::move(extras);
   primitive_counts(json, result);
-  out = assemble_glb(json.dump(), chunks.bin);
+  const std::string text = json.dump();
+  if (text.size() + chunks.bin.size() > std::numeric_limits<std::uint32_t>::max() - 64)
+    return Status::error("glb: the GLB would exceed 4 GiB (glTF's 32-bit length)");
+  out = assemble_glb(text, chunks.bin);
   if (info) *info = result;
   return Status::ok();
 }
 
 // Appends the Draco primitive `primitive` (already checked to be a JSON object) to `out`.
-Status decode_primitive(const Json& json, const Json& primitive,
-                        std::span<const std::uint8_t> bin, Mesh& out, GlbInfo& info,
+Status decode_primitive(const Json& json, const Json& primitive, std::span<const std::uint8_t> bin,
+                        Mesh& out, GlbInfo& info,
                         const std::vector<std::array<std::uint8_t, 3>>& view_colours) {
   if (const auto mode = primitive.find("mode");
       mode != primitive.end() && !(mode->is_number_integer() && mode->get<std::int64_t>() == 4))
@@ -413,8 +416,7 @@ Status decode_primitive(const Json& json, const Json& primitive,
   if (!view.is_object()) return Status::error("glb: a bufferView is not an object");
   if (Status s = get_index(view, "buffer", 1, buffer_index, "bufferView"); !s)
     return Status::error("glb: the Draco bufferView is not in the GLB's BIN chunk (buffer 0)");
-  if (Status s = get_index(view, "byteLength", bin.size() + 1, length, "bufferView"); !s)
-    return s;
+  if (Status s = get_index(view, "byteLength", bin.size() + 1, length, "bufferView"); !s) return s;
   if (view.contains("byteOffset")) {
     if (Status s = get_index(view, "byteOffset", bin.size() + 1, offset, "bufferView"); !s)
       return s;
@@ -626,8 +628,7 @@ double glb_position_error_bound(const Mesh& mesh, const GlbOptions& options) {
   if (box.empty) return 0.0;
   const int b = glb_position_bits(mesh, options);
   const double r = quantization_range(box);
-  const double magnitude =
-      std::max({r, glm::length(glm::max(glm::abs(box.lo), glm::abs(box.hi)))});
+  const double magnitude = std::max({r, glm::length(glm::max(glm::abs(box.lo), glm::abs(box.hi)))});
   const double per_coordinate =
       r / (2.0 * double((std::uint64_t(1) << b) - 1)) + 8.0 * std::ldexp(magnitude, -23);
   return std::sqrt(3.0) * per_coordinate;
@@ -643,8 +644,7 @@ double glb_normal_error_bound(const GlbOptions& options) {
 }
 
 double glb_scalar_error_bound(const GlbOptions& options) {
-  return 1.0 / (2.0 * double((std::uint64_t(1) << options.scalar_bits) - 1)) +
-         std::ldexp(1.0, -20);
+  return 1.0 / (2.0 * double((std::uint64_t(1) << options.scalar_bits) - 1)) + std::ldexp(1.0, -20);
 }
 
 std::array<std::uint8_t, 3> view_colour(std::size_t k, const glm::dvec3& dir) {

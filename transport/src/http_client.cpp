@@ -203,8 +203,8 @@ Status HttpClient::Impl::not_found(std::uint64_t step) {
     else if (steps.size() == 1)
       kept = "it keeps step " + std::to_string(steps.front());
     else
-      kept = "it keeps steps " + std::to_string(steps.front()) + " to " +
-             std::to_string(steps.back());
+      kept =
+          "it keeps steps " + std::to_string(steps.front()) + " to " + std::to_string(steps.back());
   }
   return Status::error("step " + std::to_string(step) + " is not on the server (" + kept + ")");
 }

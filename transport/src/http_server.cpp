@@ -2,6 +2,7 @@
 
 #include <pthread.h>
 #include <signal.h>
+#include <sys/socket.h>
 
 #include <algorithm>
 #include <atomic>
@@ -41,9 +42,8 @@ void set_error(Response& res, int status, const std::string& message) {
 
 std::optional<std::uint64_t> parse_u64(std::string_view text) {
   std::uint64_t value = 0;
-  if (text.empty() || !std::all_of(text.begin(), text.end(), [](char c) {
-        return c >= '0' && c <= '9';
-      })) {
+  if (text.empty() ||
+      !std::all_of(text.begin(), text.end(), [](char c) { return c >= '0' && c <= '9'; })) {
     return std::nullopt;
   }
   const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
@@ -53,8 +53,8 @@ std::optional<std::uint64_t> parse_u64(std::string_view text) {
 
 bool is_url_safe_token(std::string_view token) {
   return !token.empty() && std::all_of(token.begin(), token.end(), [](char c) {
-    return (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') ||
-           c == '-' || c == '.' || c == '_' || c == '~';
+    return (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '-' ||
+           c == '.' || c == '_' || c == '~';
   });
 }
 
@@ -176,7 +176,8 @@ httplib::Server::HandlerResponse HttpServer::Impl::handle(const Request& req, Re
 
 void HttpServer::Impl::dispatch(const Request& req, Response& res) {
   std::size_t header_bytes = req.target.size();
-  for (const auto& [key, value] : req.headers) header_bytes += key.size() + value.size() + 4;
+  for (const auto& [key, value] : req.headers)
+    header_bytes += key.size() + value.size() + 4;
   if (header_bytes > options.max_request_bytes) {
     res.set_header("Connection", "close");
     return set_error(res, 431, "request headers too large");
@@ -221,12 +222,14 @@ void HttpServer::Impl::dispatch(const Request& req, Response& res) {
 
 bool HttpServer::Impl::authorized(const Request& req) const {
   const std::string header = req.get_header_value("Authorization");
-  if (header.size() > 7 && (header.compare(0, 7, "Bearer ") == 0 ||
-                            header.compare(0, 7, "bearer ") == 0)) {
+  if (header.size() > 7 &&
+      (header.compare(0, 7, "Bearer ") == 0 || header.compare(0, 7, "bearer ") == 0)) {
     std::string_view given(header);
     given.remove_prefix(7);
-    while (!given.empty() && given.front() == ' ') given.remove_prefix(1);
-    while (!given.empty() && given.back() == ' ') given.remove_suffix(1);
+    while (!given.empty() && given.front() == ' ')
+      given.remove_prefix(1);
+    while (!given.empty() && given.back() == ' ')
+      given.remove_suffix(1);
     if (tokens_equal(given, token)) return true;
   }
   return req.has_param("token") && tokens_equal(req.get_param_value("token"), token);
@@ -303,8 +306,9 @@ void HttpServer::Impl::latest(const Request& req, Response& res) {
 void HttpServer::Impl::step_metadata(std::uint64_t step, Response& res) {
   const auto snapshot = store.find(step);
   if (!snapshot) {
-    return set_error(res, 404, "step " + std::to_string(step) + " is not on the server (" +
-                                   describe_kept_steps(store) + ")");
+    return set_error(res, 404,
+                     "step " + std::to_string(step) + " is not on the server (" +
+                         describe_kept_steps(store) + ")");
   }
   res.set_content(snapshot->metadata_json, "application/json");
 }
@@ -312,19 +316,20 @@ void HttpServer::Impl::step_metadata(std::uint64_t step, Response& res) {
 void HttpServer::Impl::step_mesh(std::uint64_t step, Response& res) {
   std::shared_ptr<const Snapshot> snapshot = store.find(step);
   if (!snapshot) {
-    return set_error(res, 404, "step " + std::to_string(step) + " is not on the server (" +
-                                   describe_kept_steps(store) + ")");
+    return set_error(res, 404,
+                     "step " + std::to_string(step) + " is not on the server (" +
+                         describe_kept_steps(store) + ")");
   }
   // The provider holds the snapshot: eviction during the download frees nothing it reads, and
   // the bytes go out from the snapshot itself, without a copy.
   const std::size_t size = snapshot->glb->size();
-  res.set_content_provider(
-      size, "model/gltf-binary",
-      [snapshot = std::move(snapshot)](std::size_t offset, std::size_t length,
-                                       httplib::DataSink& sink) {
-        const std::size_t n = std::min(length, kGlbWriteBlock);
-        return sink.write(reinterpret_cast<const char*>(snapshot->glb->data()) + offset, n);
-      });
+  res.set_content_provider(size, "model/gltf-binary",
+                           [snapshot = std::move(snapshot)](std::size_t offset, std::size_t length,
+                                                            httplib::DataSink& sink) {
+                             const std::size_t n = std::min(length, kGlbWriteBlock);
+                             return sink.write(
+                                 reinterpret_cast<const char*>(snapshot->glb->data()) + offset, n);
+                           });
 }
 
 void HttpServer::Impl::events(const Request& req, Response& res) {
@@ -351,8 +356,7 @@ void HttpServer::Impl::events(const Request& req, Response& res) {
             static constexpr std::string_view hello = "retry: 2000\n\n";
             return sink.write(hello.data(), hello.size());
           }
-          const auto snapshot =
-              store.wait_for_newer(stream->after, options.event_keep_alive, stop);
+          const auto snapshot = store.wait_for_newer(stream->after, options.event_keep_alive, stop);
           if (stop.stop_requested() || (!snapshot && store.is_shut_down())) {
             sink.done();  // the final chunk: the client sees a clean end
             return true;
@@ -440,9 +444,15 @@ Status HttpServer::start() {
   server->set_write_timeout(o.write_timeout);
   server->set_keep_alive_timeout(o.keep_alive_timeout.count());
   server->set_payload_max_length(o.max_request_bytes);
-  server->set_pre_routing_handler([&m](const Request& req, Response& res) {
-    return m.handle(req, res);
+  // httplib's default sets SO_REUSEPORT, which lets a second job bind the same port and take
+  // a share of the first one's connections. SO_REUSEADDR only allows a restart while old
+  // connections linger in TIME_WAIT; a port in use stays an error.
+  server->set_socket_options([](int sock) {
+    int yes = 1;
+    ::setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
   });
+  server->set_pre_routing_handler(
+      [&m](const Request& req, Response& res) { return m.handle(req, res); });
 
   errno = 0;
   int port = o.port;
@@ -526,7 +536,8 @@ std::string random_token() {
   std::string token;
   for (int word = 0; word < 4; ++word) {
     std::uint32_t bits = device();
-    for (int digit = 0; digit < 8; ++digit, bits >>= 4) token += hex[bits & 0xf];
+    for (int digit = 0; digit < 8; ++digit, bits >>= 4)
+      token += hex[bits & 0xf];
   }
   return token;
 }

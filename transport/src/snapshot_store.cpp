@@ -89,8 +89,8 @@ Status parse_metadata(const json& j, StepMetadata& m) {
     if (!it->is_array()) return Status::error("metadata: \"views\" is not an array");
     for (const json& v : *it) {
       std::array<double, 3> d{};
-      if (!v.is_array() || v.size() != 3 || !read_number(v[0], d[0]) ||
-          !read_number(v[1], d[1]) || !read_number(v[2], d[2])) {
+      if (!v.is_array() || v.size() != 3 || !read_number(v[0], d[0]) || !read_number(v[1], d[1]) ||
+          !read_number(v[2], d[2])) {
         return Status::error("metadata: a view is not an array of three numbers");
       }
       m.views.push_back(d);
@@ -142,8 +142,8 @@ Status check_snapshot(const Snapshot& s) {
 Status write_atomically(const fs::path& path, const void* bytes, std::size_t size) {
   static std::atomic<unsigned> counter{0};
   const fs::path tmp =
-      path.parent_path() / ("." + path.filename().string() + ".tmp." +
-                            std::to_string(::getpid()) + "." + std::to_string(counter++));
+      path.parent_path() / ("." + path.filename().string() + ".tmp." + std::to_string(::getpid()) +
+                            "." + std::to_string(counter++));
   std::FILE* f = std::fopen(tmp.c_str(), "wb");
   if (!f) return Status::error("cannot write '" + path.string() + "': " + std::strerror(errno));
   const bool written = std::fwrite(bytes, 1, size, f) == size;
@@ -193,9 +193,8 @@ std::optional<std::uint64_t> parse_step_file_name(const std::string& name, bool&
   } else {
     return std::nullopt;
   }
-  if (rest.empty() || !std::all_of(rest.begin(), rest.end(), [](char c) {
-        return c >= '0' && c <= '9';
-      })) {
+  if (rest.empty() ||
+      !std::all_of(rest.begin(), rest.end(), [](char c) { return c >= '0' && c <= '9'; })) {
     return std::nullopt;
   }
   std::uint64_t step = 0;
@@ -217,14 +216,24 @@ std::string metadata_to_json(const StepMetadata& m) {
   j["quads"] = m.quads;
   j["bytes"] = m.bytes;
   j["views"] = ordered_json::array();
-  for (const auto& v : m.views) j["views"].push_back({v[0], v[1], v[2]});
+  for (const auto& v : m.views)
+    j["views"].push_back({v[0], v[1], v[2]});
   j["resolution"] = m.resolution;
   j["r"] = m.r;
   if (m.scalar) {
     j["scalar"] = {{"name", m.scalar->name}, {"min", m.scalar->min}, {"max", m.scalar->max}};
   }
+  // The pipeline's stages in the order they run (docs/api.md), then any others by name.
   j["seconds"] = ordered_json::object();
-  for (const auto& [stage, s] : m.seconds) j["seconds"][stage] = s;
+  static constexpr const char* stages[] = {"cast", "encode", "reduce", "decode", "mesh", "glb"};
+  for (const char* stage : stages) {
+    if (const auto it = m.seconds.find(stage); it != m.seconds.end())
+      j["seconds"][stage] = it->second;
+  }
+  for (const auto& [stage, s] : m.seconds) {
+    if (std::find(std::begin(stages), std::end(stages), stage) == std::end(stages))
+      j["seconds"][stage] = s;
+  }
   // Replace invalid UTF-8 in names rather than throw: metadata must never fail a step.
   return j.dump(-1, ' ', false, nlohmann::detail::error_handler_t::replace);
 }
@@ -365,8 +374,8 @@ Status write_step_files(const fs::path& dir, const Snapshot& snapshot) {
   if (ec) return Status::error("cannot create folder '" + dir.string() + "': " + ec.message());
   const std::string stem = step_file_stem(snapshot.step);
   // The .json last: its presence tells DirectoryWatcher that the .glb is complete.
-  if (Status s = write_atomically(dir / (stem + ".glb"), snapshot.glb->data(),
-                                  snapshot.glb->size());
+  if (Status s =
+          write_atomically(dir / (stem + ".glb"), snapshot.glb->data(), snapshot.glb->size());
       !s) {
     return s;
   }

@@ -90,7 +90,8 @@ void check_writable_folder(const fs::path& dir) {
   if (ec) throw std::runtime_error("cannot create folder '" + dir.string() + "': " + ec.message());
   const fs::path probe = dir / (".ldimesh-fetch-probe-" + std::to_string(::getpid()));
   std::FILE* f = std::fopen(probe.c_str(), "wb");
-  if (!f) throw std::runtime_error("cannot write into '" + dir.string() + "': " + std::strerror(errno));
+  if (!f)
+    throw std::runtime_error("cannot write into '" + dir.string() + "': " + std::strerror(errno));
   std::fclose(f);
   fs::remove(probe, ec);
 }
@@ -120,7 +121,8 @@ ldimesh::Status fetch_step(ldimesh::HttpClient& client, const ldimesh::RemoteSte
     if (ldimesh::Status s = ldimesh::write_ply(ply.string(), mesh); !s) return s;
   }
   double seconds = 0.0;
-  for (const auto& [stage, t] : m.seconds) seconds += t;
+  for (const auto& [stage, t] : m.seconds)
+    seconds += t;
   std::printf("step %llu  time %g  triangles %llu  bytes %zu  seconds %.3f  %s\n",
               static_cast<unsigned long long>(m.step), m.time,
               static_cast<unsigned long long>(m.triangles), snapshot.glb->size(), seconds,
@@ -179,8 +181,9 @@ int run(const Args& args) {
 int main(int argc, char** argv) {
   // A server that closes the connection mid-request must give an error, not kill the process.
   ::signal(SIGPIPE, SIG_IGN);
-  CLI::App app{"Downloads the isosurface meshes a running ldimesh job (or ldimesh-serve) "
-               "publishes: step_N.glb (Draco glTF) and step_N.json (metadata) per step."};
+  CLI::App app{
+      "Downloads the isosurface meshes a running ldimesh job (or ldimesh-serve) "
+      "publishes: step_N.glb (Draco glTF) and step_N.json (metadata) per step."};
   Args args;
   app.add_option("--url", args.url,
                  "the URL the server printed, http://HOST:PORT/?token=TOKEN (the token may "
@@ -197,8 +200,7 @@ int main(int argc, char** argv) {
   app.add_option("--wait", args.wait, "with --follow: seconds per long poll (1..60)")
       ->check(CLI::Range(1, 60))
       ->capture_default_str();
-  app.add_option("-o,--out", args.out, "the folder to write into (created if missing)")
-      ->required();
+  app.add_option("-o,--out", args.out, "the folder to write into (created if missing)")->required();
   app.add_flag("--ply", args.ply, "also write the decoded mesh as step_N.ply");
   try {
     app.parse(argc, argv);

@@ -113,8 +113,9 @@ int run(const Args& args) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"Serves the steps a run wrote into a folder (step_N.glb + step_N.json) with "
-               "the job's HTTP API and web viewer; new steps are picked up as they appear."};
+  CLI::App app{
+      "Serves the steps a run wrote into a folder (step_N.glb + step_N.json) with "
+      "the job's HTTP API and web viewer; new steps are picked up as they appear."};
   Args args;
   app.add_option("--dir", args.dir, "the folder of step files")->required();
   app.add_option("--port", args.port, "the port (0: any free one)")

@@ -41,18 +41,21 @@ struct GlbOptions {
   // encoding that keeps the vertex order, ≥ 1 = Edgebreaker, which reorders vertices).
   int compression_level = 7;
   // The scalar values mapped to u = 0 and u = 1 (min < max, both finite), e.g. fixed over a
-  // run so that colours mean the same at every step; unset = the mesh's own min and max.
+  // run so that colours mean the same at every step; unset = the mesh's own min and max (a
+  // constant scalar then gives u = 0 everywhere).
   std::optional<std::array<float, 2>> scalar_range;
 };
 
 // What a GLB holds, as encode_glb wrote it or decode_glb read it.
 struct GlbInfo {
-  std::size_t triangles = 0;  // triangles in the GLB (after Draco dropped degenerate ones)
-  std::size_t vertices = 0;   // vertices in the GLB (Draco may split non-manifold ones)
-  int position_bits = 0;      // encode only: the bits used
-  double position_error_bound = 0.0;  // encode only: glb_position_error_bound
-  bool has_scalar = false;
-  float scalar_min = 0.0f;  // the scalar range behind u ∈ [0, 1] (when has_scalar)
+  std::size_t triangles = 0;          // triangles in the GLB (after Draco dropped degenerate ones)
+  std::size_t vertices = 0;           // vertices in the GLB (Draco may split non-manifold ones)
+  int position_bits = 0;              // encode only (0 from decode_glb): the bits used
+  double position_error_bound = 0.0;  // encode only (0 from decode_glb): the bound used
+  bool has_scalar = false;            // TEXCOORD_0 present
+  // The scalar range behind u ∈ [0, 1] when has_scalar (decode_glb: from extras.ldimesh,
+  // 0 and 0 when a GLB from elsewhere lacks it).
+  float scalar_min = 0.0f;
   float scalar_max = 0.0f;
 };
 
@@ -104,9 +107,9 @@ std::array<std::uint8_t, 3> view_colour(std::size_t k, const glm::dvec3& dir);
 // a GLB without meshes gives an empty mesh. Validates the container, the JSON, every index,
 // offset and count against the bytes there are, and Draco's output (attribute types, counts,
 // finite values, face indices): garbage, truncated or hostile input returns an error Status
-// and never crashes; Draco's decoder itself is fuzzed upstream (OSS-Fuzz) and guarded here
-// against exceptions. `info`, when given, gets counts and the scalar range from extras.
-// On error `out` is left unchanged.
+// and never crashes; Draco's decoder itself is fuzzed upstream (OSS-Fuzz, draco/tools/fuzz/)
+// and guarded here against exceptions. `info`, when given, gets counts and the scalar range
+// from extras. On error `out` is left unchanged.
 Status decode_glb(std::span<const std::uint8_t> glb, Mesh& out, GlbInfo* info = nullptr);
 
 }  // namespace ldimesh

@@ -48,7 +48,7 @@ struct StepMetadata {
   std::vector<std::array<double, 3>> views;
   std::uint32_t resolution = 0;
   double r = 0.0;
-  std::optional<ScalarRange> scalar;  // absent when the mesh carries no scalar
+  std::optional<ScalarRange> scalar;      // absent when the mesh carries no scalar
   std::map<std::string, double> seconds;  // per stage: cast, encode, reduce, decode, mesh, glb…
 };
 
