@@ -64,6 +64,7 @@ int main(int argc, char** argv) {
                                     ("ldimesh_bench_glb_" + std::to_string(getpid()) + ".ply");
   for (const int res : resolutions) {
     std::size_t total_triangles = 0, total_glb = 0, total_ply = 0;
+    double total_encode = 0.0, total_decode = 0.0;
     for (const ldimesh::SurfaceInfo& s : ldimesh::builtin_surfaces()) {
       ldimesh::Mesh mesh;
       double pixel = 0.0;
@@ -120,10 +121,13 @@ int main(int argc, char** argv) {
       total_triangles += mesh.triangle_count();
       total_glb += glb.size();
       total_ply += ply_bytes;
+      total_encode += median(enc);
+      total_decode += median(dec);
     }
-    std::printf("| **all** | %d² | %zu | | %zu | %.2f | %zu | %.2f | %.1f | | | | |\n", res,
-                total_triangles, total_glb, double(total_glb) / double(total_triangles), total_ply,
-                double(total_ply) / double(total_triangles), double(total_ply) / double(total_glb));
+    std::printf("| **all** | %d² | %zu | | %zu | %.2f | %zu | %.2f | %.1f | | | %.4f | %.4f |\n",
+                res, total_triangles, total_glb, double(total_glb) / double(total_triangles),
+                total_ply, double(total_ply) / double(total_triangles),
+                double(total_ply) / double(total_glb), total_encode, total_decode);
   }
   std::filesystem::remove(ply);
   return 0;
