@@ -35,6 +35,13 @@ void* operator new(std::size_t size) {
 [[gnu::noinline]] void operator delete(void* p, std::size_t) noexcept {
   std::free(p);
 }
+// The nothrow forms too (libdraco uses them), so that every pair matches under sanitizers.
+void* operator new(std::size_t size, const std::nothrow_t&) noexcept {
+  return std::malloc(size ? size : 1);
+}
+[[gnu::noinline]] void operator delete(void* p, const std::nothrow_t&) noexcept {
+  std::free(p);
+}
 
 namespace ldimesh {
 namespace {
