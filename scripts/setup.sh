@@ -16,7 +16,7 @@ packages=(
   libgtest-dev                  # tests
   clang libclang-rt-14-dev      # libFuzzer target for the fragment decoder
   clang-format                  # formatting (.clang-format)
-  python3                       # test data generation in tests/cli
+  python3 curl                  # test data generation and HTTP checks in tests/cli
   chromium                      # browser test of the viewer (driven by playwright-core)
 )
 # Node.js and npm for the viewer's three.js and the browser test driver, unless a node is there.

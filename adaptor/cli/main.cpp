@@ -2,6 +2,7 @@
 //   ldimesh surfaces
 //   ldimesh mesh --surface barth --res 512 --views xyz --r 0.5 --out out/barth.ply [--json]
 //   mpiexec -n 4 ldimesh mesh --surface barth --res 256 --out out/barth.ply
+//   ldimesh serve --dir out/steps [--port 8080] [--bind 127.0.0.1]
 #include <cctype>
 #include <cerrno>
 #include <chrono>
@@ -31,6 +32,7 @@
 #include "ldimesh/transport/distributed.hpp"
 #include "ldimesh/transport/glb.hpp"
 #include "ldimesh/transport/snapshot_store.hpp"
+#include "serve.hpp"
 
 namespace {
 
@@ -342,6 +344,10 @@ int main(int argc, char** argv) {
   CLI::App* surfaces = app.add_subcommand("surfaces", "list the built-in analytic surfaces");
   CLI::App* mesh =
       app.add_subcommand("mesh", "ray cast a surface into LDIs and mesh them (paper §3)");
+  CLI::App* serve = app.add_subcommand(
+      "serve", "serve the steps a run wrote into a folder with the job's API and web viewer");
+  ldimesh::ServeArgs serve_args;
+  ldimesh::add_serve_options(*serve, serve_args);
   MeshArgs args;
   CLI::Option* surface_opt =
       mesh->add_option("--surface", args.surface, "built-in surface (see 'ldimesh surfaces')");
@@ -401,8 +407,24 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(2, 16))
       ->capture_default_str();
 
-  // MPI is initialised for every command, so that `mpiexec -n N ldimesh mesh …` splits the
-  // work; run without mpiexec it is a job of one rank. Only the root prints.
+  // `ldimesh serve` is a plain server process: no MPI.
+  if (argc > 1 && std::string(argv[1]) == "serve") {
+    try {
+      app.parse(argc, argv);
+      return ldimesh::run_serve(serve_args, "ldimesh serve");
+    } catch (const CLI::CallForHelp& e) {
+      return app.exit(e);
+    } catch (const CLI::ParseError& e) {
+      std::fprintf(stderr, "ldimesh: error: %s\n", e.what());
+      return 2;
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "ldimesh: error: %s\n", e.what());
+      return 1;
+    }
+  }
+
+  // MPI is initialised for every other command, so that `mpiexec -n N ldimesh mesh …` splits
+  // the work; run without mpiexec it is a job of one rank. Only the root prints.
   int provided = 0;
   MPI_Init_thread(&argc, &argv, MPI_THREAD_FUNNELED, &provided);
   int rank = 0;
