@@ -1,0 +1,82 @@
+// The in situ adaptor a solver links (C++ API; ldimesh.h is the C API over it).
+//
+// Like Ascent (open / publish / execute / close) and Catalyst 2 (initialize / execute /
+// finalize): create the adaptor with a communicator and options, describe the data each rank
+// holds once (pointers into the solver's own arrays, read in place; they may be updated), call
+// execute(step, time) every step, and finalize (or destroy) at the end.
+//
+// On a due step (options "cadence") every rank ray casts the isosurfaces of its own blocks and
+// hands its LDI fragments to the root (the only time the solver waits: ray casting + the
+// reduction); the root's decode, meshing, Draco encoding and publishing run on a worker
+// thread while the solver continues. If the worker is still busy with an earlier step the new
+// one is skipped or replaces the waiting one ("busy": "skip" | "coalesce").
+//
+// Never harms the solver: no exception leaves the adaptor's functions, it never calls
+// MPI_Abort or exit; an error is returned as a Status (also kept as last_error()) and the step
+// is skipped. MPI must be initialised with at least MPI_THREAD_FUNNELED; the adaptor calls MPI
+// from the thread that calls execute() only.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <string_view>
+
+#include <mpi.h>
+
+#include "ldimesh/core/field_source.hpp"
+#include "ldimesh/core/grid_source.hpp"
+#include "ldimesh/core/hex_source.hpp"
+#include "ldimesh/core/status.hpp"
+
+namespace ldimesh {
+
+// What one step did, for logs and the snapshot metadata.
+struct StepReport {
+  std::uint64_t step = 0;
+  bool executed = false;       // false: not due, or skipped because the root was busy
+  bool skipped_busy = false;   // the root's worker was busy ("skip")
+  bool replaced_pending = false;  // a waiting step was replaced by this one ("coalesce")
+  double blocked_seconds = 0.0;   // this rank's time inside execute()
+  double max_blocked_seconds = 0.0;  // the slowest rank's (root only)
+};
+
+class Adaptor {
+ public:
+  // Collective over `comm`. `options_json` is a JSON document (docs/adaptor.md lists every
+  // key); "" means all defaults. An unknown key or a bad value is an error naming the key, on
+  // every rank. On the root the HTTP server starts here (unless disabled) and url() tells where.
+  static Status create(MPI_Comm comm, std::string_view options_json, std::unique_ptr<Adaptor>& out);
+  // The same with the options read from a file, or, when `path` is empty, from the file named
+  // by the environment variable LDIMESH_OPTIONS (defaults when unset).
+  static Status create_from_file(MPI_Comm comm, const std::string& path, std::unique_ptr<Adaptor>& out);
+
+  virtual ~Adaptor() = default;
+
+  // The global domain the views cover (the same on every rank). Required before execute().
+  virtual Status set_domain(const Box& global) = 0;
+  // This rank's data: blocks of point data, blocks of high-order elements, or any source (an
+  // analytic field). Each call adds one block; `owned` is the part of the domain this block's
+  // hits belong to (for grid blocks: the owned region, GridSource::bounds()). The arrays are
+  // read in place at every due step.
+  virtual Status add_grid_block(const GridBlock& block) = 0;
+  virtual Status add_hex_block(const HexBlock& block) = 0;
+  virtual Status add_source(std::shared_ptr<const FieldSource> source, const Box& owned) = 0;
+  // Forgets the blocks (to describe them anew, e.g. after a re-partition).
+  virtual void clear_blocks() = 0;
+
+  // Collective. Runs the in situ step if it is due. Never throws.
+  virtual Status execute(std::uint64_t step, double time) = 0;
+  // Collective. Waits for the root's pending work (published or failed) and stops the server.
+  // Called by the destructor if not before.
+  virtual Status finalize() = 0;
+
+  // Root: the viewer's URL with the token ("" elsewhere or without a server).
+  virtual std::string url() const = 0;
+  virtual const StepReport& last_report() const = 0;
+  virtual const std::string& last_error() const = 0;
+  // Root: the number of steps published so far.
+  virtual std::uint64_t published_steps() const = 0;
+};
+
+}  // namespace ldimesh
