@@ -34,10 +34,10 @@ namespace ldimesh {
 // What one step did, for logs and the snapshot metadata.
 struct StepReport {
   std::uint64_t step = 0;
-  bool executed = false;       // false: not due, or skipped because the root was busy
-  bool skipped_busy = false;   // the root's worker was busy ("skip")
-  bool replaced_pending = false;  // a waiting step was replaced by this one ("coalesce")
-  double blocked_seconds = 0.0;   // this rank's time inside execute()
+  bool executed = false;             // false: not due, or skipped because the root was busy
+  bool skipped_busy = false;         // the root's worker was busy ("skip")
+  bool replaced_pending = false;     // a waiting step was replaced by this one ("coalesce")
+  double blocked_seconds = 0.0;      // this rank's time inside execute()
   double max_blocked_seconds = 0.0;  // the slowest rank's (root only)
 };
 
@@ -49,7 +49,8 @@ class Adaptor {
   static Status create(MPI_Comm comm, std::string_view options_json, std::unique_ptr<Adaptor>& out);
   // The same with the options read from a file, or, when `path` is empty, from the file named
   // by the environment variable LDIMESH_OPTIONS (defaults when unset).
-  static Status create_from_file(MPI_Comm comm, const std::string& path, std::unique_ptr<Adaptor>& out);
+  static Status create_from_file(MPI_Comm comm, const std::string& path,
+                                 std::unique_ptr<Adaptor>& out);
 
   virtual ~Adaptor() = default;
 

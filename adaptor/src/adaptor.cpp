@@ -1,0 +1,592 @@
+#include "ldimesh/adaptor.hpp"
+
+#include <chrono>
+#include <condition_variable>
+#include <cstdio>
+#include <fstream>
+#include <mutex>
+#include <optional>
+#include <set>
+#include <sstream>
+#include <thread>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "ldimesh/core/pipeline.hpp"
+#include "ldimesh/core/raycaster.hpp"
+#include "ldimesh/transport/distributed.hpp"
+#include "ldimesh/transport/glb.hpp"
+#include "ldimesh/transport/http_server.hpp"
+#include "ldimesh/transport/mpi_reduce.hpp"
+#include "ldimesh/transport/snapshot_store.hpp"
+
+namespace ldimesh {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double seconds_since(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+struct Options {
+  std::vector<double> isovalues{0.5};
+  std::string views = "xyz";
+  int resolution = 256;
+  double r = 0.5;
+  std::uint64_t every_steps = 1;
+  double every_seconds = 0.0;
+  bool coalesce = false;
+  bool server = true;
+  std::string bind = "127.0.0.1";
+  int port = 0;
+  std::string token;
+  std::string output_dir;
+  std::size_t keep = 16;
+  std::size_t memory_mb = 512;
+  FragmentEncoding encoding;
+  int compression_level = 7;
+  bool log = true;
+  double slow_root_seconds = 0.0;  // testing only: the worker sleeps this long per step
+};
+
+// Reads `j` into `o`, naming the first unknown key or bad value.
+Status parse_options(const nlohmann::json& j, Options& o) {
+  if (!j.is_object()) return Status::error("options: the document must be a JSON object");
+  auto bad = [](const std::string& key, const std::string& why) {
+    return Status::error("options: '" + key + "' " + why);
+  };
+  auto check_keys = [&](const nlohmann::json& obj, const std::string& prefix,
+                        std::initializer_list<const char*> known) -> Status {
+    for (auto it = obj.begin(); it != obj.end(); ++it) {
+      bool found = false;
+      for (const char* k : known)
+        found = found || it.key() == k;
+      if (!found) return bad(prefix + it.key(), "is not a known option (see docs/adaptor.md)");
+    }
+    return Status::ok();
+  };
+  if (Status s = check_keys(
+          j, "",
+          {"isovalues", "views", "resolution", "r", "cadence", "busy", "refinement", "merging",
+           "server", "output_dir", "keep", "memory_mb", "encoding", "glb", "log", "testing"});
+      !s)
+    return s;
+  try {
+    if (j.contains("isovalues")) {
+      const auto& v = j["isovalues"];
+      if (!v.is_array() || v.empty())
+        return bad("isovalues", "must be a non-empty array of numbers");
+      o.isovalues.clear();
+      for (const auto& x : v) {
+        if (!x.is_number()) return bad("isovalues", "must be a non-empty array of numbers");
+        o.isovalues.push_back(x.get<double>());
+      }
+      if (o.isovalues.size() > 8) return bad("isovalues", "may hold at most 8 values");
+    }
+    if (j.contains("views")) {
+      o.views = j["views"].get<std::string>();
+      if (o.views.empty()) return bad("views", "must name at least one axis");
+      std::set<char> seen;
+      for (char c : o.views)
+        if ((c != 'x' && c != 'y' && c != 'z') || !seen.insert(c).second)
+          return bad("views", "must be a subset of \"xyz\"");
+    }
+    if (j.contains("resolution")) {
+      o.resolution = j["resolution"].get<int>();
+      if (o.resolution < 2 || o.resolution > 8192) return bad("resolution", "must lie in 2..8192");
+    }
+    if (j.contains("r")) {
+      o.r = j["r"].get<double>();
+      if (!(o.r >= 0.0 && o.r <= 1.0)) return bad("r", "must lie in [0, 1]");
+    }
+    if (j.contains("cadence")) {
+      const auto& c = j["cadence"];
+      if (Status s = check_keys(c, "cadence.", {"every_steps", "every_seconds"}); !s) return s;
+      if (c.contains("every_steps")) {
+        const auto n = c["every_steps"].get<std::int64_t>();
+        if (n < 1) return bad("cadence.every_steps", "must be at least 1");
+        o.every_steps = std::uint64_t(n);
+      }
+      if (c.contains("every_seconds")) {
+        o.every_seconds = c["every_seconds"].get<double>();
+        if (!(o.every_seconds >= 0.0)) return bad("cadence.every_seconds", "must be ≥ 0");
+      }
+    }
+    if (j.contains("busy")) {
+      const std::string b = j["busy"].get<std::string>();
+      if (b != "skip" && b != "coalesce") return bad("busy", "must be \"skip\" or \"coalesce\"");
+      o.coalesce = b == "coalesce";
+    }
+    for (const char* k : {"refinement", "merging"})
+      if (j.contains(k) && j[k].get<bool>())
+        return bad(k, "is not available yet (paper §4/§5 land in later versions)");
+    if (j.contains("server")) {
+      const auto& s = j["server"];
+      if (Status st = check_keys(s, "server.", {"enabled", "bind", "port", "token"}); !st)
+        return st;
+      if (s.contains("enabled")) o.server = s["enabled"].get<bool>();
+      if (s.contains("bind")) o.bind = s["bind"].get<std::string>();
+      if (s.contains("port")) {
+        o.port = s["port"].get<int>();
+        if (o.port < 0 || o.port > 65535) return bad("server.port", "must lie in 0..65535");
+      }
+      if (s.contains("token")) o.token = s["token"].get<std::string>();
+    }
+    if (j.contains("output_dir")) o.output_dir = j["output_dir"].get<std::string>();
+    if (j.contains("keep")) {
+      const auto k = j["keep"].get<std::int64_t>();
+      if (k < 1) return bad("keep", "must be at least 1");
+      o.keep = std::size_t(k);
+    }
+    if (j.contains("memory_mb")) {
+      const auto m = j["memory_mb"].get<std::int64_t>();
+      if (m < 1) return bad("memory_mb", "must be at least 1");
+      o.memory_mb = std::size_t(m);
+    }
+    if (j.contains("encoding")) {
+      const auto& e = j["encoding"];
+      if (Status s = check_keys(e, "encoding.", {"lossless", "depth_bits", "normal_bits"}); !s)
+        return s;
+      if (e.contains("lossless")) o.encoding.lossless = e["lossless"].get<bool>();
+      if (e.contains("depth_bits")) o.encoding.depth_bits = e["depth_bits"].get<int>();
+      if (e.contains("normal_bits")) o.encoding.normal_bits = e["normal_bits"].get<int>();
+      if (o.encoding.depth_bits < 1 || o.encoding.depth_bits > 24)
+        return bad("encoding.depth_bits", "must lie in 1..24");
+      if (o.encoding.normal_bits < 2 || o.encoding.normal_bits > 16)
+        return bad("encoding.normal_bits", "must lie in 2..16");
+    }
+    if (j.contains("glb")) {
+      const auto& g = j["glb"];
+      if (Status s = check_keys(g, "glb.", {"compression_level"}); !s) return s;
+      if (g.contains("compression_level")) {
+        o.compression_level = g["compression_level"].get<int>();
+        if (o.compression_level < 0 || o.compression_level > 10)
+          return bad("glb.compression_level", "must lie in 0..10");
+      }
+    }
+    if (j.contains("log")) o.log = j["log"].get<bool>();
+    if (j.contains("testing")) {
+      const auto& t = j["testing"];
+      if (Status s = check_keys(t, "testing.", {"slow_root_seconds"}); !s) return s;
+      if (t.contains("slow_root_seconds"))
+        o.slow_root_seconds = t["slow_root_seconds"].get<double>();
+    }
+  } catch (const nlohmann::json::exception& e) {
+    return Status::error(std::string("options: a value has the wrong type: ") + e.what());
+  }
+  return Status::ok();
+}
+
+// One due step's work for the root's worker.
+struct Job {
+  std::uint64_t step = 0;
+  double time = 0.0;
+  std::vector<View> views;
+  std::vector<LdiFragment> fragments;  // isovalue-major: isovalue i, view v at i·views + v
+  std::map<std::string, double> seconds;
+};
+
+class AdaptorImpl final : public Adaptor {
+ public:
+  AdaptorImpl(MPI_Comm comm, Options options) : comm_(comm), options_(std::move(options)) {
+    MPI_Comm_rank(comm_, &rank_);
+    MPI_Comm_size(comm_, &size_);
+  }
+  ~AdaptorImpl() override { finalize(); }
+
+  // Root: store, server and worker.
+  Status start_root() {
+    if (rank_ != 0) return Status::ok();
+    store_ = std::make_unique<SnapshotStore>(
+        SnapshotStoreLimits{options_.keep, options_.memory_mb << 20});
+    if (options_.server) {
+      HttpServerOptions o;
+      o.bind_address = options_.bind;
+      o.port = options_.port;
+      o.token = options_.token;
+      // The viewer's files, from the checkout the library was built in.
+      o.static_dir = std::filesystem::path(LDIMESH_SOURCE_DIR) / "viewer" / "web";
+      o.vendor_three_dir = std::filesystem::path(LDIMESH_SOURCE_DIR) / "node_modules" / "three";
+      server_ = std::make_unique<HttpServer>(*store_, o);
+      if (Status s = server_->start(); !s) return s;
+    }
+    if (!options_.output_dir.empty()) {
+      std::error_code ec;
+      std::filesystem::create_directories(options_.output_dir, ec);
+      if (ec) return Status::error("options: 'output_dir' cannot be created: " + ec.message());
+    }
+    worker_ = std::thread([this] { work(); });
+    return Status::ok();
+  }
+
+  Status set_domain(const Box& global) override {
+    if (!global.is_valid()) return fail("set_domain: the box is empty");
+    domain_ = global;
+    has_domain_ = true;
+    return Status::ok();
+  }
+  Status add_grid_block(const GridBlock& block) override {
+    try {
+      auto source = std::make_shared<GridSource>(block);
+      const Box owned = source->bounds();
+      return add_source(std::move(source), owned);
+    } catch (const std::exception& e) {
+      return fail(std::string("add_grid_block: ") + e.what());
+    }
+  }
+  Status add_hex_block(const HexBlock& block) override {
+    try {
+      auto source = std::make_shared<HexElementSource>(block);
+      const Box owned = source->bounds();
+      return add_source(std::move(source), owned);
+    } catch (const std::exception& e) {
+      return fail(std::string("add_hex_block: ") + e.what());
+    }
+  }
+  Status add_source(std::shared_ptr<const FieldSource> source, const Box& owned) override {
+    if (!source) return fail("add_source: no source");
+    blocks_.push_back({std::move(source), owned});
+    return Status::ok();
+  }
+  void clear_blocks() override { blocks_.clear(); }
+
+  Status execute(std::uint64_t step, double time) override {
+    const auto start = Clock::now();
+    report_ = {};
+    report_.step = step;
+    // The root decides whether the step runs (cadence, busy worker); everyone follows.
+    int decision = 0;  // 0 not due, 1 run, 2 skipped: busy
+    if (rank_ == 0) {
+      const bool due =
+          step % options_.every_steps == 0 && (options_.every_seconds <= 0.0 || !ran_before_ ||
+                                               seconds_since(last_run_) >= options_.every_seconds);
+      if (due) {
+        std::lock_guard lock(mutex_);
+        const bool busy = working_ || pending_.has_value();
+        decision = busy && !options_.coalesce ? 2 : 1;
+      }
+    }
+    MPI_Bcast(&decision, 1, MPI_INT, 0, comm_);
+    if (decision != 1) {
+      report_.skipped_busy = decision == 2;
+      if (decision == 2 && rank_ == 0 && options_.log)
+        std::printf("ldimesh: step %llu skipped: still processing an earlier step\n",
+                    (unsigned long long)step);
+      finish_report(start);
+      return Status::ok();
+    }
+    if (rank_ == 0) {
+      last_run_ = Clock::now();
+      ran_before_ = true;
+    }
+
+    // Every rank casts its blocks; a local failure sends empty fragments (so that nobody
+    // waits forever) and fails the step everywhere.
+    std::string local_error;
+    std::vector<View> views;
+    std::vector<LdiFragment> fragments;
+    const auto cast_start = Clock::now();
+    try {
+      if (!has_domain_) throw std::runtime_error("set_domain() was not called");
+      views = make_axis_views(domain_, options_.resolution, options_.views);
+      for (std::size_t i = 0; i < options_.isovalues.size(); ++i)
+        for (std::size_t v = 0; v < views.size(); ++v) {
+          const std::uint32_t index = std::uint32_t(i * views.size() + v);
+          std::vector<LdiFragment> parts;
+          for (const Block& b : blocks_) {
+            const RayCaster caster(*b.source, options_.isovalues[i]);
+            parts.push_back(caster.cast_fragment(views[v], index, {b.owned, domain_}));
+          }
+          fragments.push_back(parts.empty() ? make_empty_fragment(views[v], index)
+                                            : merge_fragments(parts, 0.0));
+        }
+    } catch (const std::exception& e) {
+      local_error = e.what();
+    }
+    if (!local_error.empty()) {
+      // Empty fragments of the right shape (views may be unknown: then none).
+      fragments.clear();
+      for (std::size_t i = 0; i < options_.isovalues.size(); ++i)
+        for (std::size_t v = 0; v < views.size(); ++v)
+          fragments.push_back(make_empty_fragment(views[v], std::uint32_t(i * views.size() + v)));
+    }
+    const double cast_seconds = seconds_since(cast_start);
+    int local_failed = local_error.empty() ? 0 : 1, any_failed = 0;
+    MPI_Allreduce(&local_failed, &any_failed, 1, MPI_INT, MPI_MAX, comm_);
+    if (any_failed) {
+      finish_report(start);
+      return fail(
+          "step " + std::to_string(step) + " skipped: " +
+          (local_error.empty() ? std::string("another rank failed to ray cast") : local_error));
+    }
+
+    double tolerance = 0.0;
+    for (const View& v : views)
+      tolerance = std::max(tolerance, merge_tolerance(options_.encoding, v, domain_.diagonal()));
+    ReductionStats stats;
+    const Status reduced =
+        reduce_fragments(comm_, 0, fragments, options_.encoding, tolerance, stats);
+    int reduce_failed = reduced ? 0 : 1;
+    MPI_Allreduce(MPI_IN_PLACE, &reduce_failed, 1, MPI_INT, MPI_MAX, comm_);
+    double max_cast = 0.0;
+    MPI_Reduce(&cast_seconds, &max_cast, 1, MPI_DOUBLE, MPI_MAX, 0, comm_);
+    if (reduce_failed) {
+      finish_report(start);
+      return fail(
+          "step " + std::to_string(step) + " skipped: " +
+          (reduced ? std::string("the reduction failed on another rank") : reduced.message()));
+    }
+    // The solver's part ends here: the root hands the step to its worker.
+    finish_report(start);
+    if (rank_ == 0) {
+      Job job;
+      job.step = step;
+      job.time = time;
+      job.views = std::move(views);
+      job.fragments = std::move(fragments);
+      job.seconds = {{"cast", max_cast},
+                     {"encode", stats.encode_seconds},
+                     {"reduce", stats.wall_seconds},
+                     {"blocked", report_.max_blocked_seconds}};
+      std::lock_guard lock(mutex_);
+      report_.replaced_pending = pending_.has_value();
+      if (report_.replaced_pending && options_.log)
+        std::printf("ldimesh: step %llu replaces step %llu, which was still waiting\n",
+                    (unsigned long long)step, (unsigned long long)pending_->step);
+      pending_ = std::move(job);
+      wake_.notify_all();
+    }
+    return Status::ok();
+  }
+
+  Status finalize() override {
+    if (finalized_) return Status::ok();
+    finalized_ = true;
+    if (rank_ == 0 && worker_.joinable()) {
+      {
+        std::unique_lock lock(mutex_);
+        idle_.wait(lock, [&] { return !pending_ && !working_; });
+        stopping_ = true;
+        wake_.notify_all();
+      }
+      worker_.join();
+      if (server_) server_->stop();
+    }
+    return last_error_.empty() ? Status::ok() : Status::error(last_error_);
+  }
+
+  std::string url() const override { return server_ ? server_->url() : std::string(); }
+  const StepReport& last_report() const override { return report_; }
+  const std::string& last_error() const override {
+    std::lock_guard lock(mutex_);
+    return last_error_;
+  }
+  std::uint64_t published_steps() const override {
+    std::lock_guard lock(mutex_);
+    return published_;
+  }
+
+ private:
+  struct Block {
+    std::shared_ptr<const FieldSource> source;
+    Box owned;
+  };
+
+  Status fail(const std::string& message) {
+    std::lock_guard lock(mutex_);
+    last_error_ = message;
+    return Status::error(message);
+  }
+
+  void finish_report(Clock::time_point start) {
+    report_.blocked_seconds = seconds_since(start);
+    MPI_Reduce(&report_.blocked_seconds, &report_.max_blocked_seconds, 1, MPI_DOUBLE, MPI_MAX, 0,
+               comm_);
+    report_.executed = !report_.skipped_busy && report_.blocked_seconds > 0.0;
+  }
+
+  // The root's worker: decode, mesh, encode, publish — off the solver's path.
+  void work() {
+    while (true) {
+      Job job;
+      {
+        std::unique_lock lock(mutex_);
+        wake_.wait(lock, [&] { return stopping_ || pending_.has_value(); });
+        if (!pending_) return;
+        job = std::move(*pending_);
+        pending_.reset();
+        working_ = true;
+      }
+      std::string error;
+      try {
+        publish(job);
+      } catch (const std::exception& e) {
+        error = e.what();
+      }
+      std::lock_guard lock(mutex_);
+      working_ = false;
+      if (!error.empty()) {
+        last_error_ = "step " + std::to_string(job.step) + ": " + error;
+        if (options_.log) std::fprintf(stderr, "ldimesh: error: %s\n", last_error_.c_str());
+      }
+      idle_.notify_all();
+    }
+  }
+
+  void publish(Job& job) {
+    if (options_.slow_root_seconds > 0.0)
+      std::this_thread::sleep_for(std::chrono::duration<double>(options_.slow_root_seconds));
+    auto t = Clock::now();
+    const std::size_t nv = job.views.size();
+    Mesh mesh;
+    MeshingOptions meshing;
+    meshing.r = options_.r;
+    std::size_t samples = 0, quads = 0;
+    double decode_s = 0.0, mesh_s = 0.0;
+    for (std::size_t i = 0; i < options_.isovalues.size(); ++i) {
+      t = Clock::now();
+      std::vector<Ldi> ldis;
+      for (std::size_t v = 0; v < nv; ++v)
+        ldis.push_back(ldi_from_fragment(job.fragments[i * nv + v], job.views[v]));
+      decode_s += seconds_since(t);
+      t = Clock::now();
+      const MeshingResult r = mesh_ldis(ldis, meshing);
+      mesh_s += seconds_since(t);
+      samples += r.samples;
+      quads += r.quads;
+      append(mesh, r.mesh);
+    }
+    t = Clock::now();
+    GlbOptions glb_options;
+    glb_options.pixel_size = job.views.front().spacing;
+    glb_options.compression_level = options_.compression_level;
+    std::vector<std::uint8_t> glb;
+    GlbInfo info;
+    if (Status s = encode_glb(mesh, glb_options, glb, &info); !s)
+      throw std::runtime_error(s.message());
+    const double glb_s = seconds_since(t);
+
+    StepMetadata meta;
+    meta.step = job.step;
+    meta.time = job.time;
+    meta.isovalues = options_.isovalues;
+    meta.triangles = info.triangles;
+    meta.vertices = info.vertices;
+    meta.samples = samples;
+    meta.quads = quads;
+    meta.bytes = glb.size();
+    for (const View& v : job.views)
+      meta.views.push_back({v.dir.x, v.dir.y, v.dir.z});
+    meta.resolution = std::uint32_t(options_.resolution);
+    meta.r = options_.r;
+    meta.seconds = job.seconds;
+    meta.seconds["decode"] = decode_s;
+    meta.seconds["mesh"] = mesh_s;
+    meta.seconds["glb"] = glb_s;
+    Snapshot snapshot;
+    snapshot.step = job.step;
+    snapshot.metadata_json = metadata_to_json(meta);
+    snapshot.glb = std::make_shared<const std::vector<std::uint8_t>>(std::move(glb));
+    if (!options_.output_dir.empty())
+      if (Status s = write_step_files(options_.output_dir, snapshot); !s)
+        throw std::runtime_error(s.message());
+    if (Status s = store_->publish(std::move(snapshot)); !s) throw std::runtime_error(s.message());
+    {
+      std::lock_guard lock(mutex_);
+      ++published_;
+    }
+    if (options_.log) {
+      std::printf(
+          "ldimesh: step %llu  t=%g  %zu triangles  %zu bytes  cast %.3f reduce %.3f mesh %.3f glb "
+          "%.3f s\n",
+          (unsigned long long)job.step, job.time, std::size_t(info.triangles),
+          std::size_t(meta.bytes), job.seconds["cast"], job.seconds["reduce"], mesh_s, glb_s);
+      std::fflush(stdout);
+    }
+  }
+
+  // Appends `b` to `a` (the meshes of several isovalues in one GLB).
+  static void append(Mesh& a, const Mesh& b) {
+    const std::uint32_t base = std::uint32_t(a.positions.size());
+    if (a.view_dirs.empty()) a.view_dirs = b.view_dirs;
+    a.positions.insert(a.positions.end(), b.positions.begin(), b.positions.end());
+    a.normals.insert(a.normals.end(), b.normals.begin(), b.normals.end());
+    a.scalars.insert(a.scalars.end(), b.scalars.begin(), b.scalars.end());
+    for (std::uint32_t i : b.triangles)
+      a.triangles.push_back(base + i);
+    for (std::uint32_t i : b.quads)
+      a.quads.push_back(base + i);
+    a.triangle_view.insert(a.triangle_view.end(), b.triangle_view.begin(), b.triangle_view.end());
+    a.quad_view.insert(a.quad_view.end(), b.quad_view.begin(), b.quad_view.end());
+  }
+
+  MPI_Comm comm_;
+  int rank_ = 0, size_ = 1;
+  Options options_;
+  Box domain_;
+  bool has_domain_ = false;
+  std::vector<Block> blocks_;
+  StepReport report_;
+  bool finalized_ = false;
+  Clock::time_point last_run_;
+  bool ran_before_ = false;
+
+  // Root only.
+  std::unique_ptr<SnapshotStore> store_;
+  std::unique_ptr<HttpServer> server_;
+  std::thread worker_;
+  mutable std::mutex mutex_;
+  std::condition_variable wake_, idle_;
+  std::optional<Job> pending_;
+  bool working_ = false;
+  bool stopping_ = false;
+  std::uint64_t published_ = 0;
+  std::string last_error_;
+};
+
+}  // namespace
+
+Status Adaptor::create(MPI_Comm comm, std::string_view options_json,
+                       std::unique_ptr<Adaptor>& out) {
+  out.reset();
+  try {
+    Options options;
+    Status status = Status::ok();
+    if (!options_json.empty()) {
+      const nlohmann::json j = nlohmann::json::parse(options_json, nullptr, false);
+      status = j.is_discarded() ? Status::error("options: not a valid JSON document")
+                                : parse_options(j, options);
+    }
+    // Everyone gets the same verdict (the document is the same on every rank).
+    int failed = status ? 0 : 1;
+    MPI_Allreduce(MPI_IN_PLACE, &failed, 1, MPI_INT, MPI_MAX, comm);
+    if (failed) return status ? Status::error("options: invalid on another rank") : status;
+    auto adaptor = std::make_unique<AdaptorImpl>(comm, std::move(options));
+    Status started = adaptor->start_root();
+    int start_failed = started ? 0 : 1;
+    MPI_Bcast(&start_failed, 1, MPI_INT, 0, comm);
+    if (start_failed)
+      return started ? Status::error("the root could not start (see its message)") : started;
+    out = std::move(adaptor);
+    return Status::ok();
+  } catch (const std::exception& e) {
+    return Status::error(std::string("ldimesh: ") + e.what());
+  }
+}
+
+Status Adaptor::create_from_file(MPI_Comm comm, const std::string& path,
+                                 std::unique_ptr<Adaptor>& out) {
+  std::string file = path;
+  if (file.empty())
+    if (const char* env = std::getenv("LDIMESH_OPTIONS")) file = env;
+  if (file.empty()) return create(comm, "", out);
+  std::ifstream in(file);
+  if (!in) return Status::error("options: cannot read '" + file + "'");
+  std::stringstream text;
+  text << in.rdbuf();
+  return create(comm, text.str(), out);
+}
+
+}  // namespace ldimesh
