@@ -1,0 +1,59 @@
+#!/usr/bin/env bash
+# In situ cost on a real solver loop: ldimesh-grayscott on 2 ranks at a size where one output
+# step (--substeps solver steps) computes in about a second, every step due, "busy": "skip".
+# Per executed step: the slowest rank's compute time, the time the solver was blocked inside
+# execute() (StepReport::max_blocked_seconds, from --report), and the root's background stages
+# (the published step's JSON "seconds"). Prints Markdown for docs/benchmarks.md.
+# Usage: bench/grayscott_bench.sh [SIZE=192] [SUBSTEPS=60] [STEPS=20] [RESOLUTION=256]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+size=${1:-192}
+substeps=${2:-60}
+steps=${3:-20}
+resolution=${4:-256}
+bin=${LDIMESH_BIN:-build/bin}
+export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+printf '{"server": {"enabled": false}, "output_dir": "%s/steps", "resolution": %d, "keep": 4}\n' \
+  "$tmp" "$resolution" >"$tmp/options.json"
+# --bind-to none: the ray caster runs threads on every rank.
+mpiexec -n 2 --bind-to none "$bin/ldimesh-grayscott" --size "$size" --substeps "$substeps" \
+  --steps "$steps" --options "$tmp/options.json" --report >"$tmp/run.log"
+python3 - "$tmp" "$size" "$substeps" "$steps" "$resolution" <<'PY'
+import json, os, re, statistics, sys
+tmp, size, substeps, steps, res = sys.argv[1:]
+reports = {}
+for line in open(os.path.join(tmp, "run.log")):
+    if line.startswith("report "):
+        r = dict(kv.split("=") for kv in line.split()[1:])
+        reports[int(r["step"])] = r
+stages = ["cast", "encode", "reduce", "decode", "mesh", "glb"]
+print(f"2 ranks, {size}³ points, {substeps} substeps per step, {steps} steps, {res}² views, "
+      f"every step due, busy = skip\n")
+if every > 1:
+    print(f"Every {every}th executed step:\n")
+print("| step | compute s | blocked s | blocked / compute | triangles | "
+      + " | ".join(f"{s} s" for s in stages) + " |")
+print("|---" * (5 + len(stages)) + "|")
+rows = []
+executed = [s for s, r in sorted(reports.items()) if r["executed"] == "1"]
+every = max(1, -(-len(executed) // 20))  # at most about 20 rows; the median covers them all
+for i, s in enumerate(executed):
+    r = reports[s]
+    path = os.path.join(tmp, "steps", f"step_{s:06d}.json")
+    meta = json.load(open(path)) if os.path.exists(path) else None
+    compute, blocked = float(r["compute_s"]), float(r["blocked_s"])
+    rows.append((compute, blocked))
+    if i % every and i != len(executed) - 1:
+        continue
+    cells = [str(s), f"{compute:.3f}", f"{blocked:.3f}", f"{100 * blocked / compute:.1f} %",
+             str(meta["triangles"]) if meta else "(replaced)"]
+    cells += [f"{meta['seconds'].get(st, 0):.3f}" if meta else "" for st in stages]
+    print("| " + " | ".join(cells) + " |")
+skipped = sum(1 for r in reports.values() if r["skipped_busy"] == "1")
+mc = statistics.median(c for c, _ in rows)
+mb = statistics.median(b for _, b in rows)
+print(f"\nMedian over the {len(rows)} executed steps: compute {mc:.3f} s, blocked {mb:.3f} s "
+      f"({100 * mb / mc:.1f} %); {skipped} of {len(reports)} steps skipped (root busy).")
+PY

@@ -1,0 +1,112 @@
+#!/usr/bin/env bash
+# The mini-apps as a user runs them: a few steps of each under mpiexec with 1 and 3 ranks, the
+# steps written to a folder (server off). Checks that the steps appear, that a step's mesh is
+# the same for 1 and 3 ranks (the same triangle count, and the same GLB bytes: every rank
+# quantizes alike), that invalid options stop the mini-app with a one-line error and a non-zero
+# exit (no crash), and that a step without surface is reported and the simulation goes on.
+#
+# Usage: miniapps_test.sh MPIEXEC BIN_DIR   (BIN_DIR holds ldimesh-grayscott, -analytic, -dg)
+set -euo pipefail
+mpiexec=$1
+bin=$2
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
+
+fail() {
+  echo "FAIL: $*" >&2
+  exit 1
+}
+
+# options DIR: an options file that writes every published step into DIR. "coalesce": a step
+# that finds the root busy replaces the waiting one instead of being dropped, and finalize()
+# drains the queue, so the last step is always published; earlier ones may be replaced, so
+# the comparison below covers the steps published by both runs.
+options() {
+  printf '{"server": {"enabled": false}, "output_dir": "%s", "busy": "coalesce", "resolution": 128}\n' \
+    "$1" >"$1.json"
+  echo "$1.json"
+}
+
+# run NAME RANKS DIR ARGS…: runs the mini-app, its output in DIR.log; fails unless it exits 0.
+run() {
+  local name=$1 ranks=$2 dir=$3
+  shift 3
+  local opts
+  opts=$(options "$dir")
+  if ! "$mpiexec" -n "$ranks" --oversubscribe "$bin/ldimesh-$name" --options "$opts" "$@" \
+    >"$dir.log" 2>&1; then
+    cat "$dir.log" >&2
+    fail "$name on $ranks ranks exited non-zero"
+  fi
+}
+
+triangles() {
+  grep -o '"triangles":[0-9]*' "$1" | cut -d: -f2
+}
+
+# same_meshes NAME LAST_STEP: the steps in $tmp/NAME-n1 and $tmp/NAME-n3 agree.
+same_meshes() {
+  local name=$1 last=$2 a="$tmp/$1-n1" b="$tmp/$1-n3"
+  local last_file
+  last_file=$(printf 'step_%06d' "$last")
+  for d in "$a" "$b"; do
+    [ -f "$d/$last_file.json" ] && [ -f "$d/$last_file.glb" ] ||
+      fail "$name: $d has no $last_file (the last step is always published)"
+  done
+  [ "$(triangles "$a/$last_file.json")" -gt 0 ] || fail "$name: no surface at step $last"
+  local common=0 bytes_differ=0
+  for json in "$a"/step_*.json; do
+    local step
+    step=$(basename "$json" .json)
+    [ -f "$b/$step.json" ] || continue
+    common=$((common + 1))
+    local ta tb
+    ta=$(triangles "$json")
+    tb=$(triangles "$b/$step.json")
+    [ "$ta" = "$tb" ] || fail "$name $step: $ta triangles on 1 rank, $tb on 3"
+    cmp -s "$a/$step.glb" "$b/$step.glb" || bytes_differ=$((bytes_differ + 1))
+  done
+  [ "$bytes_differ" -eq 0 ] || fail "$name: $bytes_differ GLB files differ between 1 and 3 ranks"
+  echo "$name: $common steps published by both runs: same triangle counts, same GLB bytes"
+}
+
+steps=3
+run grayscott 1 "$tmp/grayscott-n1" --size 24 --steps $steps
+run grayscott 3 "$tmp/grayscott-n3" --size 24 --steps $steps
+same_meshes grayscott $steps
+grep -q '^viewer: ' "$tmp/grayscott-n1.log" || fail "grayscott prints no viewer line"
+
+run analytic 1 "$tmp/analytic-n1" --surface torus --steps $steps
+run analytic 3 "$tmp/analytic-n3" --surface torus --steps $steps
+same_meshes analytic $steps
+
+run dg 1 "$tmp/dg-n1" --elements 4 --order 3 --steps $steps
+run dg 3 "$tmp/dg-n3" --elements 4 --order 3 --steps $steps
+same_meshes dg $steps
+
+# Invalid options: an unknown key is named on one line, the exit is 2 (nothing simulated).
+echo '{"server": {"enabled": false}, "no_such_key": 1}' >"$tmp/bad.json"
+for name in grayscott analytic dg; do
+  set +e
+  "$mpiexec" -n 2 --oversubscribe "$bin/ldimesh-$name" --steps 2 --options "$tmp/bad.json" \
+    >"$tmp/bad-$name.log" 2>&1
+  rc=$?
+  set -e
+  [ "$rc" -eq 2 ] || { cat "$tmp/bad-$name.log" >&2; fail "$name with bad options: exit $rc, not 2"; }
+  grep -q "ldimesh-$name: .*'no_such_key' is not a known option" "$tmp/bad-$name.log" ||
+    { cat "$tmp/bad-$name.log" >&2; fail "$name with bad options: the key is not named"; }
+done
+echo "invalid options: named, exit 2, for every mini-app"
+
+# No surface (the isovalue is above V's range): every step is published empty, the adaptor's
+# log line reports 0 triangles, and the simulation runs to the end.
+run grayscott 2 "$tmp/nosurface" --size 24 --steps $steps --isovalue 5
+grep -q "ldimesh: step $steps .* 0 triangles" "$tmp/nosurface.log" ||
+  { cat "$tmp/nosurface.log" >&2; fail "no surface: step $steps not reported with 0 triangles"; }
+grep -q "ldimesh-grayscott: done, $steps steps" "$tmp/nosurface.log" ||
+  fail "no surface: the simulation did not run to the end"
+[ "$(triangles "$tmp/nosurface/$(printf 'step_%06d' $steps).json")" -eq 0 ] ||
+  fail "no surface: the last step has triangles"
+echo "no surface: reported (0 triangles), simulation ran to the end, exit 0"
+echo "PASS"
