@@ -5,6 +5,7 @@
 # execute() (StepReport::max_blocked_seconds, from --report), and the root's background stages
 # (the published step's JSON "seconds"). Prints Markdown for docs/benchmarks.md.
 # Usage: bench/grayscott_bench.sh [SIZE=192] [SUBSTEPS=60] [STEPS=20] [RESOLUTION=256]
+# (binaries from build/bin, or from $LDIMESH_BIN)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 size=${1:-192}
@@ -21,7 +22,7 @@ printf '{"server": {"enabled": false}, "output_dir": "%s/steps", "resolution": %
 mpiexec -n 2 --bind-to none "$bin/ldimesh-grayscott" --size "$size" --substeps "$substeps" \
   --steps "$steps" --options "$tmp/options.json" --report >"$tmp/run.log"
 python3 - "$tmp" "$size" "$substeps" "$steps" "$resolution" <<'PY'
-import json, os, re, statistics, sys
+import json, os, statistics, sys
 tmp, size, substeps, steps, res = sys.argv[1:]
 reports = {}
 for line in open(os.path.join(tmp, "run.log")):
@@ -31,14 +32,14 @@ for line in open(os.path.join(tmp, "run.log")):
 stages = ["cast", "encode", "reduce", "decode", "mesh", "glb"]
 print(f"2 ranks, {size}³ points, {substeps} substeps per step, {steps} steps, {res}² views, "
       f"every step due, busy = skip\n")
+executed = [s for s, r in sorted(reports.items()) if r["executed"] == "1"]
+every = max(1, -(-len(executed) // 20))  # at most about 20 rows; the median covers them all
 if every > 1:
     print(f"Every {every}th executed step:\n")
 print("| step | compute s | blocked s | blocked / compute | triangles | "
       + " | ".join(f"{s} s" for s in stages) + " |")
 print("|---" * (5 + len(stages)) + "|")
 rows = []
-executed = [s for s, r in sorted(reports.items()) if r["executed"] == "1"]
-every = max(1, -(-len(executed) // 20))  # at most about 20 rows; the median covers them all
 for i, s in enumerate(executed):
     r = reports[s]
     path = os.path.join(tmp, "steps", f"step_{s:06d}.json")

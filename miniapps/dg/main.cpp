@@ -103,8 +103,6 @@ class ElementBlock {
     return b;
   }
 
-  std::size_t element_count() const { return lower_.size(); }
-
  private:
   int order_;
   std::vector<double> nodes_;  // GLL positions on [0, 1]

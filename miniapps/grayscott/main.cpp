@@ -144,7 +144,6 @@ class GrayScottBlock {
   }
 
   const double* v_data() const { return v_.data(); }
-  std::array<std::int64_t, 3> owned_points() const { return n_; }
 
  private:
   static int rank_of(std::array<int, 3> c, std::array<int, 3> blocks) {
