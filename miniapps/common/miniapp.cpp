@@ -26,7 +26,7 @@ MiniApp::~MiniApp() {
 
 void MiniApp::add_common_options(CLI::App& app, CommonArgs& args) const {
   app.add_option("--steps", args.steps, "time steps (each one an execute() call)")
-      ->check(CLI::PositiveNumber)
+      ->check(CLI::Range(std::uint64_t(1), std::uint64_t(1000000000)))
       ->capture_default_str();
   app.add_option("--options", args.options_path,
                  "the adaptor's options, a JSON file (docs/adaptor.md); default: the file named "
@@ -41,7 +41,7 @@ std::optional<int> MiniApp::parse(CLI::App& app, int argc, char** argv) const {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    if (rank_ == 0) return app.exit(e);
+    if (rank_ == 0) app.exit(e);  // prints the help or the error
     return e.get_exit_code() == 0 ? 0 : kExitUsage;
   }
   return std::nullopt;

@@ -10,7 +10,7 @@
 //
 // Each rank owns the points [lo, hi) of its block (block_grid over the ranks) and stores them
 // with one halo point on each side, x fastest: the layout a finite-volume or finite-difference
-// code hands over. The adaptor reads V in place, halo included (see hand_over_v).
+// code hands over. The adaptor reads V in place, halo included (see v_block).
 //
 //   mpiexec -n 2 build/bin/ldimesh-grayscott --size 64 --steps 200
 #include <algorithm>
@@ -240,7 +240,7 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(std::int64_t(4), std::int64_t(4096)))
       ->capture_default_str();
   cli.add_option("--substeps", substeps, "solver time steps per output step (execute call)")
-      ->check(CLI::PositiveNumber)
+      ->check(CLI::Range(1, 1000000))
       ->capture_default_str();
   cli.add_option("--F", p.F, "feed rate")->capture_default_str();
   cli.add_option("--k", p.k, "kill rate")->capture_default_str();
