@@ -246,26 +246,12 @@ int run_mesh(const MeshArgs& args) {
   }
   if (!args.steps_dir.empty()) {
     // A step as the job's server would publish it, for `ldimesh-serve --dir`.
-    ldimesh::StepMetadata meta;
-    meta.step = args.step;
-    meta.time = args.time;
-    meta.isovalues = {iso};
-    meta.triangles = glb_info.triangles;
-    meta.vertices = glb_info.vertices;
-    meta.samples = result.samples;
-    meta.quads = result.quads;
-    meta.bytes = glb.size();
-    for (const ldimesh::View& v : views)
-      meta.views.push_back({v.dir.x, v.dir.y, v.dir.z});
-    meta.resolution = std::uint32_t(args.res);
-    meta.r = args.r;
+    ldimesh::StepMetadata meta = ldimesh::describe_step(args.step, args.time, {iso}, views, args.r,
+                                                        result.samples, result.quads, glb_info);
     meta.seconds = {{"cast", step.seconds.cast},     {"encode", step.seconds.encode},
                     {"reduce", step.seconds.reduce}, {"decode", step.seconds.decode},
                     {"mesh", step.seconds.mesh},     {"glb", glb_seconds}};
-    ldimesh::Snapshot snapshot;
-    snapshot.step = args.step;
-    snapshot.metadata_json = ldimesh::metadata_to_json(meta);
-    snapshot.glb = std::make_shared<const std::vector<std::uint8_t>>(std::move(glb));
+    const ldimesh::Snapshot snapshot = ldimesh::make_snapshot(std::move(meta), std::move(glb));
     std::filesystem::create_directories(args.steps_dir);
     if (const ldimesh::Status s = ldimesh::write_step_files(args.steps_dir, snapshot); !s)
       throw std::runtime_error(s.message());

@@ -228,22 +228,10 @@ class AdaptorImpl final : public Adaptor {
     return Status::ok();
   }
   Status add_grid_block(const GridBlock& block) override {
-    try {
-      auto source = std::make_shared<GridSource>(block);
-      const Box owned = source->bounds();
-      return add_source(std::move(source), owned);
-    } catch (const std::exception& e) {
-      return fail(std::string("add_grid_block: ") + e.what());
-    }
+    return add_block<GridSource>(block, "add_grid_block");
   }
   Status add_hex_block(const HexBlock& block) override {
-    try {
-      auto source = std::make_shared<HexElementSource>(block);
-      const Box owned = source->bounds();
-      return add_source(std::move(source), owned);
-    } catch (const std::exception& e) {
-      return fail(std::string("add_hex_block: ") + e.what());
-    }
+    return add_block<HexElementSource>(block, "add_hex_block");
   }
   Status add_source(std::shared_ptr<const FieldSource> source, const Box& owned) override {
     if (!source) return fail("add_source: no source");
@@ -394,6 +382,18 @@ class AdaptorImpl final : public Adaptor {
     Box owned;
   };
 
+  // A block whose hits belong to its own bounds (the owned region of a grid block).
+  template <class Source, class Description>
+  Status add_block(const Description& block, const char* what) {
+    try {
+      auto source = std::make_shared<Source>(block);
+      const Box owned = source->bounds();
+      return add_source(std::move(source), owned);
+    } catch (const std::exception& e) {
+      return fail(std::string(what) + ": " + e.what());
+    }
+  }
+
   Status fail(const std::string& message) {
     std::lock_guard lock(mutex_);
     last_error_ = message;
@@ -468,27 +468,14 @@ class AdaptorImpl final : public Adaptor {
       throw std::runtime_error(s.message());
     const double glb_s = seconds_since(t);
 
-    StepMetadata meta;
-    meta.step = job.step;
-    meta.time = job.time;
-    meta.isovalues = options_.isovalues;
-    meta.triangles = info.triangles;
-    meta.vertices = info.vertices;
-    meta.samples = samples;
-    meta.quads = quads;
-    meta.bytes = glb.size();
-    for (const View& v : job.views)
-      meta.views.push_back({v.dir.x, v.dir.y, v.dir.z});
-    meta.resolution = std::uint32_t(options_.resolution);
-    meta.r = options_.r;
+    StepMetadata meta = describe_step(job.step, job.time, options_.isovalues, job.views, options_.r,
+                                      samples, quads, info);
     meta.seconds = job.seconds;
     meta.seconds["decode"] = decode_s;
     meta.seconds["mesh"] = mesh_s;
     meta.seconds["glb"] = glb_s;
-    Snapshot snapshot;
-    snapshot.step = job.step;
-    snapshot.metadata_json = metadata_to_json(meta);
-    snapshot.glb = std::make_shared<const std::vector<std::uint8_t>>(std::move(glb));
+    const std::size_t bytes = glb.size();
+    Snapshot snapshot = make_snapshot(std::move(meta), std::move(glb));
     if (!options_.output_dir.empty())
       if (Status s = write_step_files(options_.output_dir, snapshot); !s)
         throw std::runtime_error(s.message());
@@ -501,8 +488,8 @@ class AdaptorImpl final : public Adaptor {
       std::printf(
           "ldimesh: step %llu  t=%g  %zu triangles  %zu bytes  cast %.3f reduce %.3f mesh %.3f glb "
           "%.3f s\n",
-          (unsigned long long)job.step, job.time, std::size_t(info.triangles),
-          std::size_t(meta.bytes), job.seconds["cast"], job.seconds["reduce"], mesh_s, glb_s);
+          (unsigned long long)job.step, job.time, std::size_t(info.triangles), bytes,
+          job.seconds["cast"], job.seconds["reduce"], mesh_s, glb_s);
       std::fflush(stdout);
     }
   }

@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 
+#include "../mpi/mpi_gtest.hpp"
 #include "ldimesh/adaptor.hpp"
 #include "ldimesh/core/decomposition.hpp"
 #include "ldimesh/core/surfaces.hpp"
@@ -14,16 +15,8 @@
 namespace ldimesh {
 namespace {
 
-int rank_of() {
-  int r = 0;
-  MPI_Comm_rank(MPI_COMM_WORLD, &r);
-  return r;
-}
-int ranks() {
-  int n = 1;
-  MPI_Comm_size(MPI_COMM_WORLD, &n);
-  return n;
-}
+using testing::rank_of;
+using testing::ranks;
 
 // An adaptor over the built-in `surface`, this rank's block of its domain.
 std::unique_ptr<Adaptor> make(const std::string& options, const char* surface = "sphere") {
@@ -127,18 +120,5 @@ TEST(Adaptor, ExecuteWithoutADomainFailsCleanly) {
 }  // namespace ldimesh
 
 int main(int argc, char** argv) {
-  int provided = 0;
-  MPI_Init_thread(&argc, &argv, MPI_THREAD_FUNNELED, &provided);
-  ::testing::InitGoogleTest(&argc, argv);
-  int rank = 0;
-  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
-  if (rank != 0) {
-    auto& listeners = ::testing::UnitTest::GetInstance()->listeners();
-    delete listeners.Release(listeners.default_result_printer());
-  }
-  int failed = RUN_ALL_TESTS();
-  int any = 0;
-  MPI_Allreduce(&failed, &any, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD);
-  MPI_Finalize();
-  return any;
+  return ldimesh::testing::run_mpi_tests(argc, argv);
 }

@@ -35,24 +35,13 @@ std::size_t publish(ldimesh::SnapshotStore& store, std::uint64_t step, const cha
   ldimesh::GlbInfo info;
   if (const ldimesh::Status st = ldimesh::encode_glb(result.mesh, options, glb, &info); !st)
     throw std::runtime_error(st.message());
-  ldimesh::StepMetadata meta;
-  meta.step = step;
-  meta.time = 0.1 * double(step);
-  meta.isovalues = {s->isovalue};
-  meta.triangles = info.triangles;
-  meta.vertices = info.vertices;
-  meta.samples = result.samples;
-  meta.quads = result.quads;
-  meta.bytes = glb.size();
+  std::vector<ldimesh::View> views;
   for (const ldimesh::Ldi& l : ldis)
-    meta.views.push_back({l.view.dir.x, l.view.dir.y, l.view.dir.z});
-  meta.resolution = std::uint32_t(res);
-  meta.r = 0.5;
+    views.push_back(l.view);
+  ldimesh::StepMetadata meta = ldimesh::describe_step(
+      step, 0.1 * double(step), {s->isovalue}, views, 0.5, result.samples, result.quads, info);
   meta.seconds = {{"mesh", result.seconds.match + result.seconds.trim + result.seconds.assemble}};
-  ldimesh::Snapshot snapshot;
-  snapshot.step = step;
-  snapshot.metadata_json = ldimesh::metadata_to_json(meta);
-  snapshot.glb = std::make_shared<const std::vector<std::uint8_t>>(std::move(glb));
+  ldimesh::Snapshot snapshot = ldimesh::make_snapshot(std::move(meta), std::move(glb));
   if (const ldimesh::Status st = store.publish(std::move(snapshot)); !st)
     throw std::runtime_error(st.message());
   return info.triangles;

@@ -112,8 +112,6 @@ glm::dmat3 skew_map() {
 const Box kSphereBox{{-1.25, -1.25, -1.25}, {1.25, 1.25, 1.25}};
 
 using testing::axis_and_oblique_views;
-using testing::sphere_crossing;
-using testing::SphereCrossing;
 
 // Legendre P_n(x) and P'_n(x) on (−1, 1), by the three-term recurrence.
 glm::dvec2 legendre(int n, double x) {
@@ -180,29 +178,10 @@ TEST(HexElementSource, SphereFromQuadraticNodalValuesIsExact) {
         const RayCaster caster(source, 1.0);
         EXPECT_EQ(caster.primitive_count(), 56u);  // the 8 corner elements miss the sphere
         for (const View& view : axis_and_oblique_views(source.bounds(), 24)) {
-          const Ldi ldi = caster.cast(view);
-          int through = 0, outside = 0;
-          for (int j = 0; j < view.height; ++j)
-            for (int i = 0; i < view.width; ++i) {
-              const std::size_t p = std::size_t(j) * view.width + i;
-              const SphereCrossing c = sphere_crossing(view, i, j, 1.0, 1e-6);
-              if (c.grazing) continue;
-              ASSERT_EQ(ldi.count(p), std::uint32_t(c.count)) << "pixel " << i << "," << j;
-              if (c.count == 0) {
-                ++outside;
-                continue;
-              }
-              ++through;
-              const double t[2] = {c.t0, c.t1};
-              for (int h = 0; h < 2; ++h) {
-                const std::uint32_t s = ldi.begin(p) + h;
-                EXPECT_NEAR(ldi.depth[s], t[h], 1e-6);
-                const glm::dvec3 q = view.pixel_point(i, j, ldi.depth[s]);
-                EXPECT_NEAR(glm::length(glm::dvec3(ldi.normal[s]) - glm::normalize(q)), 0.0, 1e-4);
-              }
-            }
-          EXPECT_GT(through, 60);
-          EXPECT_GT(outside, 50);
+          const testing::SphereRays rays =
+              testing::expect_sphere_hits(caster.cast(view), 1.0, 1e-6);
+          EXPECT_GT(rays.through, 60);
+          EXPECT_GT(rays.outside, 50);
         }
       }
   }

@@ -48,28 +48,9 @@ TEST(RayCaster, SphereHitsLieOnTheSphere) {
   const AnalyticSource<fields::Sphere> source(fields::Sphere{}, kSphereBox);
   const RayCaster caster(source, 1.0);
   for (const View& view : axis_and_oblique_views(kSphereBox, 48)) {
-    const Ldi ldi = caster.cast(view);
-    int through = 0, outside = 0;
-    for (int j = 0; j < view.height; ++j)
-      for (int i = 0; i < view.width; ++i) {
-        const std::size_t p = std::size_t(j) * view.width + i;
-        const SphereCrossing c = sphere_crossing(view, i, j, 1.0, 1e-6);
-        if (c.grazing) continue;
-        ASSERT_EQ(ldi.count(p), std::uint32_t(c.count)) << "pixel " << i << "," << j;
-        if (c.count == 0) {
-          ++outside;
-          continue;
-        }
-        ++through;
-        EXPECT_NEAR(ldi.depth[ldi.begin(p)], c.t0, 1e-5);
-        EXPECT_NEAR(ldi.depth[ldi.begin(p) + 1], c.t1, 1e-5);
-        // Normals are the outward unit radius.
-        const glm::dvec3 q = view.pixel_point(i, j, ldi.depth[ldi.begin(p)]);
-        EXPECT_NEAR(glm::length(glm::dvec3(ldi.normal[ldi.begin(p)]) - glm::normalize(q)), 0.0,
-                    1e-4);
-      }
-    EXPECT_GT(through, 500);
-    EXPECT_GT(outside, 100);
+    const testing::SphereRays rays = testing::expect_sphere_hits(caster.cast(view), 1.0, 1e-5);
+    EXPECT_GT(rays.through, 500);
+    EXPECT_GT(rays.outside, 100);
   }
 }
 

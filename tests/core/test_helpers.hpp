@@ -8,6 +8,9 @@
 
 #include <glm/glm.hpp>
 
+#include <gtest/gtest.h>
+
+#include "ldimesh/core/ldi.hpp"
 #include "ldimesh/core/mesh.hpp"
 #include "ldimesh/core/view.hpp"
 
@@ -57,6 +60,43 @@ inline SphereCrossing sphere_crossing(const View& view, int i, int j, double R, 
   if (dist > R) return {0, 0, 0, false};
   const double s = std::sqrt(R * R - dist * dist);
   return {2, -b - s, -b + s, false};
+}
+
+// Checks that `ldi` holds the hits of the sphere of `radius` around the origin: exactly two on
+// every ray through it and none outside (rays within 1e-6 of tangency are skipped), depths
+// within `depth_tolerance` of the exact ones, radial unit normals. Stops at the first pixel
+// with a wrong hit count. Returns the number of rays through the sphere and outside it.
+struct SphereRays {
+  int through = 0;
+  int outside = 0;
+};
+inline SphereRays expect_sphere_hits(const Ldi& ldi, double radius, double depth_tolerance) {
+  const View& view = ldi.view;
+  SphereRays rays;
+  for (int j = 0; j < view.height; ++j)
+    for (int i = 0; i < view.width; ++i) {
+      const std::size_t p = std::size_t(j) * view.width + i;
+      const SphereCrossing c = sphere_crossing(view, i, j, radius, 1e-6);
+      if (c.grazing) continue;
+      if (ldi.count(p) != std::uint32_t(c.count)) {
+        ADD_FAILURE() << "pixel " << i << "," << j << ": " << ldi.count(p) << " hits, expected "
+                      << c.count;
+        return rays;
+      }
+      if (c.count == 0) {
+        ++rays.outside;
+        continue;
+      }
+      ++rays.through;
+      const double t[2] = {c.t0, c.t1};
+      for (int h = 0; h < 2; ++h) {
+        const std::uint32_t s = ldi.begin(p) + h;
+        EXPECT_NEAR(ldi.depth[s], t[h], depth_tolerance);
+        const glm::dvec3 q = view.pixel_point(i, j, ldi.depth[s]);
+        EXPECT_NEAR(glm::length(glm::dvec3(ldi.normal[s]) - glm::normalize(q)), 0.0, 1e-4);
+      }
+    }
+  return rays;
 }
 
 // The three axis views of `box` plus one oblique view, at `res`.

@@ -18,20 +18,13 @@
 #include "ldimesh/core/grid_source.hpp"
 #include "ldimesh/core/surfaces.hpp"
 #include "ldimesh/transport/distributed.hpp"
+#include "mpi_gtest.hpp"
 
 namespace ldimesh {
 namespace {
 
-int rank_of() {
-  int r = 0;
-  MPI_Comm_rank(MPI_COMM_WORLD, &r);
-  return r;
-}
-int ranks() {
-  int n = 1;
-  MPI_Comm_size(MPI_COMM_WORLD, &n);
-  return n;
-}
+using testing::rank_of;
+using testing::ranks;
 
 // What one process meshes from `ldis`, after the same quantization the ranks apply.
 MeshingResult one_process(std::vector<Ldi> ldis, const DistributedOptions& options) {
@@ -216,22 +209,10 @@ TEST(MpiPipeline, SampleRequestsAreAnsweredAsInOneProcess) {
 }  // namespace ldimesh
 
 int main(int argc, char** argv) {
-  int provided = 0;
-  MPI_Init_thread(&argc, &argv, MPI_THREAD_FUNNELED, &provided);
-  ::testing::InitGoogleTest(&argc, argv);
-  int rank = 0, size = 1;
-  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
-  MPI_Comm_size(MPI_COMM_WORLD, &size);
-  if (rank != 0) {
-    auto& listeners = ::testing::UnitTest::GetInstance()->listeners();
-    delete listeners.Release(listeners.default_result_printer());
-  }
   // Share the cores between the ranks (tests run oversubscribed on small machines).
-  tbb::global_control threads(tbb::global_control::max_allowed_parallelism,
-                              std::size_t(std::max(1, tbb::info::default_concurrency() / size)));
-  int failed = RUN_ALL_TESTS();
-  int any = 0;
-  MPI_Allreduce(&failed, &any, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD);
-  MPI_Finalize();
-  return any;
+  return ldimesh::testing::run_mpi_tests(argc, argv, [] {
+    return std::make_unique<tbb::global_control>(
+        tbb::global_control::max_allowed_parallelism,
+        std::size_t(std::max(1, tbb::info::default_concurrency() / ldimesh::testing::ranks())));
+  });
 }

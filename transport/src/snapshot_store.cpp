@@ -271,6 +271,25 @@ std::size_t Snapshot::memory_bytes() const {
   return sizeof(Snapshot) + metadata_json.capacity() + (glb ? glb->capacity() : 0);
 }
 
+StepMetadata describe_step(std::uint64_t step, double time, std::vector<double> isovalues,
+                           std::span<const View> views, double r, std::size_t samples,
+                           std::size_t quads, const GlbInfo& glb) {
+  StepMetadata meta;
+  meta.step = step;
+  meta.time = time;
+  meta.isovalues = std::move(isovalues);
+  meta.triangles = glb.triangles;
+  meta.vertices = glb.vertices;
+  meta.samples = samples;
+  meta.quads = quads;
+  for (const View& v : views) {
+    meta.views.push_back({v.dir.x, v.dir.y, v.dir.z});
+    meta.resolution = std::max(meta.resolution, std::uint32_t(std::max(v.width, v.height)));
+  }
+  meta.r = r;
+  return meta;
+}
+
 Snapshot make_snapshot(StepMetadata metadata, std::vector<std::uint8_t> glb) {
   metadata.bytes = glb.size();
   Snapshot s;

@@ -25,6 +25,8 @@
 #include <vector>
 
 #include "ldimesh/core/status.hpp"
+#include "ldimesh/core/view.hpp"
+#include "ldimesh/transport/glb.hpp"
 
 namespace ldimesh {
 
@@ -79,6 +81,14 @@ struct Snapshot {
 };
 
 // A snapshot of `metadata` (its `bytes` field set to glb.size()) and `glb`, moved in.
+// The metadata of a step meshed from `views` at `isovalues` with trimming parameter `r`:
+// counts from the meshing (`samples`, `quads`) and from the encoded GLB (`glb`), the views'
+// directions and resolution (their longer side); `seconds` and `bytes` are left to the caller
+// (make_snapshot sets `bytes`).
+StepMetadata describe_step(std::uint64_t step, double time, std::vector<double> isovalues,
+                           std::span<const View> views, double r, std::size_t samples,
+                           std::size_t quads, const GlbInfo& glb);
+
 Snapshot make_snapshot(StepMetadata metadata, std::vector<std::uint8_t> glb);
 
 struct SnapshotStoreLimits {

@@ -1,0 +1,51 @@
+// GoogleTest under mpiexec. Tests are collective: every rank runs every test, only rank 0
+// prints, and checks use non-fatal EXPECT_* so that no rank returns early and leaves the others
+// waiting in a collective call.
+#pragma once
+
+#include <mpi.h>
+
+#include <gtest/gtest.h>
+
+namespace ldimesh::testing {
+
+inline int rank_of() {
+  int r = 0;
+  MPI_Comm_rank(MPI_COMM_WORLD, &r);
+  return r;
+}
+
+inline int ranks() {
+  int n = 1;
+  MPI_Comm_size(MPI_COMM_WORLD, &n);
+  return n;
+}
+
+// The body of main(): initialises MPI (funneled), runs the tests with only rank 0 printing,
+// and returns failure on every rank if any rank failed. `before_tests` runs after MPI_Init;
+// what it returns lives while the tests run (e.g. a tbb::global_control).
+template <class Setup>
+int run_mpi_tests(int argc, char** argv, Setup before_tests) {
+  int provided = 0;
+  MPI_Init_thread(&argc, &argv, MPI_THREAD_FUNNELED, &provided);
+  ::testing::InitGoogleTest(&argc, argv);
+  if (rank_of() != 0) {
+    auto& listeners = ::testing::UnitTest::GetInstance()->listeners();
+    delete listeners.Release(listeners.default_result_printer());
+  }
+  int failed = 0;
+  {
+    [[maybe_unused]] auto guard = before_tests();
+    failed = RUN_ALL_TESTS();
+  }
+  int any = 0;
+  MPI_Allreduce(&failed, &any, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD);
+  MPI_Finalize();
+  return any;
+}
+
+inline int run_mpi_tests(int argc, char** argv) {
+  return run_mpi_tests(argc, argv, [] { return 0; });
+}
+
+}  // namespace ldimesh::testing
