@@ -4,7 +4,7 @@
 set -euo pipefail
 
 packages=(
-  cmake make g++ git            # build
+  cmake make g++ gfortran git   # build (gfortran: the Fortran module and mini-app)
   libembree-dev                 # ray casting (Embree 3)
   libglm-dev                    # vector math
   libtbb-dev                    # threads

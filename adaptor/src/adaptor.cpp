@@ -186,6 +186,8 @@ struct Job {
   std::vector<View> views;
   std::vector<LdiFragment> fragments;  // isovalue-major: isovalue i, view v at i·views + v
   std::map<std::string, double> seconds;
+  std::uint64_t skipped_steps = 0;  // due steps dropped since the previous job was handed over
+  std::uint64_t nonfinite_values = 0;
 };
 
 class AdaptorImpl final : public Adaptor {
@@ -199,6 +201,13 @@ class AdaptorImpl final : public Adaptor {
   // Root: store, server and worker.
   Status start_root() {
     if (rank_ != 0) return Status::ok();
+    int level = MPI_THREAD_SINGLE;
+    MPI_Query_thread(&level);
+    if (level < MPI_THREAD_FUNNELED && options_.log)
+      std::fprintf(stderr,
+                   "ldimesh: warning: MPI runs with MPI_THREAD_SINGLE; the root's worker thread "
+                   "never calls MPI, but the standard asks for MPI_THREAD_FUNNELED "
+                   "(MPI_Init_thread)\n");
     store_ = std::make_unique<SnapshotStore>(
         SnapshotStoreLimits{options_.keep, options_.memory_mb << 20});
     if (options_.server) {
@@ -259,6 +268,7 @@ class AdaptorImpl final : public Adaptor {
     MPI_Bcast(&decision, 1, MPI_INT, 0, comm_);
     if (decision != 1) {
       report_.skipped_busy = decision == 2;
+      if (decision == 2 && rank_ == 0) ++skipped_since_handoff_;
       if (decision == 2 && rank_ == 0 && options_.log)
         std::printf("ldimesh: step %llu skipped: still processing an earlier step\n",
                     (unsigned long long)step);
@@ -275,21 +285,28 @@ class AdaptorImpl final : public Adaptor {
     std::string local_error;
     std::vector<View> views;
     std::vector<LdiFragment> fragments;
+    std::uint64_t nonfinite = 0;
     const auto cast_start = Clock::now();
     try {
       if (!has_domain_) throw std::runtime_error("set_domain() was not called");
       views = make_axis_views(domain_, options_.resolution, options_.views);
-      for (std::size_t i = 0; i < options_.isovalues.size(); ++i)
+      for (std::size_t i = 0; i < options_.isovalues.size(); ++i) {
+        // One scene per block and isovalue, cast along every view.
+        std::vector<std::vector<LdiFragment>> parts(views.size());
+        for (const Block& b : blocks_) {
+          const RayCaster caster(*b.source, options_.isovalues[i]);
+          // The values are the same for every isovalue: count them once.
+          if (i == 0) nonfinite += caster.nonfinite_values();
+          for (std::size_t v = 0; v < views.size(); ++v)
+            parts[v].push_back(caster.cast_fragment(views[v], std::uint32_t(i * views.size() + v),
+                                                    {b.owned, domain_}));
+        }
         for (std::size_t v = 0; v < views.size(); ++v) {
           const std::uint32_t index = std::uint32_t(i * views.size() + v);
-          std::vector<LdiFragment> parts;
-          for (const Block& b : blocks_) {
-            const RayCaster caster(*b.source, options_.isovalues[i]);
-            parts.push_back(caster.cast_fragment(views[v], index, {b.owned, domain_}));
-          }
-          fragments.push_back(parts.empty() ? make_empty_fragment(views[v], index)
-                                            : merge_fragments(parts, 0.0));
+          fragments.push_back(parts[v].empty() ? make_empty_fragment(views[v], index)
+                                               : merge_fragments(parts[v], 0.0));
         }
+      }
     } catch (const std::exception& e) {
       local_error = e.what();
     }
@@ -320,6 +337,10 @@ class AdaptorImpl final : public Adaptor {
     MPI_Allreduce(MPI_IN_PLACE, &reduce_failed, 1, MPI_INT, MPI_MAX, comm_);
     double max_cast = 0.0;
     MPI_Reduce(&cast_seconds, &max_cast, 1, MPI_DOUBLE, MPI_MAX, 0, comm_);
+    static_assert(sizeof(unsigned long long) == sizeof(std::uint64_t));
+    unsigned long long nonfinite_local = nonfinite, nonfinite_total = 0;
+    MPI_Reduce(&nonfinite_local, &nonfinite_total, 1, MPI_UNSIGNED_LONG_LONG, MPI_SUM, 0, comm_);
+    if (rank_ == 0) report_.nonfinite_values = nonfinite_total;
     if (reduce_failed) {
       finish_report(start);
       return fail(
@@ -338,11 +359,17 @@ class AdaptorImpl final : public Adaptor {
                      {"encode", stats.encode_seconds},
                      {"reduce", stats.wall_seconds},
                      {"blocked", report_.max_blocked_seconds}};
+      job.nonfinite_values = report_.nonfinite_values;
+      job.skipped_steps = skipped_since_handoff_;
+      skipped_since_handoff_ = 0;
       std::lock_guard lock(mutex_);
       report_.replaced_pending = pending_.has_value();
-      if (report_.replaced_pending && options_.log)
-        std::printf("ldimesh: step %llu replaces step %llu, which was still waiting\n",
-                    (unsigned long long)step, (unsigned long long)pending_->step);
+      if (report_.replaced_pending) {
+        job.skipped_steps += pending_->skipped_steps + 1;
+        if (options_.log)
+          std::printf("ldimesh: step %llu replaces step %llu, which was still waiting\n",
+                      (unsigned long long)step, (unsigned long long)pending_->step);
+      }
       pending_ = std::move(job);
       wake_.notify_all();
     }
@@ -362,7 +389,8 @@ class AdaptorImpl final : public Adaptor {
       worker_.join();
       if (server_) server_->stop();
     }
-    return last_error_.empty() ? Status::ok() : Status::error(last_error_);
+    std::lock_guard lock(mutex_);
+    return worker_error_.empty() ? Status::ok() : Status::error(worker_error_);
   }
 
   std::string url() const override { return server_ ? server_->url() : std::string(); }
@@ -428,7 +456,7 @@ class AdaptorImpl final : public Adaptor {
       std::lock_guard lock(mutex_);
       working_ = false;
       if (!error.empty()) {
-        last_error_ = "step " + std::to_string(job.step) + ": " + error;
+        last_error_ = worker_error_ = "step " + std::to_string(job.step) + ": " + error;
         if (options_.log) std::fprintf(stderr, "ldimesh: error: %s\n", last_error_.c_str());
       }
       idle_.notify_all();
@@ -474,6 +502,8 @@ class AdaptorImpl final : public Adaptor {
     meta.seconds["decode"] = decode_s;
     meta.seconds["mesh"] = mesh_s;
     meta.seconds["glb"] = glb_s;
+    meta.skipped_steps = job.skipped_steps;
+    meta.nonfinite_values = job.nonfinite_values;
     const std::size_t bytes = glb.size();
     Snapshot snapshot = make_snapshot(std::move(meta), std::move(glb));
     if (!options_.output_dir.empty())
@@ -487,11 +517,22 @@ class AdaptorImpl final : public Adaptor {
     if (options_.log) {
       std::printf(
           "ldimesh: step %llu  t=%g  %zu triangles  %zu bytes  cast %.3f reduce %.3f mesh %.3f glb "
-          "%.3f s\n",
+          "%.3f s%s\n",
           (unsigned long long)job.step, job.time, std::size_t(info.triangles), bytes,
-          job.seconds["cast"], job.seconds["reduce"], mesh_s, glb_s);
+          job.seconds["cast"], job.seconds["reduce"], mesh_s, glb_s, step_notes(job).c_str());
       std::fflush(stdout);
     }
+  }
+
+  // The log line's warnings: steps dropped before this one, non-finite field values.
+  static std::string step_notes(const Job& job) {
+    std::string notes;
+    if (job.skipped_steps > 0)
+      notes += "  (" + std::to_string(job.skipped_steps) + " earlier steps skipped: root busy)";
+    if (job.nonfinite_values > 0)
+      notes += "  warning: " + std::to_string(job.nonfinite_values) +
+               " NaN/Inf field values, the cells touching them left out";
+    return notes;
   }
 
   // Appends `b` to `a` (the meshes of several isovalues in one GLB).
@@ -519,6 +560,7 @@ class AdaptorImpl final : public Adaptor {
   bool finalized_ = false;
   Clock::time_point last_run_;
   bool ran_before_ = false;
+  std::uint64_t skipped_since_handoff_ = 0;  // root, solver thread only
 
   // Root only.
   std::unique_ptr<SnapshotStore> store_;
@@ -531,6 +573,7 @@ class AdaptorImpl final : public Adaptor {
   bool stopping_ = false;
   std::uint64_t published_ = 0;
   std::string last_error_;
+  std::string worker_error_;  // the last failure of the root's background work
 };
 
 }  // namespace
@@ -538,6 +581,12 @@ class AdaptorImpl final : public Adaptor {
 Status Adaptor::create(MPI_Comm comm, std::string_view options_json,
                        std::unique_ptr<Adaptor>& out) {
   out.reset();
+  int initialized = 0, finalized = 0;
+  MPI_Initialized(&initialized);
+  MPI_Finalized(&finalized);
+  if (!initialized || finalized)
+    return Status::error("ldimesh: MPI is not initialised (call MPI_Init_thread first)");
+  if (comm == MPI_COMM_NULL) return Status::error("ldimesh: the communicator is MPI_COMM_NULL");
   try {
     Options options;
     Status status = Status::ok();

@@ -1,6 +1,7 @@
 #include "ldimesh/core/grid_source.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -77,18 +78,23 @@ struct GridView {
 struct Brick {
   std::array<std::int64_t, 3> lo, hi;
   glm::dvec3 box_lo, box_hi;
+  // Some corner point of its cells is NaN or ±Inf: its cells check their corners.
+  bool nonfinite = false;
 };
 
 template <class T>
 class GridBinding final : public GeometryBinding {
  public:
-  GridBinding(RTCDevice device, const GridView<T>& grid, double iso, std::vector<Brick> bricks)
+  GridBinding(RTCDevice device, const GridView<T>& grid, double iso, std::vector<Brick> bricks,
+              std::uint64_t nonfinite)
       : grid_(grid),
         iso_(iso),
         bricks_(std::move(bricks)),
+        nonfinite_(nonfinite),
         geometry_(device, bricks_.size(), this, &GridBinding::bounds, &GridBinding::intersect) {}
   RTCGeometry geometry() const override { return geometry_.get(); }
   std::size_t primitive_count() const override { return bricks_.size(); }
+  std::uint64_t nonfinite_values() const override { return nonfinite_; }
 
  private:
   static void bounds(const RTCBoundsFunctionArguments* args) {
@@ -100,10 +106,18 @@ class GridBinding final : public GeometryBinding {
   static void intersect(const RTCIntersectFunctionNArguments* args) {
     if (!args->valid[0]) return;
     const auto* self = static_cast<const GridBinding*>(args->geometryUserPtr);
-    self->intersect_brick(*reinterpret_cast<RayQuery*>(args->context), self->bricks_[args->primID]);
+    RayQuery& q = *reinterpret_cast<RayQuery*>(args->context);
+    const Brick& b = self->bricks_[args->primID];
+    if (b.nonfinite)
+      self->template intersect_brick<true>(q, b);
+    else
+      self->template intersect_brick<false>(q, b);
   }
 
-  // Walks the cells of the brick along the ray (3D DDA) and solves each cell's cubic.
+  // Walks the cells of the brick along the ray (3D DDA) and solves each cell's cubic. With
+  // kSkipNonfinite, cells with a NaN or ±Inf corner produce no hits; bricks without such values
+  // take the path without the check.
+  template <bool kSkipNonfinite>
   void intersect_brick(RayQuery& q, const Brick& b) const {
     double t0 = q.t_min, t1 = q.t_max;
     if (!clip_ray_to_box(q.org, q.dir, b.box_lo, b.box_hi, t0, t1)) return;
@@ -137,7 +151,8 @@ class GridBinding final : public GeometryBinding {
       std::array<bool, 3> on_exit_face;
       for (int a = 0; a < 3; ++a)
         on_exit_face[a] = t_next[a] == t_exit;
-      if (t_exit > t) solve_cell(q, cell, step, t, t_exit, on_entry_face, on_exit_face);
+      if (t_exit > t)
+        solve_cell<kSkipNonfinite>(q, cell, step, t, t_exit, on_entry_face, on_exit_face);
       t = std::max(t, t_exit);  // a face behind t (rounding at the entry) moves nothing back
       // Advance along every axis whose face the ray leaves through (several at an edge).
       bool inside = true;
@@ -154,6 +169,7 @@ class GridBinding final : public GeometryBinding {
     }
   }
 
+  template <bool kSkipNonfinite>
   void solve_cell(RayQuery& q, const std::array<std::int64_t, 3>& c, const std::array<int, 3>& step,
                   double ta, double tb, const std::array<bool, 3>& entry_face,
                   const std::array<bool, 3>& exit_face) const {
@@ -161,7 +177,11 @@ class GridBinding final : public GeometryBinding {
     double corner[8];
     bool any_positive = false, any_negative = false;
     for (int n = 0; n < 8; ++n) {
-      corner[n] = g.value(c[0] + (n & 1), c[1] + ((n >> 1) & 1), c[2] + ((n >> 2) & 1)) - iso_;
+      const double v = g.value(c[0] + (n & 1), c[1] + ((n >> 1) & 1), c[2] + ((n >> 2) & 1));
+      if constexpr (kSkipNonfinite) {
+        if (!std::isfinite(v)) return;  // no interpolant in this cell
+      }
+      corner[n] = v - iso_;
       (positive(corner[n]) ? any_positive : any_negative) = true;
     }
     if (!any_positive || !any_negative) return;  // the interpolant lies between its corners
@@ -203,8 +223,37 @@ class GridBinding final : public GeometryBinding {
   GridView<T> grid_;
   double iso_;
   std::vector<Brick> bricks_;
+  std::uint64_t nonfinite_;
   UserGeometry geometry_;  // last: its callbacks read the members above
 };
+
+// Folds points i0 … i1 (at least two) of row (j, k) into the running minimum, maximum and sum.
+// Two points per step into separate accumulators: a single chain of additions would bound the
+// loop by their latency.
+template <class T>
+void scan_row(const GridView<T>& g, std::int64_t i0, std::int64_t i1, std::int64_t j,
+              std::int64_t k, double& lo, double& hi, double& sum) {
+  double lo1 = lo, hi1 = hi, sum0 = 0.0, sum1 = 0.0;
+  std::int64_t i = i0;
+  for (; i < i1; i += 2) {
+    const double v0 = g.value(i, j, k), v1 = g.value(i + 1, j, k);
+    lo = std::min(lo, v0);
+    hi = std::max(hi, v0);
+    sum0 += v0;
+    lo1 = std::min(lo1, v1);
+    hi1 = std::max(hi1, v1);
+    sum1 += v1;
+  }
+  if (i == i1) {
+    const double v = g.value(i, j, k);
+    lo = std::min(lo, v);
+    hi = std::max(hi, v);
+    sum0 += v;
+  }
+  lo = std::min(lo, lo1);
+  hi = std::max(hi, hi1);
+  sum += sum0 + sum1;
+}
 
 template <class T>
 std::unique_ptr<GeometryBinding> bind_grid(RTCDevice device, const GridView<T>& grid, double iso,
@@ -215,6 +264,7 @@ std::unique_ptr<GeometryBinding> bind_grid(RTCDevice device, const GridView<T>& 
   const std::int64_t total = bricks[0] * bricks[1] * bricks[2];
   std::vector<std::uint8_t> active(total);
   std::vector<Brick> all(total);
+  std::atomic<std::uint64_t> nonfinite{0};
   tbb::parallel_for(std::int64_t(0), total, [&](std::int64_t n) {
     const std::array<std::int64_t, 3> idx{n % bricks[0], (n / bricks[0]) % bricks[1],
                                           n / (bricks[0] * bricks[1])};
@@ -225,21 +275,44 @@ std::unique_ptr<GeometryBinding> bind_grid(RTCDevice device, const GridView<T>& 
       b.box_lo[a] = grid.coord(a, b.lo[a]);
       b.box_hi[a] = grid.coord(a, b.hi[a] + 1);
     }
-    // Range of the trilinear interpolant over the brick = range of its points.
-    double lo = INFINITY, hi = -INFINITY;
+    // Range of the trilinear interpolant over the brick = range of its points. The sum of the
+    // values is finite unless one of them is NaN or ±Inf (or the sum overflows): a closer look
+    // only then.
+    double lo = INFINITY, hi = -INFINITY, sum = 0.0;
     for (std::int64_t k = b.lo[2]; k <= b.hi[2] + 1; ++k)
       for (std::int64_t j = b.lo[1]; j <= b.hi[1] + 1; ++j)
-        for (std::int64_t i = b.lo[0]; i <= b.hi[0] + 1; ++i) {
-          const double v = grid.value(i, j, k);
-          lo = std::min(lo, v);
-          hi = std::max(hi, v);
-        }
+        scan_row(grid, b.lo[0], b.hi[0] + 1, j, k, lo, hi, sum);
+    if (!std::isfinite(sum)) [[unlikely]] {
+      // Non-finite points are left out of the range (their cells produce no hits, the others
+      // keep theirs) and counted by the one brick that owns them: a brick owns the points below
+      // its upper layer of points along each axis, which the next brick reads as its lower
+      // layer, and the last brick along an axis owns that layer too. So every point read is
+      // counted exactly once.
+      std::array<std::int64_t, 3> owned_hi;
+      for (int a = 0; a < 3; ++a)
+        owned_hi[a] = b.hi[a] == last[a] ? b.hi[a] + 1 : b.hi[a];
+      lo = INFINITY, hi = -INFINITY;
+      std::uint64_t bad = 0;
+      for (std::int64_t k = b.lo[2]; k <= b.hi[2] + 1; ++k)
+        for (std::int64_t j = b.lo[1]; j <= b.hi[1] + 1; ++j)
+          for (std::int64_t i = b.lo[0]; i <= b.hi[0] + 1; ++i) {
+            const double v = grid.value(i, j, k);
+            if (std::isfinite(v)) {
+              lo = std::min(lo, v);
+              hi = std::max(hi, v);
+            } else {
+              b.nonfinite = true;
+              bad += i <= owned_hi[0] && j <= owned_hi[1] && k <= owned_hi[2];
+            }
+          }
+      if (bad > 0) nonfinite.fetch_add(bad, std::memory_order_relaxed);
+    }
     active[n] = lo <= iso && iso <= hi;
   });
   std::vector<Brick> kept;
   for (std::int64_t n = 0; n < total; ++n)
     if (active[n]) kept.push_back(all[n]);
-  return std::make_unique<GridBinding<T>>(device, grid, iso, std::move(kept));
+  return std::make_unique<GridBinding<T>>(device, grid, iso, std::move(kept), nonfinite.load());
 }
 
 }  // namespace

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -194,6 +195,21 @@ void convert_element(int order, const ConversionMatrix& m, const double* in, dou
     }
     src = dst;
   }
+}
+
+// Copies the (p + 1)³ = n nodal values of `element` as doubles into `nodal`; returns how many
+// are NaN or ±Inf.
+std::size_t read_nodal(const HexBlock& block, std::size_t element, std::size_t n, double* nodal) {
+  const std::size_t first = element * block.element_stride;
+  // One branch per element on the scalar type, none per value.
+  if (block.type == ScalarType::float32)
+    std::copy_n(static_cast<const float*>(block.values) + first, n, nodal);
+  else
+    std::copy_n(static_cast<const double*>(block.values) + first, n, nodal);
+  std::size_t nonfinite = 0;
+  for (std::size_t i = 0; i < n; ++i)
+    nonfinite += !std::isfinite(nodal[i]);
+  return nonfinite;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -458,15 +474,17 @@ struct ActiveElement {
 class HexBinding final : public GeometryBinding {
  public:
   HexBinding(RTCDevice device, int order, std::vector<ActiveElement> elements,
-             std::vector<double> coefficients)
+             std::vector<double> coefficients, std::uint64_t nonfinite)
       : order_(order),
         values_per_element_(nodes_per_element(order)),
         elements_(std::move(elements)),
         coefficients_(std::move(coefficients)),
+        nonfinite_(nonfinite),
         geometry_(device, elements_.size(), this, &HexBinding::bounds, &HexBinding::intersect) {}
 
   RTCGeometry geometry() const override { return geometry_.get(); }
   std::size_t primitive_count() const override { return elements_.size(); }
+  std::uint64_t nonfinite_values() const override { return nonfinite_; }
 
  private:
   static void bounds(const RTCBoundsFunctionArguments* args) {
@@ -506,7 +524,8 @@ class HexBinding final : public GeometryBinding {
   std::size_t values_per_element_;
   std::vector<ActiveElement> elements_;
   std::vector<double> coefficients_;  // iso subtracted, values_per_element_ per active element
-  UserGeometry geometry_;             // last: its callbacks read the members above
+  std::uint64_t nonfinite_;
+  UserGeometry geometry_;  // last: its callbacks read the members above
 };
 
 }  // namespace
@@ -596,12 +615,7 @@ void HexElementSource::element_bernstein(std::size_t element, std::span<double> 
   if (out.size() != n)
     throw std::invalid_argument("element_bernstein: span must hold (order + 1)^3 values");
   double nodal[kMaxElementValues];
-  const std::size_t first = element * block_.element_stride;
-  // One branch per element on the scalar type, none per value.
-  if (block_.type == ScalarType::float32)
-    std::copy_n(static_cast<const float*>(block_.values) + first, n, nodal);
-  else
-    std::copy_n(static_cast<const double*>(block_.values) + first, n, nodal);
+  read_nodal(block_, element, n, nodal);
   convert_element(p, conversion_matrix(p, block_.nodes), nodal, out.data());
 }
 
@@ -611,16 +625,26 @@ std::unique_ptr<GeometryBinding> HexElementSource::bind(RTCDevice device, double
   const std::size_t count = block_.element_count;
 
   // Pass 1: which elements may hold the isosurface (convex hull of the Bernstein coefficients).
-  // Flags only, so memory does not grow with the block.
+  // Flags only, so memory does not grow with the block. An element with a non-finite nodal
+  // value has no polynomial to intersect: it is left out.
   std::vector<std::uint8_t> active(count);
+  std::atomic<std::uint64_t> nonfinite{0};
+  const ConversionMatrix& matrix = conversion_matrix(p, block_.nodes);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 64),
                     [&](const tbb::blocked_range<std::size_t>& range) {
-                      double b[kMaxElementValues];
+                      double nodal[kMaxElementValues], b[kMaxElementValues];
+                      std::uint64_t bad = 0;
                       for (std::size_t e = range.begin(); e != range.end(); ++e) {
-                        element_bernstein(e, {b, n});
+                        if (const std::size_t k = read_nodal(block_, e, n, nodal); k > 0) {
+                          bad += k;
+                          active[e] = 0;
+                          continue;
+                        }
+                        convert_element(p, matrix, nodal, b);
                         const auto [lo, hi] = std::minmax_element(b, b + n);
                         active[e] = *lo <= isovalue && isovalue <= *hi;
                       }
+                      if (bad > 0) nonfinite.fetch_add(bad, std::memory_order_relaxed);
                     });
   std::vector<std::size_t> kept;
   for (std::size_t e = 0; e < count; ++e)
@@ -644,7 +668,8 @@ std::unique_ptr<GeometryBinding> HexElementSource::bind(RTCDevice device, double
     out.lo = box.lo;
     out.hi = box.hi;
   });
-  return std::make_unique<HexBinding>(device, p, std::move(elements), std::move(coefficients));
+  return std::make_unique<HexBinding>(device, p, std::move(elements), std::move(coefficients),
+                                      nonfinite.load());
 }
 
 }  // namespace ldimesh

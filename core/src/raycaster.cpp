@@ -78,6 +78,13 @@ std::size_t RayCaster::primitive_count() const {
   return n;
 }
 
+std::uint64_t RayCaster::nonfinite_values() const {
+  std::uint64_t n = 0;
+  for (const auto& b : bindings_)
+    n += b->nonfinite_values();
+  return n;
+}
+
 bool subdomain_segment(const Subdomain& sub, glm::dvec3 o, glm::dvec3 d, RaySegment& segment) {
   // Where the ray leaves the global box: the end of the last segment is closed there.
   double g0 = -INFINITY, g1 = INFINITY;

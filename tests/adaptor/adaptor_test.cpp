@@ -2,7 +2,10 @@
 // test and only non-fatal EXPECTs are used, so that no rank is left alone in a collective call.
 #include <mpi.h>
 
+#include <chrono>
 #include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <thread>
 
 #include <gtest/gtest.h>
@@ -77,21 +80,39 @@ TEST(Adaptor, DueStepsArePublishedAndWrittenOffTheSolversPath) {
 }
 
 TEST(Adaptor, ASlowRootMakesStepsBeSkippedNotTheSolverWait) {
+  const std::string dir = temp_dir("slow");
   auto a = make(R"({"server": {"enabled": false}, "resolution": 32, "log": false, "busy": "skip",
-                    "testing": {"slow_root_seconds": 0.4}})");
+                    "testing": {"slow_root_seconds": 0.4}, "output_dir": ")" +
+                dir + R"("})");
   if (!a) return;
-  int skipped = 0;
+  int skipped = 0, skipped_since_handoff = 0;
   double worst = 0.0;
   for (std::uint64_t step = 0; step < 5; ++step) {
     EXPECT_TRUE(a->execute(step, 0.0));
-    if (a->last_report().skipped_busy) ++skipped;
+    if (a->last_report().skipped_busy) {
+      ++skipped;
+      ++skipped_since_handoff;
+    } else {
+      skipped_since_handoff = 0;
+    }
     worst = std::max(worst, a->last_report().blocked_seconds);
   }
+  // Once the worker is idle again the next step is published and counts the steps dropped
+  // since the last one handed over.
+  std::this_thread::sleep_for(std::chrono::milliseconds(900));
+  EXPECT_TRUE(a->execute(5, 0.0));
+  EXPECT_FALSE(a->last_report().skipped_busy);
   EXPECT_TRUE(a->finalize());
   if (rank_of() == 0) {
     EXPECT_GE(skipped, 3);   // the worker sleeps 0.4 s per step, the solver does not
     EXPECT_LT(worst, 0.35);  // no execute() waited for the worker
-    EXPECT_LE(a->published_steps(), 2u);
+    EXPECT_LE(a->published_steps(), 3u);
+    std::ifstream in(dir + "/step_000005.json");
+    std::stringstream json;
+    json << in.rdbuf();
+    EXPECT_NE(json.str().find("\"skipped_steps\":" + std::to_string(skipped_since_handoff) + ","),
+              std::string::npos)
+        << json.str() << " (expected " << skipped_since_handoff << " skipped)";
   }
 }
 

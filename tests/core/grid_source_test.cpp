@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <random>
 #include <set>
 
@@ -346,6 +347,250 @@ TEST(GridSource, RejectsBadBlocks) {
   b = ok;
   b.coords = {decreasing.data(), decreasing.data(), decreasing.data()};
   EXPECT_THROW(GridSource{b}, std::invalid_argument);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Non-finite values
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+using Index3 = std::array<std::int64_t, 3>;
+
+// The owned cells of `grid` (lower corner indices) with a corner among `points`.
+std::vector<Index3> cells_with_corner_among(const GridSource& grid,
+                                            const std::vector<Index3>& points) {
+  std::set<Index3> cells;
+  for (const Index3& p : points)
+    for (int n = 0; n < 8; ++n) {
+      const Index3 c{p[0] - (n & 1), p[1] - ((n >> 1) & 1), p[2] - ((n >> 2) & 1)};
+      bool owned = true;
+      for (int a = 0; a < 3; ++a)
+        owned = owned && c[a] >= grid.first_cell()[a] && c[a] <= grid.last_cell()[a];
+      if (owned) cells.insert(c);
+    }
+  return {cells.begin(), cells.end()};
+}
+
+// The box of cell c grown by `pad` on every side (pad < 0 shrinks it).
+Box cell_box(const GridSource& grid, const Index3& c, double pad) {
+  Box box;
+  for (int a = 0; a < 3; ++a) {
+    box.lo[a] = grid.coordinate(a, c[a]) - pad;
+    box.hi[a] = grid.coordinate(a, c[a] + 1) + pad;
+  }
+  return box;
+}
+
+bool inside(const Box& box, glm::dvec3 x) {
+  for (int a = 0; a < 3; ++a)
+    if (!(x[a] > box.lo[a] && x[a] < box.hi[a])) return false;
+  return true;
+}
+
+// Compares the LDIs of the same views of a clean field and of the field with non-finite
+// values in `bad` cells: rays that do not touch a bad cell get bit-identical hits; rays that do
+// lose exactly the hits inside bad cells. Counts the rays of both kinds and the hits lost in
+// `result`.
+struct NonfiniteComparison {
+  int untouched_rays = 0;
+  int touched_rays = 0;
+  int hits_dropped = 0;
+};
+void expect_only_bad_cells_lose_hits(const GridSource& grid, const std::vector<Index3>& bad,
+                                     const RayCaster& clean, const RayCaster& dirty,
+                                     NonfiniteComparison& result) {
+  const double h = grid.coordinate(0, 1) - grid.coordinate(0, 0);
+  for (const View& view : axis_and_oblique_views(grid.bounds(), 64)) {
+    const Ldi a = clean.cast(view), b = dirty.cast(view);
+    for (int j = 0; j < view.height; ++j)
+      for (int i = 0; i < view.width; ++i) {
+        const std::size_t p = std::size_t(j) * view.width + i;
+        const glm::dvec3 o = view.pixel_point(i, j, 0.0);
+        bool touches = false;
+        for (const Index3& c : bad) {
+          const Box box = cell_box(grid, c, 1e-6 * h);
+          double t0 = 0.0, t1 = view.depth_extent;
+          touches = touches || clip_ray_to_box(o, view.dir, box.lo, box.hi, t0, t1);
+        }
+        if (!touches) {
+          ++result.untouched_rays;
+          ASSERT_EQ(a.count(p), b.count(p)) << "pixel " << i << "," << j;
+          for (std::uint32_t s = 0; s < a.count(p); ++s) {
+            ASSERT_EQ(a.depth[a.begin(p) + s], b.depth[b.begin(p) + s]);
+            ASSERT_EQ(a.normal[a.begin(p) + s], b.normal[b.begin(p) + s]);
+          }
+          continue;
+        }
+        ++result.touched_rays;
+        auto found_in = [](const Ldi& ldi, std::size_t pixel, float depth) {
+          for (std::uint32_t s = ldi.begin(pixel); s < ldi.end(pixel); ++s)
+            if (std::abs(ldi.depth[s] - depth) < 1e-6) return true;
+          return false;
+        };
+        // No hit inside a bad cell, and none that the clean field does not have.
+        for (std::uint32_t s = b.begin(p); s < b.end(p); ++s) {
+          const glm::dvec3 x = view.pixel_point(i, j, b.depth[s]);
+          for (const Index3& c : bad)
+            ASSERT_FALSE(inside(cell_box(grid, c, -1e-6 * h), x))
+                << "hit in a cell with a non-finite corner, pixel " << i << "," << j;
+          ASSERT_TRUE(found_in(a, p, b.depth[s])) << "pixel " << i << "," << j;
+        }
+        // Every clean hit outside the bad cells is still there.
+        for (std::uint32_t s = a.begin(p); s < a.end(p); ++s) {
+          const glm::dvec3 x = view.pixel_point(i, j, a.depth[s]);
+          bool in_bad = false, near_bad = false;
+          for (const Index3& c : bad) {
+            in_bad = in_bad || inside(cell_box(grid, c, -1e-6 * h), x);
+            near_bad = near_bad || inside(cell_box(grid, c, 1e-6 * h), x);
+          }
+          if (in_bad) {
+            ++result.hits_dropped;
+          } else if (!near_bad) {
+            ASSERT_TRUE(found_in(b, p, a.depth[s])) << "pixel " << i << "," << j;
+          }
+        }
+      }
+  }
+}
+
+TEST(GridSource, CellsWithNonFiniteCornersProduceNoHitsAndAreCounted) {
+  const int n = 33;  // 32 cells per axis: 4 bricks of 8 cells
+  const std::vector<float> clean_values = sample<float>(n, -1.25, 1.25, sphere_field);
+  std::vector<float> values = clean_values;
+  // Points near the sphere (so that their cells hold surface), on brick boundaries (read by 2,
+  // 4 or 8 bricks), on the last point layer and at a corner of the block.
+  const std::vector<std::pair<Index3, double>> written{
+      {{24, 24, 24}, kNaN}, {{29, 16, 16}, kInf}, {{16, 3, 16}, -kInf},  {{8, 16, 27}, kNaN},
+      {{32, 16, 16}, kNaN}, {{0, 0, 0}, kNaN},    {{16, 24, 23}, -kInf},
+  };
+  std::vector<Index3> points;
+  for (const auto& [p, v] : written) {
+    values[(std::size_t(p[2]) * n + p[1]) * n + p[0]] = float(v);
+    points.push_back(p);
+  }
+  const GridSource clean(uniform_block(clean_values.data(), ScalarType::float32, n, -1.25, 1.25));
+  const GridSource dirty(uniform_block(values.data(), ScalarType::float32, n, -1.25, 1.25));
+  const RayCaster clean_caster(clean, 1.0), dirty_caster(dirty, 1.0);
+  EXPECT_EQ(clean_caster.nonfinite_values(), 0u);
+  EXPECT_EQ(dirty_caster.nonfinite_values(), written.size());
+  // The bricks around a non-finite point stay in the scene: their finite cells still count.
+  EXPECT_EQ(dirty_caster.primitive_count(), clean_caster.primitive_count());
+  NonfiniteComparison compared;
+  expect_only_bad_cells_lose_hits(dirty, cells_with_corner_among(dirty, points), clean_caster,
+                                  dirty_caster, compared);
+  EXPECT_GT(compared.untouched_rays, 10000);
+  EXPECT_GT(compared.touched_rays, 200);
+  EXPECT_GT(compared.hits_dropped, 50);  // the bad cells did hold surface
+}
+
+TEST(GridSource, AllNonFiniteGridHasNoHits) {
+  const int n = 17;
+  for (const double v : {kNaN, kInf, -kInf}) {
+    const std::vector<double> values(std::size_t(n) * n * n, v);
+    const GridSource grid(uniform_block(values.data(), ScalarType::float64, n, -1.0, 1.0), 4);
+    const RayCaster caster(grid, 0.5);
+    EXPECT_EQ(caster.nonfinite_values(), values.size());
+    EXPECT_EQ(caster.primitive_count(), 0u);
+    for (const View& view : axis_and_oblique_views(grid.bounds(), 32))
+      EXPECT_EQ(caster.cast(view).sample_count(), 0u);
+  }
+}
+
+TEST(GridSource, NonFiniteValuesDoNotWidenBrickRanges) {
+  // Finite values all above the isovalue, with −Inf and +Inf points: no brick can hold the
+  // surface, so none is kept.
+  const int n = 17;
+  std::vector<double> values = sample<double>(n, -1.0, 1.0, sphere_field);
+  values[(std::size_t(5) * n + 6) * n + 7] = -kInf;
+  values[(std::size_t(12) * n + 3) * n + 9] = kInf;
+  values[(std::size_t(1) * n + 14) * n + 2] = kNaN;
+  const GridSource grid(uniform_block(values.data(), ScalarType::float64, n, -1.0, 1.0), 4);
+  const RayCaster caster(grid, -0.5);
+  EXPECT_EQ(caster.nonfinite_values(), 3u);
+  EXPECT_EQ(caster.primitive_count(), 0u);
+}
+
+TEST(GridSource, HugeFiniteValuesAreNeitherCountedNorSkipped) {
+  // Values near the largest double: finite, though sums of them are not.
+  const int n = 17;
+  const std::vector<double> unit = sample<double>(n, -1.0, 1.0, [](double x, double y, double z) {
+    return sphere_field(x, y, z) < 0.5 ? -1.0 : 1.0;
+  });
+  std::vector<double> huge(unit.size());
+  for (std::size_t p = 0; p < unit.size(); ++p)
+    huge[p] = 1e308 * unit[p];
+  const GridSource a(uniform_block(unit.data(), ScalarType::float64, n, -1.0, 1.0), 4);
+  const GridSource b(uniform_block(huge.data(), ScalarType::float64, n, -1.0, 1.0), 4);
+  const RayCaster ca(a, 0.0), cb(b, 0.0);
+  EXPECT_EQ(cb.nonfinite_values(), 0u);
+  EXPECT_GT(ca.primitive_count(), 0u);
+  EXPECT_EQ(ca.primitive_count(), cb.primitive_count());
+}
+
+TEST(GridSource, NonFiniteCountIsExactForAnyBrickSizeAndGhostLayers) {
+  // Points read by the bind: indices first_cell … last_cell + 1 per axis. Ghost layers below
+  // (1) are outside that range, of the two above the first is inside it.
+  const int n = 21;
+  GridBlock block;
+  block.dims = {n, n, n};
+  block.type = ScalarType::float64;
+  block.origin = glm::dvec3(-1.0);
+  block.spacing = glm::dvec3(0.1);
+  block.ghost_lo = {1, 1, 1};
+  block.ghost_hi = {2, 2, 2};
+  std::mt19937 rng(5);
+  std::uniform_int_distribution<int> index(0, n - 1), kind(0, 2);
+  for (int trial = 0; trial < 20; ++trial) {
+    std::vector<double> values = sample<double>(n, -1.0, 1.0, sphere_field);
+    std::uint64_t expected = 0;
+    for (int w = 0; w < 40; ++w) {
+      const int i = index(rng), j = index(rng), k = index(rng);
+      double& v = values[(std::size_t(k) * n + j) * n + i];
+      if (!std::isfinite(v)) continue;  // already written
+      v = kind(rng) == 0 ? kNaN : (kind(rng) == 1 ? kInf : -kInf);
+      expected += i >= 1 && i <= n - 2 && j >= 1 && j <= n - 2 && k >= 1 && k <= n - 2;
+    }
+    block.values = values.data();
+    for (int brick_cells : {1, 3, 4, 8, 32}) {
+      const GridSource grid(block, brick_cells);
+      ASSERT_EQ(grid.first_cell()[0], 1);
+      ASSERT_EQ(grid.last_cell()[0], n - 3);
+      EXPECT_EQ(RayCaster(grid, 0.5).nonfinite_values(), expected)
+          << "trial " << trial << ", bricks of " << brick_cells;
+    }
+  }
+}
+
+TEST(GridSource, RayCasterSumsNonFiniteCountsOverBlocks) {
+  // Two blocks split along x as in TwoBlocksWithGhostLayersGiveTheSameHitsAsOneBlock: A reads
+  // points x = 0…16 (16 a ghost), B reads x = 16…32 (its ghost x = 15 lies below its cells).
+  const int n = 33;
+  std::vector<double> values = sample<double>(n, -1.0, 1.0, sphere_field);
+  auto at = [&](int i, int j, int k) -> double& {
+    return values[(std::size_t(k) * n + j) * n + i];
+  };
+  GridBlock whole = uniform_block(values.data(), ScalarType::float64, n, -1.0, 1.0);
+  GridBlock a = whole, b = whole;
+  a.dims[0] = 17;
+  a.ghost_hi[0] = 1;
+  a.strides = {1, n, n * n};
+  b.dims[0] = 18;
+  b.ghost_lo[0] = 1;
+  b.strides = {1, n, n * n};
+  b.values = values.data() + 15;
+  b.origin.x = whole.origin.x + 15 * whole.spacing.x;
+  const GridSource block_a(a), block_b(b), one(whole);
+  const std::array<const FieldSource*, 2> pair{&block_a, &block_b};
+  EXPECT_EQ(RayCaster(pair, 0.5).nonfinite_values(), 0u);
+  at(3, 4, 5) = kNaN;    // A only
+  at(15, 9, 9) = kInf;   // A only: B's ghost below its cells is not read
+  at(16, 2, 2) = -kInf;  // A's ghost and B's own point: read, and counted, by both
+  at(30, 1, 7) = kNaN;   // B only
+  EXPECT_EQ(RayCaster(block_a, 0.5).nonfinite_values(), 3u);
+  EXPECT_EQ(RayCaster(block_b, 0.5).nonfinite_values(), 2u);
+  EXPECT_EQ(RayCaster(pair, 0.5).nonfinite_values(), 5u);
+  EXPECT_EQ(RayCaster(one, 0.5).nonfinite_values(), 4u);
 }
 
 TEST(GridSource, CubicRootsOfACellSegment) {

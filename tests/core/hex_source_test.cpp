@@ -453,6 +453,147 @@ TEST(HexElementSource, InvalidBlocksAreRejected) {
   rejects(make_block(2, NodeSet::gauss_lobatto_legendre, flat, values), "element 0 is degenerate");
 }
 
+// ---------------------------------------------------------------------------------------------
+// Non-finite values
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+// Whether the reference point r lies in the unit cube grown by `pad` (pad < 0 shrinks it).
+bool in_unit_cube(glm::dvec3 r, double pad) {
+  for (int a = 0; a < 3; ++a)
+    if (!(r[a] > -pad && r[a] < 1.0 + pad)) return false;
+  return true;
+}
+
+// Casts a sphere field over `corners` and the same field with a NaN, a +Inf and a −Inf nodal
+// value in three elements the sphere crosses: rays that miss those elements get bit-identical
+// hits, the others lose exactly the hits inside them.
+void expect_only_nonfinite_elements_lose_hits(int order, NodeSet nodes,
+                                              const std::vector<double>& corners) {
+  const int n = values_per_element(order);
+  const std::vector<double> clean_values =
+      sample_nodes(order, nodes, corners, [](glm::dvec3 x) { return glm::dot(x, x); });
+  std::vector<double> values = clean_values;
+  const std::size_t bad[] = {20, 17, 5};
+  values[bad[0] * n + 5] = kNaN;
+  values[bad[1] * n + n / 2] = kInf;
+  values[bad[2] * n + n - 1] = -kInf;
+  const HexElementSource clean(make_block(order, nodes, corners, clean_values));
+  const HexElementSource dirty(make_block(order, nodes, corners, values));
+  const RayCaster clean_caster(clean, 1.0), dirty_caster(dirty, 1.0);
+  EXPECT_EQ(clean_caster.nonfinite_values(), 0u);
+  EXPECT_EQ(dirty_caster.nonfinite_values(), 3u);
+  EXPECT_EQ(clean_caster.primitive_count(), 56u);
+  EXPECT_EQ(dirty_caster.primitive_count(), 53u);
+
+  int untouched = 0, touched = 0, dropped = 0;
+  for (const View& view : axis_and_oblique_views(clean.bounds(), 48)) {
+    const Ldi a = clean_caster.cast(view), b = dirty_caster.cast(view);
+    for (int j = 0; j < view.height; ++j)
+      for (int i = 0; i < view.width; ++i) {
+        const std::size_t p = std::size_t(j) * view.width + i;
+        const glm::dvec3 o = view.pixel_point(i, j, 0.0);
+        bool touches = false;
+        for (std::size_t e : bad) {
+          const glm::dvec3 ro = clean.to_reference(e, o),
+                           rd = clean.to_reference(e, o + view.dir) - ro;
+          double t0 = 0.0, t1 = view.depth_extent;
+          touches =
+              touches || clip_ray_to_box(ro, rd, glm::dvec3(-1e-6), glm::dvec3(1.0 + 1e-6), t0, t1);
+        }
+        if (!touches) {  // the same hits, bit for bit
+          ++untouched;
+          ASSERT_EQ(a.count(p), b.count(p)) << "pixel " << i << "," << j;
+          for (std::uint32_t s = 0; s < a.count(p); ++s) {
+            ASSERT_EQ(a.depth[a.begin(p) + s], b.depth[b.begin(p) + s]);
+            ASSERT_EQ(a.normal[a.begin(p) + s], b.normal[b.begin(p) + s]);
+          }
+          continue;
+        }
+        ++touched;
+        auto found_in = [](const Ldi& ldi, std::size_t pixel, float depth) {
+          for (std::uint32_t s = ldi.begin(pixel); s < ldi.end(pixel); ++s)
+            if (std::abs(ldi.depth[s] - depth) < 1e-6) return true;
+          return false;
+        };
+        auto where = [&](float depth, double pad) {
+          bool in = false;
+          for (std::size_t e : bad)
+            in = in || in_unit_cube(clean.to_reference(e, view.pixel_point(i, j, depth)), pad);
+          return in;
+        };
+        for (std::uint32_t s = b.begin(p); s < b.end(p); ++s) {
+          ASSERT_FALSE(where(b.depth[s], -1e-6)) << "hit in a non-finite element";
+          ASSERT_TRUE(found_in(a, p, b.depth[s])) << "pixel " << i << "," << j;
+        }
+        for (std::uint32_t s = a.begin(p); s < a.end(p); ++s) {
+          if (where(a.depth[s], -1e-6)) {
+            ++dropped;
+          } else if (!where(a.depth[s], 1e-6)) {
+            ASSERT_TRUE(found_in(b, p, a.depth[s])) << "pixel " << i << "," << j;
+          }
+        }
+      }
+  }
+  EXPECT_GT(untouched, 3000);
+  EXPECT_GT(touched, 300);
+  EXPECT_GT(dropped, 100);  // the three elements did hold surface
+}
+
+TEST(HexElementSource, ElementsWithNonFiniteValuesProduceNoHitsAndAreCounted) {
+  const int order = 3;
+  const std::vector<double> corners =
+      tiled_corners({4, 4, 4}, kSphereBox.lo, kSphereBox.hi, skew_map());
+  for (NodeSet nodes : kNodeSets) {
+    SCOPED_TRACE(describe(order, nodes));
+    expect_only_nonfinite_elements_lose_hits(order, nodes, corners);
+  }
+}
+
+TEST(HexElementSource, AllNonFiniteElementsHaveNoHits) {
+  const int order = 2, n = values_per_element(order);
+  const std::vector<double> corners =
+      tiled_corners({2, 2, 2}, kSphereBox.lo, kSphereBox.hi, glm::dmat3(1.0));
+  for (const double v : {kNaN, kInf, -kInf}) {
+    // float32 with a stride: the padding after each element is not read, so not counted.
+    const std::size_t stride = n + 3;
+    const std::vector<float> values(8 * stride, float(v));
+    const HexBlock block{order,         NodeSet::equispaced, 8,     corners.data(),
+                         values.data(), ScalarType::float32, stride};
+    const HexElementSource source(block);
+    const RayCaster caster(source, 1.0);
+    EXPECT_EQ(caster.nonfinite_values(), 8u * n);
+    EXPECT_EQ(caster.primitive_count(), 0u);
+    for (const View& view : axis_and_oblique_views(source.bounds(), 16))
+      EXPECT_EQ(caster.cast(view).sample_count(), 0u);
+  }
+}
+
+TEST(HexElementSource, RayCasterSumsNonFiniteCountsOverBlocks) {
+  const int order = 3, n = values_per_element(order);
+  const NodeSet nodes = NodeSet::gauss_legendre;
+  const std::vector<double> corners =
+      tiled_corners({4, 4, 4}, kSphereBox.lo, kSphereBox.hi, glm::dmat3(1.0));
+  std::vector<double> values =
+      sample_nodes(order, nodes, corners, [](glm::dvec3 x) { return glm::dot(x, x); });
+  // Two blocks of 32 elements each over the same arrays.
+  HexBlock first = make_block(order, nodes, corners, values), second = first;
+  first.element_count = second.element_count = 32;
+  second.corners = corners.data() + 32 * 24;
+  second.values = values.data() + 32 * n;
+  const HexElementSource a(first), b(second);
+  const std::array<const FieldSource*, 2> both{&a, &b};
+  EXPECT_EQ(RayCaster(both, 1.0).nonfinite_values(), 0u);
+  values[3] = kNaN;
+  values[21 * n + 7] = kInf;
+  values[21 * n + 8] = kNaN;  // two in one element count twice
+  values[40 * n + 1] = -kInf;
+  EXPECT_EQ(RayCaster(a, 1.0).nonfinite_values(), 3u);
+  EXPECT_EQ(RayCaster(b, 1.0).nonfinite_values(), 1u);
+  EXPECT_EQ(RayCaster(both, 1.0).nonfinite_values(), 4u);
+}
+
 TEST(HexElementSource, ThreadCountDoesNotChangeTheLdi) {
   std::mt19937 rng(3);
   std::uniform_real_distribution<double> uniform(-1.0, 1.0);

@@ -246,16 +246,18 @@ TEST(SnapshotStore, MetadataJsonIsTheDocumentedObjectAndRoundTrips) {
   m.bytes = 1234567;
   m.scalar = ScalarRange{"temperature", 0.0, 1.0};
   m.seconds = {{"glb", 0.1}, {"mesh", 0.04}, {"cast", 0.25}, {"encode", 0.03}, {"extra", 1.0}};
+  m.skipped_steps = 3;
+  m.nonfinite_values = 7;
   const std::string json = metadata_to_json(m);
   // docs/api.md's key order.
   EXPECT_EQ(json.rfind(R"({"step":42,"time":0.42,"isovalues":[0.5],"triangles":1042,)", 0), 0u)
       << json;
-  EXPECT_NE(
-      json.find(R"("views":[[1.0,0.0,0.0],[0.0,1.0,0.0],[0.0,0.0,1.0]],)"
-                R"("resolution":64,"r":0.5,)"
-                R"("scalar":{"name":"temperature","min":0.0,"max":1.0},)"
-                R"("seconds":{"cast":0.25,"encode":0.03,"mesh":0.04,"glb":0.1,"extra":1.0}})"),
-      std::string::npos)
+  EXPECT_NE(json.find(R"("views":[[1.0,0.0,0.0],[0.0,1.0,0.0],[0.0,0.0,1.0]],)"
+                      R"("resolution":64,"r":0.5,)"
+                      R"("scalar":{"name":"temperature","min":0.0,"max":1.0},)"
+                      R"("seconds":{"cast":0.25,"encode":0.03,"mesh":0.04,"glb":0.1,"extra":1.0},)"
+                      R"("skipped_steps":3,"nonfinite_values":7})"),
+            std::string::npos)
       << json;
   EXPECT_EQ(json.find('\n'), std::string::npos);
   StepMetadata back;
@@ -271,6 +273,8 @@ TEST(SnapshotStore, MetadataJsonIsTheDocumentedObjectAndRoundTrips) {
   EXPECT_EQ(back.views, m.views);
   EXPECT_EQ(back.resolution, m.resolution);
   EXPECT_EQ(back.r, m.r);
+  EXPECT_EQ(back.skipped_steps, 3u);
+  EXPECT_EQ(back.nonfinite_values, 7u);
   ASSERT_TRUE(back.scalar);
   EXPECT_EQ(back.scalar->name, "temperature");
   EXPECT_EQ(back.scalar->max, 1.0);

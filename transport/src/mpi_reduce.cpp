@@ -99,8 +99,19 @@ Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragm
   {
     const auto t = std::chrono::steady_clock::now();
     for (LdiFragment& f : fragments) {
-      const std::vector<std::uint8_t> bytes = encode_fragment(f, encoding);
-      if (Status s = decode_fragment(bytes, f); !s) status = s;
+      try {
+        const std::vector<std::uint8_t> bytes = encode_fragment(f, encoding);
+        if (Status s = decode_fragment(bytes, f); !s) status = s;
+      } catch (const std::exception& e) {
+        // Never leave the collective: go on with the fragment emptied (its view kept), and
+        // report the failure up the tree.
+        status = Status::error(std::string("reduction: ") + e.what());
+        f.pixels.clear();
+        f.counts.clear();
+        f.depth.clear();
+        f.normal.clear();
+        f.scalar.clear();
+      }
     }
     stats.encode_seconds += seconds_since(t);
   }

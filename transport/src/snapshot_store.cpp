@@ -70,7 +70,9 @@ Status parse_metadata(const json& j, StepMetadata& m) {
       !read_u64(j, "triangles", m.triangles, error) ||
       !read_u64(j, "vertices", m.vertices, error) || !read_u64(j, "samples", m.samples, error) ||
       !read_u64(j, "quads", m.quads, error) || !read_u64(j, "bytes", m.bytes, error) ||
-      !read_u64(j, "resolution", resolution, error) || !read_double(j, "r", m.r, error)) {
+      !read_u64(j, "resolution", resolution, error) || !read_double(j, "r", m.r, error) ||
+      !read_u64(j, "skipped_steps", m.skipped_steps, error) ||
+      !read_u64(j, "nonfinite_values", m.nonfinite_values, error)) {
     return Status::error("metadata: " + error);
   }
   if (resolution > std::numeric_limits<std::uint32_t>::max())
@@ -234,6 +236,8 @@ std::string metadata_to_json(const StepMetadata& m) {
     if (std::find(std::begin(stages), std::end(stages), stage) == std::end(stages))
       j["seconds"][stage] = s;
   }
+  j["skipped_steps"] = m.skipped_steps;
+  j["nonfinite_values"] = m.nonfinite_values;
   // Replace invalid UTF-8 in names rather than throw: metadata must never fail a step.
   return j.dump(-1, ' ', false, nlohmann::detail::error_handler_t::replace);
 }

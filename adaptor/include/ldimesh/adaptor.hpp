@@ -39,6 +39,9 @@ struct StepReport {
   bool replaced_pending = false;     // a waiting step was replaced by this one ("coalesce")
   double blocked_seconds = 0.0;      // this rank's time inside execute()
   double max_blocked_seconds = 0.0;  // the slowest rank's (root only)
+  // NaN/±Inf values met in the fields of all ranks' blocks (root only). The cells and elements
+  // they touch are left out of the surface; the step is still published.
+  std::uint64_t nonfinite_values = 0;
 };
 
 class Adaptor {
@@ -69,7 +72,8 @@ class Adaptor {
   // Collective. Runs the in situ step if it is due. Never throws.
   virtual Status execute(std::uint64_t step, double time) = 0;
   // Collective. Waits for the root's pending work (published or failed) and stops the server.
-  // Called by the destructor if not before.
+  // Returns the last failure of that background work, if any. Called by the destructor if not
+  // before.
   virtual Status finalize() = 0;
 
   // Root: the viewer's URL with the token ("" elsewhere or without a server).

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cstddef>
+#include <cstdint>
 #include <memory>
 #include <stdexcept>
 #include <utility>
@@ -48,6 +49,11 @@ class GeometryBinding {
   virtual std::size_t primitive_count() const = 0;
   // Whether hits carry a meaningful RayHit::scalar.
   virtual bool has_scalar() const { return false; }
+  // How many non-finite values (NaN, +Inf, −Inf) of the source's data the bind read, each
+  // counted once; what a value is depends on the source (see its bind()). The parts of the
+  // field that depend on such a value (a grid cell, an element) produce no hits; the rest are
+  // unaffected.
+  virtual std::uint64_t nonfinite_values() const { return 0; }
 };
 
 // Helpers for intersect callbacks.

@@ -52,6 +52,12 @@ class GridSource final : public FieldSource {
   // Computes every brick's value range from the current values (so a new time step in the same
   // arrays needs only a new bind) and puts the bricks whose range holds `isovalue` into an
   // Embree user geometry. Runs on all cores.
+  //
+  // Non-finite values (NaN, ±Inf): a cell with such a corner produces no hits; every other cell
+  // produces the same hits as if the field had none. The binding's nonfinite_values() is the
+  // number of points read whose value is non-finite, each point counted once: the corner
+  // points of the owned cells, i.e. indices first_cell()[a] … last_cell()[a] + 1 per axis,
+  // ghost points among them included (ghost points outside that range are not read).
   std::unique_ptr<GeometryBinding> bind(RTCDevice device, double isovalue) const override;
 
   // Bricks before culling.

@@ -89,6 +89,11 @@ class HexElementSource final : public FieldSource {
   // Reads the current values, converts every element to Bernstein form (in parallel) and keeps
   // the elements whose coefficient range contains `isovalue`. The binding holds its own copy of
   // their coefficients: it does not read the solver's arrays after bind() returns.
+  //
+  // Non-finite values (NaN, ±Inf): an element with such a nodal value produces no hits (it is
+  // left out of the scene); the other elements are unaffected. The binding's
+  // nonfinite_values() is the number of non-finite nodal values over all elements (the
+  // (p + 1)³ values of each; padding up to element_stride is not read).
   std::unique_ptr<GeometryBinding> bind(RTCDevice device, double isovalue) const override;
 
   // The block as given, with element_stride 0 replaced by (p + 1)³.
@@ -98,7 +103,8 @@ class HexElementSource final : public FieldSource {
   glm::dvec3 to_reference(std::size_t element, glm::dvec3 world) const;
   // The Bernstein coefficients of element `element` from the current values (see
   // lagrange_to_bernstein; `out` holds exactly (p + 1)³ values). Minimum and maximum bound the
-  // element's values; bind() culls with them.
+  // element's values; bind() culls with them. A non-finite nodal value makes some
+  // coefficients non-finite.
   void element_bernstein(std::size_t element, std::span<double> out) const;
 
  private:

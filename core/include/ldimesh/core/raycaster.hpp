@@ -1,6 +1,7 @@
 // Multi-hit ray casting of an isosurface with Embree (paper §3: keep every hit along a ray).
 #pragma once
 
+#include <cstdint>
 #include <memory>
 #include <span>
 #include <vector>
@@ -74,6 +75,11 @@ class RayCaster {
 
   // Primitives in the scene (those whose value range may contain the isovalue), all sources.
   std::size_t primitive_count() const;
+  // Non-finite values (NaN, ±Inf) the sources read when the scene was built: the sum of their
+  // GeometryBinding::nonfinite_values(), so a value that two sources both read (a ghost point)
+  // counts once for each. The parts of the field that depend on them produce no hits. 0 for a
+  // finite field.
+  std::uint64_t nonfinite_values() const;
   // Seconds spent building the scene.
   double build_seconds() const { return build_seconds_; }
 

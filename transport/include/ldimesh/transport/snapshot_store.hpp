@@ -52,6 +52,10 @@ struct StepMetadata {
   double r = 0.0;
   std::optional<ScalarRange> scalar;      // absent when the mesh carries no scalar
   std::map<std::string, double> seconds;  // per stage: cast, encode, reduce, decode, mesh, glb…
+  // In situ: due steps not published since the previous published step because the root was
+  // still busy (skipped or replaced while waiting), and NaN/±Inf values met in the field.
+  std::uint64_t skipped_steps = 0;
+  std::uint64_t nonfinite_values = 0;
 };
 
 // The metadata as one line of JSON with the keys in the order of docs/api.md; `scalar` only

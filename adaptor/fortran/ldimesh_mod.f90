@@ -1,0 +1,325 @@
+! The ldimesh in situ adaptor for Fortran solvers: a module over the C API (ldimesh.h), with
+! iso_c_binding. The MPI communicator is the Fortran handle (an integer from `use mpi`, or
+! comm%mpi_val of a TYPE(MPI_Comm) from `use mpi_f08`), as in Ascent's Fortran interface.
+!
+!   use ldimesh_mod
+!   type(ldimesh_adaptor) :: insitu
+!   call ldimesh_create(MPI_COMM_WORLD, '{"isovalues": [0.5]}', insitu, ierr)
+!   call ldimesh_set_domain(insitu, lo, hi, ierr)
+!   call ldimesh_add_uniform_grid(insitu, u, origin, spacing, ghost_lo, ghost_hi, ierr)
+!   do step = 1, nsteps
+!     ...; call ldimesh_execute(insitu, int(step, c_int64_t), t, ierr)
+!   end do
+!   call ldimesh_destroy(insitu)
+!
+! Every routine returns its status in ierr (LDIMESH_OK = 0) and keeps the message for
+! ldimesh_last_error(); nothing stops the program. Arrays handed over are read in place at
+! every due step: they need the TARGET attribute and must stay allocated while the adaptor
+! lives (or until ldimesh_clear_blocks).
+module ldimesh_mod
+  use, intrinsic :: iso_c_binding
+  implicit none
+  private
+
+  integer, parameter, public :: LDIMESH_OK = 0, LDIMESH_ERROR_ARGUMENT = 1, &
+                                LDIMESH_ERROR_OPTIONS = 2, LDIMESH_ERROR_STEP = 3, &
+                                LDIMESH_ERROR_RUNTIME = 4
+  integer(c_int), parameter, public :: LDIMESH_FLOAT32 = 0, LDIMESH_FLOAT64 = 1
+  integer(c_int), parameter, public :: LDIMESH_NODES_GLL = 0, LDIMESH_NODES_GL = 1, &
+                                       LDIMESH_NODES_EQUISPACED = 2
+
+  ! ldimesh_grid_block of ldimesh.h, field by field (x is the first index, as in Fortran).
+  type, bind(C), public :: ldimesh_grid_block
+    integer(c_int64_t) :: dims(3) = 0
+    type(c_ptr) :: values = c_null_ptr
+    integer(c_int64_t) :: value_count = 0
+    integer(c_int) :: type = LDIMESH_FLOAT64
+    integer(c_int64_t) :: strides(3) = 0
+    real(c_double) :: origin(3) = 0.0_c_double
+    real(c_double) :: spacing(3) = 1.0_c_double
+    type(c_ptr) :: coords(3) = c_null_ptr
+    integer(c_int) :: ghost_lo(3) = 0
+    integer(c_int) :: ghost_hi(3) = 0
+  end type ldimesh_grid_block
+
+  ! ldimesh_step_report of ldimesh.h.
+  type, bind(C), public :: ldimesh_step_report
+    integer(c_int64_t) :: step = 0
+    integer(c_int) :: executed = 0
+    integer(c_int) :: skipped_busy = 0
+    integer(c_int) :: replaced_pending = 0
+    real(c_double) :: blocked_seconds = 0.0_c_double
+    real(c_double) :: max_blocked_seconds = 0.0_c_double
+    integer(c_int64_t) :: nonfinite_values = 0
+  end type ldimesh_step_report
+
+  ! The adaptor handle; null until ldimesh_create succeeds.
+  type, public :: ldimesh_adaptor
+    type(c_ptr) :: handle = c_null_ptr
+  end type ldimesh_adaptor
+
+  interface
+    function c_create(comm, options, out) bind(C, name='ldimesh_create_fortran')
+      import :: c_int, c_char, c_ptr
+      integer(c_int), value :: comm
+      character(kind=c_char), dimension(*), intent(in) :: options
+      type(c_ptr), intent(out) :: out
+      integer(c_int) :: c_create
+    end function c_create
+    function c_create_from_file(comm, path, out) bind(C, name='ldimesh_create_from_file_fortran')
+      import :: c_int, c_char, c_ptr
+      integer(c_int), value :: comm
+      character(kind=c_char), dimension(*), intent(in) :: path
+      type(c_ptr), intent(out) :: out
+      integer(c_int) :: c_create_from_file
+    end function c_create_from_file
+    function c_set_domain(a, lo, hi) bind(C, name='ldimesh_set_domain')
+      import :: c_int, c_ptr, c_double
+      type(c_ptr), value :: a
+      real(c_double), intent(in) :: lo(3), hi(3)
+      integer(c_int) :: c_set_domain
+    end function c_set_domain
+    function c_add_grid_block(a, block) bind(C, name='ldimesh_add_grid_block')
+      import :: c_int, c_ptr, ldimesh_grid_block
+      type(c_ptr), value :: a
+      type(ldimesh_grid_block), intent(in) :: block
+      integer(c_int) :: c_add_grid_block
+    end function c_add_grid_block
+    function c_clear_blocks(a) bind(C, name='ldimesh_clear_blocks')
+      import :: c_int, c_ptr
+      type(c_ptr), value :: a
+      integer(c_int) :: c_clear_blocks
+    end function c_clear_blocks
+    function c_execute(a, step, time) bind(C, name='ldimesh_execute')
+      import :: c_int, c_ptr, c_int64_t, c_double
+      type(c_ptr), value :: a
+      integer(c_int64_t), value :: step
+      real(c_double), value :: time
+      integer(c_int) :: c_execute
+    end function c_execute
+    function c_finalize(a) bind(C, name='ldimesh_finalize')
+      import :: c_int, c_ptr
+      type(c_ptr), value :: a
+      integer(c_int) :: c_finalize
+    end function c_finalize
+    subroutine c_destroy(a) bind(C, name='ldimesh_destroy')
+      import :: c_ptr
+      type(c_ptr), value :: a
+    end subroutine c_destroy
+    function c_last_error(a) bind(C, name='ldimesh_last_error')
+      import :: c_ptr
+      type(c_ptr), value :: a
+      type(c_ptr) :: c_last_error
+    end function c_last_error
+    function c_url(a) bind(C, name='ldimesh_url')
+      import :: c_ptr
+      type(c_ptr), value :: a
+      type(c_ptr) :: c_url
+    end function c_url
+    function c_last_report(a, out) bind(C, name='ldimesh_last_report')
+      import :: c_int, c_ptr, ldimesh_step_report
+      type(c_ptr), value :: a
+      type(ldimesh_step_report), intent(out) :: out
+      integer(c_int) :: c_last_report
+    end function c_last_report
+    function c_set_error(a, message) bind(C, name='ldimesh_set_error')
+      import :: c_int, c_ptr, c_char
+      type(c_ptr), value :: a
+      character(kind=c_char), dimension(*), intent(in) :: message
+      integer(c_int) :: c_set_error
+    end function c_set_error
+    function c_published_steps(a) bind(C, name='ldimesh_published_steps')
+      import :: c_ptr, c_int64_t
+      type(c_ptr), value :: a
+      integer(c_int64_t) :: c_published_steps
+    end function c_published_steps
+    function c_strlen(s) bind(C, name='strlen')
+      import :: c_ptr, c_size_t
+      type(c_ptr), value :: s
+      integer(c_size_t) :: c_strlen
+    end function c_strlen
+  end interface
+
+  ! A uniform grid block from a 3D array of reals (kind 4 or 8), x the first index.
+  interface ldimesh_add_uniform_grid
+    module procedure add_uniform_grid_r8, add_uniform_grid_r4
+  end interface ldimesh_add_uniform_grid
+
+  public :: ldimesh_create, ldimesh_create_from_file, ldimesh_set_domain, &
+            ldimesh_add_grid_block, ldimesh_add_uniform_grid, ldimesh_clear_blocks, &
+            ldimesh_execute, ldimesh_finalize, ldimesh_destroy, ldimesh_last_error, &
+            ldimesh_url, ldimesh_last_report, ldimesh_published_steps
+
+contains
+
+  ! Collective. options: a JSON document ('' for the defaults); on failure the handle stays
+  ! null, ierr /= 0 on every rank and ldimesh_last_error(adaptor) tells why.
+  subroutine ldimesh_create(comm, options, adaptor, ierr)
+    integer, intent(in) :: comm
+    character(len=*), intent(in) :: options
+    type(ldimesh_adaptor), intent(out) :: adaptor
+    integer, intent(out) :: ierr
+    ierr = c_create(int(comm, c_int), trim(options)//c_null_char, adaptor%handle)
+  end subroutine ldimesh_create
+
+  ! Collective. The options from a file ('': the file named by LDIMESH_OPTIONS, or defaults).
+  subroutine ldimesh_create_from_file(comm, path, adaptor, ierr)
+    integer, intent(in) :: comm
+    character(len=*), intent(in) :: path
+    type(ldimesh_adaptor), intent(out) :: adaptor
+    integer, intent(out) :: ierr
+    ierr = c_create_from_file(int(comm, c_int), trim(path)//c_null_char, adaptor%handle)
+  end subroutine ldimesh_create_from_file
+
+  subroutine ldimesh_set_domain(adaptor, lo, hi, ierr)
+    type(ldimesh_adaptor), intent(in) :: adaptor
+    real(c_double), intent(in) :: lo(3), hi(3)
+    integer, intent(out) :: ierr
+    ierr = c_set_domain(adaptor%handle, lo, hi)
+  end subroutine ldimesh_set_domain
+
+  ! Any grid block, described field by field (strides, rectilinear coordinates, …).
+  subroutine ldimesh_add_grid_block(adaptor, block, ierr)
+    type(ldimesh_adaptor), intent(in) :: adaptor
+    type(ldimesh_grid_block), intent(in) :: block
+    integer, intent(out) :: ierr
+    ierr = c_add_grid_block(adaptor%handle, block)
+  end subroutine ldimesh_add_grid_block
+
+  subroutine add_uniform_grid_r8(adaptor, field, origin, spacing, ghost_lo, ghost_hi, ierr)
+    type(ldimesh_adaptor), intent(in) :: adaptor
+    real(c_double), intent(in), target :: field(:, :, :)
+    real(c_double), intent(in) :: origin(3), spacing(3)
+    integer, intent(in) :: ghost_lo(3), ghost_hi(3)
+    integer, intent(out) :: ierr
+    type(ldimesh_grid_block) :: block
+    block%type = LDIMESH_FLOAT64
+    if (.not. contiguous_block(adaptor, field)) then
+      ierr = LDIMESH_ERROR_ARGUMENT
+      return
+    end if
+    block%values = c_loc(field(1, 1, 1))
+    call describe_uniform(block, shape(field), size(field, kind=c_int64_t), origin, spacing, &
+                          ghost_lo, ghost_hi)
+    ierr = c_add_grid_block(adaptor%handle, block)
+  end subroutine add_uniform_grid_r8
+
+  subroutine add_uniform_grid_r4(adaptor, field, origin, spacing, ghost_lo, ghost_hi, ierr)
+    type(ldimesh_adaptor), intent(in) :: adaptor
+    real(c_float), intent(in), target :: field(:, :, :)
+    real(c_double), intent(in) :: origin(3), spacing(3)
+    integer, intent(in) :: ghost_lo(3), ghost_hi(3)
+    integer, intent(out) :: ierr
+    type(ldimesh_grid_block) :: block
+    block%type = LDIMESH_FLOAT32
+    if (.not. contiguous_block(adaptor, field)) then
+      ierr = LDIMESH_ERROR_ARGUMENT
+      return
+    end if
+    block%values = c_loc(field(1, 1, 1))
+    call describe_uniform(block, shape(field), size(field, kind=c_int64_t), origin, spacing, &
+                          ghost_lo, ghost_hi)
+    ierr = c_add_grid_block(adaptor%handle, block)
+  end subroutine add_uniform_grid_r4
+
+  ! A strided section would need strides the module cannot see: the caller passes a whole
+  ! array or a range of its last index.
+  logical function contiguous_block(adaptor, field)
+    type(ldimesh_adaptor), intent(in) :: adaptor
+    class(*), intent(in) :: field(:, :, :)
+    integer(c_int) :: ignored
+    contiguous_block = is_contiguous(field)
+    if (.not. contiguous_block) ignored = c_set_error(adaptor%handle, &
+      'ldimesh_add_uniform_grid: the array is not contiguous (pass a whole array or a range '// &
+      'of its last index)'//c_null_char)
+  end function contiguous_block
+
+  subroutine describe_uniform(block, dims, count, origin, spacing, ghost_lo, ghost_hi)
+    type(ldimesh_grid_block), intent(inout) :: block
+    integer, intent(in) :: dims(3)
+    integer(c_int64_t), intent(in) :: count
+    real(c_double), intent(in) :: origin(3), spacing(3)
+    integer, intent(in) :: ghost_lo(3), ghost_hi(3)
+    block%dims = int(dims, c_int64_t)
+    block%value_count = count
+    block%origin = origin
+    block%spacing = spacing
+    block%ghost_lo = int(ghost_lo, c_int)
+    block%ghost_hi = int(ghost_hi, c_int)
+  end subroutine describe_uniform
+
+  subroutine ldimesh_clear_blocks(adaptor, ierr)
+    type(ldimesh_adaptor), intent(in) :: adaptor
+    integer, intent(out) :: ierr
+    ierr = c_clear_blocks(adaptor%handle)
+  end subroutine ldimesh_clear_blocks
+
+  ! Collective. Runs the in situ step if it is due.
+  subroutine ldimesh_execute(adaptor, step, time, ierr)
+    type(ldimesh_adaptor), intent(in) :: adaptor
+    integer(c_int64_t), intent(in) :: step
+    real(c_double), intent(in) :: time
+    integer, intent(out) :: ierr
+    ierr = c_execute(adaptor%handle, step, time)
+  end subroutine ldimesh_execute
+
+  ! Collective. Waits for pending work; ierr /= 0 if a background step failed.
+  subroutine ldimesh_finalize(adaptor, ierr)
+    type(ldimesh_adaptor), intent(in) :: adaptor
+    integer, intent(out) :: ierr
+    ierr = c_finalize(adaptor%handle)
+  end subroutine ldimesh_finalize
+
+  ! Collective. Finalizes if needed and frees the adaptor; the handle becomes null.
+  subroutine ldimesh_destroy(adaptor)
+    type(ldimesh_adaptor), intent(inout) :: adaptor
+    call c_destroy(adaptor%handle)
+    adaptor%handle = c_null_ptr
+  end subroutine ldimesh_destroy
+
+  ! The last error's message ('' if none); for a null handle, of the last failed create.
+  function ldimesh_last_error(adaptor) result(message)
+    type(ldimesh_adaptor), intent(in) :: adaptor
+    character(len=:), allocatable :: message
+    message = from_c_string(c_last_error(adaptor%handle))
+  end function ldimesh_last_error
+
+  ! Root: the viewer's URL with its token ('' elsewhere or without a server).
+  function ldimesh_url(adaptor) result(url)
+    type(ldimesh_adaptor), intent(in) :: adaptor
+    character(len=:), allocatable :: url
+    url = from_c_string(c_url(adaptor%handle))
+  end function ldimesh_url
+
+  ! Root: steps published so far.
+  function ldimesh_published_steps(adaptor) result(count)
+    type(ldimesh_adaptor), intent(in) :: adaptor
+    integer(c_int64_t) :: count
+    count = c_published_steps(adaptor%handle)
+  end function ldimesh_published_steps
+
+  subroutine ldimesh_last_report(adaptor, report, ierr)
+    type(ldimesh_adaptor), intent(in) :: adaptor
+    type(ldimesh_step_report), intent(out) :: report
+    integer, intent(out) :: ierr
+    ierr = c_last_report(adaptor%handle, report)
+  end subroutine ldimesh_last_report
+
+  function from_c_string(p) result(s)
+    type(c_ptr), intent(in) :: p
+    character(len=:), allocatable :: s
+    character(kind=c_char), pointer :: chars(:)
+    integer :: n, i
+    if (.not. c_associated(p)) then
+      s = ''
+      return
+    end if
+    n = int(c_strlen(p))
+    call c_f_pointer(p, chars, [n])
+    allocate (character(len=n) :: s)
+    do i = 1, n
+      s(i:i) = chars(i)
+    end do
+  end function from_c_string
+
+end module ldimesh_mod

@@ -1,0 +1,142 @@
+/* The ldimesh in situ adaptor, C API (C99 and C++; the Fortran module ldimesh_mod binds it).
+ *
+ * The same life cycle as the C++ ldimesh::Adaptor (ldimesh/adaptor.hpp, docs/adaptor.md):
+ *
+ *   ldimesh_adaptor* a = NULL;
+ *   if (ldimesh_create(MPI_COMM_WORLD, options_json, &a) != LDIMESH_OK)
+ *     fprintf(stderr, "%s\n", ldimesh_last_error(NULL));    // the simulation goes on without it
+ *   ldimesh_set_domain(a, lo, hi);
+ *   ldimesh_add_grid_block(a, &block);                       // once; arrays are read in place
+ *   for (step = 1; ...; ++step) { solve(); ldimesh_execute(a, step, t); }
+ *   ldimesh_destroy(a);                                      // drains pending work
+ *
+ * Every function returns a status code; on an error the message is kept for
+ * ldimesh_last_error(). No function throws, aborts, exits or calls MPI_Abort; a failed in situ
+ * step is skipped and the next one is tried. Every function accepts a NULL adaptor (and then
+ * returns LDIMESH_ERROR_ARGUMENT), so a solver may keep calling after a failed create.
+ *
+ * MPI must be initialised (MPI_Init_thread with MPI_THREAD_FUNNELED recommended: the adaptor
+ * calls MPI only from the thread that calls it, and runs a worker thread on the root that never
+ * calls MPI). ldimesh_create, ldimesh_execute, ldimesh_finalize and ldimesh_destroy are
+ * collective over the adaptor's communicator.
+ */
+#ifndef LDIMESH_H
+#define LDIMESH_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include <mpi.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* Status codes. */
+enum {
+  LDIMESH_OK = 0,
+  LDIMESH_ERROR_ARGUMENT = 1, /* a NULL or malformed argument, a wrong-size array */
+  LDIMESH_ERROR_OPTIONS = 2,  /* the options document is invalid (the message names the key) */
+  LDIMESH_ERROR_STEP = 3,     /* an in situ step failed and was skipped */
+  LDIMESH_ERROR_RUNTIME = 4   /* anything else: out of memory, the server could not start… */
+};
+
+/* Element types of the solver's arrays. */
+enum { LDIMESH_FLOAT32 = 0, LDIMESH_FLOAT64 = 1 };
+
+/* Node sets of high-order elements. */
+enum {
+  LDIMESH_NODES_GLL = 0,       /* Gauss–Lobatto–Legendre (spectral elements) */
+  LDIMESH_NODES_GL = 1,        /* Gauss–Legendre (DG) */
+  LDIMESH_NODES_EQUISPACED = 2 /* evenly spaced, both ends (Lagrange finite elements) */
+};
+
+typedef struct ldimesh_adaptor ldimesh_adaptor;
+
+/* One rank-local block of point data (ldimesh::GridBlock). Initialise with
+ * ldimesh_grid_block_init(), then set at least dims, values and value_count. */
+typedef struct ldimesh_grid_block {
+  int64_t dims[3];    /* points per axis, ghost layers included */
+  const void* values; /* read in place at every due step */
+  /* How many values the array holds: the block must fit in it (a wrong-size array is an
+   * error, not a read past its end). */
+  int64_t value_count;
+  int type;           /* LDIMESH_FLOAT32 or LDIMESH_FLOAT64 */
+  int64_t strides[3]; /* values between neighbouring points per axis; 0,0,0: x fastest */
+  double origin[3];   /* uniform grid: point (i,j,k) at origin + (i,j,k)·spacing */
+  double spacing[3];
+  const double* coords[3]; /* rectilinear grid instead, when all three are set: dims[a] each */
+  int ghost_lo[3];         /* ghost point layers below / above (owned by neighbours) */
+  int ghost_hi[3];
+} ldimesh_grid_block;
+
+/* A rank-local block of hexahedral elements of order p (ldimesh::HexBlock). */
+typedef struct ldimesh_hex_block {
+  int order; /* 1..8 */
+  int nodes; /* LDIMESH_NODES_* */
+  int64_t element_count;
+  const double* corners;  /* 8 corners × (x, y, z) per element (docs/adaptor.md) */
+  const void* values;     /* (p+1)³ nodal values per element, ξ fastest */
+  int64_t value_count;    /* values the array holds */
+  int type;               /* LDIMESH_FLOAT32 or LDIMESH_FLOAT64 */
+  int64_t element_stride; /* values between elements; 0: (p+1)³ */
+} ldimesh_hex_block;
+
+/* What the last ldimesh_execute did on this rank. */
+typedef struct ldimesh_step_report {
+  uint64_t step;
+  int executed;               /* 1: the step ran (cast and reduced) */
+  int skipped_busy;           /* 1: skipped, the root was still busy ("busy": "skip") */
+  int replaced_pending;       /* 1: replaced a waiting step ("busy": "coalesce") */
+  double blocked_seconds;     /* this rank's time inside ldimesh_execute */
+  double max_blocked_seconds; /* the slowest rank's (root only) */
+  uint64_t nonfinite_values;  /* NaN/Inf field values met on all ranks (root only) */
+} ldimesh_step_report;
+
+/* Collective. Creates the adaptor from a JSON options document ("" or NULL: defaults). On
+ * failure *out is NULL and ldimesh_last_error(NULL) tells why, on every rank. */
+int ldimesh_create(MPI_Comm comm, const char* options_json, ldimesh_adaptor** out);
+/* The same with the options read from a file; path NULL or "": the file named by the
+ * environment variable LDIMESH_OPTIONS, or defaults when unset. */
+int ldimesh_create_from_file(MPI_Comm comm, const char* path, ldimesh_adaptor** out);
+/* The same with a Fortran communicator handle (MPI_Comm_f2c); for the Fortran module. */
+int ldimesh_create_fortran(MPI_Fint comm, const char* options_json, ldimesh_adaptor** out);
+int ldimesh_create_from_file_fortran(MPI_Fint comm, const char* path, ldimesh_adaptor** out);
+
+/* Fills `block` with the defaults: everything zero, float64, spacing 1. */
+void ldimesh_grid_block_init(ldimesh_grid_block* block);
+void ldimesh_hex_block_init(ldimesh_hex_block* block);
+
+/* The global domain [lo, hi] the views cover, the same on every rank. */
+int ldimesh_set_domain(ldimesh_adaptor* a, const double lo[3], const double hi[3]);
+/* Adds one block of this rank's data; checked here (sizes, dims, strides). */
+int ldimesh_add_grid_block(ldimesh_adaptor* a, const ldimesh_grid_block* block);
+int ldimesh_add_hex_block(ldimesh_adaptor* a, const ldimesh_hex_block* block);
+/* Forgets this rank's blocks (to describe them anew). */
+int ldimesh_clear_blocks(ldimesh_adaptor* a);
+
+/* Collective. Runs the in situ step if it is due (options "cadence"). */
+int ldimesh_execute(ldimesh_adaptor* a, uint64_t step, double time);
+/* Collective. Waits for the root's pending work and stops the server. Returns the error of
+ * the last failed background step, if any. */
+int ldimesh_finalize(ldimesh_adaptor* a);
+/* Collective. Finalizes if not done and frees the adaptor; NULL is fine. */
+void ldimesh_destroy(ldimesh_adaptor* a);
+
+/* The message of the last error on this adaptor ("" if none); with NULL, of the last failed
+ * create on this thread. Valid until the next call on the same adaptor (or thread). */
+const char* ldimesh_last_error(const ldimesh_adaptor* a);
+/* Keeps `message` as the adaptor's last error and returns LDIMESH_ERROR_ARGUMENT (for
+ * bindings that check arguments themselves, such as the Fortran module). */
+int ldimesh_set_error(ldimesh_adaptor* a, const char* message);
+/* Root: the viewer's URL with its token ("" elsewhere, or without a server). */
+const char* ldimesh_url(const ldimesh_adaptor* a);
+/* Root: steps published so far. */
+uint64_t ldimesh_published_steps(const ldimesh_adaptor* a);
+int ldimesh_last_report(const ldimesh_adaptor* a, ldimesh_step_report* out);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* LDIMESH_H */

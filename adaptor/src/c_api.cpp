@@ -1,0 +1,325 @@
+// The C API (ldimesh.h) over ldimesh::Adaptor. Every entry point catches everything: no
+// exception crosses into C or Fortran.
+#include "ldimesh.h"
+
+#include <cstring>
+#include <limits>
+#include <new>
+#include <string>
+
+#include "ldimesh/adaptor.hpp"
+
+struct ldimesh_adaptor {
+  std::unique_ptr<ldimesh::Adaptor> impl;
+  std::string error;  // this handle's last error (C API checks and the adaptor's)
+  std::string url;
+};
+
+namespace {
+
+using ldimesh::Status;
+
+// The last failed create on this thread (there is no handle to keep it on).
+thread_local std::string create_error;
+
+int code_of(const Status& s, int failure) {
+  return s ? LDIMESH_OK : failure;
+}
+
+// Keeps `message` on the handle and returns `code`.
+int fail(ldimesh_adaptor* a, int code, std::string message) {
+  if (a) a->error = std::move(message);
+  return code;
+}
+
+int result(ldimesh_adaptor* a, const Status& s, int failure) {
+  if (!s) a->error = s.message();
+  return code_of(s, failure);
+}
+
+// Runs `body` (which returns a status code) and turns any exception into an error code.
+template <class Body>
+int guarded(ldimesh_adaptor* a, Body&& body) {
+  try {
+    return body();
+  } catch (const std::bad_alloc&) {
+    return fail(a, LDIMESH_ERROR_RUNTIME, "out of memory");
+  } catch (const std::exception& e) {
+    return fail(a, LDIMESH_ERROR_RUNTIME, e.what());
+  } catch (...) {
+    return fail(a, LDIMESH_ERROR_RUNTIME, "unknown error");
+  }
+}
+
+int no_handle() {
+  // Nothing to keep the message on: a caller checking ldimesh_last_error(NULL) finds it.
+  create_error = "ldimesh: the adaptor handle is NULL (did ldimesh_create fail?)";
+  return LDIMESH_ERROR_ARGUMENT;
+}
+
+// Options errors name a key and start with "options:".
+int create_code(const Status& s) {
+  if (s) return LDIMESH_OK;
+  return s.message().rfind("options:", 0) == 0 ? LDIMESH_ERROR_OPTIONS : LDIMESH_ERROR_RUNTIME;
+}
+
+template <class Create>
+int create_with(ldimesh_adaptor** out, Create&& create) {
+  if (!out) {
+    create_error = "ldimesh_create: out is NULL";
+    return LDIMESH_ERROR_ARGUMENT;
+  }
+  *out = nullptr;
+  int initialized = 0;
+  MPI_Initialized(&initialized);
+  if (!initialized) {
+    create_error = "ldimesh_create: MPI is not initialised (call MPI_Init_thread first)";
+    return LDIMESH_ERROR_ARGUMENT;
+  }
+  try {
+    auto handle = std::make_unique<ldimesh_adaptor>();
+    const Status s = create(handle->impl);
+    if (!s) {
+      create_error = s.message();
+      return create_code(s);
+    }
+    handle->url = handle->impl->url();
+    create_error.clear();
+    *out = handle.release();
+    return LDIMESH_OK;
+  } catch (const std::exception& e) {
+    create_error = std::string("ldimesh_create: ") + e.what();
+    return LDIMESH_ERROR_RUNTIME;
+  }
+}
+
+bool scalar_type(int type, ldimesh::ScalarType& out) {
+  if (type == LDIMESH_FLOAT32)
+    out = ldimesh::ScalarType::float32;
+  else if (type == LDIMESH_FLOAT64)
+    out = ldimesh::ScalarType::float64;
+  else
+    return false;
+  return true;
+}
+
+// n · m, false on overflow of int64 (both non-negative).
+bool mul(std::int64_t n, std::int64_t m, std::int64_t& out) {
+  if (n != 0 && m > std::numeric_limits<std::int64_t>::max() / n) return false;
+  out = n * m;
+  return true;
+}
+
+}  // namespace
+
+extern "C" {
+
+int ldimesh_create(MPI_Comm comm, const char* options_json, ldimesh_adaptor** out) {
+  return create_with(out, [&](std::unique_ptr<ldimesh::Adaptor>& impl) {
+    return ldimesh::Adaptor::create(comm, options_json ? options_json : "", impl);
+  });
+}
+
+int ldimesh_create_from_file(MPI_Comm comm, const char* path, ldimesh_adaptor** out) {
+  return create_with(out, [&](std::unique_ptr<ldimesh::Adaptor>& impl) {
+    return ldimesh::Adaptor::create_from_file(comm, path ? path : "", impl);
+  });
+}
+
+int ldimesh_create_fortran(MPI_Fint comm, const char* options_json, ldimesh_adaptor** out) {
+  int initialized = 0;
+  MPI_Initialized(&initialized);
+  if (!initialized) return ldimesh_create(MPI_COMM_NULL, options_json, out);
+  return ldimesh_create(MPI_Comm_f2c(comm), options_json, out);
+}
+
+int ldimesh_create_from_file_fortran(MPI_Fint comm, const char* path, ldimesh_adaptor** out) {
+  int initialized = 0;
+  MPI_Initialized(&initialized);
+  if (!initialized) return ldimesh_create_from_file(MPI_COMM_NULL, path, out);
+  return ldimesh_create_from_file(MPI_Comm_f2c(comm), path, out);
+}
+
+void ldimesh_grid_block_init(ldimesh_grid_block* block) {
+  if (!block) return;
+  std::memset(block, 0, sizeof *block);
+  block->type = LDIMESH_FLOAT64;
+  for (double& s : block->spacing)
+    s = 1.0;
+}
+
+void ldimesh_hex_block_init(ldimesh_hex_block* block) {
+  if (!block) return;
+  std::memset(block, 0, sizeof *block);
+  block->type = LDIMESH_FLOAT64;
+  block->nodes = LDIMESH_NODES_GLL;
+}
+
+int ldimesh_set_domain(ldimesh_adaptor* a, const double lo[3], const double hi[3]) {
+  if (!a) return no_handle();
+  if (!lo || !hi) return fail(a, LDIMESH_ERROR_ARGUMENT, "ldimesh_set_domain: lo or hi is NULL");
+  return guarded(a, [&] {
+    return result(a, a->impl->set_domain({{lo[0], lo[1], lo[2]}, {hi[0], hi[1], hi[2]}}),
+                  LDIMESH_ERROR_ARGUMENT);
+  });
+}
+
+int ldimesh_add_grid_block(ldimesh_adaptor* a, const ldimesh_grid_block* b) {
+  if (!a) return no_handle();
+  const std::string what = "ldimesh_add_grid_block: ";
+  if (!b) return fail(a, LDIMESH_ERROR_ARGUMENT, what + "block is NULL");
+  ldimesh::GridBlock g;
+  if (!scalar_type(b->type, g.type))
+    return fail(a, LDIMESH_ERROR_ARGUMENT,
+                what + "type must be LDIMESH_FLOAT32 or LDIMESH_FLOAT64");
+  for (int i = 0; i < 3; ++i) {
+    if (b->dims[i] < 2)
+      return fail(a, LDIMESH_ERROR_ARGUMENT,
+                  what + "dims[" + std::to_string(i) + "] = " + std::to_string(b->dims[i]) +
+                      ": a block needs at least 2 points per axis");
+    if (b->strides[i] < 0)
+      return fail(a, LDIMESH_ERROR_ARGUMENT, what + "strides must not be negative");
+  }
+  const bool contiguous = b->strides[0] == 0 && b->strides[1] == 0 && b->strides[2] == 0;
+  // The values the block reads: the index of its last point, plus one.
+  std::int64_t needed = 1;
+  if (contiguous) {
+    if (!mul(b->dims[0], b->dims[1], needed) || !mul(needed, b->dims[2], needed))
+      return fail(a, LDIMESH_ERROR_ARGUMENT, what + "dims overflow");
+  } else {
+    for (int i = 0; i < 3; ++i) {
+      std::int64_t span = 0;
+      if (b->strides[i] == 0)
+        return fail(a, LDIMESH_ERROR_ARGUMENT,
+                    what + "strides must be all zero (contiguous) or all positive");
+      if (!mul(b->dims[i] - 1, b->strides[i], span) ||
+          needed > std::numeric_limits<std::int64_t>::max() - span)
+        return fail(a, LDIMESH_ERROR_ARGUMENT, what + "strides overflow");
+      needed += span;
+    }
+  }
+  if (b->value_count < needed)
+    return fail(a, LDIMESH_ERROR_ARGUMENT,
+                what + "the array holds " + std::to_string(b->value_count) +
+                    " values, the block reads " + std::to_string(needed) + " (dims " +
+                    std::to_string(b->dims[0]) + "×" + std::to_string(b->dims[1]) + "×" +
+                    std::to_string(b->dims[2]) + ")");
+  g.dims = {b->dims[0], b->dims[1], b->dims[2]};
+  g.values = b->values;
+  g.strides = {b->strides[0], b->strides[1], b->strides[2]};
+  g.origin = {b->origin[0], b->origin[1], b->origin[2]};
+  g.spacing = {b->spacing[0], b->spacing[1], b->spacing[2]};
+  g.coords = {b->coords[0], b->coords[1], b->coords[2]};
+  for (int i = 0; i < 3; ++i) {
+    g.ghost_lo[i] = b->ghost_lo[i];
+    g.ghost_hi[i] = b->ghost_hi[i];
+  }
+  return guarded(a, [&] { return result(a, a->impl->add_grid_block(g), LDIMESH_ERROR_ARGUMENT); });
+}
+
+int ldimesh_add_hex_block(ldimesh_adaptor* a, const ldimesh_hex_block* b) {
+  if (!a) return no_handle();
+  const std::string what = "ldimesh_add_hex_block: ";
+  if (!b) return fail(a, LDIMESH_ERROR_ARGUMENT, what + "block is NULL");
+  ldimesh::HexBlock h;
+  if (!scalar_type(b->type, h.type))
+    return fail(a, LDIMESH_ERROR_ARGUMENT,
+                what + "type must be LDIMESH_FLOAT32 or LDIMESH_FLOAT64");
+  switch (b->nodes) {
+    case LDIMESH_NODES_GLL:
+      h.nodes = ldimesh::NodeSet::gauss_lobatto_legendre;
+      break;
+    case LDIMESH_NODES_GL:
+      h.nodes = ldimesh::NodeSet::gauss_legendre;
+      break;
+    case LDIMESH_NODES_EQUISPACED:
+      h.nodes = ldimesh::NodeSet::equispaced;
+      break;
+    default:
+      return fail(a, LDIMESH_ERROR_ARGUMENT, what + "nodes must be LDIMESH_NODES_*");
+  }
+  if (b->order < 1 || b->order > ldimesh::kMaxHexOrder)
+    return fail(a, LDIMESH_ERROR_ARGUMENT,
+                what + "order must lie in 1.." + std::to_string(ldimesh::kMaxHexOrder));
+  if (b->element_count < 1)
+    return fail(a, LDIMESH_ERROR_ARGUMENT, what + "element_count must be at least 1");
+  const std::int64_t per_element = std::int64_t(b->order + 1) * (b->order + 1) * (b->order + 1);
+  const std::int64_t stride = b->element_stride == 0 ? per_element : b->element_stride;
+  if (stride < per_element)
+    return fail(a, LDIMESH_ERROR_ARGUMENT,
+                what + "element_stride is smaller than the (p+1)³ values of an element");
+  std::int64_t needed = 0;
+  if (!mul(b->element_count - 1, stride, needed))
+    return fail(a, LDIMESH_ERROR_ARGUMENT, what + "element_count overflows");
+  needed += per_element;
+  if (b->value_count < needed)
+    return fail(a, LDIMESH_ERROR_ARGUMENT,
+                what + "the array holds " + std::to_string(b->value_count) +
+                    " values, the elements read " + std::to_string(needed));
+  h.order = b->order;
+  h.element_count = std::size_t(b->element_count);
+  h.corners = b->corners;
+  h.values = b->values;
+  h.element_stride = std::size_t(stride);
+  return guarded(a, [&] { return result(a, a->impl->add_hex_block(h), LDIMESH_ERROR_ARGUMENT); });
+}
+
+int ldimesh_clear_blocks(ldimesh_adaptor* a) {
+  if (!a) return no_handle();
+  return guarded(a, [&] {
+    a->impl->clear_blocks();
+    return LDIMESH_OK;
+  });
+}
+
+int ldimesh_execute(ldimesh_adaptor* a, uint64_t step, double time) {
+  if (!a) return no_handle();
+  return guarded(a, [&] { return result(a, a->impl->execute(step, time), LDIMESH_ERROR_STEP); });
+}
+
+int ldimesh_finalize(ldimesh_adaptor* a) {
+  if (!a) return no_handle();
+  return guarded(a, [&] { return result(a, a->impl->finalize(), LDIMESH_ERROR_STEP); });
+}
+
+void ldimesh_destroy(ldimesh_adaptor* a) {
+  if (!a) return;
+  try {
+    a->impl->finalize();
+  } catch (...) {
+  }
+  delete a;
+}
+
+const char* ldimesh_last_error(const ldimesh_adaptor* a) {
+  return a ? a->error.c_str() : create_error.c_str();
+}
+
+int ldimesh_set_error(ldimesh_adaptor* a, const char* message) {
+  if (!a) return no_handle();
+  return fail(a, LDIMESH_ERROR_ARGUMENT, message ? message : "");
+}
+
+const char* ldimesh_url(const ldimesh_adaptor* a) {
+  return a ? a->url.c_str() : "";
+}
+
+uint64_t ldimesh_published_steps(const ldimesh_adaptor* a) {
+  return a ? a->impl->published_steps() : 0;
+}
+
+int ldimesh_last_report(const ldimesh_adaptor* a, ldimesh_step_report* out) {
+  if (!a) return no_handle();
+  if (!out) return LDIMESH_ERROR_ARGUMENT;
+  const ldimesh::StepReport& r = a->impl->last_report();
+  out->step = r.step;
+  out->executed = r.executed ? 1 : 0;
+  out->skipped_busy = r.skipped_busy ? 1 : 0;
+  out->replaced_pending = r.replaced_pending ? 1 : 0;
+  out->blocked_seconds = r.blocked_seconds;
+  out->max_blocked_seconds = r.max_blocked_seconds;
+  out->nonfinite_values = r.nonfinite_values;
+  return LDIMESH_OK;
+}
+
+}  // extern "C"

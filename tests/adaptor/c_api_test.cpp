@@ -1,0 +1,266 @@
+// The C API (ldimesh.h) under mpiexec, as a C solver uses it: status codes and messages for
+// every misuse, a wrong-size array, NaNs in the field, a step without surface. Collective
+// tests: every rank runs every test and only non-fatal EXPECTs are used.
+#include "ldimesh.h"
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "../mpi/mpi_gtest.hpp"
+
+namespace ldimesh {
+namespace {
+
+using testing::rank_of;
+using testing::ranks;
+
+constexpr long kN = 25;  // points per axis over [-1, 1]³
+
+// This rank's slab of the field |x|² on kN³ points: the owned point layers along z plus one
+// ghost layer above where a neighbour is (the cells between are this rank's).
+struct Slab {
+  std::vector<double> values;
+  long z_first = 0, layers = 0;
+  bool ghost_above = false;
+
+  Slab() {
+    const long z0 = rank_of() * kN / ranks(), z1 = (rank_of() + 1) * kN / ranks();
+    ghost_above = rank_of() < ranks() - 1;
+    z_first = z0;
+    layers = z1 - z0 + (ghost_above ? 1 : 0);
+    values.resize(std::size_t(kN * kN * layers));
+    for (long l = 0; l < layers; ++l)
+      for (long j = 0; j < kN; ++j)
+        for (long i = 0; i < kN; ++i) {
+          const double x = coordinate(i), y = coordinate(j), z = coordinate(z_first + l);
+          at(i, j, l) = x * x + y * y + z * z;
+        }
+  }
+  static double coordinate(long i) { return -1.0 + 2.0 * double(i) / double(kN - 1); }
+  double& at(long i, long j, long l) { return values[std::size_t((l * kN + j) * kN + i)]; }
+
+  ldimesh_grid_block block() {
+    ldimesh_grid_block b;
+    ldimesh_grid_block_init(&b);
+    b.dims[0] = kN;
+    b.dims[1] = kN;
+    b.dims[2] = layers;
+    b.values = values.data();
+    b.value_count = std::int64_t(values.size());
+    b.type = LDIMESH_FLOAT64;
+    for (int a = 0; a < 3; ++a) {
+      b.origin[a] = -1.0;
+      b.spacing[a] = 2.0 / double(kN - 1);
+    }
+    b.origin[2] = coordinate(z_first);
+    b.ghost_hi[2] = ghost_above ? 1 : 0;
+    return b;
+  }
+};
+
+std::string temp_dir(const std::string& name) {
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("ldimesh_c_api_" + name + "_" + std::to_string(ranks()));
+  if (rank_of() == 0) std::filesystem::remove_all(dir);
+  MPI_Barrier(MPI_COMM_WORLD);
+  return dir.string();
+}
+
+// Options writing every step into `dir`, no server, quiet, the sphere of radius 0.6.
+std::string options(const std::string& dir, const std::string& isovalue = "0.36") {
+  return R"({"server": {"enabled": false}, "log": false, "resolution": 48, "busy": "coalesce",
+             "isovalues": [)" +
+         isovalue + R"(], "output_dir": ")" + dir + R"("})";
+}
+
+// A number field of a step's metadata file (root only), or -1.
+long long metadata_number(const std::string& dir, int step, const std::string& key) {
+  char name[32];
+  std::snprintf(name, sizeof name, "/step_%06d.json", step);
+  std::ifstream in(dir + name);
+  std::stringstream text;
+  text << in.rdbuf();
+  const std::string json = text.str();
+  const std::string pattern = "\"" + key + "\":";
+  const auto at = json.find(pattern);
+  if (at == std::string::npos) return -1;
+  return std::stoll(json.substr(at + pattern.size()));
+}
+
+ldimesh_adaptor* create(const std::string& options_json) {
+  ldimesh_adaptor* a = nullptr;
+  const int rc = ldimesh_create(MPI_COMM_WORLD, options_json.c_str(), &a);
+  EXPECT_EQ(rc, LDIMESH_OK) << ldimesh_last_error(nullptr);
+  const double lo[3] = {-1, -1, -1}, hi[3] = {1, 1, 1};
+  EXPECT_EQ(ldimesh_set_domain(a, lo, hi), a ? LDIMESH_OK : LDIMESH_ERROR_ARGUMENT);
+  return a;
+}
+
+TEST(CApi, ANullHandleIsAnErrorNotACrash) {
+  EXPECT_EQ(ldimesh_execute(nullptr, 1, 0.0), LDIMESH_ERROR_ARGUMENT);
+  EXPECT_NE(std::string(ldimesh_last_error(nullptr)).find("NULL"), std::string::npos);
+  EXPECT_EQ(ldimesh_add_grid_block(nullptr, nullptr), LDIMESH_ERROR_ARGUMENT);
+  EXPECT_EQ(ldimesh_finalize(nullptr), LDIMESH_ERROR_ARGUMENT);
+  EXPECT_STREQ(ldimesh_url(nullptr), "");
+  EXPECT_EQ(ldimesh_published_steps(nullptr), 0u);
+  ldimesh_destroy(nullptr);
+  EXPECT_EQ(ldimesh_create(MPI_COMM_WORLD, "", nullptr), LDIMESH_ERROR_ARGUMENT);
+}
+
+TEST(CApi, InvalidOptionsAreNamedOnEveryRank) {
+  ldimesh_adaptor* a = reinterpret_cast<ldimesh_adaptor*>(&a);  // must be reset to NULL
+  EXPECT_EQ(ldimesh_create(MPI_COMM_WORLD, R"({"resolution": 1})", &a), LDIMESH_ERROR_OPTIONS);
+  EXPECT_EQ(a, nullptr);
+  EXPECT_NE(std::string(ldimesh_last_error(nullptr)).find("'resolution'"), std::string::npos)
+      << ldimesh_last_error(nullptr);
+  EXPECT_EQ(ldimesh_create(MPI_COMM_WORLD, "{not json", &a), LDIMESH_ERROR_OPTIONS);
+  EXPECT_EQ(ldimesh_create_from_file(MPI_COMM_WORLD, "/nonexistent/options.json", &a),
+            LDIMESH_ERROR_OPTIONS);
+  EXPECT_NE(std::string(ldimesh_last_error(nullptr)).find("/nonexistent/options.json"),
+            std::string::npos);
+  // A later good create clears the message.
+  a = create(R"({"server": {"enabled": false}, "log": false})");
+  EXPECT_STREQ(ldimesh_last_error(nullptr), "");
+  ldimesh_destroy(a);
+}
+
+TEST(CApi, AWrongSizeArrayIsRejectedAndTheAdaptorKeepsWorking) {
+  const std::string dir = temp_dir("wrong_size");
+  ldimesh_adaptor* a = create(options(dir));
+  if (!a) return;
+  Slab slab;
+  ldimesh_grid_block b = slab.block();
+  // One value short: the block would read past the end of the array.
+  b.value_count = std::int64_t(slab.values.size()) - 1;
+  EXPECT_EQ(ldimesh_add_grid_block(a, &b), LDIMESH_ERROR_ARGUMENT);
+  const std::string message = ldimesh_last_error(a);
+  EXPECT_NE(message.find("holds " + std::to_string(slab.values.size() - 1) + " values"),
+            std::string::npos)
+      << message;
+  EXPECT_NE(message.find("reads " + std::to_string(slab.values.size())), std::string::npos)
+      << message;
+  // Strides that reach past the end: the last point is at 2·(n − 1) per axis.
+  b = slab.block();
+  b.strides[0] = 2;
+  b.strides[1] = 2 * kN;
+  b.strides[2] = 2 * kN * kN;
+  EXPECT_EQ(ldimesh_add_grid_block(a, &b), LDIMESH_ERROR_ARGUMENT);
+  b.strides[0] = 0;  // mixed zero and non-zero strides
+  EXPECT_EQ(ldimesh_add_grid_block(a, &b), LDIMESH_ERROR_ARGUMENT);
+  b = slab.block();
+  b.type = 7;
+  EXPECT_EQ(ldimesh_add_grid_block(a, &b), LDIMESH_ERROR_ARGUMENT);
+  b = slab.block();
+  b.values = nullptr;  // checked by the grid source
+  EXPECT_EQ(ldimesh_add_grid_block(a, &b), LDIMESH_ERROR_ARGUMENT);
+  EXPECT_FALSE(std::string(ldimesh_last_error(a)).empty());
+
+  // Hex blocks: one value short of 2 elements of order 2.
+  std::vector<double> corners(2 * 24, 0.0), nodal(2 * 27, 1.0);
+  ldimesh_hex_block h;
+  ldimesh_hex_block_init(&h);
+  h.order = 2;
+  h.element_count = 2;
+  h.corners = corners.data();
+  h.values = nodal.data();
+  h.value_count = 2 * 27 - 1;
+  EXPECT_EQ(ldimesh_add_hex_block(a, &h), LDIMESH_ERROR_ARGUMENT);
+  EXPECT_NE(std::string(ldimesh_last_error(a)).find("the elements read 54"), std::string::npos)
+      << ldimesh_last_error(a);
+  h.value_count = 54;
+  h.order = 9;
+  EXPECT_EQ(ldimesh_add_hex_block(a, &h), LDIMESH_ERROR_ARGUMENT);
+
+  // Nothing was added: the right block now gives the sphere.
+  b = slab.block();
+  EXPECT_EQ(ldimesh_add_grid_block(a, &b), LDIMESH_OK) << ldimesh_last_error(a);
+  EXPECT_EQ(ldimesh_execute(a, 1, 0.0), LDIMESH_OK) << ldimesh_last_error(a);
+  EXPECT_EQ(ldimesh_finalize(a), LDIMESH_OK);
+  if (rank_of() == 0) {
+    EXPECT_EQ(ldimesh_published_steps(a), 1u);
+    EXPECT_GT(metadata_number(dir, 1, "triangles"), 1000);
+  }
+  ldimesh_destroy(a);
+}
+
+TEST(CApi, NaNsInTheFieldAreCountedAndTheirCellsLeftOut) {
+  const std::string dir = temp_dir("nan");
+  ldimesh_adaptor* a = create(options(dir));
+  if (!a) return;
+  Slab slab;
+  ldimesh_grid_block b = slab.block();
+  EXPECT_EQ(ldimesh_add_grid_block(a, &b), LDIMESH_OK) << ldimesh_last_error(a);
+  // Step 1 clean; step 2 with a NaN and an Inf on every rank at points next to the sphere
+  // (|x| ≈ 0.58 at i = 5 of 25: x = −0.583); step 3 clean again.
+  EXPECT_EQ(ldimesh_execute(a, 1, 0.0), LDIMESH_OK) << ldimesh_last_error(a);
+  ldimesh_step_report report;
+  EXPECT_EQ(ldimesh_last_report(a, &report), LDIMESH_OK);
+  EXPECT_EQ(report.nonfinite_values, 0u);
+  const long l = slab.layers / 2, mid = kN / 2;
+  const double saved[2] = {slab.at(5, mid, l), slab.at(kN - 6, mid, l)};
+  slab.at(5, mid, l) = std::nan("");
+  slab.at(kN - 6, mid, l) = std::numeric_limits<double>::infinity();
+  EXPECT_EQ(ldimesh_execute(a, 2, 1.0), LDIMESH_OK) << ldimesh_last_error(a);
+  EXPECT_EQ(ldimesh_last_report(a, &report), LDIMESH_OK);
+  EXPECT_EQ(report.executed, 1);
+  if (rank_of() == 0) {
+    EXPECT_EQ(report.nonfinite_values, 2u * std::uint64_t(ranks()));
+  }
+  slab.at(5, mid, l) = saved[0];
+  slab.at(kN - 6, mid, l) = saved[1];
+  EXPECT_EQ(ldimesh_execute(a, 3, 2.0), LDIMESH_OK) << ldimesh_last_error(a);
+  EXPECT_EQ(ldimesh_finalize(a), LDIMESH_OK) << ldimesh_last_error(a);
+  if (rank_of() == 0) {
+    const long long clean = metadata_number(dir, 1, "triangles");
+    const long long holed = metadata_number(dir, 2, "triangles");
+    EXPECT_GT(clean, 1000);
+    // The cells around the NaN/Inf points are missing from the surface, the rest is there.
+    EXPECT_LT(holed, clean);
+    EXPECT_GT(holed, clean * 8 / 10);
+    EXPECT_EQ(metadata_number(dir, 3, "triangles"), clean);
+    EXPECT_EQ(metadata_number(dir, 1, "nonfinite_values"), 0);
+    EXPECT_EQ(metadata_number(dir, 2, "nonfinite_values"), 2 * ranks());
+  }
+  ldimesh_destroy(a);
+}
+
+TEST(CApi, AStepWithoutSurfaceIsPublishedEmpty) {
+  const std::string dir = temp_dir("empty");
+  ldimesh_adaptor* a = create(options(dir, "7"));  // |x|² ≤ 3 in the box
+  if (!a) return;
+  Slab slab;
+  ldimesh_grid_block b = slab.block();
+  EXPECT_EQ(ldimesh_add_grid_block(a, &b), LDIMESH_OK);
+  EXPECT_EQ(ldimesh_execute(a, 1, 0.0), LDIMESH_OK) << ldimesh_last_error(a);
+  EXPECT_EQ(ldimesh_finalize(a), LDIMESH_OK);
+  if (rank_of() == 0) {
+    EXPECT_EQ(metadata_number(dir, 1, "triangles"), 0);
+  }
+  ldimesh_destroy(a);
+}
+
+TEST(CApi, ExecuteWithoutADomainFailsWithAStepError) {
+  ldimesh_adaptor* a = nullptr;
+  EXPECT_EQ(ldimesh_create(MPI_COMM_WORLD, R"({"server": {"enabled": false}, "log": false})", &a),
+            LDIMESH_OK);
+  if (!a) return;
+  EXPECT_EQ(ldimesh_execute(a, 1, 0.0), LDIMESH_ERROR_STEP);
+  EXPECT_NE(std::string(ldimesh_last_error(a)).find("set_domain"), std::string::npos);
+  // The next step is tried again (and fails the same way): nothing is stuck.
+  EXPECT_EQ(ldimesh_execute(a, 2, 0.0), LDIMESH_ERROR_STEP);
+  ldimesh_destroy(a);
+}
+
+}  // namespace
+}  // namespace ldimesh
+
+int main(int argc, char** argv) {
+  return ldimesh::testing::run_mpi_tests(argc, argv);
+}
