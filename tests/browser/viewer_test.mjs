@@ -1,7 +1,20 @@
 // Browser test of the viewer: Debian's chromium, driven by playwright-core, opens the page a
 // test publisher serves (real server, real Draco GLB meshes), and checks what a person sees:
 // the mesh of step 1 loads (the page's triangle count equals the published one), the canvas
-// is not blank, and the view follows to step 2 when it is published. Screenshots are kept.
+// is not blank, and the view follows to step 2 when it is published. Then:
+// - steps published faster than the page can load them (every mesh download held back 1.5 s,
+//   a step every 0.3 s): the page still shows newer steps every few seconds, and downloads only
+//   meshes it shows;
+// - the page draws only when something changes: no frames while nothing happens (counted from
+//   the WebGL clears and the page's own counter), frames when the camera is dragged, the
+//   colouring changed;
+// - the camera keeps the surface in view (no mesh pixels on the canvas's edges, the bounding
+//   box of the mesh shown projects inside the view) and re-frames for a surface that outgrows
+//   what it framed, until the person moves it: then it stays put; "reset camera" frames again;
+// - the slider shows an older step, "follow" goes back to the newest;
+// - no request is answered with an error (favicon included), no three.js interleaved-attribute
+//   warning in the console.
+// Screenshots are kept.
 //
 //   node tests/browser/viewer_test.mjs PUBLISHER REPO_ROOT ARTIFACT_DIR
 import { spawn } from 'node:child_process';
@@ -25,6 +38,24 @@ const nextLine = () => new Promise((resolve, reject) => {
   waiting.push((line) => { clearTimeout(timer); resolve(line); });
 });
 const published = (line) => { const [, step, triangles] = line.split(' '); return { step, triangles: Number(triangles) }; };
+const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
+const publishNext = async () => { publisher.stdin.write('next\n'); return published(await nextLine()); };
+
+// Before the page's scripts: count the WebGL clears (one per frame three.js draws) and note when
+// the page shows each step (body's data-loaded-step), with the time.
+function instrument() {
+  window.testGlClears = 0;
+  for (const gl of [window.WebGLRenderingContext, window.WebGL2RenderingContext]) {
+    const clear = gl.prototype.clear;
+    gl.prototype.clear = function (...args) { window.testGlClears++; return clear.apply(this, args); };
+  }
+  window.testShown = [];
+  new MutationObserver(() => {
+    const step = document.body.dataset.loadedStep;
+    const last = window.testShown[window.testShown.length - 1];
+    if (step !== undefined && (!last || last.step !== Number(step))) window.testShown.push({ step: Number(step), t: Date.now() });
+  }).observe(document, { subtree: true, attributes: true, attributeFilter: ['data-loaded-step'] });
+}
 
 let browser;
 const timeout = setTimeout(() => { console.log('FAIL the test took over 4 minutes'); process.exit(1); }, 240000);
@@ -38,6 +69,68 @@ try {
   });
   const page = await browser.newPage({ viewport: { width: 960, height: 640 } });
   page.on('pageerror', (e) => console.log(`page error: ${e.message}`));
+  const consoleMessages = [], httpErrors = [], meshRequests = [];
+  page.on('console', (m) => {
+    consoleMessages.push(`${m.type()}: ${m.text()}`);
+    if (m.type() === 'warning' || m.type() === 'error') console.log(`       console ${m.type()}: ${m.text()}`);
+  });
+  page.on('response', (r) => { if (r.status() >= 400) httpErrors.push(`${r.status()} ${r.url()}`); });
+  page.on('requestfailed', (r) => httpErrors.push(`failed (${r.failure()?.errorText}) ${r.url()}`));
+  page.on('request', (r) => {
+    const m = /\/api\/v1\/steps\/(\d+)\/mesh\.glb/.exec(r.url());
+    if (m) meshRequests.push({ step: Number(m[1]), t: Date.now() });
+  });
+  await page.addInitScript(instrument);
+  const loadedStep = () => page.evaluate(() => Number(document.body.dataset.loadedStep));
+  const waitForStep = (step, ms = 60000) =>
+    page.waitForFunction((s) => document.body.dataset.loadedStep === String(s), step, { timeout: ms });
+  const counters = () => page.evaluate(() => ({ gl: window.testGlClears, page: Number(document.body.dataset.renders) }));
+  // Waits until the page has drawn nothing for 600 ms (the camera's damping settled); false
+  // after `ms`.
+  const settle = async (ms) => {
+    const end = Date.now() + ms;
+    for (let last = null; Date.now() < end; await sleep(600)) {
+      const now = (await counters()).gl;
+      if (now === last) return true;
+      last = now;
+    }
+    return false;
+  };
+  // Whether the shown mesh is in view, read in an animation frame after the page's own (which
+  // places the camera and draws): the pixels along the canvas's edges that differ from the
+  // background (a surface cut off by the edges shows there) and how far the corners of the
+  // mesh's bounding box project from the canvas centre (> 1: outside the view).
+  const inView = () => page.evaluate(() => new Promise((resolve) => requestAnimationFrame(async () => {
+    const gl = document.getElementById('view');
+    const copy = document.createElement('canvas');
+    copy.width = gl.width; copy.height = gl.height;
+    const ctx = copy.getContext('2d');
+    ctx.drawImage(gl, 0, 0);
+    const d = ctx.getImageData(0, 0, copy.width, copy.height).data;
+    let edge = 0;
+    for (let y = 0; y < copy.height; ++y) for (let x = 0; x < copy.width; ++x) {
+      if (y > 0 && y < copy.height - 1 && x > 0 && x < copy.width - 1) continue;
+      const i = 4 * (y * copy.width + x);
+      if (Math.abs(d[i] - 0x1d) + Math.abs(d[i + 1] - 0x20) + Math.abs(d[i + 2] - 0x26) > 24) edge++;
+    }
+    const THREE = await import('/vendor/three/build/three.module.js');
+    const { camera, mesh } = window.ldimesh;
+    let box = Infinity;
+    if (camera && mesh) {
+      camera.updateMatrixWorld();
+      const b = new THREE.Box3().setFromObject(mesh);
+      box = 0;
+      for (const x of [b.min.x, b.max.x]) for (const y of [b.min.y, b.max.y]) for (const z of [b.min.z, b.max.z]) {
+        const p = new THREE.Vector3(x, y, z).project(camera);
+        box = Math.max(box, Math.abs(p.x), Math.abs(p.y), Math.abs(p.z));
+      }
+    }
+    resolve({ edge, box, ok: edge === 0 && box <= 1,
+      text: `${edge} mesh pixels on the canvas's edges, bounding box within ${box.toFixed(2)} of the view` });
+  })));
+  const cameraPosition = () => page.evaluate(() => window.ldimesh.camera ? window.ldimesh.camera.position.toArray() : null);
+  const distance = (a, b) => (a && b ? Math.hypot(a[0] - b[0], a[1] - b[1], a[2] - b[2]) : Infinity);
+  const cameraMode = () => page.evaluate(() => document.body.dataset.camera);
   await page.goto(url);
   await page.waitForFunction((s) => document.body.dataset.loadedStep === s, first.step, { timeout: 60000 });
   const triangles = await page.evaluate(() => Number(document.body.dataset.triangles));
@@ -68,12 +161,125 @@ try {
   check(panel === second.step, `the panel shows step ${panel}`);
   await page.waitForTimeout(300);
   await page.screenshot({ path: `${artifacts}/viewer_step2.png` });
+  let view = await inView();
+  check(view.ok, `step 2 is in view (${view.text})`);
+
+  // A surface that outgrows the ones before (step 3: the Klein bottle) is framed anew.
+  const grown = await publishNext();
+  await waitForStep(grown.step);
+  view = await inView();
+  check(view.ok, `step ${grown.step}, larger than steps 1 and 2, is in view (${view.text})`);
+
+  // Nothing happens: nothing is drawn.
+  await settle(10000);
+  let before = await counters();
+  await sleep(2000);
+  let after = await counters();
+  check(after.gl - before.gl <= 1 && after.page - before.page <= 1,
+    `no frames drawn while nothing changes: ${after.gl - before.gl} WebGL clears, ${after.page - before.page} renders counted by the page in 2 s`);
+
+  // Steps published faster than the page can load them: each mesh download is held back 1.5 s,
+  // a step is published every 0.3 s for 9 s. The page shows a newer step within 4 s, then
+  // again at least every 4 s, and downloads only meshes it shows.
+  await page.route('**/mesh.glb', async (route) => { await sleep(1500); await route.continue(); });
+  const burstStart = Date.now(), fromStep = Number(grown.step);
+  let last;
+  for (let i = 1; i <= 30; ++i) {
+    last = await publishNext();
+    await sleep(burstStart + 300 * i - Date.now());
+  }
+  const burstEnd = Date.now();
+  await waitForStep(last.step, 15000).catch(() => {});
+  const lastShownAt = Date.now();
+  const shown = (await page.evaluate(() => window.testShown)).filter((s) => s.t >= burstStart);
+  const during = shown.filter((s) => s.t <= burstEnd);
+  const times = [burstStart, ...during.map((s) => s.t), burstEnd];
+  const gaps = times.slice(1).map((t, i) => t - times[i]);
+  console.log(`       steps ${fromStep + 1}–${last.step} published in ${((burstEnd - burstStart) / 1000).toFixed(1)} s; shown: ` +
+    shown.map((s) => `${s.step} at ${((s.t - burstStart) / 1000).toFixed(1)} s`).join(', '));
+  check(during.length >= 3 && during.every((s, i) => s.step > (i ? during[i - 1].step : fromStep)),
+    `steps published faster than they download: the page showed ${during.length} newer steps while they were published (≥ 3)`);
+  check(Math.max(...gaps) < 4000, `… a newer step at least every 4 s (longest wait ${(Math.max(...gaps) / 1000).toFixed(1)} s)`);
+  check(await loadedStep() === Number(last.step),
+    `… and the newest, step ${last.step}, ${(lastShownAt - burstEnd) / 1000} s after it was published`);
+  const wasted = meshRequests.filter((r) => r.t >= burstStart && !shown.some((s) => s.step === r.step)).map((r) => r.step);
+  check(wasted.length === 0, `… downloading only meshes it shows (${meshRequests.filter((r) => r.t >= burstStart).length} downloads; not shown: ${wasted.join(', ') || 'none'})`);
+  await page.unroute('**/mesh.glb');
+  view = await inView();
+  check(view.ok, `step ${last.step} is in view (${view.text})`);
+
+  // The camera: "reset camera" frames the step shown (the torus); the next surface (the Barth
+  // sextic) outgrows it and is framed anew; once the person drags the camera it stays put, also
+  // for the next (the Klein bottle, larger again).
+  await page.click('#reset');
+  view = await inView();
+  check(view.ok && await cameraMode() === 'framed', `after "reset camera" the camera is framed (${view.text})`);
+  let position = await cameraPosition();
+  const third = await publishNext();
+  await waitForStep(third.step);
+  view = await inView();
+  const moved = distance(position, await cameraPosition());
+  check(view.ok && moved > 0.1, `step ${third.step}, larger, is framed anew: in view (${view.text}), the camera moved by ${moved.toFixed(2)}`);
+  await settle(10000);
+  before = await counters();
+  await page.mouse.move(600, 320);
+  await page.mouse.down();
+  await page.mouse.move(700, 360, { steps: 10 });
+  await page.mouse.up();
+  const settled = await settle(30000);
+  after = await counters();
+  check(after.page - before.page >= 5 && await cameraMode() === 'user' && settled,
+    `dragging the camera draws frames (${after.page - before.page}), then stops (${settled}); the camera is the person's: ${await cameraMode()}`);
+  position = await cameraPosition();
+  const fourth = await publishNext();
+  await waitForStep(fourth.step);
+  await settle(10000);
+  // (up to the last, imperceptible steps of OrbitControls' damping, applied when a frame is
+  // drawn: within 1 % of the camera's distance; framing anew would move it by far more)
+  const shift = distance(position, await cameraPosition());
+  check(shift < 0.01 * distance(position, [0, 0, 0]),
+    `step ${fourth.step}, larger again, leaves the person's camera where it was (moved by ${shift.toExponential(1)})`);
+  await page.screenshot({ path: `${artifacts}/viewer_user_camera.png` });
+  await page.click('#reset');
+  view = await inView();
+  check(view.ok && await cameraMode() === 'framed', `"reset camera" frames step ${fourth.step} again (${view.text})`);
+
+  // Another colouring is drawn (one frame or two, not a loop).
+  await settle(10000);
+  before = await counters();
+  await page.selectOption('#colour', 'plain');
+  await sleep(500);
+  after = await counters();
+  await page.selectOption('#colour', 'view');
+  check(after.page - before.page >= 1 && after.page - before.page <= 3, `a change of colouring is drawn (${after.page - before.page} frames)`);
+
+  // The slider shows an older stored step, "follow" the newest again.
+  const older = await page.evaluate(() => {
+    const slider = document.getElementById('slider');
+    slider.value = String(Number(slider.max) - 2);
+    slider.dispatchEvent(new Event('input'));
+    return window.ldimesh.steps[Number(slider.value)];
+  });
+  await waitForStep(older, 15000).catch(() => {});
+  let status = await page.evaluate(() => document.body.dataset.status);
+  check(await loadedStep() === older && status === `step ${older}`, `the slider shows step ${older}: "${status}"`);
+  await page.click('#follow');
+  await waitForStep(fourth.step, 15000).catch(() => {});
+  status = await page.evaluate(() => document.body.dataset.status);
+  check(await loadedStep() === Number(fourth.step) && status === `step ${fourth.step} (following)`, `"follow" goes back to step ${fourth.step}: "${status}"`);
+
+  const interleaved = consoleMessages.filter((m) => m.includes('InterleavedBufferAttribute'));
+  check(interleaved.length === 0, `no InterleavedBufferAttribute warning in the console (${interleaved.length})`);
+  // (the browser's own request for /favicon.ico shows only as a console error)
+  const failedLoads = consoleMessages.filter((m) => m.includes('Failed to load resource'));
+  check(httpErrors.length === 0 && failedLoads.length === 0,
+    `no request answered with an error, favicon included (${[...httpErrors, ...failedLoads].join(', ') || 'none'})`);
 
   // Without the token the page says so instead of showing anything.
   const bare = await browser.newPage();
   await bare.goto(url.replace(/\?token=.*/, ''));
-  const status = await bare.evaluate(() => document.body.dataset.status || '');
-  check(status.includes('token'), `without a token the page explains: "${status}"`);
+  const bareStatus = await bare.evaluate(() => document.body.dataset.status || '');
+  check(bareStatus.includes('token'), `without a token the page explains: "${bareStatus}"`);
 } catch (e) {
   failures++;
   console.log(`FAIL ${e.message}`);

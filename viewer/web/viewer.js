@@ -34,23 +34,40 @@ const material = new THREE.MeshStandardMaterial({
   vertexColors: true, roughness: 0.55, metalness: 0.05, side: THREE.DoubleSide,
 });
 
+// Rendering on demand: a frame is drawn only when the picture changes (a step shown, the camera
+// moved, a resize, another colouring), never in a loop: with software rendering a big mesh
+// costs a CPU core per frame, which the simulation beside it needs. OrbitControls reports each
+// camera move as 'change', including the moves of its damping after the pointer lets go (the
+// update() in each frame applies them and asks for the next frame until the camera is still).
+// document.body.dataset.renders counts the frames drawn (the browser test reads it).
+let renderRequested = false, renders = 0;
+function requestRender() {
+  if (renderRequested) return;
+  renderRequested = true;
+  requestAnimationFrame(() => {
+    renderRequested = false;
+    controls.update();
+    renderer.render(scene, camera);
+    document.body.dataset.renders = String(++renders);
+  });
+}
+controls.addEventListener('change', requestRender);
+
 function resize() {
   const w = canvas.clientWidth, h = canvas.clientHeight;
   renderer.setSize(w, h, false);
   camera.aspect = w / Math.max(h, 1);
   camera.updateProjectionMatrix();
+  requestRender();
 }
 window.addEventListener('resize', resize);
 resize();
-renderer.setAnimationLoop(() => {
-  controls.update();
-  renderer.render(scene, camera);
-});
 
 // ---------------------------------------------------------------------------------------------
 // State shown to the person (the panel) and to tests (data attributes on <body>)
 
-const state = { steps: [], loaded: null, loading: 0, mesh: null, framed: false };
+// loading: the step being loaded (null when none), next: the step to load after it (see show()).
+const state = { steps: [], loaded: null, loading: null, next: null, mesh: null, camera };
 window.ldimesh = state;
 
 function setStatus(text, isError = false) {
@@ -113,17 +130,22 @@ function colourmap(u) {
   return viridis[i].map((c, k) => c + f * (viridis[i + 1][k] - c));
 }
 
-// Colours by view (the GLB's COLOR_0), by scalar (TEXCOORD_0.u through viridis) or plain.
+// Colours by view (the GLB's COLOR_0), by scalar (TEXCOORD_0.u through viridis) or plain. The
+// colour attributes are swapped, never modified, so the GLB's own (which the Draco loader may
+// hand over interleaved: cloning it would de-interleave it, with a warning) is kept as it is.
 function applyColouring(root) {
   const mode = $('colour').value;
   root.traverse((object) => {
     if (!object.isMesh) return;
     const g = object.geometry;
-    if (!g.userData.viewColours && g.attributes.color) g.userData.viewColours = g.attributes.color.clone();
+    if (!g.userData.viewColours && g.attributes.color) g.userData.viewColours = g.attributes.color;
     if (mode === 'scalar' && g.attributes.uv) {
-      const uv = g.attributes.uv, colours = new Float32Array(uv.count * 3);
-      for (let i = 0; i < uv.count; ++i) colours.set(colourmap(uv.getX(i)), 3 * i);
-      g.setAttribute('color', new THREE.BufferAttribute(colours, 3));
+      if (!g.userData.scalarColours) {
+        const uv = g.attributes.uv, colours = new Float32Array(uv.count * 3);
+        for (let i = 0; i < uv.count; ++i) colours.set(colourmap(uv.getX(i)), 3 * i);
+        g.userData.scalarColours = new THREE.BufferAttribute(colours, 3);
+      }
+      g.setAttribute('color', g.userData.scalarColours);
     } else if (mode !== 'plain' && g.userData.viewColours) {
       g.setAttribute('color', g.userData.viewColours);
     }
@@ -144,8 +166,24 @@ function countTriangles(root) {
   return n;
 }
 
-function frame(root) {
-  const sphere = new THREE.Box3().setFromObject(root).getBoundingSphere(new THREE.Sphere());
+// The camera is framed by the page until the person moves it (a drag, the wheel or a touch that
+// moves it): it frames the union of the bounds of the steps shown so far, and is framed anew
+// only when a step's surface leaves those bounds, so a growing surface stays in view and the
+// camera does not jump with every step. Once the person has moved the camera it stays where
+// they put it; "reset camera" frames the step shown and hands the camera back to the page.
+// document.body.dataset.camera: "framed" or "user".
+const framing = { byUser: false, interacting: false, bounds: null };
+controls.addEventListener('start', () => { framing.interacting = true; });
+controls.addEventListener('end', () => { framing.interacting = false; });
+controls.addEventListener('change', () => {
+  if (!framing.interacting || framing.byUser) return;
+  framing.byUser = true;
+  document.body.dataset.camera = 'user';
+});
+document.body.dataset.camera = 'framed';
+
+function frame(box) {
+  const sphere = box.getBoundingSphere(new THREE.Sphere());
   if (!(sphere.radius > 0)) return;
   controls.target.copy(sphere.center);
   const distance = sphere.radius / Math.sin(THREE.MathUtils.degToRad(camera.fov / 2));
@@ -153,17 +191,30 @@ function frame(root) {
   camera.near = distance / 100;
   camera.far = distance * 10;
   camera.updateProjectionMatrix();
+  requestRender();
+}
+
+function frameShown(reset) {
+  if (!state.mesh) return;
+  const box = new THREE.Box3().setFromObject(state.mesh);
+  if (box.isEmpty()) return;
+  if (reset) {
+    framing.byUser = false;
+    framing.bounds = null;
+    document.body.dataset.camera = 'framed';
+  }
+  if (framing.byUser || (framing.bounds && framing.bounds.containsBox(box))) return;
+  framing.bounds = framing.bounds ? framing.bounds.union(box) : box;
+  frame(framing.bounds);
 }
 
 async function loadStep(step) {
-  const ticket = ++state.loading;  // a newer request wins over one still in flight
   setStatus(`loading step ${step}…`);
-  const meta = await json(`/api/v1/steps/${step}`);
-  const response = await api(`/api/v1/steps/${step}/mesh.glb`);
+  const [meta, response] = await Promise.all([
+    json(`/api/v1/steps/${step}`), api(`/api/v1/steps/${step}/mesh.glb`)]);
   if (!response.ok) throw new Error(`mesh of step ${step}: HTTP ${response.status}`);
   const buffer = await response.arrayBuffer();
   const gltf = await loader.parseAsync(buffer, '');
-  if (ticket !== state.loading) return;
   if (state.mesh) {
     scene.remove(state.mesh);
     state.mesh.traverse((o) => o.isMesh && o.geometry.dispose());
@@ -171,10 +222,8 @@ async function loadStep(step) {
   state.mesh = gltf.scene;
   applyColouring(state.mesh);
   scene.add(state.mesh);
-  if (!state.framed) {
-    frame(state.mesh);
-    state.framed = true;
-  }
+  frameShown(false);
+  requestRender();
   const triangles = countTriangles(state.mesh);
   state.loaded = meta;
   showMetadata(meta, triangles);
@@ -184,8 +233,33 @@ async function loadStep(step) {
   setStatus($('follow').checked ? `step ${meta.step} (following)` : `step ${meta.step}`);
 }
 
-function load(step) {
-  loadStep(step).catch((e) => setStatus(e.message, true));
+// At most one load is in flight, and every load that starts is shown. While one runs, only the
+// step to show next is remembered (state.next: the newest announced one when following, else
+// the slider's), each request replacing the previous; when the load finishes or fails, that
+// step is loaded unless it is the one shown. So however fast the job publishes, the page shows
+// a new step each time a load completes (a load abandoned for every newer step would never
+// finish on a slow link), and nothing is downloaded that will not be shown: no download is ever
+// abandoned, so there is none to cancel (no AbortController).
+function show(step) {
+  if (state.loading === null && state.loaded && state.loaded.step === step) return;
+  if (state.loading !== null) {
+    state.next = step;
+    return;
+  }
+  state.next = null;
+  state.loading = step;
+  loadStep(step).catch((e) => setStatus(e.message, true)).finally(() => {
+    state.loading = null;
+    const next = state.next;
+    state.next = null;
+    if (next !== null && !(state.loaded && state.loaded.step === next)) show(next);
+  });
+}
+
+// The newest step shown, being loaded or to be loaded (-Infinity before the first).
+function newestWanted() {
+  return Math.max(state.loaded ? state.loaded.step : -Infinity, state.loading ?? -Infinity,
+    state.next ?? -Infinity);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -195,8 +269,9 @@ function syncSlider() {
   const slider = $('slider');
   slider.max = String(Math.max(state.steps.length - 1, 0));
   slider.disabled = state.steps.length < 2;
+  // The slider follows the step shown while following; otherwise it is the person's.
   const at = state.loaded ? state.steps.indexOf(state.loaded.step) : -1;
-  if (at >= 0) slider.value = String(at);
+  if (at >= 0 && $('follow').checked) slider.value = String(at);
   $('slider-step').textContent = state.loaded ? `#${state.loaded.step}` : '';
 }
 
@@ -208,13 +283,17 @@ function addStep(meta) {
 
 $('slider').addEventListener('input', () => {
   $('follow').checked = false;
-  load(state.steps[Number($('slider').value)]);
+  show(state.steps[Number($('slider').value)]);
 });
 $('follow').addEventListener('change', () => {
-  if ($('follow').checked && state.steps.length) load(state.steps[state.steps.length - 1]);
+  if ($('follow').checked && state.steps.length) show(state.steps[state.steps.length - 1]);
 });
-$('colour').addEventListener('change', () => state.mesh && applyColouring(state.mesh));
-$('reset').addEventListener('click', () => state.mesh && frame(state.mesh));
+$('colour').addEventListener('change', () => {
+  if (!state.mesh) return;
+  applyColouring(state.mesh);
+  requestRender();
+});
+$('reset').addEventListener('click', () => frameShown(true));
 
 function listen() {
   // Server-sent events: the newest step first, then each new one. EventSource reconnects by
@@ -223,7 +302,7 @@ function listen() {
   events.addEventListener('step', (event) => {
     const meta = JSON.parse(event.data);
     addStep(meta);
-    if ($('follow').checked && (!state.loaded || meta.step > state.loaded.step)) load(meta.step);
+    if ($('follow').checked && meta.step > newestWanted()) show(meta.step);
   });
   events.onerror = () => {
     if (!state.loaded) setStatus('waiting for the job…');
@@ -238,7 +317,7 @@ async function start() {
   try {
     const list = await json('/api/v1/steps');
     for (const meta of list.steps || []) addStep(meta);
-    if (state.steps.length) await loadStep(state.steps[state.steps.length - 1]);
+    if (state.steps.length) show(state.steps[state.steps.length - 1]);
     else setStatus('waiting for the first step…');
   } catch (e) {
     setStatus(e.message, true);
