@@ -3,6 +3,8 @@
 //   ldimesh mesh --surface barth --res 512 --views xyz --r 0.5 --out out/barth.ply [--json]
 //   mpiexec -n 4 ldimesh mesh --surface barth --res 256 --out out/barth.ply
 //   ldimesh serve --dir out/steps [--port 8080] [--bind 127.0.0.1]
+//   ldimesh distance A.ply B.ply [--samples N] [--json]
+//   ldimesh distance A.ply --surface NAME [--isovalue v] [--samples N] [--json]
 #include <cctype>
 #include <cerrno>
 #include <chrono>
@@ -23,6 +25,7 @@
 #include <nlohmann/json.hpp>
 
 #include "ldimesh/core/decomposition.hpp"
+#include "ldimesh/core/distance.hpp"
 #include "ldimesh/core/grid_source.hpp"
 #include "ldimesh/core/mesh_io.hpp"
 #include "ldimesh/core/pipeline.hpp"
@@ -322,6 +325,133 @@ int run_mesh(const MeshArgs& args) {
   return 0;
 }
 
+struct DistanceArgs {
+  std::vector<std::string> files;  // A, or A and B
+  std::string surface;
+  std::optional<double> isovalue;
+  std::uint64_t samples = 0;
+  int threads = 0;
+  bool json = false;
+};
+
+ldimesh::Mesh read_mesh_file(const std::string& path) {
+  if (!has_extension(path, ".ply"))
+    throw std::runtime_error("cannot read '" + path + "': only PLY meshes can be read");
+  ldimesh::Mesh mesh;
+  if (const ldimesh::Status s = ldimesh::read_ply(path, mesh); !s)
+    throw std::runtime_error(s.message());
+  if (mesh.face_count() == 0) throw std::runtime_error("'" + path + "' has no faces");
+  return mesh;
+}
+
+nlohmann::json stats_json(const ldimesh::DistanceStats& s, double diagonal) {
+  const double scale = diagonal > 0.0 ? 1.0 / diagonal : 0.0;
+  return {{"samples", s.samples.total()},
+          {"vertex_samples", s.samples.vertices},
+          {"edge_samples", s.samples.edges},
+          {"face_samples", s.samples.faces},
+          {"mean", s.mean},
+          {"rms", s.rms},
+          {"max", s.max},
+          {"mean_relative", s.mean * scale},
+          {"rms_relative", s.rms * scale},
+          {"max_relative", s.max * scale},
+          {"max_at", {s.max_at.x, s.max_at.y, s.max_at.z}}};
+}
+
+void print_stats(const char* label, const ldimesh::DistanceStats& s, double diagonal) {
+  const double percent = diagonal > 0.0 ? 100.0 / diagonal : 0.0;
+  std::printf("  %-18s mean %.4e (%.4f %%)  rms %.4e (%.4f %%)  max %.4e (%.4f %%)\n", label,
+              s.mean, s.mean * percent, s.rms, s.rms * percent, s.max, s.max * percent);
+  std::printf("  %-18s %llu samples: %llu vertices, %llu on edges, %llu on faces\n", "",
+              (unsigned long long)s.samples.total(), (unsigned long long)s.samples.vertices,
+              (unsigned long long)s.samples.edges, (unsigned long long)s.samples.faces);
+}
+
+std::string describe_mesh(const std::string& path, const ldimesh::Mesh& m) {
+  return path + " (" + std::to_string(m.vertex_count()) + " vertices, " +
+         std::to_string(m.face_count()) + " faces)";
+}
+
+// `ldimesh distance`: Metro-style distances between two PLY meshes, or from one to a built-in
+// surface (core/distance.hpp, docs/method.md "Distances").
+int run_distance(const DistanceArgs& args) {
+  const bool to_surface = !args.surface.empty();
+  if (to_surface && args.files.size() != 1)
+    throw std::runtime_error("give one mesh with --surface: ldimesh distance A.ply --surface NAME");
+  if (!to_surface && args.files.size() != 2)
+    throw std::runtime_error("give two meshes (A.ply B.ply) or one mesh and --surface NAME");
+  const ldimesh::SurfaceInfo* surface = nullptr;
+  if (to_surface) {
+    surface = ldimesh::find_surface(args.surface);
+    if (!surface)
+      throw std::runtime_error("unknown surface '" + args.surface + "' (see 'ldimesh surfaces')");
+  }
+  const int threads = args.threads > 0 ? args.threads : tbb::info::default_concurrency();
+  tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
+  ldimesh::DistanceOptions options;
+  options.samples = args.samples;
+
+  const ldimesh::Mesh a = read_mesh_file(args.files[0]);
+  if (to_surface) {
+    const double iso = args.isovalue.value_or(surface->isovalue);
+    const auto start = std::chrono::steady_clock::now();
+    const ldimesh::SurfaceDistance d = ldimesh::surface_distance(a, *surface, iso, options);
+    const double seconds = seconds_since(start);
+    if (args.json) {
+      nlohmann::json j;
+      j["a"] = args.files[0];
+      j["surface"] = surface->name;
+      j["isovalue"] = iso;
+      j["diagonal"] = d.diagonal;
+      j["forward"] = stats_json(d.forward, d.diagonal);
+      j["not_converged"] = d.not_converged;
+      j["outside_clip"] = d.outside_clip;
+      j["threads"] = threads;
+      j["seconds"] = seconds;
+      std::cout << j.dump(2) << "\n";
+      return 0;
+    }
+    std::printf("ldimesh distance: A = %s to the surface %s, isovalue %g\n",
+                describe_mesh(args.files[0], a).c_str(), surface->name.c_str(), iso);
+    std::printf("  relative figures: %% of A's bounding box diagonal %g\n", d.diagonal);
+    print_stats("forward A -> surf", d.forward, d.diagonal);
+    std::printf("  %-18s %llu samples left out: %llu not converged, %llu outside the clip region\n",
+                "", (unsigned long long)(d.not_converged + d.outside_clip),
+                (unsigned long long)d.not_converged, (unsigned long long)d.outside_clip);
+    std::printf("  time %.3f s, %d thread%s\n", seconds, threads, threads == 1 ? "" : "s");
+    return 0;
+  }
+  const ldimesh::Mesh b = read_mesh_file(args.files[1]);
+  const auto start = std::chrono::steady_clock::now();
+  const ldimesh::MeshDistance d = ldimesh::mesh_distance(a, b, options);
+  const double seconds = seconds_since(start);
+  if (args.json) {
+    nlohmann::json j;
+    j["a"] = args.files[0];
+    j["b"] = args.files[1];
+    j["diagonal"] = d.diagonal;
+    j["forward"] = stats_json(d.forward, d.diagonal);
+    j["backward"] = stats_json(d.backward, d.diagonal);
+    j["max"] = d.max();
+    j["max_relative"] = d.diagonal > 0.0 ? d.max() / d.diagonal : 0.0;
+    j["threads"] = threads;
+    j["seconds"] = seconds;
+    std::cout << j.dump(2) << "\n";
+    return 0;
+  }
+  std::printf("ldimesh distance: A = %s, B = %s\n", describe_mesh(args.files[0], a).c_str(),
+              describe_mesh(args.files[1], b).c_str());
+  std::printf("  relative figures: %% of the bounding box diagonal of A and B, %g\n", d.diagonal);
+  print_stats("forward  A -> B", d.forward, d.diagonal);
+  print_stats("backward B -> A", d.backward, d.diagonal);
+  const double percent = d.diagonal > 0.0 ? 100.0 / d.diagonal : 0.0;
+  std::printf("  %-18s max  %.4e (%.4f %%)  (sampled Hausdorff distance)\n", "symmetric", d.max(),
+              d.max() * percent);
+  std::printf("  time %.3f s, %d thread%s\n", seconds, threads, threads == 1 ? "" : "s");
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -334,6 +464,23 @@ int main(int argc, char** argv) {
       "serve", "serve the steps a run wrote into a folder with the job's API and web viewer");
   ldimesh::ServeArgs serve_args;
   ldimesh::add_serve_options(*serve, serve_args);
+  CLI::App* distance = app.add_subcommand(
+      "distance", "Metro-style distances between two PLY meshes, or from one to a surface");
+  DistanceArgs distance_args;
+  distance->add_option("meshes", distance_args.files, "A.ply [B.ply]")->required()->expected(1, 2);
+  CLI::Option* distance_surface = distance->add_option(
+      "--surface", distance_args.surface, "measure A against this built-in surface instead of B");
+  distance
+      ->add_option("--isovalue,--iso", distance_args.isovalue,
+                   "isovalue of --surface (default: the surface's)")
+      ->needs(distance_surface);
+  distance
+      ->add_option("--samples", distance_args.samples,
+                   "samples per mesh (default: ten per triangle of the larger mesh)")
+      ->check(CLI::Range(std::uint64_t(1), std::uint64_t(10000000000)));
+  distance->add_option("--threads", distance_args.threads, "threads (default: all cores)")
+      ->check(CLI::Range(1, 4096));
+  distance->add_flag("--json", distance_args.json, "print the figures as JSON");
   MeshArgs args;
   CLI::Option* surface_opt =
       mesh->add_option("--surface", args.surface, "built-in surface (see 'ldimesh surfaces')");
@@ -393,10 +540,11 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(2, 16))
       ->capture_default_str();
 
-  // `ldimesh serve` is a plain server process: no MPI.
-  if (argc > 1 && std::string(argv[1]) == "serve") {
+  // `ldimesh serve` is a plain server process and `ldimesh distance` a plain tool: no MPI.
+  if (argc > 1 && (std::string(argv[1]) == "serve" || std::string(argv[1]) == "distance")) {
     try {
       app.parse(argc, argv);
+      if (*distance) return run_distance(distance_args);
       return ldimesh::run_serve(serve_args, "ldimesh serve");
     } catch (const CLI::CallForHelp& e) {
       return app.exit(e);

@@ -12,11 +12,6 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
-float squared_distance(const glm::vec3& a, const glm::vec3& b) {
-  const glm::vec3 d = a - b;
-  return glm::dot(d, d);
-}
-
 }  // namespace
 
 MeshingResult mesh_ldis(std::span<const Ldi> ldis, const MeshingOptions& options) {
@@ -60,17 +55,13 @@ MeshingResult mesh_ldis(std::span<const Ldi> ldis, const MeshingOptions& options
     }
     const std::uint8_t view = std::uint8_t(k);
     for (std::size_t q = 0; q < quads.size(); q += 4) {
-      const std::uint32_t a = vertex_of[quads[q]], b = vertex_of[quads[q + 1]],
-                          c = vertex_of[quads[q + 2]], d = vertex_of[quads[q + 3]];
+      const std::uint32_t v[4] = {vertex_of[quads[q]], vertex_of[quads[q + 1]],
+                                  vertex_of[quads[q + 2]], vertex_of[quads[q + 3]]};
       if (options.faces == FaceType::quads) {
-        mesh.quads.insert(mesh.quads.end(), {a, b, c, d});
+        mesh.quads.insert(mesh.quads.end(), v, v + 4);
         mesh.quad_view.push_back(view);
-      } else if (squared_distance(mesh.positions[a], mesh.positions[c]) <=
-                 squared_distance(mesh.positions[b], mesh.positions[d])) {
-        mesh.triangles.insert(mesh.triangles.end(), {a, b, c, a, c, d});
-        mesh.triangle_view.insert(mesh.triangle_view.end(), {view, view});
       } else {
-        mesh.triangles.insert(mesh.triangles.end(), {a, b, d, b, c, d});
+        append_quad_triangles(mesh.positions, v, mesh.triangles);
         mesh.triangle_view.insert(mesh.triangle_view.end(), {view, view});
       }
     }

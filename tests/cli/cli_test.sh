@@ -67,5 +67,28 @@ expect_error "grid without dims" mesh --grid "$tmp/v.raw"
 expect_error "grid and surface" mesh --grid "$tmp/v.raw" --dims 12,12,12 --surface sphere
 expect_error "neither grid nor surface" mesh --res 16
 
+# ldimesh distance: the sphere meshed at two resolutions is close to itself and to the implicit
+# sphere (within a small fraction of the coarser pixel, 2.5/32); a mesh is at distance 0 from itself.
+"$ldimesh" mesh --surface sphere --res 32 --out "$tmp/s32.ply" >/dev/null || fail "sphere 32 failed"
+"$ldimesh" mesh --surface sphere --res 64 --json --out "$tmp/s64.ply" >"$tmp/s64.json" || fail "sphere 64 failed"
+"$ldimesh" distance "$tmp/s32.ply" "$tmp/s64.ply" --json >"$tmp/d.json" || fail "distance failed"
+"$ldimesh" distance "$tmp/s32.ply" --surface sphere --isovalue 1 --json >"$tmp/ds.json" || fail "distance to surface failed"
+python3 - "$tmp/d.json" "$tmp/ds.json" "$tmp/s64.json" <<'PY' || fail "distance: implausible figures"
+import json, sys
+d, ds, s64 = (json.load(open(f)) for f in sys.argv[1:])
+for s in (d["forward"], d["backward"], ds["forward"]):
+    assert 0 < s["mean"] <= s["rms"] <= s["max"] < 0.01, s
+assert d["max"] == max(d["forward"]["max"], d["backward"]["max"])
+assert d["forward"]["samples"] == 10 * s64["triangles"], (d["forward"]["samples"], s64["triangles"])
+assert ds["not_converged"] == 0 and ds["outside_clip"] == 0
+PY
+"$ldimesh" distance "$tmp/s32.ply" "$tmp/s32.ply" >"$tmp/d.txt" || fail "distance to itself failed"
+grep -q 'symmetric *max  0.0000e+00' "$tmp/d.txt" || { fail "distance to itself is not 0"; cat "$tmp/d.txt"; }
+head -c 300 "$tmp/s32.ply" >"$tmp/cut.ply"
+expect_error "distance: missing file" distance "$tmp/none.ply" "$tmp/s32.ply"
+expect_error "distance: truncated PLY" distance "$tmp/s32.ply" "$tmp/cut.ply"
+expect_error "distance: one mesh only" distance "$tmp/s32.ply"
+expect_error "distance: unknown surface" distance "$tmp/s32.ply" --surface teapot
+
 if [ "$failures" -ne 0 ]; then echo "$failures check(s) failed"; exit 1; fi
 echo "all CLI checks passed"

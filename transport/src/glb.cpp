@@ -209,25 +209,16 @@ Status check_mesh(const Mesh& m) {
   return Status::ok();
 }
 
-// glTF has no quads (primitive modes are points, lines and triangles). Quads split along the
-// shorter diagonal, the rule mesh_ldis uses for FaceType::triangles (ties take a–c), so the GLB of
-// a quad mesh holds the same triangles as that of the triangle mesh; the shorter diagonal also cuts
-// the obtuse corners of a skewed quad, leaving the smaller largest angle.
+// glTF has no quads (primitive modes are points, lines and triangles): quads are split by
+// append_quad_triangles, the rule mesh_ldis uses for FaceType::triangles, so the GLB of a quad
+// mesh holds the same triangles as that of the triangle mesh.
 void triangulate(const Mesh& m, std::vector<std::uint32_t>& tris, std::vector<std::uint8_t>& view) {
   tris.clear();
   view.clear();
   tris.reserve(6 * m.quad_count() + m.triangles.size());
   view.reserve(2 * m.quad_count() + m.triangle_count());
   for (std::size_t q = 0; q < m.quad_count(); ++q) {
-    const std::uint32_t* v = &m.quads[4 * q];
-    const auto dist2 = [&](int a, int b) {
-      const glm::dvec3 d = glm::dvec3(m.positions[v[a]]) - glm::dvec3(m.positions[v[b]]);
-      return glm::dot(d, d);
-    };
-    if (dist2(0, 2) <= dist2(1, 3))
-      tris.insert(tris.end(), {v[0], v[1], v[2], v[0], v[2], v[3]});
-    else
-      tris.insert(tris.end(), {v[0], v[1], v[3], v[1], v[2], v[3]});
+    append_quad_triangles(m.positions, &m.quads[4 * q], tris);
     view.insert(view.end(), {m.quad_view[q], m.quad_view[q]});
   }
   tris.insert(tris.end(), m.triangles.begin(), m.triangles.end());

@@ -27,4 +27,19 @@ struct Mesh {
   std::size_t face_count() const { return quad_count() + triangle_count(); }
 };
 
+// Appends the two triangles of quad v[0..3] to `triangles`: split along the shorter diagonal
+// (ties take v0–v2), which cuts the obtuse corners of a skewed quad. The one rule of the mesher's
+// triangle output, the GLB encoder and the distance sampler, so all see the same triangles.
+inline void append_quad_triangles(const std::vector<glm::vec3>& positions, const std::uint32_t* v,
+                                  std::vector<std::uint32_t>& triangles) {
+  const auto dist2 = [&](int a, int b) {
+    const glm::dvec3 d = glm::dvec3(positions[v[a]]) - glm::dvec3(positions[v[b]]);
+    return glm::dot(d, d);
+  };
+  if (dist2(0, 2) <= dist2(1, 3))
+    triangles.insert(triangles.end(), {v[0], v[1], v[2], v[0], v[2], v[3]});
+  else
+    triangles.insert(triangles.end(), {v[0], v[1], v[3], v[1], v[2], v[3]});
+}
+
 }  // namespace ldimesh

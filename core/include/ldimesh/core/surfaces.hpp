@@ -17,6 +17,8 @@ struct SurfaceInfo {
   double isovalue;      // the default isovalue
   double clip_radius;   // > 0: the surface is clipped to this ball around the origin
   std::unique_ptr<FieldSource> (*make_source)(const SurfaceInfo&, int bricks_per_axis);
+  // The field's value at p, its gradient into `gradient` (distances to the surface).
+  double (*field)(const glm::dvec3& p, glm::dvec3& gradient);
 };
 
 // All built-in surfaces, in a fixed order.
