@@ -69,6 +69,26 @@ double interpolate(const GridSource& grid, glm::dvec3 p) {
 
 using testing::axis_and_oblique_views;
 
+// A contiguous float64 block of 33 points along x split in two along x: A owns points 0…15 and
+// reads point 16 as a ghost; B owns 16…32 and reads point 15 as a ghost. Both read the same
+// array in place (offset pointer, full strides), uniform or rectilinear as `whole` is.
+std::pair<GridBlock, GridBlock> split_along_x(const GridBlock& whole) {
+  const std::int64_t n = whole.dims[0];
+  GridBlock a = whole, b = whole;
+  a.dims[0] = 17;
+  a.ghost_hi[0] = 1;
+  a.strides = {1, n, n * whole.dims[1]};
+  b.dims[0] = n - 15;
+  b.ghost_lo[0] = 1;
+  b.strides = a.strides;
+  b.values = static_cast<const double*>(whole.values) + 15;
+  if (whole.coords[0])
+    b.coords[0] = whole.coords[0] + 15;
+  else
+    b.origin.x = whole.origin.x + 15 * whole.spacing.x;
+  return {a, b};
+}
+
 TEST(GridSource, HitsLieOnTheTrilinearSurface) {
   for (int n : {32, 64}) {
     const std::vector<float> values = sample<float>(n, -1.25, 1.25, sphere_field);
@@ -212,17 +232,7 @@ TEST(GridSource, TwoBlocksWithGhostLayersGiveTheSameHitsAsOneBlock) {
   whole.values = values.data();
   whole.type = ScalarType::float64;
   whole.coords = {coords.data(), coords.data(), coords.data()};
-  // Split along x: A owns points 0…15 and reads point 16 as a ghost; B owns 16…32 and reads
-  // point 15 as a ghost. Both read the solver's array in place (offset pointer, full strides).
-  GridBlock a = whole, b = whole;
-  a.dims[0] = 17;
-  a.ghost_hi[0] = 1;
-  a.strides = {1, n, n * n};
-  b.dims[0] = 18;
-  b.ghost_lo[0] = 1;
-  b.strides = {1, n, n * n};
-  b.values = values.data() + 15;
-  b.coords[0] = coords.data() + 15;
+  const auto [a, b] = split_along_x(whole);
   const GridSource one(whole), block_a(a), block_b(b);
   EXPECT_EQ(block_a.bounds().hi.x, coords[16]);
   EXPECT_EQ(block_b.bounds().lo.x, coords[16]);
@@ -571,15 +581,7 @@ TEST(GridSource, RayCasterSumsNonFiniteCountsOverBlocks) {
     return values[(std::size_t(k) * n + j) * n + i];
   };
   GridBlock whole = uniform_block(values.data(), ScalarType::float64, n, -1.0, 1.0);
-  GridBlock a = whole, b = whole;
-  a.dims[0] = 17;
-  a.ghost_hi[0] = 1;
-  a.strides = {1, n, n * n};
-  b.dims[0] = 18;
-  b.ghost_lo[0] = 1;
-  b.strides = {1, n, n * n};
-  b.values = values.data() + 15;
-  b.origin.x = whole.origin.x + 15 * whole.spacing.x;
+  const auto [a, b] = split_along_x(whole);
   const GridSource block_a(a), block_b(b), one(whole);
   const std::array<const FieldSource*, 2> pair{&block_a, &block_b};
   EXPECT_EQ(RayCaster(pair, 0.5).nonfinite_values(), 0u);
