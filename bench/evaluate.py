@@ -65,7 +65,7 @@ QUICK_IMAGES = [("slices", 16)]
 SECTIONS = [("marschner-lobb", 64, "y", 0.55, ((0.3, 0.8), (-0.2, 0.2))),
             ("marschner-lobb", 256, "y", 0.55, ((0.55, 0.8), (-0.18, 0.18))),
             ("slices", 32, "z", 0.0, ((-1.45, 1.45), (-1.45, 1.45))),
-            ("barth", 128, "z", 0.0, ((-1.6, 1.6), (-1.6, 1.6)))]
+            ("barth", 128, "z", 0.0, ((-0.8, 0.8), (0.7, 1.65)))]
 SECTIONS_QUICK = [("marschner-lobb", 64, "y", 0.55, ((0.3, 0.8), (-0.2, 0.2)))]
 
 NICE = {"marschner-lobb": "Marschner–Lobb", "slices": "Slices", "sphere": "Sphere",
@@ -567,7 +567,7 @@ class Evaluation:
             extent = max(b - a_ for a_, b in zip(ds["domain"]["lo"], ds["domain"]["hi"]))
             pixel = extent / res
             pts = self._ref_points(surface)
-            half = 0.25 * (extent / (self.refs[surface]["dims"][a] - 1))
+            half = 0.75 * (extent / (self.refs[surface]["dims"][a] - 1))
             sel = pts[np.abs(pts[:, a] - offset) < half]
             (u0, u1), (v0, v1) = window
             sel = sel[(sel[:, u] >= u0) & (sel[:, u] <= u1) & (sel[:, v] >= v0) &
@@ -610,7 +610,8 @@ class Evaluation:
             fig.suptitle(f"{NICE[surface]}: reference vertices within {half:.1e} of the plane "
                          f"{axis} = {offset:g}, coloured by their distance to the mesh; black: "
                          "the mesh's cut", fontsize=9)
-            fig.colorbar(sc, ax=axes, label=f"distance (0 … half an LDI pixel, {0.5 * pixel:.3g})")
+            fig.colorbar(sc, ax=axes,
+                         label=f"distance (0 … half an LDI pixel, {0.5 * pixel:.3g})")
             name = f"section_{surface}_{res}.png"
             fig.savefig(os.path.join(self.fig_dir, name), bbox_inches="tight")
             plt.close(fig)
@@ -724,7 +725,8 @@ class Evaluation:
                   f"{fmt_int(c['triangles'])} | {fmt_e(od['fwd_mean'])} | {fmt_e(cd['fwd_mean'])}"
                   f" | {fmt_e(cd.get('fwd_ref_mean'))} | {rf:.2f} | {fmt_e(od['bwd_mean'])} | "
                   f"{fmt_e(cd['bwd_mean'])} | {rb:.2f} | {mark} | "
-                  f"{fmt_share(od.get('bwd_over_pixel'))} / {fmt_share(cd.get('bwd_over_pixel'))} |")
+                  f"{fmt_share(od.get('bwd_over_pixel'))} / "
+                  f"{fmt_share(cd.get('bwd_over_pixel'))} |")
         w("")
         w("\"bwd > 1 px\": the share of the reference's vertices (a subsample of "
           f"{fmt_int(self.args.coverage_points)}) farther than one LDI pixel (the domain's longest "
@@ -796,8 +798,9 @@ class Evaluation:
                       f"{'–' if 'area_ratio' not in m else format(m['area_ratio'], '.3f')} | "
                       f"{fmt_s(t)} | {detail} |")
             w("")
-            lo_hi = [f"{r['res']}²: n = {' / '.join(str(m['n']) + ' → ' + fmt_int(m['triangles']) for m in r['mc_bracket'])}"
-                     for r in ds["rows"]]
+            lo_hi = [f"{r['res']}²: n = " + " / ".join(
+                f"{m['n']} → {fmt_int(m['triangles'])}" for m in r["mc_bracket"])
+                for r in ds["rows"]]
             w("MC grid sizes bracketing our triangle counts: " + "; ".join(lo_hi) + ".")
             w("")
 
@@ -813,7 +816,8 @@ class Evaluation:
           "that we cannot run: Coulomb and Shock Channel (not among our data sets).")
         w("")
         w("| data set | LDI | Fig. | paper Mesh. | Ref. | Bridge | Sew | Qual. | paper Tot. | "
-          "ours ray cast | ours Mesh. (match + trim) | ours arrays | ours Ref./Bridge/Sew/Qual. "
+          "ours scene + ray cast | ours Mesh. (match + trim) | ours arrays | "
+          "ours Ref./Bridge/Sew/Qual. "
           "| ours triangles | paper triangles |")
         w("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
         for t in R["table1"]:
