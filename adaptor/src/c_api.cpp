@@ -70,12 +70,6 @@ int create_with(ldimesh_adaptor** out, Create&& create) {
     return LDIMESH_ERROR_ARGUMENT;
   }
   *out = nullptr;
-  int initialized = 0;
-  MPI_Initialized(&initialized);
-  if (!initialized) {
-    create_error = "ldimesh_create: MPI is not initialised (call MPI_Init_thread first)";
-    return LDIMESH_ERROR_ARGUMENT;
-  }
   try {
     auto handle = std::make_unique<ldimesh_adaptor>();
     const Status s = create(handle->impl);
@@ -91,6 +85,14 @@ int create_with(ldimesh_adaptor** out, Create&& create) {
     create_error = std::string("ldimesh_create: ") + e.what();
     return LDIMESH_ERROR_RUNTIME;
   }
+}
+
+// A Fortran communicator handle in C; MPI_COMM_NULL before MPI_Init (MPI_Comm_f2c is not
+// allowed then), which Adaptor::create refuses with a message.
+MPI_Comm comm_from_fortran(MPI_Fint comm) {
+  int initialized = 0;
+  MPI_Initialized(&initialized);
+  return initialized ? MPI_Comm_f2c(comm) : MPI_COMM_NULL;
 }
 
 bool scalar_type(int type, ldimesh::ScalarType& out) {
@@ -127,17 +129,11 @@ int ldimesh_create_from_file(MPI_Comm comm, const char* path, ldimesh_adaptor** 
 }
 
 int ldimesh_create_fortran(MPI_Fint comm, const char* options_json, ldimesh_adaptor** out) {
-  int initialized = 0;
-  MPI_Initialized(&initialized);
-  if (!initialized) return ldimesh_create(MPI_COMM_NULL, options_json, out);
-  return ldimesh_create(MPI_Comm_f2c(comm), options_json, out);
+  return ldimesh_create(comm_from_fortran(comm), options_json, out);
 }
 
 int ldimesh_create_from_file_fortran(MPI_Fint comm, const char* path, ldimesh_adaptor** out) {
-  int initialized = 0;
-  MPI_Initialized(&initialized);
-  if (!initialized) return ldimesh_create_from_file(MPI_COMM_NULL, path, out);
-  return ldimesh_create_from_file(MPI_Comm_f2c(comm), path, out);
+  return ldimesh_create_from_file(comm_from_fortran(comm), path, out);
 }
 
 void ldimesh_grid_block_init(ldimesh_grid_block* block) {

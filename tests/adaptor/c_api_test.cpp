@@ -3,21 +3,22 @@
 // tests: every rank runs every test and only non-fatal EXPECTs are used.
 #include "ldimesh.h"
 
+#include <chrono>
 #include <cmath>
-#include <filesystem>
-#include <fstream>
 #include <limits>
-#include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <gtest/gtest.h>
 
 #include "../mpi/mpi_gtest.hpp"
+#include "published_step.hpp"
 
 namespace ldimesh {
 namespace {
 
+using testing::published_step;
 using testing::rank_of;
 using testing::ranks;
 
@@ -66,11 +67,7 @@ struct Slab {
 };
 
 std::string temp_dir(const std::string& name) {
-  const auto dir = std::filesystem::temp_directory_path() /
-                   ("ldimesh_c_api_" + name + "_" + std::to_string(ranks()));
-  if (rank_of() == 0) std::filesystem::remove_all(dir);
-  MPI_Barrier(MPI_COMM_WORLD);
-  return dir.string();
+  return testing::fresh_temp_dir("ldimesh_c_api", name);
 }
 
 // Options writing every step into `dir`, no server, quiet, the sphere of radius 0.6.
@@ -80,18 +77,16 @@ std::string options(const std::string& dir, const std::string& isovalue = "0.36"
          isovalue + R"(], "output_dir": ")" + dir + R"("})";
 }
 
-// A number field of a step's metadata file (root only), or -1.
-long long metadata_number(const std::string& dir, int step, const std::string& key) {
-  char name[32];
-  std::snprintf(name, sizeof name, "/step_%06d.json", step);
-  std::ifstream in(dir + name);
-  std::stringstream text;
-  text << in.rdbuf();
-  const std::string json = text.str();
-  const std::string pattern = "\"" + key + "\":";
-  const auto at = json.find(pattern);
-  if (at == std::string::npos) return -1;
-  return std::stoll(json.substr(at + pattern.size()));
+// Collective: waits until the root has published `count` steps, so that the next step does
+// not find the worker busy ("coalesce" would replace a waiting step) and every step is kept.
+void wait_published(const ldimesh_adaptor* a, std::uint64_t count) {
+  if (rank_of() == 0) {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (ldimesh_published_steps(a) < count && std::chrono::steady_clock::now() < deadline)
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    EXPECT_GE(ldimesh_published_steps(a), count);
+  }
+  MPI_Barrier(MPI_COMM_WORLD);
 }
 
 ldimesh_adaptor* create(const std::string& options_json) {
@@ -185,7 +180,7 @@ TEST(CApi, AWrongSizeArrayIsRejectedAndTheAdaptorKeepsWorking) {
   EXPECT_EQ(ldimesh_finalize(a), LDIMESH_OK);
   if (rank_of() == 0) {
     EXPECT_EQ(ldimesh_published_steps(a), 1u);
-    EXPECT_GT(metadata_number(dir, 1, "triangles"), 1000);
+    EXPECT_GT(published_step(dir, 1).triangles, 1000u);
   }
   ldimesh_destroy(a);
 }
@@ -200,6 +195,7 @@ TEST(CApi, NaNsInTheFieldAreCountedAndTheirCellsLeftOut) {
   // Step 1 clean; step 2 with a NaN and an Inf on every rank at points next to the sphere
   // (|x| ≈ 0.58 at i = 5 of 25: x = −0.583); step 3 clean again.
   EXPECT_EQ(ldimesh_execute(a, 1, 0.0), LDIMESH_OK) << ldimesh_last_error(a);
+  wait_published(a, 1);
   ldimesh_step_report report;
   EXPECT_EQ(ldimesh_last_report(a, &report), LDIMESH_OK);
   EXPECT_EQ(report.nonfinite_values, 0u);
@@ -215,18 +211,19 @@ TEST(CApi, NaNsInTheFieldAreCountedAndTheirCellsLeftOut) {
   }
   slab.at(5, mid, l) = saved[0];
   slab.at(kN - 6, mid, l) = saved[1];
+  wait_published(a, 2);
   EXPECT_EQ(ldimesh_execute(a, 3, 2.0), LDIMESH_OK) << ldimesh_last_error(a);
   EXPECT_EQ(ldimesh_finalize(a), LDIMESH_OK) << ldimesh_last_error(a);
   if (rank_of() == 0) {
-    const long long clean = metadata_number(dir, 1, "triangles");
-    const long long holed = metadata_number(dir, 2, "triangles");
-    EXPECT_GT(clean, 1000);
+    const std::uint64_t clean = published_step(dir, 1).triangles;
+    const std::uint64_t holed = published_step(dir, 2).triangles;
+    EXPECT_GT(clean, 1000u);
     // The cells around the NaN/Inf points are missing from the surface, the rest is there.
     EXPECT_LT(holed, clean);
     EXPECT_GT(holed, clean * 8 / 10);
-    EXPECT_EQ(metadata_number(dir, 3, "triangles"), clean);
-    EXPECT_EQ(metadata_number(dir, 1, "nonfinite_values"), 0);
-    EXPECT_EQ(metadata_number(dir, 2, "nonfinite_values"), 2 * ranks());
+    EXPECT_EQ(published_step(dir, 3).triangles, clean);
+    EXPECT_EQ(published_step(dir, 1).nonfinite_values, 0u);
+    EXPECT_EQ(published_step(dir, 2).nonfinite_values, 2u * std::uint64_t(ranks()));
   }
   ldimesh_destroy(a);
 }
@@ -241,7 +238,7 @@ TEST(CApi, AStepWithoutSurfaceIsPublishedEmpty) {
   EXPECT_EQ(ldimesh_execute(a, 1, 0.0), LDIMESH_OK) << ldimesh_last_error(a);
   EXPECT_EQ(ldimesh_finalize(a), LDIMESH_OK);
   if (rank_of() == 0) {
-    EXPECT_EQ(metadata_number(dir, 1, "triangles"), 0);
+    EXPECT_EQ(published_step(dir, 1).triangles, 0u);
   }
   ldimesh_destroy(a);
 }

@@ -5,6 +5,9 @@
 
 #include <mpi.h>
 
+#include <filesystem>
+#include <string>
+
 #include <gtest/gtest.h>
 
 namespace ldimesh::testing {
@@ -19,6 +22,16 @@ inline int ranks() {
   int n = 1;
   MPI_Comm_size(MPI_COMM_WORLD, &n);
   return n;
+}
+
+// Collective: an empty folder <temp>/<prefix>_<name>_<ranks> (removed by rank 0 first; every
+// rank returns once it is gone), for a test's output.
+inline std::string fresh_temp_dir(const std::string& prefix, const std::string& name) {
+  const auto dir = std::filesystem::temp_directory_path() /
+                   (prefix + "_" + name + "_" + std::to_string(ranks()));
+  if (rank_of() == 0) std::filesystem::remove_all(dir);
+  MPI_Barrier(MPI_COMM_WORLD);
+  return dir.string();
 }
 
 // The body of main(): initialises MPI (funneled), runs the tests with only rank 0 printing,
