@@ -1,12 +1,14 @@
 // ldimesh: the command line of the pipeline, in one process or over MPI ranks.
 //   ldimesh surfaces
 //   ldimesh mesh --surface barth --res 512 --views xyz --r 0.5 --out out/barth.ply [--json]
+//   ldimesh mesh --surface marschner-lobb --res 128 --refine 2 --out out/ml.ply
 //   mpiexec -n 4 ldimesh mesh --surface barth --res 256 --out out/barth.ply
 //   ldimesh serve --dir out/steps [--port 8080] [--bind 127.0.0.1]
 //   ldimesh distance A.ply B.ply [--samples N] [--json]
 //   ldimesh distance A.ply --surface NAME [--isovalue v] [--samples N] [--json]
 #include <cctype>
 #include <cerrno>
+#include <charconv>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
@@ -64,6 +66,8 @@ struct MeshArgs {
   double time = 0.0;
   int depth_bits = ldimesh::FragmentEncoding{}.depth_bits;
   int normal_bits = ldimesh::FragmentEncoding{}.normal_bits;
+  ldimesh::RefinementOptions refinement;
+  bool no_grow = false;
 };
 
 double seconds_since(std::chrono::steady_clock::time_point start) {
@@ -214,6 +218,8 @@ int run_mesh(const MeshArgs& args) {
   options.meshing.r = args.r;
   options.meshing.faces = args.quads ? FaceType::quads : FaceType::triangles;
   options.meshing.matching.max_cost = args.max_cost;
+  options.meshing.refinement = args.refinement;
+  options.meshing.refinement.grow = !args.no_grow;
   ldimesh::DistributedResult step;
   const ldimesh::Status status =
       ldimesh::mesh_distributed(comm, *caster, input.subdomain, views, options, step);
@@ -265,6 +271,10 @@ int run_mesh(const MeshArgs& args) {
     rays += view.pixel_count();
   const auto& m = result.mesh;
   const auto& t = step.seconds;
+  const ldimesh::RefinementStats& refined = result.refinement;
+  std::size_t refine_rays = 0;
+  for (std::size_t n : refined.rays_per_pass)
+    refine_rays += n;
   if (args.json) {
     nlohmann::json j;
     j[args.grid.empty() ? "surface" : "grid"] = input.name;
@@ -285,6 +295,21 @@ int run_mesh(const MeshArgs& args) {
     j["face_type"] = args.quads ? "quads" : "triangles";
     j["bytes_to_root"] = step.bytes_to_root;
     j["bytes_moved"] = step.bytes_moved;
+    j["refinement"] = {{"levels", options.meshing.refinement.levels},
+                       {"min_normal_dot", options.meshing.refinement.min_normal_dot},
+                       {"grow", options.meshing.refinement.grow},
+                       {"passes", refined.passes},
+                       {"round_trips", refined.round_trips},
+                       {"rays", refine_rays},
+                       {"rays_per_pass", refined.rays_per_pass},
+                       {"seconds_per_pass", refined.seconds_per_pass},
+                       {"grown_cells", refined.grown_cells},
+                       {"subdivided_cells", refined.subdivided_cells},
+                       {"invalid_vertices", refined.invalid_vertices},
+                       {"removed_faces", refined.removed_faces},
+                       {"trimmed_faces", refined.trimmed_faces},
+                       {"seconds", refined.seconds},
+                       {"sample_seconds", refined.sample_seconds}};
     j["output"] = args.out.empty() ? nlohmann::json(nullptr) : nlohmann::json(args.out);
     j["seconds"] = {{"load", load_seconds},
                     {"scene", max_scene},
@@ -294,6 +319,7 @@ int run_mesh(const MeshArgs& args) {
                     {"decode", t.decode},
                     {"match", result.seconds.match},
                     {"trim", result.seconds.trim},
+                    {"refine", result.seconds.refine},
                     {"assemble", result.seconds.assemble},
                     {"write", write_seconds}};
     std::cout << j.dump(2) << "\n";
@@ -318,6 +344,12 @@ int run_mesh(const MeshArgs& args) {
   std::printf("  decode     %8.3f s\n", t.decode);
   std::printf("  mesh       %8.3f s  %zu quads\n", result.seconds.match, result.quads_untrimmed);
   std::printf("  trim       %8.3f s  %zu quads kept\n", result.seconds.trim, result.quads);
+  if (options.meshing.refinement.levels > 0)
+    std::printf(
+        "  refine     %8.3f s  %d pass%s, %zu rays requested (%.3f s sampling), %zu cells grown, "
+        "%zu faces removed\n",
+        result.seconds.refine, refined.passes, refined.passes == 1 ? "" : "es", refine_rays,
+        refined.sample_seconds, refined.grown_cells, refined.removed_faces);
   std::printf("  assemble   %8.3f s  %zu vertices, %zu %s\n", result.seconds.assemble,
               m.vertex_count(), m.face_count(), args.quads ? "quads" : "triangles");
   std::printf("  mesh+trim  %8.3f s\n", result.seconds.match + result.seconds.trim);
@@ -530,6 +562,28 @@ int main(int argc, char** argv) {
   mesh->add_option("--max-cost", args.max_cost, "§3 match rejection threshold in pixels")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  mesh->add_option("--refine", args.refinement.levels,
+                   "§4 adaptive refinement: at most LEVELS subdivisions of a cell, one sampling "
+                   "round trip each (0: off)")
+      ->check(CLI::Validator(
+          [](std::string& value) -> std::string {
+            long long levels = 0;
+            const char* end = value.data() + value.size();
+            const auto [ptr, ec] = std::from_chars(value.data(), end, levels);
+            // Not a number: left to the conversion, which says so.
+            if (ptr != end || ec != std::errc()) return {};
+            if (levels < 0) return "must be 0 (off) or more";
+            if (levels > 16) return "at most 16 levels (each halves the sample spacing)";
+            return {};
+          },
+          "LEVELS in [0, 16]"))
+      ->capture_default_str();
+  mesh->add_option("--refine-dot", args.refinement.min_normal_dot,
+                   "§4: refine a cell whose corner normals have a dot product below this")
+      ->check(CLI::Range(-1.0, 1.0))
+      ->capture_default_str();
+  mesh->add_flag("--no-grow", args.no_grow,
+                 "§4: no growth of the mesh across its boundaries and silhouettes");
 
   mesh->add_flag("--lossless", args.lossless,
                  "send fragments to the root losslessly (default: quantized depths and normals)");

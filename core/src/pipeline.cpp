@@ -12,12 +12,68 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
+// §3 per view, then §4 on all views together (one sampling round trip per pass), then one mesh.
+MeshingResult mesh_refined(std::span<const Ldi> ldis, const MeshingOptions& options,
+                           SampleSource& samples) {
+  MeshingResult result;
+  Mesh& mesh = result.mesh;
+  for (const Ldi& ldi : ldis)
+    mesh.view_dirs.push_back(ldi.view.dir);
+  std::vector<ViewQuads> quads(ldis.size());
+  for (std::size_t k = 0; k < ldis.size(); ++k) {
+    const Ldi& ldi = ldis[k];
+    result.samples += ldi.sample_count();
+    auto start = std::chrono::steady_clock::now();
+    quads[k].untrimmed = build_quads(ldi, options.matching);
+    result.quads_untrimmed += quads[k].untrimmed.size() / 4;
+    result.seconds.match += seconds_since(start);
+
+    start = std::chrono::steady_clock::now();
+    quads[k].kept = quads[k].untrimmed;
+    result.quads += trim_by_view_quality(quads[k].kept, sample_positions(ldi), ldi.view.dir,
+                                         mesh.view_dirs, options.r);
+    result.seconds.trim += seconds_since(start);
+  }
+
+  auto start = std::chrono::steady_clock::now();
+  const std::vector<RefinedView> refined =
+      refine_views(ldis, quads, options.faces, options.refinement, options.matching, mesh.view_dirs,
+                   options.r, samples, result.refinement);
+  result.seconds.refine = seconds_since(start);
+
+  start = std::chrono::steady_clock::now();
+  for (std::size_t k = 0; k < refined.size(); ++k) {
+    const RefinedView& r = refined[k];
+    const std::uint32_t base = std::uint32_t(mesh.positions.size());
+    mesh.positions.insert(mesh.positions.end(), r.positions.begin(), r.positions.end());
+    mesh.normals.insert(mesh.normals.end(), r.normals.begin(), r.normals.end());
+    mesh.scalars.insert(mesh.scalars.end(), r.scalars.begin(), r.scalars.end());
+    const std::uint8_t view = std::uint8_t(k);
+    if (options.faces == FaceType::quads) {
+      for (std::uint32_t v : r.faces)
+        mesh.quads.push_back(base + v);
+      mesh.quad_view.insert(mesh.quad_view.end(), r.faces.size() / 4, view);
+    } else {
+      for (std::uint32_t v : r.faces)
+        mesh.triangles.push_back(base + v);
+      mesh.triangle_view.insert(mesh.triangle_view.end(), r.faces.size() / 3, view);
+    }
+  }
+  result.seconds.assemble += seconds_since(start);
+  return result;
+}
+
 }  // namespace
 
-MeshingResult mesh_ldis(std::span<const Ldi> ldis, const MeshingOptions& options) {
+MeshingResult mesh_ldis(std::span<const Ldi> ldis, const MeshingOptions& options,
+                        SampleSource* samples) {
   if (!(options.r >= 0.0 && options.r <= 1.0))
     throw std::invalid_argument("trimming parameter r must lie in [0, 1]");
   if (ldis.size() > 255) throw std::invalid_argument("at most 255 views");
+  if (options.refinement.levels != 0) {
+    if (!samples) throw std::invalid_argument("refinement needs a sample source");
+    return mesh_refined(ldis, options, *samples);
+  }
 
   MeshingResult result;
   Mesh& mesh = result.mesh;

@@ -25,15 +25,7 @@ std::size_t trim_by_view_quality(std::vector<std::uint32_t>& quads,
                           const glm::vec3 v = positions[c[k]];
                           const glm::vec3 prev = positions[c[(k + 3) & 3]];
                           const glm::vec3 next = positions[c[(k + 1) & 3]];
-                          const glm::vec3 nv = glm::cross(v - prev, v - next);
-                          float best = 0.0f;
-                          for (const glm::vec3& d : dirs)
-                            best = std::max(best, std::abs(glm::dot(nv, d)));
-                          // |n·d_q| / max|n·d| > r, without dividing (best = 0: degenerate
-                          // corner). A corner whose own view is the best stays valid even at
-                          // r = 1, as §5 needs.
-                          const float own = std::abs(glm::dot(nv, dq));
-                          valid = best > 0.0f && (own > rf * best || own >= best);
+                          valid = view_quality_ok(glm::cross(v - prev, v - next), dq, dirs, rf);
                         }
                         keep[q] = valid;
                       }

@@ -29,6 +29,11 @@ expect_error "unknown format" mesh --surface sphere --res 16 --out "$tmp/x.stl"
 expect_error "bad views" mesh --surface sphere --res 16 --views xq
 expect_error "no subcommand"
 expect_error "tri and quad" mesh --surface sphere --res 16 --tri --quad
+expect_error "refine below 0" mesh --surface sphere --res 16 --refine -1
+expect_error "refine above 16" mesh --surface sphere --res 16 --refine 17
+expect_error "refine not a number" mesh --surface sphere --res 16 --refine two
+expect_error "refine-dot above 1" mesh --surface sphere --res 16 --refine 1 --refine-dot 2
+expect_error "refine-dot below -1" mesh --surface sphere --res 16 --refine-dot -1.5
 
 # ldimesh surfaces lists every built-in surface.
 "$ldimesh" surfaces >"$tmp/surfaces" || fail "surfaces: non-zero exit"

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The command line over MPI: 2, 3 and 4 ranks write the same mesh (byte for byte) as one process,
-# for an analytic surface and for a raw volume split into grid blocks.
+# for an analytic surface and for a raw volume split into grid blocks, refined (§4) or not.
 set -u
 ldimesh=$1
 mpiexec=$2
@@ -32,6 +32,33 @@ PY
 "$mpiexec" -n 3 --oversubscribe "$ldimesh" mesh --grid "$tmp/v.raw" --dims 40,40,40 --iso 0.7 --res 96 \
   --out "$tmp/g3.ply" >/dev/null || fail "grid, 3 ranks"
 cmp -s "$tmp/g1.ply" "$tmp/g3.ply" || fail "grid: 3 ranks wrote a different mesh"
+
+# §4 refinement: the root's sample requests are answered by all ranks, and 3 ranks write the
+# same mesh as one process, triangles and quads; the summary counts one round trip per pass.
+for faces in tri quad; do
+  "$ldimesh" mesh --surface marschner-lobb --res 32 --refine 2 --"$faces" --json \
+    --out "$tmp/r1_$faces.ply" >"$tmp/r1_$faces.json" || fail "refine $faces: one process"
+  "$mpiexec" -n 3 --oversubscribe "$ldimesh" mesh --surface marschner-lobb --res 32 --refine 2 \
+    --"$faces" --json --out "$tmp/r3_$faces.ply" >"$tmp/r3_$faces.json" || fail "refine $faces: 3 ranks"
+  cmp -s "$tmp/r1_$faces.ply" "$tmp/r3_$faces.ply" || fail "refine $faces: 3 ranks wrote a different mesh"
+  python3 - "$tmp/r1_$faces.json" "$tmp/r3_$faces.json" <<'PY' || fail "refine $faces: implausible summary"
+import json, sys
+one, three = (json.load(open(f)) for f in sys.argv[1:])
+for j in (one, three):
+    r = j["refinement"]
+    assert r["levels"] == 2 and 1 <= r["passes"] <= 2, r
+    assert r["round_trips"] == r["passes"] == len(r["rays_per_pass"]) == len(r["seconds_per_pass"]), r
+    assert r["rays"] == sum(r["rays_per_pass"]) > 0, r
+    assert j["seconds"]["refine"] >= r["sample_seconds"] >= 0, j["seconds"]
+assert three["ranks"] == 3
+for key in ("passes", "rays_per_pass", "grown_cells", "subdivided_cells", "removed_faces"):
+    assert one["refinement"][key] == three["refinement"][key], key
+assert one["faces"] == three["faces"]
+PY
+done
+"$mpiexec" -n 3 --oversubscribe "$ldimesh" mesh --surface marschner-lobb --res 32 --refine 1 --no-grow \
+  --out "$tmp/ng.ply" >"$tmp/ng.log" || fail "refine --no-grow: 3 ranks"
+grep -q '^  refine ' "$tmp/ng.log" || fail "refine: no 'refine' line in the summary"
 
 # An error on every rank is reported once, with a non-zero exit.
 "$mpiexec" -n 2 --oversubscribe "$ldimesh" mesh --surface teapot >"$tmp/out" 2>"$tmp/err"

@@ -1,12 +1,15 @@
 // The distributed pipeline under mpiexec (1 to 4 ranks): every rank ray casts its subdomain,
-// the fragments are reduced to the root, the root meshes them. The root compares with what one
+// the fragments are reduced to the root, the root meshes them and refines them (§4) with extra
+// samples from all ranks. The root compares with what one
 // process computes. Tests are collective: every rank runs every test; only the root checks
 // (with EXPECT_*, never returning early, so that no rank is left alone in a collective call).
 #include <mpi.h>
 
 #include <algorithm>
+#include <cstring>
 #include <memory>
 #include <random>
+#include <string>
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
@@ -174,6 +177,35 @@ TEST(MpiPipeline, AllRanksEmptyGiveAnEmptyMesh) {
   }
 }
 
+// `a` and `b` the same, bit for bit.
+template <class T>
+void expect_identical(const std::vector<T>& a, const std::vector<T>& b, const char* what) {
+  EXPECT_EQ(a.size(), b.size()) << what;
+  if (a.size() != b.size()) return;
+  std::size_t differ = 0, first = 0;
+  for (std::size_t i = 0; i < a.size(); ++i)
+    if (std::memcmp(&a[i], &b[i], sizeof(T)) != 0 && differ++ == 0) first = i;
+  EXPECT_EQ(differ, 0u) << what << ": " << differ << " differ, the first at " << first;
+}
+
+void expect_identical_mesh(const Mesh& a, const Mesh& b) {
+  expect_identical(a.positions, b.positions, "positions");
+  expect_identical(a.normals, b.normals, "normals");
+  expect_identical(a.scalars, b.scalars, "scalars");
+  expect_identical(a.triangles, b.triangles, "triangles");
+  expect_identical(a.triangle_view, b.triangle_view, "triangle views");
+  expect_identical(a.quads, b.quads, "quads");
+  expect_identical(a.quad_view, b.quad_view, "quad views");
+}
+
+void expect_identical_hits(const RayHitList& a, const RayHitList& b) {
+  expect_identical(a.offsets, b.offsets, "offsets");
+  expect_identical(a.depth, b.depth, "depths");
+  expect_identical(a.normal, b.normal, "normals");
+  expect_identical(a.scalar, b.scalar, "scalars");
+}
+
+// The round trip gives exactly what the ray caster of the whole domain gives in one process.
 TEST(MpiPipeline, SampleRequestsAreAnsweredAsInOneProcess) {
   const SurfaceInfo* s = find_surface("barth");
   const auto source = make_surface_source("barth");
@@ -187,22 +219,117 @@ TEST(MpiPipeline, SampleRequestsAreAnsweredAsInOneProcess) {
     return;
   }
   LocalSampleSource local(caster, views);
+  // One request mixing all views in random order, as a refinement pass asks.
   std::mt19937 rng(9);
-  std::size_t hits = 0;
-  for (std::uint32_t v = 0; v < views.size(); ++v) {
-    std::uniform_real_distribution<double> x(0.0, views[v].width), y(0.0, views[v].height);
-    std::vector<glm::dvec2> positions(300);
-    for (auto& p : positions)
-      p = {x(rng), y(rng)};
-    const RayHitList a = remote.sample(v, positions), b = local.sample(v, positions);
-    EXPECT_EQ(a.offsets, b.offsets);
-    if (a.offsets != b.offsets) continue;
-    for (std::size_t k = 0; k < a.depth.size(); ++k)
-      EXPECT_NEAR(a.depth[k], b.depth[k], 1e-6);
-    hits += a.depth.size();
+  std::uniform_int_distribution<std::uint32_t> view_of(0, std::uint32_t(views.size() - 1));
+  std::vector<SamplePoint> points(300 * views.size());
+  for (SamplePoint& p : points) {
+    p.view = view_of(rng);
+    std::uniform_real_distribution<double> x(0.0, views[p.view].width),
+        y(0.0, views[p.view].height);
+    p.position = {x(rng), y(rng)};
   }
+  const RayHitList a = remote.sample(points);
+  expect_identical_hits(a, local.sample(points));
+  EXPECT_GT(a.depth.size(), 500u);
+
+  // A bad request is refused on the root before anything is sent; the other ranks go on
+  // serving: the next requests (a part of the first, then none) are answered as before.
+  std::vector<SamplePoint> bad(points.begin(), points.begin() + 10);
+  bad[7].view = std::uint32_t(views.size());
+  EXPECT_THROW(remote.sample(bad), std::out_of_range);
+  const std::span<const SamplePoint> some = std::span<const SamplePoint>(points).first(40);
+  expect_identical_hits(remote.sample(some), local.sample(some));
+  EXPECT_EQ(remote.sample({}).offsets, std::vector<std::uint32_t>{0});
   remote.finish();
-  EXPECT_GT(hits, 500u);
+}
+
+// §4 over MPI: the refined mesh is, bit for bit, the one the root refines with samples from a
+// ray caster of the whole domain in one process (the round trips give exactly the local
+// answers), and each pass is one round trip.
+TEST(MpiPipeline, RefinedMeshIsTheOneProcessRefinedMesh) {
+  for (const char* name : {"sphere", "marschner-lobb"})
+    for (const FaceType faces : {FaceType::triangles, FaceType::quads}) {
+      SCOPED_TRACE(std::string(name) + (faces == FaceType::quads ? ", quads" : ", triangles"));
+      const SurfaceInfo* s = find_surface(name);
+      const auto source = make_surface_source(name);
+      const RayCaster caster(*source, s->isovalue);
+      const Subdomain sub{decompose_box(s->domain, ranks())[rank_of()], s->domain};
+      const std::vector<View> views = make_axis_views(s->domain, 24);
+      DistributedOptions options;
+      options.meshing.faces = faces;
+      options.meshing.refinement.levels = 2;
+      DistributedResult result;
+      const Status status = mesh_distributed(MPI_COMM_WORLD, caster, sub, views, options, result);
+      EXPECT_TRUE(status) << status.message();
+      if (rank_of() != 0 || !status) continue;
+      LocalSampleSource local(caster, views);  // every rank's caster sees the whole field
+      const MeshingResult expected = mesh_ldis(result.ldis, options.meshing, &local);
+      EXPECT_GT(expected.mesh.face_count(), 100u);
+      expect_identical_mesh(result.meshing.mesh, expected.mesh);
+      const RefinementStats& got = result.meshing.refinement;
+      const RefinementStats& want = expected.refinement;
+      EXPECT_GT(got.passes, 0);
+      EXPECT_EQ(got.round_trips, std::size_t(got.passes));
+      EXPECT_EQ(got.rays_per_pass, want.rays_per_pass);
+      EXPECT_EQ(got.subdivided_cells, want.subdivided_cells);
+      EXPECT_EQ(got.grown_cells, want.grown_cells);
+      EXPECT_EQ(got.invalid_vertices, want.invalid_vertices);
+    }
+}
+
+// Whether every rank's `status` is an error with the root's (non-empty) message.
+bool same_error_on_every_rank(const Status& status) {
+  std::string root_message = status.message();
+  int length = int(root_message.size());
+  MPI_Bcast(&length, 1, MPI_INT, 0, MPI_COMM_WORLD);
+  root_message.resize(std::size_t(length));
+  MPI_Bcast(root_message.data(), length, MPI_CHAR, 0, MPI_COMM_WORLD);
+  int mine = !status && !root_message.empty() && status.message() == root_message ? 1 : 0, all = 0;
+  MPI_Allreduce(&mine, &all, 1, MPI_INT, MPI_MIN, MPI_COMM_WORLD);
+  return all == 1;
+}
+
+// Refinement that fails on the root (here: more levels than allowed) fails on every rank with
+// the root's message, and leaves no rank waiting for requests.
+TEST(MpiPipeline, RefinementFailingOnTheRootFailsOnEveryRank) {
+  const SurfaceInfo* s = find_surface("sphere");
+  const auto source = make_surface_source("sphere");
+  const RayCaster caster(*source, s->isovalue);
+  const Subdomain sub{decompose_box(s->domain, ranks())[rank_of()], s->domain};
+  DistributedOptions options;
+  options.meshing.refinement.levels = 17;
+  DistributedResult result;
+  const Status status = mesh_distributed(MPI_COMM_WORLD, caster, sub,
+                                         make_axis_views(s->domain, 16), options, result);
+  const bool same = same_error_on_every_rank(status);
+  if (rank_of() == 0) {
+    EXPECT_TRUE(same) << status.message();
+    EXPECT_EQ(result.meshing.mesh.face_count(), 0u);
+  }
+  // The ranks are in step afterwards: a step without refinement works.
+  options.meshing.refinement.levels = 0;
+  const Status next = mesh_distributed(MPI_COMM_WORLD, caster, sub, make_axis_views(s->domain, 16),
+                                       options, result);
+  EXPECT_TRUE(next) << next.message();
+}
+
+// Ranks that disagree on refinement (a misconfigured job) get an error, not a hang.
+TEST(MpiPipeline, RefinementLevelsThatDifferBetweenRanksAreAnError) {
+  if (ranks() == 1) GTEST_SKIP() << "needs two ranks";
+  const SurfaceInfo* s = find_surface("sphere");
+  const auto source = make_surface_source("sphere");
+  const RayCaster caster(*source, s->isovalue);
+  const Subdomain sub{decompose_box(s->domain, ranks())[rank_of()], s->domain};
+  DistributedOptions options;
+  options.meshing.refinement.levels = rank_of() == ranks() - 1 ? 1 : 0;
+  DistributedResult result;
+  const Status status = mesh_distributed(MPI_COMM_WORLD, caster, sub,
+                                         make_axis_views(s->domain, 16), options, result);
+  const bool same = same_error_on_every_rank(status);
+  if (rank_of() == 0) {
+    EXPECT_TRUE(same) << status.message();
+  }
 }
 
 }  // namespace

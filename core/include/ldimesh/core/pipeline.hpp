@@ -6,20 +6,22 @@
 #include "ldimesh/core/ldi.hpp"
 #include "ldimesh/core/mesh.hpp"
 #include "ldimesh/core/mesher.hpp"
+#include "ldimesh/core/refine.hpp"
+#include "ldimesh/core/sample_source.hpp"
 
 namespace ldimesh {
-
-enum class FaceType { triangles, quads };
 
 struct MeshingOptions {
   double r = 0.5;  // §3 trimming parameter in [0, 1]; the paper's recommended trade-off
   FaceType faces = FaceType::triangles;
   MatchOptions matching;
+  RefinementOptions refinement;  // §4; levels > 0 needs a SampleSource
 };
 
 struct MeshingTimes {
   double match = 0.0;     // best matches and quads (§3)
   double trim = 0.0;      // trimming (§3)
+  double refine = 0.0;    // §4 refinement, its sampling included
   double assemble = 0.0;  // vertices, triangle split, output arrays
 };
 
@@ -29,12 +31,17 @@ struct MeshingResult {
   std::size_t quads_untrimmed = 0;  // quads before trimming
   std::size_t quads = 0;            // quads after trimming
   MeshingTimes seconds;
+  RefinementStats refinement;  // zeros unless refinement ran
 };
 
 // Meshes each LDI (§3), trims against the directions of all of them with options.r, and
 // assembles one mesh: vertices are the samples used by a kept face (one vertex per sample,
 // shared by the faces of its view), faces are quads or triangles (each quad split along its
-// shorter diagonal). Throws std::invalid_argument if r is outside [0, 1] or more than 255 views.
-MeshingResult mesh_ldis(std::span<const Ldi> ldis, const MeshingOptions& options = {});
+// shorter diagonal). With options.refinement.levels > 0 the trimmed meshes are refined (§4,
+// refine_views) with extra samples from `samples` before assembly. Throws
+// std::invalid_argument if r is outside [0, 1], more than 255 views, or refinement is asked for
+// without a sample source.
+MeshingResult mesh_ldis(std::span<const Ldi> ldis, const MeshingOptions& options = {},
+                        SampleSource* samples = nullptr);
 
 }  // namespace ldimesh

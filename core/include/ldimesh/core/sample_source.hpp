@@ -1,6 +1,7 @@
 // Where refinement (§4 (ii)) gets extra samples: rays through arbitrary image positions of the
 // step's views, all hits each. One interface, served by the local ray caster in one process
-// and by an MPI round trip to the ranks that own the rays in a parallel run.
+// and by an MPI round trip to the ranks that own the rays in a parallel run. One call is one
+// round trip: a refinement pass asks for all its samples, of all views, in one call.
 #pragma once
 
 #include <cstdint>
@@ -11,14 +12,25 @@
 
 namespace ldimesh {
 
+// A ray of view `view` through image position `position` (pixel units, see View::point).
+struct SamplePoint {
+  std::uint32_t view = 0;
+  glm::dvec2 position{0.0};
+};
+
 class SampleSource {
  public:
   virtual ~SampleSource() = default;
-  // All hits along the rays of view `view_index` through `image_positions` (pixel units), per
-  // ray sorted by depth. Throws std::out_of_range for an unknown view.
-  virtual RayHitList sample(std::uint32_t view_index,
-                            std::span<const glm::dvec2> image_positions) = 0;
+  // All hits along the rays through `points`, ray k's hits sorted by depth. Throws
+  // std::out_of_range for an unknown view.
+  virtual RayHitList sample(std::span<const SamplePoint> points) = 0;
 };
+
+// The hits of `points` from `caster` (only the parts `sub` owns, when given): the rays grouped
+// by view, cast with RayCaster::cast_points and returned in the order of `points`. Throws
+// std::out_of_range for a view index outside `views`.
+RayHitList cast_sample_points(const RayCaster& caster, std::span<const View> views,
+                              std::span<const SamplePoint> points, const Subdomain* sub = nullptr);
 
 // Samples from a ray caster in this process.
 class LocalSampleSource final : public SampleSource {
@@ -26,9 +38,8 @@ class LocalSampleSource final : public SampleSource {
   // `caster` must outlive this object.
   LocalSampleSource(const RayCaster& caster, std::vector<View> views)
       : caster_(caster), views_(std::move(views)) {}
-  RayHitList sample(std::uint32_t view_index,
-                    std::span<const glm::dvec2> image_positions) override {
-    return caster_.cast_points(views_.at(view_index), image_positions);
+  RayHitList sample(std::span<const SamplePoint> points) override {
+    return cast_sample_points(caster_, views_, points);
   }
 
  private:

@@ -1,5 +1,6 @@
 // The distributed pipeline: every rank ray casts its own subdomain, the fragments travel
-// compressed to the root, the root meshes them (paper §3).
+// compressed to the root, the root meshes them (paper §3) and refines the meshes with extra
+// samples that every rank casts in its subdomain (§4).
 #pragma once
 
 #include <cstdint>
@@ -28,7 +29,7 @@ struct DistributedTimes {
   double encode = 0.0;
   double reduce = 0.0;  // the root's wall time in the reduction (waiting included)
   double decode = 0.0;
-  double mesh = 0.0;  // match + trim + assemble on the root
+  double mesh = 0.0;  // match + trim + refine (its round trips included) + assemble on the root
 };
 
 struct DistributedResult {
@@ -46,31 +47,52 @@ double merge_tolerance(const FragmentEncoding& encoding, const View& view, doubl
 // Collective over `comm` (rank 0 is the root). Every rank ray casts the part `sub` owns of
 // each of `views` (the same views on every rank, derived from the global domain), the
 // fragments are reduced to the root, which turns them into full LDIs and meshes them with
-// options.meshing. Ranks with nothing to cast contribute empty fragments. Returns an error
-// Status (on every rank) if a fragment failed to decode anywhere; the mesh is then not built.
+// options.meshing. Ranks with nothing to cast contribute empty fragments. `options` must be the
+// same on every rank.
+//
+// Without refinement (options.meshing.refinement.levels == 0) the other ranks return as soon
+// as the reduction is done. With refinement (§4) the root meshes with an MpiSampleSource while
+// every other rank serves its sample requests, so all ranks return when the mesh is built.
+//
+// Returns an error Status, on every rank, if a fragment failed to decode anywhere or the
+// refinement levels differ between ranks (the mesh is then not built), or, with refinement,
+// if meshing failed on the root (the root's message; no rank is left waiting). Without
+// refinement an exception from meshing (e.g. r outside [0, 1]) propagates on the root only.
 Status mesh_distributed(MPI_Comm comm, const RayCaster& caster, const Subdomain& sub,
                         std::span<const View> views, const DistributedOptions& options,
                         DistributedResult& result);
 
 // Extra samples by an MPI round trip (§4 (ii)). The root calls sample(); every other rank
-// calls serve(), which answers the root's requests until the root calls finish(). A request
-// (view index + image positions) is broadcast; every rank casts the rays' parts it owns
-// (RayCaster::cast_points with its subdomain); the answers are gathered to the root and merged
-// per ray (concatenated, sorted, duplicates merged), so the root gets what one process would.
+// calls serve(), which answers the root's requests until the root calls finish(). One
+// sample() call is one round trip, whatever the number of views: the root broadcasts a header
+// (ray count) and all rays (view index and image position each); every rank casts the parts it
+// owns of the rays (cast_sample_points with its subdomain); the answers are gathered to the
+// root and merged per ray (concatenated, sorted by depth, hits closer than `tolerance` merged),
+// so the root gets what one process would.
+//
+// Requests are checked on the root before anything is sent: an unknown view throws
+// std::out_of_range, more than 715,827,882 rays std::invalid_argument, and the other ranks
+// keep waiting for the next request. A rank that fails to answer (e.g. out of memory) sends
+// its error instead; sample() then throws std::runtime_error naming the rank, after the round
+// trip, so the ranks stay in step and serve() goes on. Every MPI call is made by the calling
+// thread (MPI_THREAD_FUNNELED is enough); ranks of one job are assumed homogeneous (floats
+// travel as raw bytes).
 class MpiSampleSource final : public SampleSource {
  public:
-  // `caster` must outlive this object; `views` and `sub` as for mesh_distributed.
+  // `caster` must outlive this object; `views` and `sub` as for mesh_distributed; `tolerance`
+  // as for the reduction (merge_tolerance).
   MpiSampleSource(MPI_Comm comm, const RayCaster& caster, Subdomain sub, std::vector<View> views,
                   double tolerance);
   // Root only (collective with the other ranks' serve()).
-  RayHitList sample(std::uint32_t view_index, std::span<const glm::dvec2> image_positions) override;
-  // Root only: ends every rank's serve().
+  RayHitList sample(std::span<const SamplePoint> points) override;
+  // Root only: ends every rank's serve(). Call it exactly once, also when meshing failed.
   void finish();
   // Every rank but the root: answers requests until finish().
   void serve();
 
  private:
-  RayHitList answer(std::uint32_t view_index, std::span<const glm::dvec2> positions);
+  // This rank's serialized answer: its hits of `points`, or the error that stopped it.
+  std::vector<std::uint8_t> answer(std::span<const SamplePoint> points) const;
   MPI_Comm comm_;
   const RayCaster& caster_;
   Subdomain sub_;

@@ -1,0 +1,46 @@
+#include "ldimesh/core/sample_source.hpp"
+
+#include <stdexcept>
+
+namespace ldimesh {
+
+RayHitList cast_sample_points(const RayCaster& caster, std::span<const View> views,
+                              std::span<const SamplePoint> points, const Subdomain* sub) {
+  // Rays of each view in request order, cast together.
+  std::vector<std::vector<glm::dvec2>> positions(views.size());
+  std::vector<std::uint32_t> slot(points.size());  // index of point k among its view's rays
+  for (std::size_t k = 0; k < points.size(); ++k) {
+    const std::uint32_t v = points[k].view;
+    if (v >= views.size()) throw std::out_of_range("sample request for an unknown view");
+    slot[k] = std::uint32_t(positions[v].size());
+    positions[v].push_back(points[k].position);
+  }
+  std::vector<RayHitList> hits(views.size());
+  for (std::size_t v = 0; v < views.size(); ++v)
+    if (!positions[v].empty()) hits[v] = caster.cast_points(views[v], positions[v], sub);
+
+  RayHitList out;
+  out.offsets.reserve(points.size() + 1);
+  out.offsets.push_back(0);
+  const bool with_scalar = [&] {
+    for (const RayHitList& h : hits)
+      if (!h.scalar.empty()) return true;
+    return false;
+  }();
+  for (std::size_t k = 0; k < points.size(); ++k) {
+    const RayHitList& h = hits[points[k].view];
+    const std::uint32_t b = h.offsets[slot[k]], e = h.offsets[slot[k] + 1];
+    out.depth.insert(out.depth.end(), h.depth.begin() + b, h.depth.begin() + e);
+    out.normal.insert(out.normal.end(), h.normal.begin() + b, h.normal.begin() + e);
+    if (with_scalar) {
+      if (h.scalar.empty())
+        out.scalar.insert(out.scalar.end(), e - b, 0.0f);
+      else
+        out.scalar.insert(out.scalar.end(), h.scalar.begin() + b, h.scalar.begin() + e);
+    }
+    out.offsets.push_back(std::uint32_t(out.depth.size()));
+  }
+  return out;
+}
+
+}  // namespace ldimesh
