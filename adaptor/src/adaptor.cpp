@@ -119,9 +119,12 @@ Status parse_options(const nlohmann::json& j, Options& o) {
       if (b != "skip" && b != "coalesce") return bad("busy", "must be \"skip\" or \"coalesce\"");
       o.coalesce = b == "coalesce";
     }
-    for (const char* k : {"refinement", "merging"})
-      if (j.contains(k) && j[k].get<bool>())
-        return bad(k, "is not available yet (paper §4/§5 land in later versions)");
+    if (j.contains("refinement") && j["refinement"].get<bool>())
+      return bad("refinement",
+                 "is not available in situ yet (every rank would have to answer the root's ray "
+                 "requests during the step); refine offline with 'ldimesh mesh --refine'");
+    if (j.contains("merging") && j["merging"].get<bool>())
+      return bad("merging", "is not available yet (paper §5 lands in a later version)");
     if (j.contains("server")) {
       const auto& s = j["server"];
       if (Status st = check_keys(s, "server.", {"enabled", "bind", "port", "token"}); !st)

@@ -292,40 +292,36 @@ bool same_error_on_every_rank(const Status& status) {
 
 // Refinement that fails on the root (here: more levels than allowed) fails on every rank with
 // the root's message, and leaves no rank waiting for requests.
-TEST(MpiPipeline, RefinementFailingOnTheRootFailsOnEveryRank) {
+// One step of the sphere at 16² with this rank's refinement `levels`.
+Status mesh_sphere_step(int levels, DistributedResult& result) {
   const SurfaceInfo* s = find_surface("sphere");
   const auto source = make_surface_source("sphere");
   const RayCaster caster(*source, s->isovalue);
   const Subdomain sub{decompose_box(s->domain, ranks())[rank_of()], s->domain};
   DistributedOptions options;
-  options.meshing.refinement.levels = 17;
+  options.meshing.refinement.levels = levels;
+  return mesh_distributed(MPI_COMM_WORLD, caster, sub, make_axis_views(s->domain, 16), options,
+                          result);
+}
+
+TEST(MpiPipeline, RefinementFailingOnTheRootFailsOnEveryRank) {
   DistributedResult result;
-  const Status status = mesh_distributed(MPI_COMM_WORLD, caster, sub,
-                                         make_axis_views(s->domain, 16), options, result);
+  const Status status = mesh_sphere_step(17, result);
   const bool same = same_error_on_every_rank(status);
   if (rank_of() == 0) {
     EXPECT_TRUE(same) << status.message();
     EXPECT_EQ(result.meshing.mesh.face_count(), 0u);
   }
   // The ranks are in step afterwards: a step without refinement works.
-  options.meshing.refinement.levels = 0;
-  const Status next = mesh_distributed(MPI_COMM_WORLD, caster, sub, make_axis_views(s->domain, 16),
-                                       options, result);
+  const Status next = mesh_sphere_step(0, result);
   EXPECT_TRUE(next) << next.message();
 }
 
 // Ranks that disagree on refinement (a misconfigured job) get an error, not a hang.
 TEST(MpiPipeline, RefinementLevelsThatDifferBetweenRanksAreAnError) {
   if (ranks() == 1) GTEST_SKIP() << "needs two ranks";
-  const SurfaceInfo* s = find_surface("sphere");
-  const auto source = make_surface_source("sphere");
-  const RayCaster caster(*source, s->isovalue);
-  const Subdomain sub{decompose_box(s->domain, ranks())[rank_of()], s->domain};
-  DistributedOptions options;
-  options.meshing.refinement.levels = rank_of() == ranks() - 1 ? 1 : 0;
   DistributedResult result;
-  const Status status = mesh_distributed(MPI_COMM_WORLD, caster, sub,
-                                         make_axis_views(s->domain, 16), options, result);
+  const Status status = mesh_sphere_step(rank_of() == ranks() - 1 ? 1 : 0, result);
   const bool same = same_error_on_every_rank(status);
   if (rank_of() == 0) {
     EXPECT_TRUE(same) << status.message();
