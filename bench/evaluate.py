@@ -53,6 +53,11 @@ PAPER_TABLE1 = [
     ("slices", 24, "6(k)", "< 0.01", "-", "0.01", "0.01", "< 0.01", "0.02"),
     ("slices", 32, "6(l)", "0.02", "-", "0.02", "0.01", "0.04", "0.09"),
 ]
+# Rows the paper refined (§4), with the refinement levels we run them at (`--refine N`): the paper
+# does not give its levels for Fig. 6(h).
+REFINED_ROWS = {"6(h) (ref.)": 2}
+# The accuracy of refined meshes against MC at equal triangle count: (data set, LDI, levels).
+REFINED_ACCURACY = [("marschner-lobb", 64, 2)]
 PAPER_TRIANGLES = {("barth", 64): "24k", ("barth", 128): "136k", ("barth", 256): "625k",
                    ("barth", 512): "2 646k"}
 
@@ -298,12 +303,14 @@ class Evaluation:
         self.distances[key] = d
         return d
 
-    def ours(self, surface, res, threads=None, lossless=True, repeat=None, out=None):
+    def ours(self, surface, res, threads=None, lossless=True, repeat=None, out=None, refine=0):
         repeat = repeat or self.args.repeat
         runs = []
         for k in range(repeat):
             cmd = self.ldimesh("mesh", "--surface", surface, "--res", res, "--views", "xyz",
                                "--r", 0.5, "--json")
+            if refine:
+                cmd += ["--refine", str(refine)]
             if lossless:
                 cmd.append("--lossless")
             if threads:
@@ -315,13 +322,41 @@ class Evaluation:
         j = runs[0]
         mesh_s = statistics.median(r["seconds"]["match"] + r["seconds"]["trim"] for r in runs)
         total = statistics.median(
-            sum(r["seconds"][k] for k in ("scene", "raycast", "match", "trim", "assemble"))
+            sum(r["seconds"].get(k, 0.0)
+                for k in ("scene", "raycast", "match", "trim", "refine", "assemble"))
             for r in runs)
-        return {"triangles": j["triangles"], "vertices": j["vertices"], "samples": j["samples"],
-                "quads_untrimmed": j["quads_untrimmed"], "quads": j["quads"], "rays": j["rays"],
-                "threads": j["threads"], "scene": med["scene"], "raycast": med["raycast"],
-                "match": med["match"], "trim": med["trim"], "assemble": med["assemble"],
-                "mesh": mesh_s, "total": total, "ply": out}
+        o = {"triangles": j["triangles"], "vertices": j["vertices"], "samples": j["samples"],
+             "quads_untrimmed": j["quads_untrimmed"], "quads": j["quads"], "rays": j["rays"],
+             "threads": j["threads"], "scene": med["scene"], "raycast": med["raycast"],
+             "match": med["match"], "trim": med["trim"], "assemble": med["assemble"],
+             "mesh": mesh_s, "total": total, "ply": out}
+        if refine:
+            # §4: seconds.refine includes the ray casting of the extension samples
+            # (refinement.sample_seconds); the paper's timings exclude ray casting.
+            ref = j["refinement"]
+            o.update({
+                "refine_levels": refine, "refine": med["refine"],
+                "refine_sample": statistics.median(r["refinement"]["sample_seconds"]
+                                                   for r in runs),
+                "refine_nosample": statistics.median(
+                    r["seconds"]["refine"] - r["refinement"]["sample_seconds"] for r in runs),
+                "refine_passes": ref["passes"], "refine_rays_per_pass": ref["rays_per_pass"],
+                "refine_grown_cells": ref["grown_cells"],
+                "refine_removed_faces": ref["removed_faces"],
+            })
+        return o
+
+    def against_mc(self, surface, o, ply):
+        """Distances of our mesh `ply` (result `o`, which gains "dist") and of the MC meshes
+        whose triangle counts bracket it: (the closest MC, all of them)."""
+        lo, hi, closest = self.bracket(surface, o["triangles"])
+        o["dist"] = self.distances_of(surface, ply, o["triangles"], o["vertices"])
+        mcs = []
+        for p in {lo["n"]: lo, hi["n"]: hi, closest["n"]: closest}.values():
+            d = self.distances_of(surface, p["ply"], p["triangles"], p["vertices"],
+                                  cross_check=p is closest)
+            mcs.append(dict(p, dist=d))
+        return next(m for m in mcs if m["n"] == closest["n"]), mcs
 
     # ---- the runs ----
 
@@ -335,14 +370,7 @@ class Evaluation:
             log(f"  ours {surface} {res}²: {fmt_int(o['triangles'])} triangles, ray cast "
                 f"{o['raycast']:.3f} s, mesh+trim {o['mesh']:.4f} s (median of "
                 f"{self.args.repeat})")
-            lo, hi, closest = self.bracket(surface, o["triangles"])
-            o["dist"] = self.distances_of(surface, ply, o["triangles"], o["vertices"])
-            mcs = []
-            for p in {lo["n"]: lo, hi["n"]: hi, closest["n"]: closest}.values():
-                d = self.distances_of(surface, p["ply"], p["triangles"], p["vertices"],
-                                      cross_check=p is closest)
-                mcs.append(dict(p, dist=d))
-            c = next(m for m in mcs if m["n"] == closest["n"])
+            c, mcs = self.against_mc(surface, o, ply)
             rows.append({"res": res, "ours": o, "mc": c, "mc_bracket": mcs})
             od, cd = o["dist"], c["dist"]
             log(f"  {surface} {res}²: ours {fmt_int(o['triangles'])} vs MC n={c['n']} "
@@ -367,13 +395,39 @@ class Evaluation:
             if self.args.quick and (surface, res) not in {(s, r) for s, rs in QUICK_PLAN
                                                           for r in rs}:
                 continue
-            if (surface, res) not in done:
-                done[(surface, res)] = self.ours(surface, res, threads=1,
-                                                 repeat=max(3, self.args.repeat))
-                o = done[(surface, res)]
+            levels = REFINED_ROWS.get(row[2], 0)
+            key = (surface, res, levels)
+            if key not in done:
+                done[key] = self.ours(surface, res, threads=1, repeat=max(3, self.args.repeat),
+                                      refine=levels)
+                o = done[key]
                 log(f"  {surface} {res}² one thread: ray cast {o['raycast']:.3f} s, "
-                    f"mesh+trim {o['mesh']:.4f} s, {fmt_int(o['triangles'])} triangles")
-            self.results["table1"].append({"paper": list(row), "ours": done[(surface, res)]})
+                    f"mesh+trim {o['mesh']:.4f} s, " +
+                    (f"refine {levels} {o['refine']:.3f} s ({o['refine_nosample']:.3f} s "
+                     "without its ray casting), " if levels else "") +
+                    f"{fmt_int(o['triangles'])} triangles")
+            self.results["table1"].append({"paper": list(row), "ours": done[key]})
+
+    def run_refined(self):
+        """Refined meshes (§4) against MC at their own triangle count, beside the unrefined row
+        of the same LDI resolution (run_dataset must have run for that data set)."""
+        for surface, res, levels in REFINED_ACCURACY:
+            ds = self.results["datasets"].get(surface)
+            base = next((r for r in ds["rows"] if r["res"] == res), None) if ds else None
+            if not base:
+                continue
+            log(f"{NICE[surface]} {res}², refined ({levels} levels)")
+            ply = os.path.join(self.work, f"{surface}_ours{res}_ref{levels}.ply")
+            o = self.ours(surface, res, out=ply, refine=levels)
+            c, mcs = self.against_mc(surface, o, ply)
+            self.results.setdefault("refined", []).append(
+                {"surface": surface, "res": res, "levels": levels, "ours": o, "mc": c,
+                 "mc_bracket": mcs})
+            od, cd = o["dist"], c["dist"]
+            log(f"  {surface} {res}² refined: ours {fmt_int(o['triangles'])} vs MC n={c['n']} "
+                f"{fmt_int(c['triangles'])}: forward mean {od['fwd_mean']:.2e} vs "
+                f"{cd['fwd_mean']:.2e}, backward mean {od['bwd_mean']:.2e} vs "
+                f"{cd['bwd_mean']:.2e}")
 
     # ---- figures ----
 
@@ -535,7 +589,8 @@ class Evaluation:
             extent = max(b - a for a, b in zip(ds["domain"]["lo"], ds["domain"]["hi"]))
             ref_area = self._area(self.refs[surface]["ply"])
             ds["reference"]["area"] = ref_area
-            for r in ds["rows"]:
+            refined = [r for r in self.results.get("refined", []) if r["surface"] == surface]
+            for r in ds["rows"] + refined:
                 pixel = extent / r["res"]
                 for m in (r["ours"], r["mc"]):
                     m["area_ratio"] = self._area(m["ply"]) / ref_area
@@ -543,7 +598,8 @@ class Evaluation:
                     m["dist"]["bwd_over_pixel"] = float((d > pixel).mean())
                     m["dist"]["bwd_p99"] = float(np.percentile(d, 99))
                     m["dist"]["coverage_points"] = int(len(sub))
-                log(f"  {surface} {r['res']}²: reference vertices farther than a pixel "
+                log(f"  {surface} {r['res']}²{' refined' if 'levels' in r else ''}: reference "
+                    f"vertices farther than a pixel "
                     f"({pixel:.3g}): ours {100 * r['ours']['dist']['bwd_over_pixel']:.2f} %, "
                     f"MC {100 * r['mc']['dist']['bwd_over_pixel']:.2f} %; area / reference "
                     f"area: ours {r['ours']['area_ratio']:.3f}, MC {r['mc']['area_ratio']:.3f}")
@@ -638,8 +694,9 @@ class Evaluation:
         w("## What is measured")
         w("")
         w("- **Ours**: `ldimesh mesh --surface S --res R --views xyz --r 0.5 --lossless` "
-          "(§3: matching and trimming; no refinement (§4), no bridging or hole filling (§5) — "
-          "not implemented). `--lossless` so that the mesh is the method's, without the "
+          "(§3: matching and trimming; refinement (§4) only where a section says so, with "
+          "`--refine N`; no bridging or hole filling (§5) — not implemented). `--lossless` so "
+          "that the mesh is the method's, without the "
           "transport's 20-bit depth quantization (which moves vertices by at most "
           "2.4·10⁻⁴ pixel). Times are the median of "
           f"{self.args.repeat} runs on all cores: ray cast (incl. the scene build: interval "
@@ -804,27 +861,87 @@ class Evaluation:
             w("MC grid sizes bracketing our triangle counts: " + "; ".join(lo_hi) + ".")
             w("")
 
+        # Refined meshes against MC
+        refined = R.get("refined", [])
+        if refined:
+            w("## Refinement (§4): accuracy at equal triangle count")
+            w("")
+            w("The same LDIs refined with `--refine N` (triangles, all cores), against MC at the "
+              "refined mesh's triangle count, beside the unrefined row of the same resolution "
+              "from the tables above. Columns as in the per-data-set tables; time = ray cast + "
+              "mesh + refinement (its extension-sample ray casting included).")
+            w("")
+            w("| data set | LDI | mesh | n | triangles | fwd mean | fwd max | fwd vs ref mean / "
+              "max | bwd mean | bwd max | bwd p99 | bwd > 1 px | area / ref. area | time s |")
+            w("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+            for rr in refined:
+                ds = R["datasets"][rr["surface"]]
+                base = next(r for r in ds["rows"] if r["res"] == rr["res"])
+                o = rr["ours"]
+                entries = [
+                    ("ours, §3 only", "", base["ours"],
+                     base["ours"]["scene"] + base["ours"]["raycast"] + base["ours"]["mesh"] +
+                     base["ours"]["assemble"]),
+                    (f"ours, --refine {rr['levels']}", "", o,
+                     o["scene"] + o["raycast"] + o["mesh"] + o["refine"] + o["assemble"]),
+                    ("MC at the refined count", rr["mc"]["n"], rr["mc"],
+                     rr["mc"]["total_seconds"])]
+                for label, n, m, t in entries:
+                    d = m["dist"]
+                    w(f"| {NICE[rr['surface']]} | {rr['res']}² | {label} | {n} | "
+                      f"{fmt_int(m['triangles'])} | {fmt_e(d['fwd_mean'])} | "
+                      f"{fmt_e(d['fwd_max'])} | {fmt_e(d.get('fwd_ref_mean'))} / "
+                      f"{fmt_e(d.get('fwd_ref_max'))} | {fmt_e(d['bwd_mean'])} | "
+                      f"{fmt_e(d['bwd_max'])} | {fmt_e(d.get('bwd_p99'))} | "
+                      f"{fmt_share(d.get('bwd_over_pixel'))} | "
+                      f"{'–' if 'area_ratio' not in m else format(m['area_ratio'], '.3f')} | "
+                      f"{fmt_s(t)} |")
+                mc_fwd = min(rr["mc"]["dist"]["fwd_mean"],
+                             rr["mc"]["dist"].get("fwd_ref_mean", rr["mc"]["dist"]["fwd_mean"]))
+                w("")
+                w(f"{NICE[rr['surface']]} {rr['res']}², {rr['levels']} levels: "
+                  f"{o['refine_passes']} passes, extension rays per pass "
+                  f"{' / '.join(map(str, o['refine_rays_per_pass']))}, "
+                  f"{fmt_int(o['refine_grown_cells'])} cells grown; ours/MC forward mean "
+                  f"{o['dist']['fwd_mean'] / mc_fwd:.2f}, backward mean "
+                  f"{o['dist']['bwd_mean'] / rr['mc']['dist']['bwd_mean']:.2f} (unrefined "
+                  f"at its own count: see the headline table).")
+                w("")
+
         # Table 1
         w("## Table 1 reproduction (one thread)")
         w("")
+        refined_rows = ", ".join(f"{fig} with `--refine {lv}`" for fig, lv in
+                                 REFINED_ROWS.items())
         w("`ldimesh mesh --surface S --res R --views xyz --r 0.5 --lossless --threads 1`, median "
           f"of {max(3, self.args.repeat)} runs. The paper's columns are seconds on one core of a "
-          "Core i7 at 3.4 GHz, ray casting excluded (done on a GPU there). Only the \"Mesh.\" "
-          "stage (§3 matching and trimming) exists here: refinement (§4), bridging, sewing and "
+          "Core i7 at 3.4 GHz, ray casting excluded (done on a GPU there). The \"Mesh.\" stage "
+          "(§3 matching and trimming) and refinement (§4) exist here; bridging, sewing and "
           "quality improvement (§5) are not implemented yet, so their columns are \"n/i\" and "
-          "our total is mesh + trim (+ the output arrays, shown apart). Rows the paper shows "
-          "that we cannot run: Coulomb and Shock Channel (not among our data sets).")
+          "our total is mesh + trim (+ refinement where the paper refined) (+ the output arrays, "
+          f"shown apart). Refined rows: {refined_rows} (triangles; the paper does not give its "
+          "levels); \"ours Ref.\" is the JSON's `seconds.refine`, which includes the ray "
+          "casting of refinement's extension samples, and in parentheses the same without it "
+          "(`refinement.sample_seconds` subtracted), the figure comparable to the paper's "
+          "(whose timings exclude ray casting). Each run is a fresh process (cold caches and "
+          "allocator); `ldimesh_bench_refine` (docs/benchmarks.md) "
+          "reports warm medians within one process, which are lower. "
+          "Rows the paper shows that we cannot run: "
+          "Coulomb and Shock Channel (not among our data sets; `ldimesh_bench_refine` times a "
+          "stand-in for the Shock Channel, docs/benchmarks.md).")
         w("")
         w("| data set | LDI | Fig. | paper Mesh. | Ref. | Bridge | Sew | Qual. | paper Tot. | "
           "ours scene + ray cast | ours Mesh. (match + trim) | ours arrays | "
-          "ours Ref./Bridge/Sew/Qual. "
+          "ours Ref. (without its ray casting) | ours Bridge/Sew/Qual. "
           "| ours triangles | paper triangles |")
-        w("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+        w("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
         for t in R["table1"]:
             p, o = t["paper"], t["ours"]
+            ref = (f"{fmt_s(o['refine'])} ({fmt_s(o['refine_nosample'])}), "
+                   f"{o['refine_levels']} levels" if "refine" in o else "–")
             w(f"| {NICE[p[0]]} | {p[1]}² | {p[2]} | {p[3]} | {p[4]} | {p[5]} | {p[6]} | {p[7]} "
               f"| {p[8]} | {fmt_s(o['scene'] + o['raycast'])} | {fmt_s(o['mesh'])} | "
-              f"{fmt_s(o['assemble'])} | n/i | {fmt_int(o['triangles'])} | "
+              f"{fmt_s(o['assemble'])} | {ref} | n/i | {fmt_int(o['triangles'])} | "
               f"{PAPER_TRIANGLES.get((p[0], p[1]), 'n/a')} |")
         w("")
 
@@ -934,6 +1051,9 @@ def main():
             for r in ds["rows"]:
                 for m in [r["ours"], r["mc"], *r["mc_bracket"]]:
                     m["ply"] = os.path.join(ROOT, m["ply"])
+        for r in ev.results.get("refined", []):
+            for m in [r["ours"], r["mc"], *r["mc_bracket"]]:
+                m["ply"] = os.path.join(ROOT, m["ply"])
         ev.coverage()
         plot_files = ev.plots()
         image_files = [] if args.no_images else ev.images()
@@ -963,6 +1083,7 @@ def main():
     log(f"evaluate: {len(plan)} data sets, work in {args.work}/, report in {args.docs}/")
     for surface, resolutions in plan:
         ev.run_dataset(surface, resolutions)
+    ev.run_refined()
     if not args.only:
         ev.run_table1()
     ev.coverage()
