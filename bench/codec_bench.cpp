@@ -14,23 +14,18 @@
 
 #include <CLI/CLI.hpp>
 
+#include "bench_util.hpp"
 #include "ldimesh/core/raycaster.hpp"
 #include "ldimesh/core/surfaces.hpp"
 #include "ldimesh/transport/fragment_codec.hpp"
 
 namespace {
 
+using ldimesh::bench::median;
+using ldimesh::bench::seconds_since;
+
 constexpr double kRawBytesPerSample = 16.0;  // float depth + float3 normal
 constexpr double kDegrees = 180.0 / 3.141592653589793;
-
-double seconds_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v[v.size() / 2];
-}
 
 double angle(glm::vec3 a, glm::vec3 b) {
   const glm::dvec3 u = glm::normalize(glm::dvec3(a)), v = glm::normalize(glm::dvec3(b));

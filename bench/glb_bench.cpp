@@ -16,6 +16,7 @@
 #include <unistd.h>
 #include <CLI/CLI.hpp>
 
+#include "bench_util.hpp"
 #include "ldimesh/core/mesh_io.hpp"
 #include "ldimesh/core/pipeline.hpp"
 #include "ldimesh/core/raycaster.hpp"
@@ -24,14 +25,8 @@
 
 namespace {
 
-double seconds_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v[v.size() / 2];
-}
+using ldimesh::bench::median;
+using ldimesh::bench::seconds_since;
 
 }  // namespace
 

@@ -17,6 +17,7 @@
 #include <tbb/info.h>
 #include <CLI/CLI.hpp>
 
+#include "bench_util.hpp"
 #include "ldimesh/core/analytic_fields.hpp"
 #include "ldimesh/core/analytic_source.hpp"
 #include "ldimesh/core/pipeline.hpp"
@@ -25,20 +26,14 @@
 
 namespace {
 
+using ldimesh::bench::median;
+using ldimesh::bench::seconds_since;
+
 struct Case {
   const char* surface;
   int res;
   const char* paper;  // Table 1 / Fig. 2 figures for the same case
 };
-
-double seconds_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v[v.size() / 2];
-}
 
 }  // namespace
 

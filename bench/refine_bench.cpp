@@ -24,6 +24,7 @@
 #include <tbb/info.h>
 #include <CLI/CLI.hpp>
 
+#include "bench_util.hpp"
 #include "ldimesh/core/hex_source.hpp"
 #include "ldimesh/core/mesh_io.hpp"
 #include "ldimesh/core/pipeline.hpp"
@@ -33,14 +34,8 @@
 
 namespace {
 
-double seconds_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v[v.size() / 2];
-}
+using ldimesh::bench::median;
+using ldimesh::bench::seconds_since;
 
 // Density of a supersonic flow along +x around the box obstacle [0, 0.5] × [−0.25, 0.25]²: free
 // stream 1; a bow shock (a paraboloid with its apex 0.3 ahead of the obstacle's front face,

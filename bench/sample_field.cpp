@@ -31,10 +31,13 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include "bench_util.hpp"
 #include "ldimesh/core/analytic_fields.hpp"
 #include "ldimesh/core/surfaces.hpp"
 
 namespace {
+
+using ldimesh::bench::seconds_since;
 
 using FieldFn = std::function<double(double, double, double)>;
 
@@ -58,10 +61,6 @@ FieldFn field_of(const ldimesh::SurfaceInfo& s) {
     glm::dvec3 g;
     return fn({x, y, z}, g);
   };
-}
-
-double seconds_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
 }  // namespace

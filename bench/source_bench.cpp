@@ -13,6 +13,7 @@
 #include <tbb/parallel_for.h>
 #include <CLI/CLI.hpp>
 
+#include "bench_util.hpp"
 #include "ldimesh/core/analytic_fields.hpp"
 #include "ldimesh/core/grid_source.hpp"
 #include "ldimesh/core/hex_source.hpp"
@@ -20,9 +21,7 @@
 
 namespace {
 
-double seconds_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
+using ldimesh::bench::seconds_since;
 
 // Casts the three axis views of `source` at `res` on `threads` threads; prints one table row.
 void cast_row(const char* label, const ldimesh::FieldSource& source, double iso, int res,

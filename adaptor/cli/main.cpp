@@ -8,7 +8,6 @@
 //   ldimesh distance A.ply --surface NAME [--isovalue v] [--samples N] [--json]
 #include <cctype>
 #include <cerrno>
-#include <charconv>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
@@ -34,6 +33,7 @@
 #include "ldimesh/core/raw_volume.hpp"
 #include "ldimesh/core/raycaster.hpp"
 #include "ldimesh/core/surfaces.hpp"
+#include "ldimesh/core/timing.hpp"
 #include "ldimesh/transport/distributed.hpp"
 #include "ldimesh/transport/glb.hpp"
 #include "ldimesh/transport/snapshot_store.hpp"
@@ -42,6 +42,7 @@
 namespace {
 
 using ldimesh::FaceType;
+using ldimesh::seconds_since;
 
 struct MeshArgs {
   std::string surface;
@@ -69,10 +70,6 @@ struct MeshArgs {
   ldimesh::RefinementOptions refinement;
   bool no_grow = false;
 };
-
-double seconds_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 // Fails early, before any work, if `path` cannot be written (creating missing parent folders).
 void check_writable(const std::string& path) {
@@ -565,18 +562,7 @@ int main(int argc, char** argv) {
   mesh->add_option("--refine", args.refinement.levels,
                    "§4 adaptive refinement: at most LEVELS subdivisions of a cell, one sampling "
                    "round trip each (0: off)")
-      ->check(CLI::Validator(
-          [](std::string& value) -> std::string {
-            long long levels = 0;
-            const char* end = value.data() + value.size();
-            const auto [ptr, ec] = std::from_chars(value.data(), end, levels);
-            // Not a number: left to the conversion, which says so.
-            if (ptr != end || ec != std::errc()) return {};
-            if (levels < 0) return "must be 0 (off) or more";
-            if (levels > 16) return "at most 16 levels (each halves the sample spacing)";
-            return {};
-          },
-          "LEVELS in [0, 16]"))
+      ->check(CLI::Range(0, 16))
       ->capture_default_str();
   mesh->add_option("--refine-dot", args.refinement.min_normal_dot,
                    "§4: refine a cell whose corner normals have a dot product below this")

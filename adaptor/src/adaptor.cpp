@@ -15,6 +15,7 @@
 
 #include "ldimesh/core/pipeline.hpp"
 #include "ldimesh/core/raycaster.hpp"
+#include "ldimesh/core/timing.hpp"
 #include "ldimesh/transport/distributed.hpp"
 #include "ldimesh/transport/glb.hpp"
 #include "ldimesh/transport/http_server.hpp"
@@ -25,10 +26,6 @@ namespace ldimesh {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double seconds_since(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
 
 struct Options {
   std::vector<double> isovalues{0.5};

@@ -13,16 +13,13 @@
 #include <tbb/parallel_for.h>
 
 #include "ldimesh/core/mesh.hpp"
+#include "ldimesh/core/timing.hpp"
 #include "ldimesh/core/trim.hpp"
 
 namespace ldimesh {
 namespace {
 
 constexpr std::uint32_t kNone = UINT32_MAX;
-
-double seconds_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 std::uint64_t edge_key(std::uint32_t a, std::uint32_t b) {
   return a < b ? (std::uint64_t(a) << 32 | b) : (std::uint64_t(b) << 32 | a);
@@ -110,7 +107,7 @@ class ViewRefiner {
     for (std::size_t q = 0; q < quads.kept.size(); q += 4) {
       Cell cell;
       cell.c = lattice(&quads.kept[q], cell.flip);
-      add_top_cell(cell, pixel_of(cell.c[0]));
+      add_top_cell(cell);  // its lattice cell is occupied already, as an untrimmed quad
     }
   }
 
@@ -132,7 +129,7 @@ class ViewRefiner {
       if ((u == untrimmed_edges_.end() ? 0 : u->second) != (from.grown ? 0 : 1)) continue;
       if (!vertices_[a].valid && !vertices_[b].valid) continue;
 
-      const glm::ivec2 at = top_pixel_[t], target = at + kAcross[k];
+      const glm::ivec2 at = pixel_of(from.c[0]), target = at + kAcross[k];
       if (target.x < -1 || target.y < -1 || target.x >= view_.width || target.y >= view_.height)
         continue;
       Cell cell;
@@ -154,7 +151,8 @@ class ViewRefiner {
         if (it != top_edges_.end() && it->second >= 2) manifold = false;
       }
       if (!manifold || crosses_sheet_edge(cell)) continue;
-      const std::uint32_t index = add_top_cell(cell, target);
+      const std::uint32_t index = add_top_cell(cell);
+      occupy(target, cell.c);
       ++grown_;
       for (int q = 0; q < 4; ++q)
         queue.emplace_back(index, q);
@@ -354,10 +352,10 @@ class ViewRefiner {
     return vertex_of_sample_[s];
   }
 
-  std::uint32_t add_top_cell(const Cell& cell, glm::ivec2 pixel) {
+  // A top-level cell (corner 0 at its lattice position) and its edges.
+  std::uint32_t add_top_cell(const Cell& cell) {
     const std::uint32_t index = std::uint32_t(cells_.size());
     cells_.push_back(cell);
-    top_pixel_.push_back(pixel);
     for (int k = 0; k < 4; ++k) {
       const std::uint32_t a = cell.c[k], b = cell.c[(k + 1) & 3];
       if (top_edges_[edge_key(a, b)]++ == 0) {
@@ -366,7 +364,6 @@ class ViewRefiner {
         lattice_edges_[lattice_edge_key(a, b)].push_back(edge_key(a, b));
       }
     }
-    occupy(pixel, cell.c);
     return index;
   }
 
@@ -663,8 +660,7 @@ class ViewRefiner {
   std::vector<std::uint32_t> pixel_of_sample_;
   std::vector<std::uint32_t> vertex_of_sample_;
   std::vector<Vertex> vertices_;
-  std::vector<Cell> cells_;            // top-level cells first
-  std::vector<glm::ivec2> top_pixel_;  // lattice position of top-level cell i
+  std::vector<Cell> cells_;  // top-level cells first
   std::unordered_map<std::uint64_t, int> untrimmed_edges_;
   std::unordered_map<std::uint64_t, int> top_edges_;
   std::unordered_map<std::uint32_t, std::vector<std::uint32_t>> top_neighbours_;

@@ -7,13 +7,10 @@
 #include <stdexcept>
 #include <string>
 #include <tuple>
+#include "ldimesh/core/timing.hpp"
 
 namespace ldimesh {
 namespace {
-
-double seconds_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 // What every rank learns after the reduction, in one allreduce (the minima of ok, levels and
 // -levels): whether it succeeded everywhere, and whether all ranks refine alike (a rank that

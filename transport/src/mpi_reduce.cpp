@@ -5,6 +5,7 @@
 #include <cstring>
 #include <stdexcept>
 #include <string>
+#include "ldimesh/core/timing.hpp"
 
 namespace ldimesh {
 namespace {
@@ -12,10 +13,6 @@ namespace {
 constexpr int kTag = 7301;
 constexpr std::uint32_t kEnvelopeMagic = 0x4549444c;  // "LDIE"
 constexpr std::uint32_t kUpstreamError = 1;
-
-double seconds_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 void put_u32(std::vector<std::uint8_t>& out, std::uint32_t v) {
   for (int i = 0; i < 4; ++i)
