@@ -900,7 +900,7 @@ class Evaluation:
                              rr["mc"]["dist"].get("fwd_ref_mean", rr["mc"]["dist"]["fwd_mean"]))
                 w("")
                 w(f"{NICE[rr['surface']]} {rr['res']}², {rr['levels']} levels: "
-                  f"{o['refine_passes']} passes, extension rays per pass "
+                  f"{o['refine_passes']} passes, extension ray stretches per pass "
                   f"{' / '.join(map(str, o['refine_rays_per_pass']))}, "
                   f"{fmt_int(o['refine_grown_cells'])} cells grown; ours/MC forward mean "
                   f"{o['dist']['fwd_mean'] / mc_fwd:.2f}, backward mean "

@@ -166,7 +166,8 @@ int main(int argc, char** argv) {
   std::printf("threads: %d, runs per case: %d (median)\n\n", threads, repeat);
   std::printf(
       "| data set | LDI | faces | levels | threads | §3 mesh+trim s | refinement s | of which "
-      "sampling s | refinement w/o sampling s | passes | rays per pass | seconds per pass | "
+      "sampling s | refinement w/o sampling s | passes | ray stretches per pass | seconds per pass "
+      "| "
       "grown cells | output faces | paper (1 core): Mesh. / Ref. s, Fig. |\n");
   std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   // Where the sampling time goes: rays, hits per ray and time per ray, for the LDI's pixel
@@ -255,7 +256,8 @@ int main(int argc, char** argv) {
   }
 
   std::printf(
-      "\n| data set | which rays | faces, levels | rays | hits per ray | seconds | µs per ray "
+      "\n| data set | which rays | faces, levels | rays (stretches) | hits per ray | seconds | µs "
+      "per ray "
       "|\n|---|---|---|---|---|---|---|\n");
   for (const std::string& r : ray_rows)
     std::printf("%s\n", r.c_str());

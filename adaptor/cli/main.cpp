@@ -343,7 +343,8 @@ int run_mesh(const MeshArgs& args) {
   std::printf("  trim       %8.3f s  %zu quads kept\n", result.seconds.trim, result.quads);
   if (options.meshing.refinement.levels > 0)
     std::printf(
-        "  refine     %8.3f s  %d pass%s, %zu rays requested (%.3f s sampling), %zu cells grown, "
+        "  refine     %8.3f s  %d pass%s, %zu ray stretches requested (%.3f s sampling), %zu cells "
+        "grown, "
         "%zu faces removed\n",
         result.seconds.refine, refined.passes, refined.passes == 1 ? "" : "es", refine_rays,
         refined.sample_seconds, refined.grown_cells, refined.removed_faces);

@@ -219,8 +219,11 @@ LdiFragment RayCaster::cast_fragment(const View& view, std::uint32_t view_index,
 }
 
 RayHitList RayCaster::cast_points(const View& view, std::span<const glm::dvec2> image_positions,
-                                  const Subdomain* sub) const {
+                                  const Subdomain* sub,
+                                  std::span<const glm::dvec2> depth_ranges) const {
   const std::size_t n = image_positions.size();
+  if (!depth_ranges.empty() && depth_ranges.size() != n)
+    throw std::invalid_argument("cast_points: one depth range per ray, or none");
   constexpr std::size_t kChunk = 256;
   std::vector<RayCaster::HitRun> chunks((n + kChunk - 1) / kChunk);
   tbb::parallel_for(std::size_t(0), chunks.size(), [&](std::size_t c) {
@@ -228,8 +231,17 @@ RayHitList RayCaster::cast_points(const View& view, std::span<const glm::dvec2> 
     for (std::size_t k = c * kChunk; k < std::min(n, (c + 1) * kChunk); ++k) {
       const glm::dvec2 position = image_positions[k];
       RaySegment segment{0.0, view.depth_extent, true};
-      if (!sub ||
-          subdomain_segment(*sub, view.point(position.x, position.y, 0.0), view.dir, segment)) {
+      bool crosses = !sub || subdomain_segment(*sub, view.point(position.x, position.y, 0.0),
+                                               view.dir, segment);
+      if (crosses && !depth_ranges.empty()) {
+        // The range is closed at both ends. Where it ends before the segment, the end is
+        // closed; otherwise the segment's own rule (half-open at a shared face) stays.
+        const glm::dvec2 range = depth_ranges[k];
+        if (range.y < segment.t1) segment = {segment.t0, range.y, true};
+        segment.t0 = std::max(segment.t0, range.x);
+        crosses = segment.t0 < segment.t1 || (segment.closed_end && segment.t0 == segment.t1);
+      }
+      if (crosses) {
         trace(view, position, segment, hits);
       } else {
         hits.clear();

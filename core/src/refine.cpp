@@ -170,38 +170,69 @@ class ViewRefiner {
       if (cells_[i].leaf && cells_[i].level < options_.levels && needs_refinement(cells_[i]))
         marked.push_back(i);
     if (marked.empty()) return false;
+    const std::size_t first_new = vertices_.size();
     if (faces_ == FaceType::triangles)
       split_quadtree(marked);
     else
       split_two_refinement(marked);
+    // The depths at which each ray's new vertices can match (see resolve): a matching hit lies
+    // within the threshold of the mean prediction of its references. Each position's intervals
+    // (one per vertex there, one per layer) are merged where they overlap and cast as separate
+    // stretches of its ray, in depth order, so the position's hits stay one sorted run that
+    // holds every hit the whole ray would give its vertices. A vertex whose references were made
+    // in this pass has no prediction yet: its position's ray is cast whole.
+    std::vector<std::vector<glm::dvec2>> wanted(rays_.size());
+    const double pad = 1e-6 * (1.0 + view_.depth_extent);  // the hits' depths are floats
+    for (const Pending& p : pending_) {
+      const References refs = references(p);
+      bool known = true;
+      double predicted = 0.0;
+      for (std::uint32_t k = 0; k < refs.n; ++k) {
+        const Vertex& r = vertices_[refs.use[k]];
+        known = known && refs.use[k] < first_new;
+        predicted += r.depth + glm::dot(r.slope, vertices_[p.vertex].image - r.image);
+      }
+      predicted /= refs.n;
+      wanted[p.ray].push_back(known ? glm::dvec2(std::max(0.0, predicted - refs.threshold - pad),
+                                                 predicted + refs.threshold + pad)
+                                    : glm::dvec2(0.0, INFINITY));
+    }
+    stretch_positions_.clear();
+    stretch_ranges_.clear();
+    first_stretch_.assign(1, 0);
+    for (std::size_t ray = 0; ray < rays_.size(); ++ray) {
+      std::vector<glm::dvec2>& ranges = wanted[ray];
+      std::sort(ranges.begin(), ranges.end(), [](glm::dvec2 a, glm::dvec2 b) { return a.x < b.x; });
+      for (const glm::dvec2& range : ranges) {
+        if (stretch_ranges_.size() > first_stretch_.back() && range.x <= stretch_ranges_.back().y) {
+          stretch_ranges_.back().y = std::max(stretch_ranges_.back().y, range.y);
+        } else {
+          stretch_positions_.push_back(rays_[ray]);
+          stretch_ranges_.push_back(range);
+        }
+      }
+      first_stretch_.push_back(std::uint32_t(stretch_ranges_.size()));
+    }
     return true;
   }
 
-  std::span<const glm::dvec2> rays() const { return rays_; }
+  // The ray stretches this pass asks for: image positions and depth ranges.
+  std::span<const glm::dvec2> stretch_positions() const { return stretch_positions_; }
+  std::span<const glm::dvec2> stretch_ranges() const { return stretch_ranges_; }
 
-  // The answers to rays() are hits [offsets[first + k], offsets[first + k + 1]) of `hits`.
+  // The answers to the stretches: stretch k's hits are [offsets[first + k],
+  // offsets[first + k + 1]) of `hits`.
   void resolve(const RayHitList& hits, std::size_t first) {
     std::vector<std::uint8_t> claimed(hits.depth.size(), 0);
     for (const Pending& p : pending_) {
       Vertex& v = vertices_[p.vertex];
-      std::array<std::uint32_t, 4> use{};
-      std::uint32_t n = 0;
-      for (std::uint32_t k = 0; k < p.ref_count; ++k)
-        if (vertices_[p.refs[k]].valid) use[n++] = p.refs[k];
-      if (n == 0) {
-        use = p.refs;
-        n = p.ref_count;
-      }
-      // §3's cost against every reference: the mean of |e(s, ref) − d(ref)| + |e(ref, p) − d(s)|,
-      // accepted below the §3 threshold scaled by the mean step (in pixels) to the references:
-      // predictions over shorter steps are better, and a layer as close as the threshold would
-      // otherwise be taken for this one.
-      double reach = 0.0;
-      for (std::uint32_t k = 0; k < n; ++k)
-        reach += glm::length(v.image - vertices_[use[k]].image);
-      const std::uint32_t b = hits.offsets[first + p.ray], e = hits.offsets[first + p.ray + 1];
+      const References refs = references(p);
+      const std::array<std::uint32_t, 4>& use = refs.use;
+      const std::uint32_t n = refs.n;
+      const std::uint32_t b = hits.offsets[first + first_stretch_[p.ray]],
+                          e = hits.offsets[first + first_stretch_[p.ray + 1]];
       std::uint32_t best = kNone;
-      double best_cost = tolerance_ * std::min(1.0, reach / n);
+      double best_cost = refs.threshold;
       for (std::uint32_t s = b; s < e; ++s) {
         if (claimed[s]) continue;
         const double ds = hits.depth[s];
@@ -243,6 +274,31 @@ class ViewRefiner {
       }
       v.slope = slope_of(v.normal);
     }
+  }
+
+  // The references a pending vertex is matched against: its valid ones, or all when none is
+  // valid, and the cost threshold. §3's cost against every reference is the mean of
+  // |e(s, ref) − d(ref)| + |e(ref, p) − d(s)|, accepted below the §3 threshold scaled by the mean
+  // step (in pixels) to the references: predictions over shorter steps are better, and a layer
+  // as close as the threshold would otherwise be taken for this one.
+  struct References {
+    std::array<std::uint32_t, 4> use{};
+    std::uint32_t n = 0;
+    double threshold = 0.0;
+  };
+  References references(const Pending& p) const {
+    References refs;
+    for (std::uint32_t k = 0; k < p.ref_count; ++k)
+      if (vertices_[p.refs[k]].valid) refs.use[refs.n++] = p.refs[k];
+    if (refs.n == 0) {
+      refs.use = p.refs;
+      refs.n = p.ref_count;
+    }
+    double reach = 0.0;
+    for (std::uint32_t k = 0; k < refs.n; ++k)
+      reach += glm::length(vertices_[p.vertex].image - vertices_[refs.use[k]].image);
+    refs.threshold = tolerance_ * std::min(1.0, reach / refs.n);
+    return refs;
   }
 
   // The leaves as faces: quads as they are, triangles through the six templates. Faces with an
@@ -676,7 +732,9 @@ class ViewRefiner {
   std::unordered_map<std::uint64_t, std::uint32_t> midpoints_;
 
   std::vector<Pending> pending_;
-  std::vector<glm::dvec2> rays_;
+  std::vector<glm::dvec2> rays_;  // image positions of this pass's new vertices
+  std::vector<glm::dvec2> stretch_positions_, stretch_ranges_;
+  std::vector<std::uint32_t> first_stretch_;  // stretches of rays_[k]: [first[k], first[k + 1])
   std::unordered_map<glm::dvec2, std::uint32_t, PositionHash> ray_of_;
 
   std::size_t grown_ = 0, subdivided_ = 0, invalid_ = 0;
@@ -713,8 +771,10 @@ std::vector<RefinedView> refine_views(std::span<const Ldi> ldis, std::span<const
     std::vector<std::size_t> first(n);
     for (std::size_t k = 0; k < n; ++k) {
       first[k] = points.size();
-      for (const glm::dvec2& p : views[k]->rays())
-        points.push_back({std::uint32_t(k), p});
+      const std::span<const glm::dvec2> positions = views[k]->stretch_positions(),
+                                        ranges = views[k]->stretch_ranges();
+      for (std::size_t i = 0; i < positions.size(); ++i)
+        points.push_back({std::uint32_t(k), positions[i], ranges[i].x, ranges[i].y});
     }
     const auto sample_start = std::chrono::steady_clock::now();
     const RayHitList hits = samples.sample(points);

@@ -7,17 +7,18 @@ namespace ldimesh {
 RayHitList cast_sample_points(const RayCaster& caster, std::span<const View> views,
                               std::span<const SamplePoint> points, const Subdomain* sub) {
   // Rays of each view in request order, cast together.
-  std::vector<std::vector<glm::dvec2>> positions(views.size());
+  std::vector<std::vector<glm::dvec2>> positions(views.size()), ranges(views.size());
   std::vector<std::uint32_t> slot(points.size());  // index of point k among its view's rays
   for (std::size_t k = 0; k < points.size(); ++k) {
     const std::uint32_t v = points[k].view;
     if (v >= views.size()) throw std::out_of_range("sample request for an unknown view");
     slot[k] = std::uint32_t(positions[v].size());
     positions[v].push_back(points[k].position);
+    ranges[v].push_back({points[k].depth_min, points[k].depth_max});
   }
   std::vector<RayHitList> hits(views.size());
   for (std::size_t v = 0; v < views.size(); ++v)
-    if (!positions[v].empty()) hits[v] = caster.cast_points(views[v], positions[v], sub);
+    if (!positions[v].empty()) hits[v] = caster.cast_points(views[v], positions[v], sub, ranges[v]);
 
   RayHitList out;
   out.offsets.reserve(points.size() + 1);

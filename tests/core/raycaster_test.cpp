@@ -126,6 +126,37 @@ TEST(RayCaster, RaysBetweenPixelCentresMatchTheSphere) {
   EXPECT_EQ(hits.offsets[2] - hits.offsets[1], 0u);  // the corner misses
 }
 
+// A depth range per ray keeps exactly the hits of the whole ray that lie in it, for rays on
+// brick faces and edges (even positions) as well.
+TEST(RayCaster, DepthRangesKeepTheWholeRaysHitsInside) {
+  const Box box{{-1, -1, -1}, {1, 1, 1}};
+  const AnalyticSource<Layers64> source(Layers64{}, box, 0.0, 4);
+  const RayCaster caster(source, 0.5);
+  const View view = make_view(box, {0, 0, 1}, 8);
+  const std::vector<glm::dvec2> points{{4.0, 4.0}, {2.5, 6.0}, {0.3, 7.9}, {6.0, 2.0}};
+  const RayHitList whole = caster.cast_points(view, points);
+  const std::vector<glm::dvec2> ranges{{0.30, 0.50}, {0.0, INFINITY}, {1.7, 1.2}, {0.625, 0.875}};
+  const RayHitList part = caster.cast_points(view, points, nullptr, ranges);
+  ASSERT_EQ(part.offsets.size(), points.size() + 1);
+  for (std::size_t k = 0; k < points.size(); ++k) {
+    std::vector<float> expected;
+    for (std::uint32_t s = whole.offsets[k]; s < whole.offsets[k + 1]; ++s)
+      if (whole.depth[s] >= ranges[k].x - 1e-6 && whole.depth[s] <= ranges[k].y + 1e-6)
+        expected.push_back(whole.depth[s]);
+    const std::vector<float> got(part.depth.begin() + part.offsets[k],
+                                 part.depth.begin() + part.offsets[k + 1]);
+    ASSERT_EQ(got.size(), expected.size()) << "ray " << k;
+    for (std::size_t i = 0; i < got.size(); ++i)
+      EXPECT_NEAR(got[i], expected[i], 1e-6) << "ray " << k << ", hit " << i;
+  }
+  EXPECT_EQ(part.offsets[1] - part.offsets[0], 6u);   // 64 layers in depth 2: 6 in [0.3, 0.5]
+  EXPECT_EQ(part.offsets[2] - part.offsets[1], 64u);  // the whole ray
+  EXPECT_EQ(part.offsets[3] - part.offsets[2], 0u);   // an empty range
+  EXPECT_EQ(part.offsets[4] - part.offsets[3], 8u);
+  EXPECT_THROW(caster.cast_points(view, points, nullptr, std::span(ranges).first(2)),
+               std::invalid_argument);
+}
+
 TEST(RayCaster, BuiltinSurfacesProduceHits) {
   for (const SurfaceInfo& s : builtin_surfaces()) {
     const auto source = make_surface_source(s.name, 16);

@@ -137,7 +137,7 @@ constexpr std::uint64_t kDone = 0, kBatch = 1;
 struct Request {
   std::uint64_t command, rays;
 };
-constexpr std::size_t kMaxRays = INT_MAX / 3;  // one MPI_Bcast of 3 doubles per ray
+constexpr std::size_t kMaxRays = INT_MAX / 5;  // one MPI_Bcast of 5 doubles per ray
 
 // An answer starts with its kind: hits, or the error that kept the rank from answering.
 constexpr std::uint64_t kHits = 0, kError = 1;
@@ -255,11 +255,13 @@ RayHitList MpiSampleSource::sample(std::span<const SamplePoint> points) {
   for (const SamplePoint& p : points)
     if (p.view >= views_.size()) throw std::out_of_range("sample request for an unknown view");
   if (points.size() > kMaxRays) throw std::invalid_argument("too many sample requests");
-  std::vector<double> rays(3 * points.size());
+  std::vector<double> rays(5 * points.size());
   for (std::size_t k = 0; k < points.size(); ++k) {
-    rays[3 * k] = double(points[k].view);
-    rays[3 * k + 1] = points[k].position.x;
-    rays[3 * k + 2] = points[k].position.y;
+    rays[5 * k] = double(points[k].view);
+    rays[5 * k + 1] = points[k].position.x;
+    rays[5 * k + 2] = points[k].position.y;
+    rays[5 * k + 3] = points[k].depth_min;
+    rays[5 * k + 4] = points[k].depth_max;
   }
   Request request{kBatch, points.size()};
   MPI_Bcast(&request, 2, MPI_UINT64_T, 0, comm_);
@@ -318,16 +320,18 @@ void MpiSampleSource::serve() {
     Request request{};
     MPI_Bcast(&request, 2, MPI_UINT64_T, 0, comm_);
     if (request.command == kDone) return;
-    rays.resize(3 * request.rays);
+    rays.resize(5 * request.rays);
     MPI_Bcast(rays.data(), int(rays.size()), MPI_DOUBLE, 0, comm_);
     points.resize(request.rays);
     for (std::size_t k = 0; k < points.size(); ++k) {
-      const double view = rays[3 * k];
+      const double view = rays[5 * k];
       // The root sent only known views; anything else becomes an unknown view, answered as
       // an error rather than cast.
       points[k].view = view >= 0.0 && view < double(views_.size()) ? std::uint32_t(view)
                                                                    : std::uint32_t(UINT32_MAX);
-      points[k].position = {rays[3 * k + 1], rays[3 * k + 2]};
+      points[k].position = {rays[5 * k + 1], rays[5 * k + 2]};
+      points[k].depth_min = rays[5 * k + 3];
+      points[k].depth_max = rays[5 * k + 4];
     }
     gather(comm_, answer(points));
   }

@@ -68,10 +68,13 @@ class RayCaster {
   LdiFragment cast_fragment(const View& view, std::uint32_t view_index, const Subdomain& sub) const;
 
   // All hits along the rays of `view` through the given image positions (pixel units, see
-  // View::point), optionally only those `sub` owns. Used for extra samples between pixel
-  // centres (§4).
+  // View::point), optionally only those `sub` owns and, where `depth_ranges` is not empty, only
+  // those with depth in [depth_ranges[k].x, depth_ranges[k].y] for ray k (one range per ray).
+  // Used for extra samples between pixel centres (§4). Throws std::invalid_argument when
+  // `depth_ranges` is neither empty nor one per ray.
   RayHitList cast_points(const View& view, std::span<const glm::dvec2> image_positions,
-                         const Subdomain* sub = nullptr) const;
+                         const Subdomain* sub = nullptr,
+                         std::span<const glm::dvec2> depth_ranges = {}) const;
 
   // Primitives in the scene (those whose value range may contain the isovalue), all sources.
   std::size_t primitive_count() const;

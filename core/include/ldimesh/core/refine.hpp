@@ -32,7 +32,7 @@ struct RefinementOptions {
 struct RefinementStats {
   int passes = 0;                          // refinement passes run (at most `levels`)
   std::size_t round_trips = 0;             // SampleSource::sample calls: one per pass
-  std::vector<std::size_t> rays_per_pass;  // extension samples requested per pass
+  std::vector<std::size_t> rays_per_pass;  // extension ray stretches requested per pass
   std::vector<double> seconds_per_pass;    // per pass: marking, templates, sampling, matching
   std::size_t grown_cells = 0;             // top-level cells added by growth (iii)
   std::size_t subdivided_cells = 0;        // cells split by templates, all passes

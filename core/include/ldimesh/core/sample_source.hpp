@@ -4,6 +4,7 @@
 // round trip: a refinement pass asks for all its samples, of all views, in one call.
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <span>
 #include <vector>
@@ -12,17 +13,22 @@
 
 namespace ldimesh {
 
-// A ray of view `view` through image position `position` (pixel units, see View::point).
+// A ray of view `view` through image position `position` (pixel units, see View::point), of
+// which only the hits with depth in [depth_min, depth_max] are wanted (the whole ray by default).
+// Refinement knows where a new sample can match and asks only for that stretch: casting it costs
+// a fraction of the whole ray, which crosses every layer of the surface.
 struct SamplePoint {
   std::uint32_t view = 0;
   glm::dvec2 position{0.0};
+  double depth_min = 0.0;
+  double depth_max = INFINITY;
 };
 
 class SampleSource {
  public:
   virtual ~SampleSource() = default;
-  // All hits along the rays through `points`, ray k's hits sorted by depth. Throws
-  // std::out_of_range for an unknown view.
+  // All hits along the rays through `points` within their depth ranges, ray k's hits sorted by
+  // depth. Throws std::out_of_range for an unknown view.
   virtual RayHitList sample(std::span<const SamplePoint> points) = 0;
 };
 
