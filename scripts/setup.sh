@@ -11,6 +11,7 @@ packages=(
   libcli11-dev                  # command line
   nlohmann-json3-dev            # JSON summaries
   libzstd-dev                   # fragment compression
+  libopenmesh-dev               # half-edge meshes for §5 merging
   libdraco-dev libeigen3-dev draco  # GLB meshes (Draco glTF encoder; draco_decoder CLI)
   libopenmpi-dev openmpi-bin    # the distributed pipeline
   libgtest-dev                  # tests

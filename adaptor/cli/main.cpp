@@ -69,6 +69,7 @@ struct MeshArgs {
   int normal_bits = ldimesh::FragmentEncoding{}.normal_bits;
   ldimesh::RefinementOptions refinement;
   bool no_grow = false;
+  bool merge = false;
 };
 
 // Fails early, before any work, if `path` cannot be written (creating missing parent folders).
@@ -217,6 +218,7 @@ int run_mesh(const MeshArgs& args) {
   options.meshing.matching.max_cost = args.max_cost;
   options.meshing.refinement = args.refinement;
   options.meshing.refinement.grow = !args.no_grow;
+  options.meshing.merging.enabled = args.merge;
   ldimesh::DistributedResult step;
   const ldimesh::Status status =
       ldimesh::mesh_distributed(comm, *caster, input.subdomain, views, options, step);
@@ -307,6 +309,20 @@ int run_mesh(const MeshArgs& args) {
                        {"trimmed_faces", refined.trimmed_faces},
                        {"seconds", refined.seconds},
                        {"sample_seconds", refined.sample_seconds}};
+    const ldimesh::MergeStats& merged = result.merging;
+    j["merging"] = {{"enabled", args.merge},
+                    {"dropped_faces", merged.dropped_faces},
+                    {"boundary_faces", merged.boundary_faces},
+                    {"patches", merged.patches},
+                    {"bridge_pairs", merged.bridge_pairs},
+                    {"bridges", merged.bridges},
+                    {"holes", merged.holes},
+                    {"fill_triangles", merged.fill_triangles},
+                    {"unfilled_holes", merged.unfilled_holes},
+                    {"split_quads", merged.split_quads},
+                    {"flips", merged.flips},
+                    {"merges", merged.merges},
+                    {"components", merged.components}};
     j["output"] = args.out.empty() ? nlohmann::json(nullptr) : nlohmann::json(args.out);
     j["seconds"] = {{"load", load_seconds},
                     {"scene", max_scene},
@@ -318,13 +334,16 @@ int run_mesh(const MeshArgs& args) {
                     {"trim", result.seconds.trim},
                     {"refine", result.seconds.refine},
                     {"assemble", result.seconds.assemble},
+                    {"bridge", result.seconds.bridge},
+                    {"sew", result.seconds.sew},
+                    {"quality", result.seconds.quality},
                     {"write", write_seconds}};
     std::cout << j.dump(2) << "\n";
     return 0;
   }
   std::printf("ldimesh: %s, isovalue %g, views %s at %d px, r = %g, %d rank%s x %d threads\n",
-              input.name.c_str(), iso, args.views.c_str(), args.res, args.r, ranks,
-              ranks == 1 ? "" : "s", threads);
+              input.name.c_str(), iso, args.views.c_str(), args.res, args.merge ? 1.0 : args.r,
+              ranks, ranks == 1 ? "" : "s", threads);
   if (!args.grid.empty())
     std::printf("  load       %8.3f s  %lldx%lldx%lld %s, values in [%g, %g]\n", load_seconds,
                 (long long)args.dims[0], (long long)args.dims[1], (long long)args.dims[2],
@@ -348,6 +367,17 @@ int run_mesh(const MeshArgs& args) {
         "%zu faces removed\n",
         result.seconds.refine, refined.passes, refined.passes == 1 ? "" : "es", refine_rays,
         refined.sample_seconds, refined.grown_cells, refined.removed_faces);
+  if (args.merge) {
+    const ldimesh::MergeStats& merged = result.merging;
+    std::printf("  bridge     %8.3f s  %zu boundary faces removed, %zu patches, %zu bridges\n",
+                result.seconds.bridge, merged.boundary_faces, merged.patches, merged.bridges);
+    std::printf("  sew        %8.3f s  %zu holes, %zu triangles added, %zu holes left open\n",
+                result.seconds.sew, merged.holes, merged.fill_triangles, merged.unfilled_holes);
+    std::printf(
+        "  quality    %8.3f s  %zu quads split, %zu flips, %zu 3-to-1 merges; %zu piece%s\n",
+        result.seconds.quality, merged.split_quads, merged.flips, merged.merges, merged.components,
+        merged.components == 1 ? "" : "s");
+  }
   std::printf("  assemble   %8.3f s  %zu vertices, %zu %s\n", result.seconds.assemble,
               m.vertex_count(), m.face_count(), args.quads ? "quads" : "triangles");
   std::printf("  mesh+trim  %8.3f s\n", result.seconds.match + result.seconds.trim);
@@ -571,6 +601,10 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   mesh->add_flag("--no-grow", args.no_grow,
                  "§4: no growth of the mesh across its boundaries and silhouettes");
+  mesh->add_flag("--merge", args.merge,
+                 "§5: merge the views into one mesh (trims with r = 1, bridges, hole filling, "
+                 "triangle enhancement; triangles only for now)")
+      ->excludes(quad_flag);
 
   mesh->add_flag("--lossless", args.lossless,
                  "send fragments to the root losslessly (default: quantized depths and normals)");

@@ -32,6 +32,7 @@ struct Options {
   std::string views = "xyz";
   int resolution = 256;
   double r = 0.5;
+  bool merging = false;  // §5: one merged mesh per isovalue (trimmed with r = 1)
   std::uint64_t every_steps = 1;
   double every_seconds = 0.0;
   bool coalesce = false;
@@ -120,8 +121,7 @@ Status parse_options(const nlohmann::json& j, Options& o) {
       return bad("refinement",
                  "is not available in situ yet (every rank would have to answer the root's ray "
                  "requests during the step); refine offline with 'ldimesh mesh --refine'");
-    if (j.contains("merging") && j["merging"].get<bool>())
-      return bad("merging", "is not available yet (paper §5 lands in a later version)");
+    if (j.contains("merging")) o.merging = j["merging"].get<bool>();
     if (j.contains("server")) {
       const auto& s = j["server"];
       if (Status st = check_keys(s, "server.", {"enabled", "bind", "port", "token"}); !st)
@@ -471,6 +471,7 @@ class AdaptorImpl final : public Adaptor {
     Mesh mesh;
     MeshingOptions meshing;
     meshing.r = options_.r;
+    meshing.merging.enabled = options_.merging;
     std::size_t samples = 0, quads = 0;
     double decode_s = 0.0, mesh_s = 0.0;
     for (std::size_t i = 0; i < options_.isovalues.size(); ++i) {

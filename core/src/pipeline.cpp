@@ -60,6 +60,11 @@ MeshingResult mesh_ldis(std::span<const Ldi> ldis, const MeshingOptions& options
   if (ldis.size() > 255) throw std::invalid_argument("at most 255 views");
   const bool refine = options.refinement.levels != 0;
   if (refine && !samples) throw std::invalid_argument("refinement needs a sample source");
+  const bool merge = options.merging.enabled;
+  if (merge && options.faces == FaceType::quads)
+    throw std::invalid_argument(
+        "merged all-quad output (paper §5 (iv)) is not available yet: merge with triangles");
+  const double r = merge ? 1.0 : options.r;  // §5 trims with r = 1
 
   MeshingResult result;
   Mesh& mesh = result.mesh;
@@ -81,7 +86,7 @@ MeshingResult mesh_ldis(std::span<const Ldi> ldis, const MeshingOptions& options
     start = std::chrono::steady_clock::now();
     const std::vector<glm::vec3> positions = sample_positions(ldi);
     if (refine) refine_input[k].untrimmed = quads;
-    result.quads += trim_by_view_quality(quads, positions, ldi.view.dir, mesh.view_dirs, options.r);
+    result.quads += trim_by_view_quality(quads, positions, ldi.view.dir, mesh.view_dirs, r);
     result.seconds.trim += seconds_since(start);
 
     if (refine) {
@@ -89,20 +94,27 @@ MeshingResult mesh_ldis(std::span<const Ldi> ldis, const MeshingOptions& options
       continue;
     }
     start = std::chrono::steady_clock::now();
-    append_view(mesh, ldi, positions, quads, std::uint8_t(k), options.faces);
+    append_view(mesh, ldi, positions, quads, std::uint8_t(k),
+                merge ? FaceType::quads : options.faces);  // merging splits what it needs to
     result.seconds.assemble += seconds_since(start);
   }
-  if (!refine) return result;
-
-  auto start = std::chrono::steady_clock::now();
-  const std::vector<RefinedView> refined =
-      refine_views(ldis, refine_input, options.faces, options.refinement, options.matching,
-                   mesh.view_dirs, options.r, *samples, result.refinement);
-  result.seconds.refine = seconds_since(start);
-  start = std::chrono::steady_clock::now();
-  for (std::size_t k = 0; k < refined.size(); ++k)
-    append_refined(mesh, refined[k], std::uint8_t(k), options.faces);
-  result.seconds.assemble += seconds_since(start);
+  if (refine) {
+    auto start = std::chrono::steady_clock::now();
+    const std::vector<RefinedView> refined =
+        refine_views(ldis, refine_input, options.faces, options.refinement, options.matching,
+                     mesh.view_dirs, r, *samples, result.refinement);
+    result.seconds.refine = seconds_since(start);
+    start = std::chrono::steady_clock::now();
+    for (std::size_t k = 0; k < refined.size(); ++k)
+      append_refined(mesh, refined[k], std::uint8_t(k), options.faces);
+    result.seconds.assemble += seconds_since(start);
+  }
+  if (merge) {
+    mesh = merge_views(mesh, options.faces, options.merging, result.merging);
+    result.seconds.bridge = result.merging.bridge_seconds;
+    result.seconds.sew = result.merging.sew_seconds;
+    result.seconds.quality = result.merging.quality_seconds;
+  }
   return result;
 }
 

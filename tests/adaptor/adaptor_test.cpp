@@ -117,6 +117,23 @@ TEST(Adaptor, AStepWithoutSurfaceIsPublishedEmpty) {
   }
 }
 
+// "merging": the root publishes one merged mesh (§5): for the sphere a closed triangle mesh,
+// so its counts satisfy Euler's V − E + F = 2 with E = 3F/2, i.e. F = 2 (V − 2).
+TEST(Adaptor, MergingPublishesOneClosedMesh) {
+  const std::string dir = temp_dir("merging");
+  auto a = make(R"({"server": {"enabled": false}, "resolution": 32, "log": false, "isovalues": [1],
+                    "merging": true, "output_dir": ")" +
+                dir + R"("})");
+  if (!a) return;
+  EXPECT_TRUE(a->execute(0, 0.0));
+  EXPECT_TRUE(a->finalize());
+  if (rank_of() == 0) {
+    const StepMetadata meta = testing::published_step(dir, 0);
+    EXPECT_GT(meta.triangles, 1000u);
+    EXPECT_EQ(meta.triangles, 2 * (meta.vertices - 2));
+  }
+}
+
 TEST(Adaptor, ExecuteWithoutADomainFailsCleanly) {
   std::unique_ptr<Adaptor> a;
   EXPECT_TRUE(

@@ -34,6 +34,21 @@ expect_error "refine above 16" mesh --surface sphere --res 16 --refine 17
 expect_error "refine not a number" mesh --surface sphere --res 16 --refine two
 expect_error "refine-dot above 1" mesh --surface sphere --res 16 --refine 1 --refine-dot 2
 expect_error "refine-dot below -1" mesh --surface sphere --res 16 --refine-dot -1.5
+expect_error "merge with quads" mesh --surface sphere --res 16 --merge --quad
+
+# --merge (§5): the sphere becomes one closed triangle mesh; the summary says how.
+"$ldimesh" mesh --surface sphere --res 48 --merge --json --out "$tmp/merged.ply" >"$tmp/merged.json" \
+  || fail "merge run failed"
+python3 - "$tmp/merged.json" <<'PY' || fail "merge: implausible summary"
+import json, sys
+j = json.load(open(sys.argv[1]))
+m = j["merging"]
+assert m["enabled"] and m["patches"] == 6 and m["bridges"] == 12, m
+assert m["unfilled_holes"] == 0 and m["components"] == 1, m
+assert j["triangles"] == 2 * (j["vertices"] - 2), (j["triangles"], j["vertices"])  # closed, genus 0
+assert j["seconds"]["bridge"] > 0 and j["seconds"]["sew"] > 0, j["seconds"]
+PY
+[ -s "$tmp/merged.ply" ] || fail "merge run wrote no PLY"
 
 # ldimesh surfaces lists every built-in surface.
 "$ldimesh" surfaces >"$tmp/surfaces" || fail "surfaces: non-zero exit"

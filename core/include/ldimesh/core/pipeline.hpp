@@ -4,6 +4,7 @@
 #include <span>
 
 #include "ldimesh/core/ldi.hpp"
+#include "ldimesh/core/merge.hpp"
 #include "ldimesh/core/mesh.hpp"
 #include "ldimesh/core/mesher.hpp"
 #include "ldimesh/core/refine.hpp"
@@ -16,6 +17,7 @@ struct MeshingOptions {
   FaceType faces = FaceType::triangles;
   MatchOptions matching;
   RefinementOptions refinement;  // §4; levels > 0 needs a SampleSource
+  MergeOptions merging;          // §5; trims with r = 1 instead of `r` when enabled
 };
 
 struct MeshingTimes {
@@ -23,6 +25,9 @@ struct MeshingTimes {
   double trim = 0.0;      // trimming (§3)
   double refine = 0.0;    // §4 refinement, its sampling included
   double assemble = 0.0;  // vertices, triangle split, output arrays
+  double bridge = 0.0;    // §5: boundary layer, patches, bridges
+  double sew = 0.0;       // §5: hole filling
+  double quality = 0.0;   // §5: enhancement and the merged output
 };
 
 struct MeshingResult {
@@ -32,15 +37,17 @@ struct MeshingResult {
   std::size_t quads = 0;            // quads after trimming
   MeshingTimes seconds;
   RefinementStats refinement;  // zeros unless refinement ran
+  MergeStats merging;          // zeros unless merging ran
 };
 
 // Meshes each LDI (§3), trims against the directions of all of them with options.r, and
 // assembles one mesh: vertices are the samples used by a kept face (one vertex per sample,
 // shared by the faces of its view), faces are quads or triangles (each quad split along its
 // shorter diagonal). With options.refinement.levels > 0 the trimmed meshes are refined (§4,
-// refine_views) with extra samples from `samples` before assembly. Throws
-// std::invalid_argument if r is outside [0, 1], more than 255 views, or refinement is asked for
-// without a sample source.
+// refine_views) with extra samples from `samples` before assembly. With options.merging.enabled
+// the views are trimmed with r = 1 and merged into one mesh (§5, merge_views; triangles only
+// for now). Throws std::invalid_argument if r is outside [0, 1], more than 255 views,
+// refinement is asked for without a sample source, or merging with quad output.
 MeshingResult mesh_ldis(std::span<const Ldi> ldis, const MeshingOptions& options = {},
                         SampleSource* samples = nullptr);
 

@@ -1,0 +1,62 @@
+// Combining the per-view meshes into one (paper §5): boundary layer removal, bridges between
+// patches, hole filling by ear cutting and triangle enhancement, on a half-edge mesh (OpenMesh).
+#pragma once
+
+#include <cstddef>
+
+#include "ldimesh/core/mesh.hpp"
+#include "ldimesh/core/refine.hpp"
+
+namespace ldimesh {
+
+struct MergeOptions {
+  bool enabled = false;
+  // Remove the faces that have an open edge before bridging (§5: the ragged "boundary layer"
+  // the r = 1 trim leaves).
+  bool remove_boundary_layer = true;
+  // (i) A bridge is kept if neither connecting edge exceeds bridge_limit · (|e_a| + |e_b|). The
+  // paper's l is factor 1; after the r = 1 trim and the boundary layer removal our gaps between
+  // patches are about three cells wide, which l = two edges does not span (docs/method.md).
+  double bridge_limit = 1.5;
+  // Bridges and fill triangles must face the way their vertices' normals do: the cosine between
+  // the face normal and the mean vertex normal is at least this.
+  double min_facing = 0.2;
+  // (ii) Ears whose new edge is longer than this many times the median input edge are not cut
+  // (so a hole is never closed across the far side of the surface); such holes are reported.
+  double max_fill_edge = 6.0;
+  // (iii) Edge flips by length and 3-to-1 merges of almost coplanar triangle triples.
+  bool enhance = true;
+  // 3-to-1 merge: |det(a − v, b − v, c − v)| below this times the mean edge length cubed.
+  double coplanar = 0.02;
+};
+
+struct MergeStats {
+  std::size_t dropped_faces = 0;   // input faces that would have made the mesh non-manifold
+  std::size_t boundary_faces = 0;  // faces removed as the boundary layer
+  std::size_t patches = 0;         // connected pieces before bridging
+  std::size_t bridge_pairs = 0;    // patch pairs close enough to test
+  std::size_t bridges = 0;         // (i) bridge quads inserted
+  std::size_t holes = 0;           // (ii) boundary loops before filling
+  std::size_t fill_triangles = 0;  // (ii) triangles added by ear cutting
+  std::size_t unfilled_holes = 0;  // boundary loops of the output (reported, not hidden)
+  std::size_t split_quads = 0;     // (iii) quads next to fill triangles split
+  std::size_t flips = 0;           // (iii) edge flips
+  std::size_t merges = 0;          // (iii) 3-to-1 merges
+  std::size_t lost_faces = 0;      // (iii) faces OpenMesh refused to re-add (holes count them)
+  std::size_t components = 0;      // connected pieces of the output
+  double bridge_seconds = 0.0;     // layer removal, patches and bridges (Table 1 "Bridge")
+  double sew_seconds = 0.0;        // hole filling (Table 1 "Sew")
+  double quality_seconds = 0.0;    // enhancement and output (Table 1 "Qual.")
+};
+
+// Merges the per-view meshes in `mesh` (faces of different views share no vertex; quads and/or
+// triangles, each view's faces trimmed with r = 1 for best results) into one mesh: faces that
+// cannot be added without making it non-manifold are dropped and counted, the boundary layer
+// is removed, bridges join patches, holes are filled with triangles and improved. Output faces
+// are triangles (each remaining quad split along its shorter diagonal) for FaceType::triangles;
+// FaceType::quads keeps the untouched quads beside the triangles of the sewing region (§5 (iv),
+// the conversion to all quads, is not implemented yet). Face views: the view of the face's
+// first vertex. Deterministic.
+Mesh merge_views(const Mesh& mesh, FaceType faces, const MergeOptions& options, MergeStats& stats);
+
+}  // namespace ldimesh

@@ -1,0 +1,498 @@
+#include "ldimesh/core/merge.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <numeric>
+#include <queue>
+#include <unordered_map>
+#include <vector>
+
+#include <OpenMesh/Core/Mesh/PolyMesh_ArrayKernelT.hh>
+#include <OpenMesh/Core/System/omstream.hh>
+
+#include "ldimesh/core/timing.hpp"
+
+namespace ldimesh {
+namespace {
+
+// OpenMesh's half-edge mesh in double precision, with deletion (status) and per-vertex normals.
+struct Traits : OpenMesh::DefaultTraits {
+  using Point = OpenMesh::Vec3d;
+  using Normal = OpenMesh::Vec3d;
+  VertexAttributes(OpenMesh::Attributes::Status | OpenMesh::Attributes::Normal);
+  FaceAttributes(OpenMesh::Attributes::Status);
+  EdgeAttributes(OpenMesh::Attributes::Status);
+  HalfedgeAttributes(OpenMesh::Attributes::Status | OpenMesh::Attributes::PrevHalfedge);
+};
+using HalfEdgeMesh = OpenMesh::PolyMesh_ArrayKernelT<Traits>;
+using VH = OpenMesh::VertexHandle;
+using HH = OpenMesh::HalfedgeHandle;
+using FH = OpenMesh::FaceHandle;
+
+// Where a face came from; the sewing region is everything but kInput.
+enum class Kind : std::uint8_t { kInput, kBridge, kFill, kSplit };
+
+glm::dvec3 to_glm(const OpenMesh::Vec3d& p) {
+  return {p[0], p[1], p[2]};
+}
+
+struct UnionFind {
+  std::vector<std::uint32_t> parent;
+  explicit UnionFind(std::size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), 0u); }
+  std::uint32_t find(std::uint32_t a) {
+    while (parent[a] != a)
+      a = parent[a] = parent[parent[a]];
+    return a;
+  }
+  void join(std::uint32_t a, std::uint32_t b) {
+    a = find(a), b = find(b);
+    if (a != b) parent[std::max(a, b)] = std::min(a, b);
+  }
+};
+
+// OpenMesh reports refused faces on its error stream; merging tests before adding and treats a
+// refusal as "not added", so the stream is quiet while a Merger lives.
+class QuietOpenMesh {
+ public:
+  QuietOpenMesh() : was_enabled_(omerr().is_enabled()) { omerr().disable(); }
+  ~QuietOpenMesh() {
+    if (was_enabled_) omerr().enable();
+  }
+
+ private:
+  bool was_enabled_;
+};
+
+class Merger {
+ public:
+  Merger(const Mesh& in, const MergeOptions& options, MergeStats& stats)
+      : in_(in), options_(options), stats_(stats) {
+    mesh_.add_property(kind_);
+    mesh_.add_property(view_);
+    mesh_.add_property(scalar_);
+    for (std::size_t v = 0; v < in.positions.size(); ++v) {
+      const VH vh = mesh_.add_vertex({in.positions[v].x, in.positions[v].y, in.positions[v].z});
+      mesh_.set_normal(vh, {in.normals[v].x, in.normals[v].y, in.normals[v].z});
+      mesh_.property(scalar_, vh) = in.scalars.empty() ? 0.0f : in.scalars[v];
+      mesh_.property(view_, vh) = 0;
+    }
+    auto add_input = [&](const std::vector<std::uint32_t>& faces,
+                         const std::vector<std::uint8_t>& views, int arity) {
+      for (std::size_t f = 0; f * arity < faces.size(); ++f) {
+        std::vector<VH> vs;
+        for (int k = 0; k < arity; ++k) {
+          vs.emplace_back(int(faces[f * arity + k]));
+          if (f < views.size()) mesh_.property(view_, vs.back()) = views[f];
+        }
+        if (!add(vs, Kind::kInput)) ++stats_.dropped_faces;
+      }
+    };
+    add_input(in.quads, in.quad_view, 4);
+    add_input(in.triangles, in.triangle_view, 3);
+    // A length scale for the limits: the median edge of the input.
+    std::vector<double> lengths;
+    for (const auto& e : mesh_.edges())
+      lengths.push_back(length(e.halfedge(0)));
+    if (!lengths.empty()) {
+      std::nth_element(lengths.begin(), lengths.begin() + lengths.size() / 2, lengths.end());
+      median_edge_ = lengths[lengths.size() / 2];
+    }
+  }
+
+  void remove_boundary_layer() {
+    std::vector<FH> layer;
+    for (const auto& f : mesh_.faces())
+      for (const auto& h : f.halfedges())
+        if (h.opp().is_boundary()) {
+          layer.push_back(f);
+          break;
+        }
+    for (FH f : layer)
+      mesh_.delete_face(f, true);
+    stats_.boundary_faces = layer.size();
+  }
+
+  // (i) One bridge per pair of patches that are close: the quad p→q→s→t on the open half-edges
+  // p→q of patch a and s→t of patch b with the shortest connecting edges q–s and t–p, kept if
+  // neither exceeds l = |e_a| + |e_b| (times options.bridge_limit).
+  void bridge() {
+    // Patches: connected pieces, through shared vertices.
+    UnionFind pieces(mesh_.n_vertices());
+    for (const auto& f : mesh_.faces()) {
+      const int first = f.halfedge().from().idx();
+      for (const auto& v : f.vertices())
+        pieces.join(std::uint32_t(first), std::uint32_t(v.idx()));
+    }
+    std::vector<HH> open;
+    double longest = 0.0;
+    for (const auto& h : mesh_.halfedges())
+      if (h.is_boundary()) {
+        open.push_back(h);
+        longest = std::max(longest, length(h));
+      }
+    for (const auto& v : mesh_.vertices())
+      if (!mesh_.is_isolated(v) && pieces.find(v.idx()) == std::uint32_t(v.idx())) ++stats_.patches;
+    if (open.empty() || median_edge_ <= 0.0) return;
+    // Open half-edges by their start vertex in a uniform grid.
+    const double cell = 2.0 * median_edge_;
+    auto key = [&](glm::dvec3 p) {
+      const glm::i64vec3 c = glm::i64vec3(glm::floor(p / cell)) & std::int64_t(0x1FFFFF);
+      return std::uint64_t(c.x) << 42 | std::uint64_t(c.y) << 21 | std::uint64_t(c.z);
+    };
+    std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> grid;
+    for (std::uint32_t k = 0; k < open.size(); ++k)
+      grid[key(point(mesh_.from_vertex_handle(open[k])))].push_back(k);
+
+    struct Candidate {
+      double cost;
+      HH a, b;
+    };
+    struct PairBest {
+      std::vector<Candidate> best;  // up to kKeep, cheapest first
+      bool done = false;            // the paper's early stop: cost < l / 2 found
+    };
+    constexpr std::size_t kKeep = 4;
+    std::unordered_map<std::uint64_t, PairBest> pairs;
+    const double reach = options_.bridge_limit * std::min(2.0 * longest, 8.0 * median_edge_);
+    const int span = int(std::ceil(reach / cell));
+    for (const HH ha : open) {
+      const VH p = mesh_.from_vertex_handle(ha), q = mesh_.to_vertex_handle(ha);
+      const std::uint32_t pa = pieces.find(p.idx());
+      const glm::dvec3 P = point(p), Q = point(q);
+      const double la = glm::distance(P, Q);
+      const glm::i64vec3 c0 = glm::i64vec3(glm::floor(Q / cell));
+      for (int dz = -span; dz <= span; ++dz)
+        for (int dy = -span; dy <= span; ++dy)
+          for (int dx = -span; dx <= span; ++dx) {
+            const glm::dvec3 corner = glm::dvec3(c0 + glm::i64vec3(dx, dy, dz)) * cell;
+            const auto it = grid.find(key(corner + 0.5 * cell));
+            if (it == grid.end()) continue;
+            for (std::uint32_t k : it->second) {
+              const HH hb = open[k];
+              const VH s = mesh_.from_vertex_handle(hb), t = mesh_.to_vertex_handle(hb);
+              const std::uint32_t pb = pieces.find(s.idx());
+              if (pb == pa) continue;
+              const std::uint64_t pair = std::uint64_t(std::min(pa, pb)) << 32 | std::max(pa, pb);
+              PairBest& best = pairs[pair];
+              if (best.done) continue;
+              const glm::dvec3 S = point(s), T = point(t);
+              const double lb = glm::distance(S, T);
+              const double l = options_.bridge_limit * (la + lb);
+              const double qs = glm::distance(Q, S), tp = glm::distance(T, P);
+              if (qs > l || tp > l) continue;
+              if (glm::dot(Q - P, T - S) >= 0.0) continue;  // the open edges must run opposite
+              if (!faces_its_normals({p, q, s, t})) continue;
+              const Candidate c{qs + tp, ha, hb};
+              auto at = std::find_if(best.best.begin(), best.best.end(), [&](const Candidate& o) {
+                return std::tie(c.cost, c.a, c.b) < std::tie(o.cost, o.a, o.b);
+              });
+              best.best.insert(at, c);
+              if (best.best.size() > kKeep) best.best.pop_back();
+              if (qs + tp < 0.5 * (la + lb)) best.done = true;
+            }
+          }
+    }
+    // Cheapest pairs first, so that where two pairs want the same open edge the better wins.
+    std::vector<std::pair<double, std::uint64_t>> order;
+    for (const auto& [pair, best] : pairs)
+      if (!best.best.empty()) order.emplace_back(best.best.front().cost, pair);
+    std::sort(order.begin(), order.end());
+    stats_.bridge_pairs = order.size();
+    for (const auto& [cost, pair] : order)
+      for (const Candidate& c : pairs[pair].best) {
+        if (!mesh_.is_boundary(c.a) || !mesh_.is_boundary(c.b)) continue;
+        const VH p = mesh_.from_vertex_handle(c.a), q = mesh_.to_vertex_handle(c.a);
+        const VH s = mesh_.from_vertex_handle(c.b), t = mesh_.to_vertex_handle(c.b);
+        if (add({p, q, s, t}, Kind::kBridge)) {
+          ++stats_.bridges;
+          break;
+        }
+      }
+  }
+
+  // (ii) Ear cutting: repeatedly the shortest new edge u–w that closes a triangle u→v→w with two
+  // consecutive open half-edges u→v, v→w, over all holes at once. Ears must turn the way the
+  // surface does (convex) and face like their vertices' normals; a second round accepts any
+  // convex ear. Holes left are counted.
+  void fill_holes() {
+    stats_.holes = count_loops();
+    struct Ear {
+      double length;
+      int u, v, w;
+      bool operator>(const Ear& o) const {
+        return std::tie(length, u, v, w) > std::tie(o.length, o.u, o.v, o.w);
+      }
+    };
+    for (int round = 0; round < 2; ++round) {
+      const bool strict = round == 0;
+      std::priority_queue<Ear, std::vector<Ear>, std::greater<Ear>> ears;
+      auto consider = [&](HH in) {
+        if (!in.is_valid() || !mesh_.is_boundary(in)) return;
+        const HH out = mesh_.next_halfedge_handle(in);
+        const VH u = mesh_.from_vertex_handle(in), v = mesh_.to_vertex_handle(in);
+        const VH w = mesh_.to_vertex_handle(out);
+        if (u == w) return;
+        ears.push({glm::distance(point(u), point(w)), u.idx(), v.idx(), w.idx()});
+      };
+      for (const auto& h : mesh_.halfedges())
+        if (h.is_boundary()) consider(h);
+      while (!ears.empty()) {
+        const Ear e = ears.top();
+        ears.pop();
+        const VH u(e.u), v(e.v), w(e.w);
+        const HH in = mesh_.find_halfedge(u, v);
+        if (!in.is_valid() || !mesh_.is_boundary(in)) continue;
+        const HH out = mesh_.next_halfedge_handle(in);
+        if (mesh_.to_vertex_handle(out) != w) continue;
+        const bool closes = mesh_.to_vertex_handle(mesh_.next_halfedge_handle(out)) == u;
+        if (!closes) {
+          if (mesh_.find_halfedge(u, w).is_valid()) continue;  // u–w exists elsewhere
+          if (e.length > options_.max_fill_edge * median_edge_) continue;
+          if (!ear_is_convex(u, v, w, strict)) continue;
+        }
+        if (!add({u, v, w}, Kind::kFill)) continue;
+        ++stats_.fill_triangles;
+        if (closes) continue;
+        const HH uw = mesh_.find_halfedge(u, w);
+        consider(mesh_.prev_halfedge_handle(uw));
+        consider(uw);
+      }
+    }
+    stats_.unfilled_holes = count_loops();
+  }
+
+  // (iii) Quads next to fill triangles split into triangles, then edge flips toward shorter
+  // edges and 3-to-1 merges inside the sewing region.
+  void enhance() {
+    std::vector<FH> quads;
+    for (const auto& f : mesh_.faces()) {
+      if (mesh_.property(kind_, f) != Kind::kFill) continue;
+      for (const auto& g : f.faces())
+        if (g.valence() == 4) quads.push_back(g);
+    }
+    std::sort(quads.begin(), quads.end());
+    quads.erase(std::unique(quads.begin(), quads.end()), quads.end());
+    for (FH f : quads) {
+      std::vector<VH> c;
+      for (const auto& v : mesh_.fv_range(f))
+        c.push_back(v);
+      mesh_.delete_face(f, false);
+      const bool along_02 =
+          glm::distance(point(c[0]), point(c[2])) <= glm::distance(point(c[1]), point(c[3]));
+      const bool ok =
+          along_02 ? add({c[0], c[1], c[2]}, Kind::kSplit) && add({c[0], c[2], c[3]}, Kind::kSplit)
+                   : add({c[0], c[1], c[3]}, Kind::kSplit) && add({c[1], c[2], c[3]}, Kind::kSplit);
+      if (ok) {
+        ++stats_.split_quads;
+      } else {
+        ++stats_.lost_faces;
+      }
+    }
+    for (int pass = 0; pass < 8; ++pass) {
+      std::size_t flipped = 0;
+      std::vector<HH> edges;
+      for (const auto& e : mesh_.edges())
+        edges.push_back(e.halfedge(0));
+      for (HH h : edges) {
+        if (mesh_.status(mesh_.edge_handle(h)).deleted()) continue;
+        if (try_flip(h)) ++flipped;
+      }
+      stats_.flips += flipped;
+      if (flipped == 0) break;
+    }
+    std::vector<VH> centres;
+    for (const auto& v : mesh_.vertices())
+      if (!v.is_boundary() && v.valence() == 3) centres.push_back(v);
+    for (VH v : centres)
+      if (!mesh_.status(v).deleted() && try_merge(v)) ++stats_.merges;
+  }
+
+  Mesh output(FaceType faces) {
+    Mesh out;
+    out.view_dirs = in_.view_dirs;
+    std::vector<std::uint32_t> index(mesh_.n_vertices(), UINT32_MAX);
+    for (const auto& v : mesh_.vertices()) {
+      if (mesh_.is_isolated(v)) continue;
+      index[v.idx()] = std::uint32_t(out.positions.size());
+      const glm::dvec3 p = point(v), n = to_glm(mesh_.normal(v));
+      out.positions.emplace_back(p);
+      out.normals.emplace_back(n);
+      if (!in_.scalars.empty()) out.scalars.push_back(mesh_.property(scalar_, v));
+    }
+    UnionFind pieces(out.positions.size());
+    for (const auto& f : mesh_.faces()) {
+      std::vector<std::uint32_t> c;
+      for (const auto& v : f.vertices())
+        c.push_back(index[v.idx()]);
+      for (std::uint32_t k : c)
+        pieces.join(c[0], k);
+      const std::uint8_t view = mesh_.property(view_, f.halfedge().from());
+      if (c.size() == 3) {
+        out.triangles.insert(out.triangles.end(), c.begin(), c.end());
+        out.triangle_view.push_back(view);
+      } else if (faces == FaceType::quads) {
+        out.quads.insert(out.quads.end(), c.begin(), c.end());
+        out.quad_view.push_back(view);
+      } else {
+        append_quad_triangles(out.positions, c.data(), out.triangles);
+        out.triangle_view.insert(out.triangle_view.end(), {view, view});
+      }
+    }
+    for (std::uint32_t v = 0; v < out.positions.size(); ++v)
+      if (pieces.find(v) == v) ++stats_.components;
+    stats_.unfilled_holes = count_loops();
+    return out;
+  }
+
+ private:
+  glm::dvec3 point(VH v) const { return to_glm(mesh_.point(v)); }
+  double length(HH h) const {
+    return glm::distance(point(mesh_.from_vertex_handle(h)), point(mesh_.to_vertex_handle(h)));
+  }
+
+  // Adds the face if the mesh stays a 2-manifold: every edge it uses is new or open on the side
+  // the face takes, and OpenMesh accepts it.
+  bool add(const std::vector<VH>& vs, Kind kind) {
+    const std::size_t n = vs.size();
+    for (std::size_t i = 0; i < n; ++i) {
+      for (std::size_t j = i + 1; j < n; ++j)
+        if (vs[i] == vs[j]) return false;
+      if (!mesh_.is_isolated(vs[i]) && !mesh_.is_boundary(vs[i])) return false;
+      const HH h = mesh_.find_halfedge(vs[i], vs[(i + 1) % n]);
+      if (h.is_valid() && !mesh_.is_boundary(h)) return false;
+    }
+    const FH f = mesh_.add_face(vs);
+    if (!f.is_valid()) return false;
+    mesh_.property(kind_, f) = kind;
+    return true;
+  }
+
+  // The face through `vs` (counter-clockwise) faces the way the mean of their normals points.
+  bool faces_its_normals(std::initializer_list<VH> vs) const {
+    std::vector<glm::dvec3> p;
+    glm::dvec3 n(0.0);
+    for (VH v : vs) {
+      p.push_back(point(v));
+      n += to_glm(mesh_.normal(v));
+    }
+    glm::dvec3 face(0.0);  // Newell's normal
+    for (std::size_t i = 0; i < p.size(); ++i)
+      face += glm::cross(p[i], p[(i + 1) % p.size()]);
+    const double a = glm::length(face), b = glm::length(n);
+    return a > 0.0 && b > 0.0 && glm::dot(face, n) >= options_.min_facing * a * b;
+  }
+
+  bool ear_is_convex(VH u, VH v, VH w, bool strict) const {
+    const glm::dvec3 U = point(u), V = point(v), W = point(w);
+    const glm::dvec3 n = glm::cross(V - U, W - V);
+    const double scale = glm::distance(U, V) * glm::distance(V, W);
+    if (!(glm::length(n) > (strict ? 0.05 : 0.01) * scale)) return false;  // not a straight run
+    if (strict) return faces_its_normals({u, v, w});
+    const glm::dvec3 normals =
+        to_glm(mesh_.normal(u)) + to_glm(mesh_.normal(v)) + to_glm(mesh_.normal(w));
+    return glm::dot(n, normals) > 0.0;
+  }
+
+  std::size_t count_loops() const {
+    std::vector<std::uint8_t> seen(mesh_.n_halfedges(), 0);
+    std::size_t loops = 0;
+    for (const auto& h : mesh_.halfedges()) {
+      if (!h.is_boundary() || seen[h.idx()]) continue;
+      ++loops;
+      HH g = h;
+      do {
+        seen[g.idx()] = 1;
+        g = mesh_.next_halfedge_handle(g);
+      } while (g != HH(h) && !seen[g.idx()]);
+    }
+    return loops;
+  }
+
+  bool in_region(FH f) const { return f.is_valid() && mesh_.property(kind_, f) != Kind::kInput; }
+
+  // Flips the edge of h between two triangles of the sewing region if the other diagonal is
+  // shorter and both new triangles face like their normals.
+  bool try_flip(HH h) {
+    const HH o = mesh_.opposite_halfedge_handle(h);
+    const FH f = mesh_.face_handle(h), g = mesh_.face_handle(o);
+    if (!in_region(f) || !in_region(g) || mesh_.valence(f) != 3 || mesh_.valence(g) != 3)
+      return false;
+    const VH a = mesh_.from_vertex_handle(h), b = mesh_.to_vertex_handle(h);
+    const VH c = mesh_.to_vertex_handle(mesh_.next_halfedge_handle(h));
+    const VH d = mesh_.to_vertex_handle(mesh_.next_halfedge_handle(o));
+    if (c == d || mesh_.find_halfedge(c, d).is_valid()) return false;
+    if (mesh_.valence(a) <= 3 || mesh_.valence(b) <= 3) return false;
+    if (glm::distance(point(c), point(d)) >= glm::distance(point(a), point(b))) return false;
+    if (!faces_its_normals({a, d, c}) || !faces_its_normals({d, b, c})) return false;
+    const Kind kf = mesh_.property(kind_, f), kg = mesh_.property(kind_, g);
+    mesh_.delete_face(f, false);
+    mesh_.delete_face(g, false);
+    if (add({a, d, c}, kf)) {
+      if (add({d, b, c}, kg)) return true;
+      mesh_.delete_face(mesh_.face_handle(mesh_.find_halfedge(a, d)), false);
+    }
+    // Put the two triangles back as they were (OpenMesh refused the flip).
+    if (!add({a, b, c}, kf) || !add({b, a, d}, kg)) ++stats_.lost_faces;
+    return false;
+  }
+
+  // Replaces the three triangles around a valence-3 vertex of the sewing region by one when the
+  // vertex lies almost in the plane of its neighbours.
+  bool try_merge(VH v) {
+    std::vector<HH> outer;
+    std::vector<FH> fan;
+    for (const auto& h : mesh_.voh_range(v)) {
+      const FH f = mesh_.face_handle(h);
+      if (!in_region(f) || mesh_.valence(f) != 3) return false;
+      fan.push_back(f);
+      outer.push_back(mesh_.next_halfedge_handle(h));  // the edge of f opposite v
+    }
+    if (fan.size() != 3) return false;
+    const VH a = mesh_.from_vertex_handle(outer[0]), b = mesh_.to_vertex_handle(outer[0]);
+    VH c = mesh_.to_vertex_handle(outer[1]);
+    if (mesh_.from_vertex_handle(outer[1]) != b) c = mesh_.to_vertex_handle(outer[2]);
+    const glm::dvec3 V = point(v), A = point(a) - V, B = point(b) - V, C = point(c) - V;
+    const double mean = (glm::length(A) + glm::length(B) + glm::length(C)) / 3.0;
+    if (std::abs(glm::dot(A, glm::cross(B, C))) >= options_.coplanar * mean * mean * mean)
+      return false;
+    if (!faces_its_normals({a, b, c})) return false;
+    for (FH f : fan)
+      mesh_.delete_face(f, true);
+    if (add({a, b, c}, Kind::kFill)) return true;
+    ++stats_.lost_faces;  // the fan's vertex is gone: the hole stays and is counted
+    return false;
+  }
+
+  const Mesh& in_;
+  MergeOptions options_;
+  MergeStats& stats_;
+  HalfEdgeMesh mesh_;
+  OpenMesh::FPropHandleT<Kind> kind_;
+  OpenMesh::VPropHandleT<std::uint8_t> view_;
+  OpenMesh::VPropHandleT<float> scalar_;
+  double median_edge_ = 0.0;
+};
+
+}  // namespace
+
+Mesh merge_views(const Mesh& mesh, FaceType faces, const MergeOptions& options, MergeStats& stats) {
+  stats = {};
+  const QuietOpenMesh quiet;
+  auto start = std::chrono::steady_clock::now();
+  Merger merger(mesh, options, stats);
+  if (options.remove_boundary_layer) merger.remove_boundary_layer();
+  merger.bridge();
+  stats.bridge_seconds = seconds_since(start);
+  start = std::chrono::steady_clock::now();
+  merger.fill_holes();
+  stats.sew_seconds = seconds_since(start);
+  start = std::chrono::steady_clock::now();
+  if (options.enhance) merger.enhance();
+  Mesh out = merger.output(faces);
+  stats.quality_seconds = seconds_since(start);
+  return out;
+}
+
+}  // namespace ldimesh
