@@ -228,6 +228,7 @@ int run_mesh(const MeshArgs& args) {
   if (!root) return 0;
 
   const ldimesh::MeshingResult& result = step.meshing;
+  const double r_used = ldimesh::trim_r(options.meshing);
   double write_seconds = 0.0, glb_seconds = 0.0;
   std::vector<std::uint8_t> glb;
   ldimesh::GlbInfo glb_info;
@@ -254,7 +255,7 @@ int run_mesh(const MeshArgs& args) {
   }
   if (!args.steps_dir.empty()) {
     // A step as the job's server would publish it, for `ldimesh-serve --dir`.
-    ldimesh::StepMetadata meta = ldimesh::describe_step(args.step, args.time, {iso}, views, args.r,
+    ldimesh::StepMetadata meta = ldimesh::describe_step(args.step, args.time, {iso}, views, r_used,
                                                         result.samples, result.quads, glb_info);
     meta.seconds = {{"cast", step.seconds.cast},     {"encode", step.seconds.encode},
                     {"reduce", step.seconds.reduce}, {"decode", step.seconds.decode},
@@ -280,7 +281,7 @@ int run_mesh(const MeshArgs& args) {
     j["isovalue"] = iso;
     j["resolution"] = args.res;
     j["views"] = args.views;
-    j["r"] = args.r;
+    j["r"] = r_used;
     j["ranks"] = ranks;
     j["threads"] = threads;
     j["encoding"] = args.lossless ? "lossless" : "quantized";
@@ -342,8 +343,8 @@ int run_mesh(const MeshArgs& args) {
     return 0;
   }
   std::printf("ldimesh: %s, isovalue %g, views %s at %d px, r = %g, %d rank%s x %d threads\n",
-              input.name.c_str(), iso, args.views.c_str(), args.res, args.merge ? 1.0 : args.r,
-              ranks, ranks == 1 ? "" : "s", threads);
+              input.name.c_str(), iso, args.views.c_str(), args.res, r_used, ranks,
+              ranks == 1 ? "" : "s", threads);
   if (!args.grid.empty())
     std::printf("  load       %8.3f s  %lldx%lldx%lld %s, values in [%g, %g]\n", load_seconds,
                 (long long)args.dims[0], (long long)args.dims[1], (long long)args.dims[2],

@@ -497,8 +497,8 @@ class AdaptorImpl final : public Adaptor {
       throw std::runtime_error(s.message());
     const double glb_s = seconds_since(t);
 
-    StepMetadata meta = describe_step(job.step, job.time, options_.isovalues, job.views, options_.r,
-                                      samples, quads, info);
+    StepMetadata meta = describe_step(job.step, job.time, options_.isovalues, job.views,
+                                      trim_r(meshing), samples, quads, info);
     meta.seconds = job.seconds;
     meta.seconds["decode"] = decode_s;
     meta.seconds["mesh"] = mesh_s;

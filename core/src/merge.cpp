@@ -1,6 +1,7 @@
 #include "ldimesh/core/merge.hpp"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -80,8 +81,9 @@ class Merger {
     }
     auto add_input = [&](const std::vector<std::uint32_t>& faces,
                          const std::vector<std::uint8_t>& views, int arity) {
+      std::vector<VH> vs;
       for (std::size_t f = 0; f * arity < faces.size(); ++f) {
-        std::vector<VH> vs;
+        vs.clear();
         for (int k = 0; k < arity; ++k) {
           vs.emplace_back(int(faces[f * arity + k]));
           if (f < views.size()) mesh_.property(view_, vs.back()) = views[f];
@@ -175,15 +177,14 @@ class Merger {
               const std::uint32_t pb = pieces.find(s.idx());
               if (pb == pa) continue;
               const std::uint64_t pair = std::uint64_t(std::min(pa, pb)) << 32 | std::max(pa, pb);
-              PairBest& best = pairs[pair];
-              if (best.done) continue;
               const glm::dvec3 S = point(s), T = point(t);
               const double lb = glm::distance(S, T);
               const double l = options_.bridge_limit * (la + lb);
               const double qs = glm::distance(Q, S), tp = glm::distance(T, P);
               if (qs > l || tp > l) continue;
               if (glm::dot(Q - P, T - S) >= 0.0) continue;  // the open edges must run opposite
-              if (!faces_its_normals({p, q, s, t})) continue;
+              PairBest& best = pairs[pair];
+              if (best.done || !faces_its_normals({p, q, s, t})) continue;
               const Candidate c{qs + tp, ha, hb};
               auto at = std::find_if(best.best.begin(), best.best.end(), [&](const Candidate& o) {
                 return std::tie(c.cost, c.a, c.b) < std::tie(o.cost, o.a, o.b);
@@ -371,15 +372,16 @@ class Merger {
 
   // The face through `vs` (counter-clockwise) faces the way the mean of their normals points.
   bool faces_its_normals(std::initializer_list<VH> vs) const {
-    std::vector<glm::dvec3> p;
+    std::array<glm::dvec3, 4> p;  // triangles and quads
+    std::size_t count = 0;
     glm::dvec3 n(0.0);
     for (VH v : vs) {
-      p.push_back(point(v));
+      p[count++] = point(v);
       n += to_glm(mesh_.normal(v));
     }
     glm::dvec3 face(0.0);  // Newell's normal
-    for (std::size_t i = 0; i < p.size(); ++i)
-      face += glm::cross(p[i], p[(i + 1) % p.size()]);
+    for (std::size_t i = 0; i < count; ++i)
+      face += glm::cross(p[i], p[(i + 1) % count]);
     const double a = glm::length(face), b = glm::length(n);
     return a > 0.0 && b > 0.0 && glm::dot(face, n) >= options_.min_facing * a * b;
   }

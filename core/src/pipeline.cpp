@@ -64,7 +64,7 @@ MeshingResult mesh_ldis(std::span<const Ldi> ldis, const MeshingOptions& options
   if (merge && options.faces == FaceType::quads)
     throw std::invalid_argument(
         "merged all-quad output (paper §5 (iv)) is not available yet: merge with triangles");
-  const double r = merge ? 1.0 : options.r;  // §5 trims with r = 1
+  const double r = trim_r(options);
 
   MeshingResult result;
   Mesh& mesh = result.mesh;

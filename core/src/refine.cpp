@@ -61,12 +61,21 @@ struct Cell {
   bool grown = false;
 };
 
+// What a new vertex is matched against (see ViewRefiner::match_references): reference
+// vertices and the cost threshold.
+struct References {
+  std::array<std::uint32_t, 4> use{};
+  std::uint32_t n = 0;
+  double threshold = 0.0;
+};
+
 // A vertex made in the current pass, waiting for its ray.
 struct Pending {
   std::uint32_t vertex;
   std::array<std::uint32_t, 4> refs;
   std::uint32_t ref_count;
   std::uint32_t ray;
+  References match;  // set once the pass's templates are applied
 };
 
 // Corner offsets of a lattice cell and the neighbour across each edge (edge k joins corners k
@@ -179,23 +188,21 @@ class ViewRefiner {
     // within the threshold of the mean prediction of its references. Each position's intervals
     // (one per vertex there, one per layer) are merged where they overlap and cast as separate
     // stretches of its ray, in depth order, so the position's hits stay one sorted run that
-    // holds every hit the whole ray would give its vertices. A vertex whose references were made
-    // in this pass has no prediction yet: its position's ray is cast whole.
+    // holds every hit the whole ray would give its vertices. The references are corners of cells
+    // that existed before the pass (a cell split in a pass never needs splitting again in it), so
+    // their depths are known here.
     std::vector<std::vector<glm::dvec2>> wanted(rays_.size());
     const double pad = 1e-6 * (1.0 + view_.depth_extent);  // the hits' depths are floats
-    for (const Pending& p : pending_) {
-      const References refs = references(p);
-      bool known = true;
+    for (Pending& p : pending_) {
+      p.match = match_references(p, first_new);
       double predicted = 0.0;
-      for (std::uint32_t k = 0; k < refs.n; ++k) {
-        const Vertex& r = vertices_[refs.use[k]];
-        known = known && refs.use[k] < first_new;
+      for (std::uint32_t k = 0; k < p.match.n; ++k) {
+        const Vertex& r = vertices_[p.match.use[k]];
         predicted += r.depth + glm::dot(r.slope, vertices_[p.vertex].image - r.image);
       }
-      predicted /= refs.n;
-      wanted[p.ray].push_back(known ? glm::dvec2(std::max(0.0, predicted - refs.threshold - pad),
-                                                 predicted + refs.threshold + pad)
-                                    : glm::dvec2(0.0, INFINITY));
+      predicted /= p.match.n;
+      wanted[p.ray].push_back({std::max(0.0, predicted - p.match.threshold - pad),
+                               predicted + p.match.threshold + pad});
     }
     stretch_positions_.clear();
     stretch_ranges_.clear();
@@ -226,13 +233,12 @@ class ViewRefiner {
     std::vector<std::uint8_t> claimed(hits.depth.size(), 0);
     for (const Pending& p : pending_) {
       Vertex& v = vertices_[p.vertex];
-      const References refs = references(p);
-      const std::array<std::uint32_t, 4>& use = refs.use;
-      const std::uint32_t n = refs.n;
+      const std::array<std::uint32_t, 4>& use = p.match.use;
+      const std::uint32_t n = p.match.n;
       const std::uint32_t b = hits.offsets[first + first_stretch_[p.ray]],
                           e = hits.offsets[first + first_stretch_[p.ray + 1]];
       std::uint32_t best = kNone;
-      double best_cost = refs.threshold;
+      double best_cost = p.match.threshold;
       for (std::uint32_t s = b; s < e; ++s) {
         if (claimed[s]) continue;
         const double ds = hits.depth[s];
@@ -280,16 +286,15 @@ class ViewRefiner {
   // valid, and the cost threshold. §3's cost against every reference is the mean of
   // |e(s, ref) − d(ref)| + |e(ref, p) − d(s)|, accepted below the §3 threshold scaled by the mean
   // step (in pixels) to the references: predictions over shorter steps are better, and a layer
-  // as close as the threshold would otherwise be taken for this one.
-  struct References {
-    std::array<std::uint32_t, 4> use{};
-    std::uint32_t n = 0;
-    double threshold = 0.0;
-  };
-  References references(const Pending& p) const {
+  // as close as the threshold would otherwise be taken for this one. Throws std::logic_error if
+  // a reference is a vertex of this pass (index ≥ first_new), whose depth is not known yet.
+  References match_references(const Pending& p, std::size_t first_new) const {
     References refs;
-    for (std::uint32_t k = 0; k < p.ref_count; ++k)
+    for (std::uint32_t k = 0; k < p.ref_count; ++k) {
+      if (p.refs[k] >= first_new)
+        throw std::logic_error("refinement: a new vertex refers to a vertex of the same pass");
       if (vertices_[p.refs[k]].valid) refs.use[refs.n++] = p.refs[k];
+    }
     if (refs.n == 0) {
       refs.use = p.refs;
       refs.n = p.ref_count;

@@ -44,6 +44,7 @@ import json, sys
 j = json.load(open(sys.argv[1]))
 m = j["merging"]
 assert m["enabled"] and m["patches"] == 6 and m["bridges"] == 12, m
+assert j["r"] == 1, j["r"]  # merging trims with r = 1
 assert m["unfilled_holes"] == 0 and m["components"] == 1, m
 assert j["triangles"] == 2 * (j["vertices"] - 2), (j["triangles"], j["vertices"])  # closed, genus 0
 assert j["seconds"]["bridge"] > 0 and j["seconds"]["sew"] > 0, j["seconds"]

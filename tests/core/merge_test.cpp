@@ -79,7 +79,6 @@ Topology topology(const Mesh& m) {
   }
   // Fans: corners (prev, v, next) chained where one corner's next is another's prev.
   for (const auto& [v, cs] : corners) {
-    std::map<std::uint32_t, std::uint32_t> link;  // neighbour → its index among endpoints
     std::vector<std::uint32_t> p(cs.size());
     for (std::uint32_t k = 0; k < cs.size(); ++k)
       p[k] = k;
@@ -122,6 +121,27 @@ MeshingResult merged(const std::string& surface, int res, MergeOptions merging =
   options.merging = merging;
   options.merging.enabled = true;
   return mesh_ldis(ldis, options);
+}
+
+// The checker itself: a closed tetrahedron, the same with one face turned, and a bowtie (two
+// triangles sharing only a vertex).
+TEST(Merge, TopologyCheckerSeesDefects) {
+  Mesh tet;
+  tet.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  tet.triangles = {0, 2, 1, 0, 1, 3, 1, 2, 3, 0, 3, 2};
+  Topology t = topology(tet);
+  EXPECT_TRUE(t.closed_manifold());
+  EXPECT_EQ(t.euler(), 2);
+  EXPECT_EQ(t.pieces, 1u);
+  std::swap(tet.triangles[10], tet.triangles[11]);
+  EXPECT_EQ(topology(tet).misoriented_edges, 3u);
+  Mesh bowtie;
+  bowtie.positions = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {-1, 0, 0}, {-1, -1, 0}};
+  bowtie.triangles = {0, 1, 2, 0, 3, 4};
+  t = topology(bowtie);
+  EXPECT_EQ(t.nonmanifold_vertices, 1u);
+  EXPECT_EQ(t.open_edges, 6u);
+  EXPECT_FALSE(t.closed_manifold());
 }
 
 TEST(Merge, ClosedSurfacesBecomeOneClosedManifold) {

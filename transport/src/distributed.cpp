@@ -137,7 +137,9 @@ constexpr std::uint64_t kDone = 0, kBatch = 1;
 struct Request {
   std::uint64_t command, rays;
 };
-constexpr std::size_t kMaxRays = INT_MAX / 5;  // one MPI_Bcast of 5 doubles per ray
+// A ray on the wire: view, image position x, y, depth_min, depth_max.
+constexpr std::size_t kDoublesPerRay = 5;
+constexpr std::size_t kMaxRays = INT_MAX / kDoublesPerRay;  // one MPI_Bcast for all rays
 
 // An answer starts with its kind: hits, or the error that kept the rank from answering.
 constexpr std::uint64_t kHits = 0, kError = 1;
@@ -255,13 +257,14 @@ RayHitList MpiSampleSource::sample(std::span<const SamplePoint> points) {
   for (const SamplePoint& p : points)
     if (p.view >= views_.size()) throw std::out_of_range("sample request for an unknown view");
   if (points.size() > kMaxRays) throw std::invalid_argument("too many sample requests");
-  std::vector<double> rays(5 * points.size());
+  std::vector<double> rays(kDoublesPerRay * points.size());
   for (std::size_t k = 0; k < points.size(); ++k) {
-    rays[5 * k] = double(points[k].view);
-    rays[5 * k + 1] = points[k].position.x;
-    rays[5 * k + 2] = points[k].position.y;
-    rays[5 * k + 3] = points[k].depth_min;
-    rays[5 * k + 4] = points[k].depth_max;
+    double* ray = &rays[kDoublesPerRay * k];
+    ray[0] = double(points[k].view);
+    ray[1] = points[k].position.x;
+    ray[2] = points[k].position.y;
+    ray[3] = points[k].depth_min;
+    ray[4] = points[k].depth_max;
   }
   Request request{kBatch, points.size()};
   MPI_Bcast(&request, 2, MPI_UINT64_T, 0, comm_);
@@ -320,18 +323,19 @@ void MpiSampleSource::serve() {
     Request request{};
     MPI_Bcast(&request, 2, MPI_UINT64_T, 0, comm_);
     if (request.command == kDone) return;
-    rays.resize(5 * request.rays);
+    rays.resize(kDoublesPerRay * request.rays);
     MPI_Bcast(rays.data(), int(rays.size()), MPI_DOUBLE, 0, comm_);
     points.resize(request.rays);
     for (std::size_t k = 0; k < points.size(); ++k) {
-      const double view = rays[5 * k];
+      const double* ray = &rays[kDoublesPerRay * k];
+      const double view = ray[0];
       // The root sent only known views; anything else becomes an unknown view, answered as
       // an error rather than cast.
       points[k].view = view >= 0.0 && view < double(views_.size()) ? std::uint32_t(view)
                                                                    : std::uint32_t(UINT32_MAX);
-      points[k].position = {rays[5 * k + 1], rays[5 * k + 2]};
-      points[k].depth_min = rays[5 * k + 3];
-      points[k].depth_max = rays[5 * k + 4];
+      points[k].position = {ray[1], ray[2]};
+      points[k].depth_min = ray[3];
+      points[k].depth_max = ray[4];
     }
     gather(comm_, answer(points));
   }

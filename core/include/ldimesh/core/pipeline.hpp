@@ -40,6 +40,11 @@ struct MeshingResult {
   MergeStats merging;          // zeros unless merging ran
 };
 
+// The trimming parameter mesh_ldis uses: options.r, or 1 when merging (§5 trims with r = 1).
+inline double trim_r(const MeshingOptions& options) {
+  return options.merging.enabled ? 1.0 : options.r;
+}
+
 // Meshes each LDI (§3), trims against the directions of all of them with options.r, and
 // assembles one mesh: vertices are the samples used by a kept face (one vertex per sample,
 // shared by the faces of its view), faces are quads or triangles (each quad split along its
