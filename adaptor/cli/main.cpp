@@ -323,6 +323,9 @@ int run_mesh(const MeshArgs& args) {
                     {"split_quads", merged.split_quads},
                     {"flips", merged.flips},
                     {"merges", merged.merges},
+                    {"split_edges", merged.split_edges},
+                    {"projected", merged.projected},
+                    {"split_passes", merged.split_passes},
                     {"components", merged.components}};
     j["output"] = args.out.empty() ? nlohmann::json(nullptr) : nlohmann::json(args.out);
     j["seconds"] = {{"load", load_seconds},
@@ -375,8 +378,10 @@ int run_mesh(const MeshArgs& args) {
     std::printf("  sew        %8.3f s  %zu holes, %zu triangles added, %zu holes left open\n",
                 result.seconds.sew, merged.holes, merged.fill_triangles, merged.unfilled_holes);
     std::printf(
-        "  quality    %8.3f s  %zu quads split, %zu flips, %zu 3-to-1 merges; %zu piece%s\n",
-        result.seconds.quality, merged.split_quads, merged.flips, merged.merges, merged.components,
+        "  quality    %8.3f s  %zu quads split, %zu flips, %zu 3-to-1 merges, %zu edges split "
+        "(%zu new vertices on the surface, %zu round trips); %zu piece%s\n",
+        result.seconds.quality, merged.split_quads, merged.flips, merged.merges, merged.split_edges,
+        merged.projected, merged.split_passes, merged.components,
         merged.components == 1 ? "" : "s");
   }
   std::printf("  assemble   %8.3f s  %zu vertices, %zu %s\n", result.seconds.assemble,

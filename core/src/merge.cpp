@@ -38,6 +38,9 @@ enum class Kind : std::uint8_t { kInput, kBridge, kFill, kSplit };
 glm::dvec3 to_glm(const OpenMesh::Vec3d& p) {
   return {p[0], p[1], p[2]};
 }
+OpenMesh::Vec3d to_om(glm::dvec3 p) {
+  return {p.x, p.y, p.z};
+}
 
 struct UnionFind {
   std::vector<std::uint32_t> parent;
@@ -185,6 +188,7 @@ class Merger {
               if (glm::dot(Q - P, T - S) >= 0.0) continue;  // the open edges must run opposite
               PairBest& best = pairs[pair];
               if (best.done || !faces_its_normals({p, q, s, t})) continue;
+              if (!spans_surface(q, s) || !spans_surface(t, p)) continue;
               const Candidate c{qs + tp, ha, hb};
               auto at = std::find_if(best.best.begin(), best.best.end(), [&](const Candidate& o) {
                 return std::tie(c.cost, c.a, c.b) < std::tie(o.cost, o.a, o.b);
@@ -251,7 +255,7 @@ class Merger {
         if (!closes) {
           if (mesh_.find_halfedge(u, w).is_valid()) continue;  // u–w exists elsewhere
           if (e.length > options_.max_fill_edge * median_edge_) continue;
-          if (!ear_is_convex(u, v, w, strict)) continue;
+          if (!ear_is_convex(u, v, w, strict) || !spans_surface(u, w)) continue;
         }
         if (!add({u, v, w}, Kind::kFill)) continue;
         ++stats_.fill_triangles;
@@ -264,11 +268,14 @@ class Merger {
     stats_.unfilled_holes = count_loops();
   }
 
-  // (iii) Quads next to fill triangles split into triangles, then edge flips toward shorter
-  // edges and 3-to-1 merges inside the sewing region.
-  void enhance() {
+  // (iii) Quads next to fill triangles (and, when the sewing region is refined, bridges) split
+  // into triangles; edge flips toward shorter edges; the sewing region's long edges split with
+  // their new vertices moved onto the surface; flips again; 3-to-1 merges.
+  void enhance(const SurfaceProjection& project) {
+    const bool refine = options_.project && project;
     std::vector<FH> quads;
     for (const auto& f : mesh_.faces()) {
+      if (refine && mesh_.property(kind_, f) == Kind::kBridge) quads.push_back(f);
       if (mesh_.property(kind_, f) != Kind::kFill) continue;
       for (const auto& g : f.faces())
         if (g.valence() == 4) quads.push_back(g);
@@ -279,29 +286,23 @@ class Merger {
       std::vector<VH> c;
       for (const auto& v : mesh_.fv_range(f))
         c.push_back(v);
+      // Bridges stay bridges (they are the sewing region already); input quads become kSplit.
+      const Kind kind = mesh_.property(kind_, f) == Kind::kBridge ? Kind::kBridge : Kind::kSplit;
       mesh_.delete_face(f, false);
       const bool along_02 =
           glm::distance(point(c[0]), point(c[2])) <= glm::distance(point(c[1]), point(c[3]));
-      const bool ok =
-          along_02 ? add({c[0], c[1], c[2]}, Kind::kSplit) && add({c[0], c[2], c[3]}, Kind::kSplit)
-                   : add({c[0], c[1], c[3]}, Kind::kSplit) && add({c[1], c[2], c[3]}, Kind::kSplit);
+      const bool ok = along_02 ? add({c[0], c[1], c[2]}, kind) && add({c[0], c[2], c[3]}, kind)
+                               : add({c[0], c[1], c[3]}, kind) && add({c[1], c[2], c[3]}, kind);
       if (ok) {
         ++stats_.split_quads;
       } else {
         ++stats_.lost_faces;
       }
     }
-    for (int pass = 0; pass < 8; ++pass) {
-      std::size_t flipped = 0;
-      std::vector<HH> edges;
-      for (const auto& e : mesh_.edges())
-        edges.push_back(e.halfedge(0));
-      for (HH h : edges) {
-        if (mesh_.status(mesh_.edge_handle(h)).deleted()) continue;
-        if (try_flip(h)) ++flipped;
-      }
-      stats_.flips += flipped;
-      if (flipped == 0) break;
+    flip_all();
+    if (refine) {
+      refine_region(project);
+      flip_all();
     }
     std::vector<VH> centres;
     for (const auto& v : mesh_.vertices())
@@ -386,6 +387,13 @@ class Merger {
     return a > 0.0 && b > 0.0 && glm::dot(face, n) >= options_.min_facing * a * b;
   }
 
+  // A new edge a–b can lie on the surface only if the normals at its ends do not oppose; if
+  // they do, a and b sit on the two walls of a thin crest or valley and the edge would cut
+  // through it (Marschner–Lobb's ripples at 64² are such walls, a cell or two apart).
+  bool spans_surface(VH a, VH b) const {
+    return glm::dot(to_glm(mesh_.normal(a)), to_glm(mesh_.normal(b))) >= options_.min_normal_dot;
+  }
+
   bool ear_is_convex(VH u, VH v, VH w, bool strict) const {
     const glm::dvec3 U = point(u), V = point(v), W = point(w);
     const glm::dvec3 n = glm::cross(V - U, W - V);
@@ -413,6 +421,129 @@ class Merger {
   }
 
   bool in_region(FH f) const { return f.is_valid() && mesh_.property(kind_, f) != Kind::kInput; }
+
+  // Length flips over the whole mesh until none applies (at most 8 passes).
+  void flip_all() {
+    for (int pass = 0; pass < 8; ++pass) {
+      std::size_t flipped = 0;
+      std::vector<HH> edges;
+      for (const auto& e : mesh_.edges())
+        edges.push_back(e.halfedge(0));
+      for (HH h : edges) {
+        if (mesh_.status(mesh_.edge_handle(h)).deleted()) continue;
+        if (try_flip(h)) ++flipped;
+      }
+      stats_.flips += flipped;
+      if (flipped == 0) break;
+    }
+  }
+
+  // Splits the sewing region's long edges (both faces triangles, at least one of the region),
+  // longest first and no two in one triangle per pass, and moves the pass's new vertices onto
+  // the surface in one batch. A new vertex whose faces would no longer face their normals after
+  // the move stays at its edge's midpoint.
+  void refine_region(const SurfaceProjection& project) {
+    const double limit = options_.split_length * median_edge_;
+    if (!(limit > 0.0)) return;
+    for (int pass = 0; pass < options_.split_passes; ++pass) {
+      std::vector<std::pair<double, HH>> long_edges;
+      for (const auto& e : mesh_.edges()) {
+        const HH h = e.halfedge(0), o = e.halfedge(1);
+        const FH f = mesh_.face_handle(h), g = mesh_.face_handle(o);
+        if (!f.is_valid() || !g.is_valid() || mesh_.valence(f) != 3 || mesh_.valence(g) != 3)
+          continue;
+        if (!in_region(f) && !in_region(g)) continue;
+        const double l = length(h);
+        if (l > limit) long_edges.emplace_back(l, h);
+      }
+      if (long_edges.empty()) break;
+      std::sort(long_edges.begin(), long_edges.end(), [](const auto& x, const auto& y) {
+        return x.first != y.first ? x.first > y.first : x.second < y.second;
+      });
+      std::vector<std::uint8_t> touched(mesh_.n_faces(), 0);
+      std::vector<VH> fresh;
+      std::vector<glm::dvec3> points, normals;
+      for (const auto& [l, h] : long_edges) {
+        const FH f = mesh_.face_handle(h), g = mesh_.face_handle(mesh_.opposite_halfedge_handle(h));
+        // Faces made in this pass (indices past `touched`) took over edges of split triangles.
+        auto done = [&](FH x) {
+          return std::size_t(x.idx()) >= touched.size() || touched[x.idx()];
+        };
+        if (done(f) || done(g)) continue;
+        const VH m = split(h);
+        if (!m.is_valid()) continue;
+        touched[f.idx()] = touched[g.idx()] = 1;
+        fresh.push_back(m);
+        points.push_back(point(m));
+        normals.push_back(to_glm(mesh_.normal(m)));
+      }
+      if (fresh.empty()) break;
+      stats_.split_edges += fresh.size();
+      ++stats_.split_passes;
+      const std::vector<glm::dvec3> mid = points, mid_normals = normals;
+      project(points, normals, options_.project_reach * median_edge_);
+      for (std::size_t k = 0; k < fresh.size(); ++k) {
+        if (points[k] == mid[k]) continue;
+        // The move must not turn any face of the new vertex over.
+        std::vector<glm::dvec3> before;
+        for (const auto& f : mesh_.vf_range(fresh[k]))
+          before.push_back(face_normal(f));
+        set_point(fresh[k], points[k], normals[k]);
+        std::size_t i = 0;
+        bool turned = false;
+        for (const auto& f : mesh_.vf_range(fresh[k]))
+          turned = turned || !(glm::dot(face_normal(f), before[i++]) > 0.0);
+        if (turned) {
+          set_point(fresh[k], mid[k], mid_normals[k]);
+        } else {
+          ++stats_.projected;
+        }
+      }
+    }
+  }
+
+  // Splits the edge of h between the triangles a→b→c and b→a→d at its midpoint into four
+  // triangles of the same kinds. Returns the new vertex, or an invalid handle (nothing changed).
+  VH split(HH h) {
+    const HH o = mesh_.opposite_halfedge_handle(h);
+    const FH f = mesh_.face_handle(h), g = mesh_.face_handle(o);
+    const VH a = mesh_.from_vertex_handle(h), b = mesh_.to_vertex_handle(h);
+    const VH c = mesh_.to_vertex_handle(mesh_.next_halfedge_handle(h));
+    const VH d = mesh_.to_vertex_handle(mesh_.next_halfedge_handle(o));
+    if (c == d) return VH();
+    const Kind kf = mesh_.property(kind_, f), kg = mesh_.property(kind_, g);
+    const glm::dvec3 n = to_glm(mesh_.normal(a)) + to_glm(mesh_.normal(b));
+    const VH m = mesh_.add_vertex(mesh_.calc_edge_midpoint(mesh_.edge_handle(h)));
+    mesh_.set_normal(m, glm::length(n) > 0.0 ? to_om(glm::normalize(n)) : mesh_.normal(a));
+    mesh_.property(scalar_, m) = 0.5f * (mesh_.property(scalar_, a) + mesh_.property(scalar_, b));
+    mesh_.property(view_, m) = mesh_.property(view_, a);
+    mesh_.delete_face(f, false);
+    mesh_.delete_face(g, false);
+    if (add({a, m, c}, kf) && add({m, b, c}, kf) && add({b, m, d}, kg) && add({m, a, d}, kg))
+      return m;
+    // OpenMesh refused: take the new faces away (m stays isolated, output skips it) and put the
+    // two triangles back.
+    std::vector<FH> added;
+    for (const auto& f2 : mesh_.vf_range(m))
+      added.push_back(f2);
+    for (FH f2 : added)
+      mesh_.delete_face(f2, false);
+    if (!add({a, b, c}, kf) || !add({b, a, d}, kg)) ++stats_.lost_faces;
+    return VH();
+  }
+
+  // Newell's normal of a face (not normalised).
+  glm::dvec3 face_normal(FH f) const {
+    glm::dvec3 n(0.0);
+    for (const auto& h : mesh_.fh_range(f))
+      n += glm::cross(point(mesh_.from_vertex_handle(h)), point(mesh_.to_vertex_handle(h)));
+    return n;
+  }
+
+  void set_point(VH v, glm::dvec3 p, glm::dvec3 n) {
+    mesh_.set_point(v, to_om(p));
+    mesh_.set_normal(v, to_om(n));
+  }
 
   // Flips the edge of h between two triangles of the sewing region if the other diagonal is
   // shorter and both new triangles face like their normals.
@@ -479,7 +610,8 @@ class Merger {
 
 }  // namespace
 
-Mesh merge_views(const Mesh& mesh, FaceType faces, const MergeOptions& options, MergeStats& stats) {
+Mesh merge_views(const Mesh& mesh, FaceType faces, const MergeOptions& options, MergeStats& stats,
+                 const SurfaceProjection& project) {
   stats = {};
   const QuietOpenMesh quiet;
   auto start = std::chrono::steady_clock::now();
@@ -491,7 +623,7 @@ Mesh merge_views(const Mesh& mesh, FaceType faces, const MergeOptions& options, 
   merger.fill_holes();
   stats.sew_seconds = seconds_since(start);
   start = std::chrono::steady_clock::now();
-  if (options.enhance) merger.enhance();
+  if (options.enhance) merger.enhance(project);
   Mesh out = merger.output(faces);
   stats.quality_seconds = seconds_since(start);
   return out;

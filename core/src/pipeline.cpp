@@ -110,7 +110,12 @@ MeshingResult mesh_ldis(std::span<const Ldi> ldis, const MeshingOptions& options
     result.seconds.assemble += seconds_since(start);
   }
   if (merge) {
-    mesh = merge_views(mesh, options.faces, options.merging, result.merging);
+    std::vector<View> views;
+    for (const Ldi& ldi : ldis)
+      views.push_back(ldi.view);
+    const SurfaceProjection project =
+        samples && !views.empty() ? sample_projection(*samples, views) : SurfaceProjection();
+    mesh = merge_views(mesh, options.faces, options.merging, result.merging, project);
     result.seconds.bridge = result.merging.bridge_seconds;
     result.seconds.sew = result.merging.sew_seconds;
     result.seconds.quality = result.merging.quality_seconds;

@@ -56,6 +56,21 @@ for key in ("passes", "rays_per_pass", "grown_cells", "subdivided_cells", "remov
 assert one["faces"] == three["faces"]
 PY
 done
+# §5 merging: the sewing region's new vertices are projected with samples from all ranks, and
+# 3 ranks write the same merged mesh as one process.
+"$ldimesh" mesh --surface torus --res 32 --merge --json --out "$tmp/m1.ply" >"$tmp/m1.json" ||
+  fail "merge: one process"
+"$mpiexec" -n 3 --oversubscribe "$ldimesh" mesh --surface torus --res 32 --merge --json \
+  --out "$tmp/m3.ply" >"$tmp/m3.json" || fail "merge: 3 ranks"
+cmp -s "$tmp/m1.ply" "$tmp/m3.ply" || fail "merge: 3 ranks wrote a different mesh"
+python3 - "$tmp/m1.json" "$tmp/m3.json" <<'PY' || fail "merge: implausible summary"
+import json, sys
+one, three = (json.load(open(f)) for f in sys.argv[1:])
+assert one["merging"] == three["merging"], (one["merging"], three["merging"])
+m = one["merging"]
+assert m["split_edges"] > 0 and 0 < m["projected"] <= m["split_edges"], m
+assert m["split_passes"] >= 1 and m["components"] == 1 and m["unfilled_holes"] == 0, m
+PY
 "$mpiexec" -n 3 --oversubscribe "$ldimesh" mesh --surface marschner-lobb --res 32 --refine 1 --no-grow \
   --out "$tmp/ng.ply" >"$tmp/ng.log" || fail "refine --no-grow: 3 ranks"
 grep -q '^  refine ' "$tmp/ng.log" || fail "refine: no 'refine' line in the summary"

@@ -301,13 +301,14 @@ bool same_error_on_every_rank(const Status& status) {
 // Refinement that fails on the root (here: more levels than allowed) fails on every rank with
 // the root's message, and leaves no rank waiting for requests.
 // One step of the sphere at 16² with this rank's refinement `levels`.
-Status mesh_sphere_step(int levels, DistributedResult& result) {
+Status mesh_sphere_step(int levels, DistributedResult& result, bool merge = false) {
   const SurfaceInfo* s = find_surface("sphere");
   const auto source = make_surface_source("sphere");
   const RayCaster caster(*source, s->isovalue);
   const Subdomain sub{decompose_box(s->domain, ranks())[rank_of()], s->domain};
   DistributedOptions options;
   options.meshing.refinement.levels = levels;
+  options.meshing.merging.enabled = merge;
   return mesh_distributed(MPI_COMM_WORLD, caster, sub, make_axis_views(s->domain, 16), options,
                           result);
 }
@@ -330,6 +331,33 @@ TEST(MpiPipeline, RefinementLevelsThatDifferBetweenRanksAreAnError) {
   if (ranks() == 1) GTEST_SKIP() << "needs two ranks";
   DistributedResult result;
   const Status status = mesh_sphere_step(rank_of() == ranks() - 1 ? 1 : 0, result);
+  const bool same = same_error_on_every_rank(status);
+  if (rank_of() == 0) {
+    EXPECT_TRUE(same) << status.message();
+  }
+}
+
+// §5 merging asks for samples too (its new vertices are projected onto the surface): every rank
+// serves, and the root gets the same closed mesh for any number of ranks.
+TEST(MpiPipeline, MergingProjectsWithSamplesFromAllRanks) {
+  DistributedResult result;
+  const Status status = mesh_sphere_step(0, result, true);
+  EXPECT_TRUE(status) << status.message();
+  if (rank_of() == 0) {
+    const MergeStats& m = result.meshing.merging;
+    EXPECT_GT(m.split_edges, 0u);
+    EXPECT_GT(m.projected, 0u);
+    EXPECT_EQ(m.components, 1u);
+    EXPECT_EQ(m.unfilled_holes, 0u);
+  }
+}
+
+// Ranks that disagree on merging would disagree on serving samples: an error, not a hang.
+TEST(MpiPipeline, MergingThatDiffersBetweenRanksIsAnError) {
+  if (ranks() == 1) GTEST_SKIP() << "needs two ranks";
+  DistributedResult result;
+  const Status status = mesh_sphere_step(0, result, rank_of() == ranks() - 1);
+  EXPECT_FALSE(status);
   const bool same = same_error_on_every_rank(status);
   if (rank_of() == 0) {
     EXPECT_TRUE(same) << status.message();

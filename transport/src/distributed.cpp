@@ -12,19 +12,22 @@
 namespace ldimesh {
 namespace {
 
-// What every rank learns after the reduction, in one allreduce (the minima of ok, levels and
-// -levels): whether it succeeded everywhere, and whether all ranks refine alike (a rank that
-// serves requests the root never sends, or the reverse, would wait forever).
+// What every rank learns after the reduction, in one allreduce (the minima of ok, levels,
+// -levels, projects and -projects): whether it succeeded everywhere, and whether all ranks
+// refine and project alike (a rank that serves requests the root never sends, or the reverse,
+// would wait forever).
 struct Agreement {
   bool reduced = false;
   bool same_levels = false;
+  bool same_projection = false;
 };
 
-Agreement agree(MPI_Comm comm, bool reduced, int levels) {
-  const long long mine[3] = {reduced ? 1 : 0, levels, -static_cast<long long>(levels)};
-  long long all[3] = {0, 0, 0};
-  MPI_Allreduce(mine, all, 3, MPI_LONG_LONG, MPI_MIN, comm);
-  return {all[0] == 1, all[1] == -all[2]};
+Agreement agree(MPI_Comm comm, bool reduced, int levels, bool projects) {
+  const long long mine[5] = {reduced ? 1 : 0, levels, -static_cast<long long>(levels),
+                             projects ? 1 : 0, projects ? -1 : 0};
+  long long all[5] = {0, 0, 0, 0, 0};
+  MPI_Allreduce(mine, all, 5, MPI_LONG_LONG, MPI_MIN, comm);
+  return {all[0] == 1, all[1] == -all[2], all[3] == -all[4]};
 }
 
 double max_over_ranks(MPI_Comm comm, double v) {
@@ -79,14 +82,18 @@ Status mesh_distributed(MPI_Comm comm, const RayCaster& caster, const Subdomain&
   MPI_Reduce(&sent, &result.bytes_moved, 1, MPI_UINT64_T, MPI_SUM, 0, comm);
   // Every rank learns whether the step failed anywhere, so all return the same status.
   const int levels = options.meshing.refinement.levels;
-  const Agreement agreed = agree(comm, bool(reduced), levels);
+  // §5 merging moves the sewing region's new vertices onto the surface with samples, too.
+  const MergeOptions& merging = options.meshing.merging;
+  const bool projects = merging.enabled && merging.enhance && merging.project;
+  const Agreement agreed = agree(comm, bool(reduced), levels, projects);
   if (!agreed.reduced) {
     return reduced ? Status::error("reduction failed on another rank") : reduced;
   }
   if (!agreed.same_levels) return Status::error("refinement levels differ between ranks");
+  if (!agreed.same_projection) return Status::error("merging options differ between ranks");
   // levels != 0, as mesh_ldis tests it: negative levels fail in refinement, on every rank.
-  const bool refine = levels != 0;
-  if (rank != 0 && !refine) return Status::ok();
+  const bool serve = levels != 0 || projects;
+  if (rank != 0 && !serve) return Status::ok();
 
   const auto mesh_on_root = [&](SampleSource* samples) {
     result.bytes_to_root = stats.bytes_received;
@@ -99,13 +106,13 @@ Status mesh_distributed(MPI_Comm comm, const RayCaster& caster, const Subdomain&
     result.meshing = mesh_ldis(result.ldis, options.meshing, samples);
     result.seconds.mesh = seconds_since(start);
   };
-  if (!refine) {
+  if (!serve) {
     mesh_on_root(nullptr);
     return Status::ok();
   }
 
-  // §4: the root refines, the other ranks cast the extra samples in their subdomains. The
-  // root ends the serving whatever happens, then tells every rank how it went.
+  // §4 and §5: the root refines and merges, the other ranks cast the extra samples in their
+  // subdomains. The root ends the serving whatever happens, then tells every rank how it went.
   MpiSampleSource source(comm, caster, sub, std::vector<View>(views.begin(), views.end()),
                          tolerance);
   if (rank != 0) {

@@ -5,6 +5,7 @@
 #include <cstddef>
 
 #include "ldimesh/core/mesh.hpp"
+#include "ldimesh/core/projection.hpp"
 #include "ldimesh/core/refine.hpp"
 
 namespace ldimesh {
@@ -21,11 +22,24 @@ struct MergeOptions {
   // Bridges and fill triangles must face the way their vertices' normals do: the cosine between
   // the face normal and the mean vertex normal is at least this.
   double min_facing = 0.2;
+  // A connecting edge (of a bridge or an ear) joins vertices whose normals' dot product is at
+  // least this, so that it does not cut across a thin crest or valley of the surface.
+  double min_normal_dot = 0.0;
   // (ii) Ears whose new edge is longer than this many times the median input edge are not cut
   // (so a hole is never closed across the far side of the surface); such holes are reported.
   double max_fill_edge = 6.0;
   // (iii) Edge flips by length and 3-to-1 merges of almost coplanar triangle triples.
   bool enhance = true;
+  // Vertices on the surface in the sewing region: bridges and fill triangles span gaps of a few
+  // cells with flat faces between samples. Their edges longer than split_length times the median
+  // input edge are split, and the new vertices moved onto the surface (one projection batch per
+  // pass, at most split_passes passes). Needs a SurfaceProjection; without one nothing is split.
+  // A new vertex is looked for on the surface within project_reach times the median input edge
+  // along a view's ray: a long fill edge across a ripple has its midpoint that far off.
+  bool project = true;
+  double split_length = 1.5;
+  double project_reach = 4.0;
+  int split_passes = 6;
   // 3-to-1 merge: |det(a − v, b − v, c − v)| below this times the mean edge length cubed.
   double coplanar = 0.02;
 };
@@ -42,6 +56,9 @@ struct MergeStats {
   std::size_t split_quads = 0;     // (iii) quads next to fill triangles split
   std::size_t flips = 0;           // (iii) edge flips
   std::size_t merges = 0;          // (iii) 3-to-1 merges
+  std::size_t split_edges = 0;     // sewing-region edges split (a new vertex each)
+  std::size_t projected = 0;       // of those new vertices, moved onto the surface
+  std::size_t split_passes = 0;    // projection batches (round trips to the ray casters)
   std::size_t lost_faces = 0;      // (iii) faces OpenMesh refused to re-add (holes count them)
   std::size_t components = 0;      // connected pieces of the output
   double bridge_seconds = 0.0;     // layer removal, patches and bridges (Table 1 "Bridge")
@@ -56,7 +73,9 @@ struct MergeStats {
 // are triangles (each remaining quad split along its shorter diagonal) for FaceType::triangles;
 // FaceType::quads keeps the untouched quads beside the triangles of the sewing region (§5 (iv),
 // the conversion to all quads, is not implemented yet). Face views: the view of the face's
-// first vertex. Deterministic.
-Mesh merge_views(const Mesh& mesh, FaceType faces, const MergeOptions& options, MergeStats& stats);
+// first vertex. `project` (may be empty) moves the sewing region's new vertices onto the surface
+// (options.project). Deterministic.
+Mesh merge_views(const Mesh& mesh, FaceType faces, const MergeOptions& options, MergeStats& stats,
+                 const SurfaceProjection& project = {});
 
 }  // namespace ldimesh

@@ -17,6 +17,7 @@ struct MeshingOptions {
   FaceType faces = FaceType::triangles;
   MatchOptions matching;
   RefinementOptions refinement;  // §4; levels > 0 needs a SampleSource
+  // §5; merging.project uses the SampleSource when there is one
   MergeOptions merging;          // §5; trims with r = 1 instead of `r` when enabled
 };
 
@@ -51,7 +52,7 @@ inline double trim_r(const MeshingOptions& options) {
 // shorter diagonal). With options.refinement.levels > 0 the trimmed meshes are refined (§4,
 // refine_views) with extra samples from `samples` before assembly. With options.merging.enabled
 // the views are trimmed with r = 1 and merged into one mesh (§5, merge_views; triangles only
-// for now). Throws std::invalid_argument if r is outside [0, 1], more than 255 views,
+// for now); with `samples` the new vertices of its sewing region are moved onto the surface. Throws std::invalid_argument if r is outside [0, 1], more than 255 views,
 // refinement is asked for without a sample source, or merging with quad output.
 MeshingResult mesh_ldis(std::span<const Ldi> ldis, const MeshingOptions& options = {},
                         SampleSource* samples = nullptr);

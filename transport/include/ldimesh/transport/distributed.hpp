@@ -50,14 +50,16 @@ double merge_tolerance(const FragmentEncoding& encoding, const View& view, doubl
 // options.meshing. Ranks with nothing to cast contribute empty fragments. `options` must be the
 // same on every rank.
 //
-// Without refinement (options.meshing.refinement.levels == 0) the other ranks return as soon
-// as the reduction is done. With refinement (§4) the root meshes with an MpiSampleSource while
-// every other rank serves its sample requests, so all ranks return when the mesh is built.
+// Without refinement (options.meshing.refinement.levels == 0) and without merging that projects
+// (§5, options.meshing.merging enabled with project) the other ranks return as soon as the
+// reduction is done. With either, the root meshes with an MpiSampleSource while every other rank
+// serves its sample requests, so all ranks return when the mesh is built.
 //
-// Returns an error Status, on every rank, if a fragment failed to decode anywhere or the
-// refinement levels differ between ranks (the mesh is then not built), or, with refinement,
-// if meshing failed on the root (the root's message; no rank is left waiting). Without
-// refinement an exception from meshing (e.g. r outside [0, 1]) propagates on the root only.
+// Returns an error Status, on every rank, if a fragment failed to decode anywhere, or the
+// refinement levels or the merging projection differ between ranks (the mesh is then not
+// built), or, when the other ranks serve samples, if meshing failed on the root (the root's
+// message; no rank is left waiting). Otherwise an exception from meshing (e.g. r outside
+// [0, 1]) propagates on the root only.
 Status mesh_distributed(MPI_Comm comm, const RayCaster& caster, const Subdomain& sub,
                         std::span<const View> views, const DistributedOptions& options,
                         DistributedResult& result);
