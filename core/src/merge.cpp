@@ -97,12 +97,17 @@ class Merger {
     add_input(in.quads, in.quad_view, 4);
     add_input(in.triangles, in.triangle_view, 3);
     // A length scale for the limits: the median edge of the input.
+    // The length scale for the limits: the LDI cell size when the caller knows it (refined
+    // meshes have many short edges, their median would make every limit too tight), else the
+    // median edge of the input.
+    scale_ = options.cell_size;
     std::vector<double> lengths;
-    for (const auto& e : mesh_.edges())
-      lengths.push_back(length(e.halfedge(0)));
+    if (!(scale_ > 0.0))
+      for (const auto& e : mesh_.edges())
+        lengths.push_back(length(e.halfedge(0)));
     if (!lengths.empty()) {
       std::nth_element(lengths.begin(), lengths.begin() + lengths.size() / 2, lengths.end());
-      median_edge_ = lengths[lengths.size() / 2];
+      scale_ = lengths[lengths.size() / 2];
     }
   }
 
@@ -139,9 +144,11 @@ class Merger {
       }
     for (const auto& v : mesh_.vertices())
       if (!mesh_.is_isolated(v) && pieces.find(v.idx()) == std::uint32_t(v.idx())) ++stats_.patches;
-    if (open.empty() || median_edge_ <= 0.0) return;
-    // Open half-edges by their start vertex in a uniform grid.
-    const double cell = 2.0 * median_edge_;
+    if (open.empty() || scale_ <= 0.0) return;
+    // Open half-edges by their start vertex in a uniform grid whose cells are as wide as the
+    // longest connecting edge a bridge may have, so each half-edge looks at 27 cells.
+    const double reach = options_.bridge_limit * std::min(2.0 * longest, 8.0 * scale_);
+    const double cell = std::max(2.0 * scale_, reach);
     auto key = [&](glm::dvec3 p) {
       const glm::i64vec3 c = glm::i64vec3(glm::floor(p / cell)) & std::int64_t(0x1FFFFF);
       return std::uint64_t(c.x) << 42 | std::uint64_t(c.y) << 21 | std::uint64_t(c.z);
@@ -160,7 +167,6 @@ class Merger {
     };
     constexpr std::size_t kKeep = 4;
     std::unordered_map<std::uint64_t, PairBest> pairs;
-    const double reach = options_.bridge_limit * std::min(2.0 * longest, 8.0 * median_edge_);
     const int span = int(std::ceil(reach / cell));
     for (const HH ha : open) {
       const VH p = mesh_.from_vertex_handle(ha), q = mesh_.to_vertex_handle(ha);
@@ -254,7 +260,7 @@ class Merger {
         const bool closes = mesh_.to_vertex_handle(mesh_.next_halfedge_handle(out)) == u;
         if (!closes) {
           if (mesh_.find_halfedge(u, w).is_valid()) continue;  // u–w exists elsewhere
-          if (e.length > options_.max_fill_edge * median_edge_) continue;
+          if (e.length > options_.max_fill_edge * scale_) continue;
           if (!ear_is_convex(u, v, w, strict) || !spans_surface(u, w)) continue;
         }
         if (!add({u, v, w}, Kind::kFill)) continue;
@@ -305,8 +311,12 @@ class Merger {
       flip_all();
     }
     std::vector<VH> centres;
-    for (const auto& v : mesh_.vertices())
-      if (!v.is_boundary() && v.valence() == 3) centres.push_back(v);
+    for (FH f : region_faces_)
+      if (!mesh_.status(f).deleted())
+        for (const auto& v : mesh_.fv_range(f))
+          if (!v.is_boundary() && v.valence() == 3) centres.push_back(v);
+    std::sort(centres.begin(), centres.end());
+    centres.erase(std::unique(centres.begin(), centres.end()), centres.end());
     for (VH v : centres)
       if (!mesh_.status(v).deleted() && try_merge(v)) ++stats_.merges;
   }
@@ -368,6 +378,7 @@ class Merger {
     const FH f = mesh_.add_face(vs);
     if (!f.is_valid()) return false;
     mesh_.property(kind_, f) = kind;
+    if (kind != Kind::kInput) region_faces_.push_back(f);
     return true;
   }
 
@@ -420,21 +431,40 @@ class Merger {
     return loops;
   }
 
+  // The edges of the sewing region's live faces, each once (as its first half-edge), in index
+  // order: what the flip and split passes look at, so that their cost follows the region, not
+  // the whole mesh. Drops deleted faces from region_faces_ on the way.
+  std::vector<HH> region_edges() {
+    std::erase_if(region_faces_, [&](FH f) { return mesh_.status(f).deleted(); });
+    std::vector<HH> edges;
+    for (FH f : region_faces_)
+      for (const auto& h : mesh_.fh_range(f))
+        edges.push_back(mesh_.halfedge_handle(mesh_.edge_handle(h), 0));
+    std::sort(edges.begin(), edges.end());
+    edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+    return edges;
+  }
+
   bool in_region(FH f) const { return f.is_valid() && mesh_.property(kind_, f) != Kind::kInput; }
 
-  // Length flips over the whole mesh until none applies (at most 8 passes).
+  // Length flips in the sewing region until none applies (at most 8 passes): the first pass
+  // looks at every region edge, each later one at the edges of the faces the previous pass made.
   void flip_all() {
-    for (int pass = 0; pass < 8; ++pass) {
-      std::size_t flipped = 0;
-      std::vector<HH> edges;
-      for (const auto& e : mesh_.edges())
-        edges.push_back(e.halfedge(0));
+    std::vector<HH> edges = region_edges();
+    for (int pass = 0; pass < 8 && !edges.empty(); ++pass) {
+      std::vector<HH> next;
       for (HH h : edges) {
         if (mesh_.status(mesh_.edge_handle(h)).deleted()) continue;
-        if (try_flip(h)) ++flipped;
+        const HH flipped = try_flip(h);
+        if (!flipped.is_valid()) continue;
+        ++stats_.flips;
+        for (HH side : {flipped, mesh_.opposite_halfedge_handle(flipped)})
+          for (const auto& g : mesh_.fh_range(mesh_.face_handle(side)))
+            next.push_back(mesh_.halfedge_handle(mesh_.edge_handle(g), 0));
       }
-      stats_.flips += flipped;
-      if (flipped == 0) break;
+      std::sort(next.begin(), next.end());
+      next.erase(std::unique(next.begin(), next.end()), next.end());
+      edges = std::move(next);
     }
   }
 
@@ -443,12 +473,12 @@ class Merger {
   // the surface in one batch. A new vertex whose faces would no longer face their normals after
   // the move stays at its edge's midpoint.
   void refine_region(const SurfaceProjection& project) {
-    const double limit = options_.split_length * median_edge_;
+    const double limit = options_.split_length * scale_;
     if (!(limit > 0.0)) return;
     for (int pass = 0; pass < options_.split_passes; ++pass) {
       std::vector<std::pair<double, HH>> long_edges;
-      for (const auto& e : mesh_.edges()) {
-        const HH h = e.halfedge(0), o = e.halfedge(1);
+      for (const HH h : region_edges()) {
+        const HH o = mesh_.opposite_halfedge_handle(h);
         const FH f = mesh_.face_handle(h), g = mesh_.face_handle(o);
         if (!f.is_valid() || !g.is_valid() || mesh_.valence(f) != 3 || mesh_.valence(g) != 3)
           continue;
@@ -481,7 +511,7 @@ class Merger {
       stats_.split_edges += fresh.size();
       ++stats_.split_passes;
       const std::vector<glm::dvec3> mid = points, mid_normals = normals;
-      project(points, normals, options_.project_reach * median_edge_);
+      project(points, normals, options_.project_reach * scale_);
       for (std::size_t k = 0; k < fresh.size(); ++k) {
         if (points[k] == mid[k]) continue;
         // The move must not turn any face of the new vertex over.
@@ -546,29 +576,32 @@ class Merger {
   }
 
   // Flips the edge of h between two triangles of the sewing region if the other diagonal is
-  // shorter and both new triangles face like their normals.
-  bool try_flip(HH h) {
+  // shorter and both new triangles face like their normals. Returns the new edge's half-edge
+  // c→d, or an invalid handle if nothing was flipped.
+  HH try_flip(HH h) {
     const HH o = mesh_.opposite_halfedge_handle(h);
     const FH f = mesh_.face_handle(h), g = mesh_.face_handle(o);
     if (!in_region(f) || !in_region(g) || mesh_.valence(f) != 3 || mesh_.valence(g) != 3)
-      return false;
+      return HH();
     const VH a = mesh_.from_vertex_handle(h), b = mesh_.to_vertex_handle(h);
     const VH c = mesh_.to_vertex_handle(mesh_.next_halfedge_handle(h));
     const VH d = mesh_.to_vertex_handle(mesh_.next_halfedge_handle(o));
-    if (c == d || mesh_.find_halfedge(c, d).is_valid()) return false;
-    if (mesh_.valence(a) <= 3 || mesh_.valence(b) <= 3) return false;
-    if (glm::distance(point(c), point(d)) >= glm::distance(point(a), point(b))) return false;
-    if (!faces_its_normals({a, d, c}) || !faces_its_normals({d, b, c})) return false;
+    // Cheapest tests first: most edges of the region are not longer than their other diagonal.
+    if (c == d || glm::distance(point(c), point(d)) >= glm::distance(point(a), point(b)))
+      return HH();
+    if (mesh_.find_halfedge(c, d).is_valid()) return HH();
+    if (mesh_.valence(a) <= 3 || mesh_.valence(b) <= 3) return HH();
+    if (!faces_its_normals({a, d, c}) || !faces_its_normals({d, b, c})) return HH();
     const Kind kf = mesh_.property(kind_, f), kg = mesh_.property(kind_, g);
     mesh_.delete_face(f, false);
     mesh_.delete_face(g, false);
     if (add({a, d, c}, kf)) {
-      if (add({d, b, c}, kg)) return true;
+      if (add({d, b, c}, kg)) return mesh_.find_halfedge(c, d);
       mesh_.delete_face(mesh_.face_handle(mesh_.find_halfedge(a, d)), false);
     }
     // Put the two triangles back as they were (OpenMesh refused the flip).
     if (!add({a, b, c}, kf) || !add({b, a, d}, kg)) ++stats_.lost_faces;
-    return false;
+    return HH();
   }
 
   // Replaces the three triangles around a valence-3 vertex of the sewing region by one when the
@@ -605,7 +638,8 @@ class Merger {
   OpenMesh::FPropHandleT<Kind> kind_;
   OpenMesh::VPropHandleT<std::uint8_t> view_;
   OpenMesh::VPropHandleT<float> scalar_;
-  double median_edge_ = 0.0;
+  double scale_ = 0.0;            // the length scale of the limits: cell_size or the median edge
+  std::vector<FH> region_faces_;  // faces added by bridging, filling and enhancement
 };
 
 }  // namespace

@@ -1,5 +1,6 @@
 #include "ldimesh/core/pipeline.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <stdexcept>
 
@@ -111,11 +112,15 @@ MeshingResult mesh_ldis(std::span<const Ldi> ldis, const MeshingOptions& options
   }
   if (merge) {
     std::vector<View> views;
-    for (const Ldi& ldi : ldis)
+    MergeOptions merging = options.merging;
+    for (const Ldi& ldi : ldis) {
       views.push_back(ldi.view);
+      if (options.merging.cell_size <= 0.0)
+        merging.cell_size = std::max(merging.cell_size, ldi.view.spacing);
+    }
     const SurfaceProjection project =
         samples && !views.empty() ? sample_projection(*samples, views) : SurfaceProjection();
-    mesh = merge_views(mesh, options.faces, options.merging, result.merging, project);
+    mesh = merge_views(mesh, options.faces, merging, result.merging, project);
     result.seconds.bridge = result.merging.bridge_seconds;
     result.seconds.sew = result.merging.sew_seconds;
     result.seconds.quality = result.merging.quality_seconds;

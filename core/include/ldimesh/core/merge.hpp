@@ -12,6 +12,9 @@ namespace ldimesh {
 
 struct MergeOptions {
   bool enabled = false;
+  // The length scale of the limits below, in world units: the LDIs' pixel size (mesh_ldis sets
+  // it when it is 0). 0 in merge_views: the median edge of the input mesh.
+  double cell_size = 0.0;
   // Remove the faces that have an open edge before bridging (§5: the ragged "boundary layer"
   // the r = 1 trim leaves).
   bool remove_boundary_layer = true;
@@ -25,16 +28,16 @@ struct MergeOptions {
   // A connecting edge (of a bridge or an ear) joins vertices whose normals' dot product is at
   // least this, so that it does not cut across a thin crest or valley of the surface.
   double min_normal_dot = 0.0;
-  // (ii) Ears whose new edge is longer than this many times the median input edge are not cut
+  // (ii) Ears whose new edge is longer than this many times the length scale are not cut
   // (so a hole is never closed across the far side of the surface); such holes are reported.
   double max_fill_edge = 6.0;
   // (iii) Edge flips by length and 3-to-1 merges of almost coplanar triangle triples.
   bool enhance = true;
   // Vertices on the surface in the sewing region: bridges and fill triangles span gaps of a few
-  // cells with flat faces between samples. Their edges longer than split_length times the median
-  // input edge are split, and the new vertices moved onto the surface (one projection batch per
+  // cells with flat faces between samples. Their edges longer than split_length times the length
+  // scale are split, and the new vertices moved onto the surface (one projection batch per
   // pass, at most split_passes passes). Needs a SurfaceProjection; without one nothing is split.
-  // A new vertex is looked for on the surface within project_reach times the median input edge
+  // A new vertex is looked for on the surface within project_reach times the length scale
   // along a view's ray: a long fill edge across a ripple has its midpoint that far off.
   bool project = true;
   double split_length = 1.5;
