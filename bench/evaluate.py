@@ -303,7 +303,8 @@ class Evaluation:
         self.distances[key] = d
         return d
 
-    def ours(self, surface, res, threads=None, lossless=True, repeat=None, out=None, refine=0):
+    def ours(self, surface, res, threads=None, lossless=True, repeat=None, out=None, refine=0,
+             merge=False):
         repeat = repeat or self.args.repeat
         runs = []
         for k in range(repeat):
@@ -311,6 +312,8 @@ class Evaluation:
                                "--r", 0.5, "--json")
             if refine:
                 cmd += ["--refine", str(refine)]
+            if merge:
+                cmd.append("--merge")
             if lossless:
                 cmd.append("--lossless")
             if threads:
@@ -344,6 +347,17 @@ class Evaluation:
                 "refine_grown_cells": ref["grown_cells"],
                 "refine_removed_faces": ref["removed_faces"],
             })
+        if merge:
+            # §5: Table 1's Bridge, Sew and Qual. columns; the projection of the sewing
+            # region's new vertices (ray casting) is inside Qual.
+            m = j["merging"]
+            o.update({"bridge": med["bridge"], "sew": med["sew"], "quality": med["quality"],
+                      "merge_total": statistics.median(
+                          r["seconds"]["bridge"] + r["seconds"]["sew"] + r["seconds"]["quality"]
+                          for r in runs),
+                      "merge_patches": m["patches"], "merge_bridges": m["bridges"],
+                      "merge_holes": m["holes"], "merge_unfilled": m["unfilled_holes"],
+                      "merge_pieces": m["components"]})
         return o
 
     def against_mc(self, surface, o, ply):
@@ -406,7 +420,20 @@ class Evaluation:
                     (f"refine {levels} {o['refine']:.3f} s ({o['refine_nosample']:.3f} s "
                      "without its ray casting), " if levels else "") +
                     f"{fmt_int(o['triangles'])} triangles")
-            self.results["table1"].append({"paper": list(row), "ours": done[key]})
+            entry = {"paper": list(row), "ours": done[key]}
+            if row[5] != "-":
+                # The paper merged this row (§5): the same run with --merge (r = 1).
+                mkey = key + ("merge",)
+                if mkey not in done:
+                    done[mkey] = self.ours(surface, res, threads=1,
+                                           repeat=max(3, self.args.repeat), refine=levels,
+                                           merge=True)
+                    o = done[mkey]
+                    log(f"  {surface} {res}² merged: bridge {o['bridge']:.3f} s, sew "
+                        f"{o['sew']:.3f} s, quality {o['quality']:.3f} s, "
+                        f"{o['merge_pieces']} piece(s), {o['merge_unfilled']} hole(s) open")
+                entry["merged"] = done[mkey]
+            self.results["table1"].append(entry)
 
     def run_refined(self):
         """Refined meshes (§4) against MC at their own triangle count, beside the unrefined row
@@ -916,10 +943,15 @@ class Evaluation:
         w("`ldimesh mesh --surface S --res R --views xyz --r 0.5 --lossless --threads 1`, median "
           f"of {max(3, self.args.repeat)} runs. The paper's columns are seconds on one core of a "
           "Core i7 at 3.4 GHz, ray casting excluded (done on a GPU there). The \"Mesh.\" stage "
-          "(§3 matching and trimming) and refinement (§4) exist here; bridging, sewing and "
-          "quality improvement (§5) are not implemented yet, so their columns are \"n/i\" and "
-          "our total is mesh + trim (+ refinement where the paper refined) (+ the output arrays, "
-          f"shown apart). Refined rows: {refined_rows} (triangles; the paper does not give its "
+          "(§3 matching and trimming), refinement (§4) and merging (§5) exist here. Our total "
+          "is mesh + trim (+ refinement where the paper refined) (+ the output arrays, shown "
+          "apart). Where the paper merged, the same command with `--merge` (which trims with "
+          "r = 1) gives \"ours Bridge/Sew/Qual.\": `seconds.bridge` (building the half-edge "
+          "mesh, the boundary layer, patches and bridges), `seconds.sew` (ear cutting) and "
+          "`seconds.quality` (enhancement, the sewing region's edge splits with the ray "
+          "casting that projects their new vertices, and the output), with the merged mesh's "
+          "pieces and open holes. "
+          f"Refined rows: {refined_rows} (triangles; the paper does not give its "
           "levels); \"ours Ref.\" is the JSON's `seconds.refine`, which includes the ray "
           "casting of refinement's extension samples, and in parentheses the same without it "
           "(`refinement.sample_seconds` subtracted), the figure comparable to the paper's "
@@ -939,9 +971,14 @@ class Evaluation:
             p, o = t["paper"], t["ours"]
             ref = (f"{fmt_s(o['refine'])} ({fmt_s(o['refine_nosample'])}), "
                    f"{o['refine_levels']} levels" if "refine" in o else "–")
+            mo = t.get("merged")
+            merged = (f"{fmt_s(mo['bridge'])} / {fmt_s(mo['sew'])} / {fmt_s(mo['quality'])} "
+                      f"(Σ {fmt_s(mo['merge_total'])}; {mo['merge_pieces']} piece"
+                      f"{'' if mo['merge_pieces'] == 1 else 's'}, {mo['merge_unfilled']} "
+                      f"open hole{'' if mo['merge_unfilled'] == 1 else 's'})" if mo else "–")
             w(f"| {NICE[p[0]]} | {p[1]}² | {p[2]} | {p[3]} | {p[4]} | {p[5]} | {p[6]} | {p[7]} "
               f"| {p[8]} | {fmt_s(o['scene'] + o['raycast'])} | {fmt_s(o['mesh'])} | "
-              f"{fmt_s(o['assemble'])} | {ref} | n/i | {fmt_int(o['triangles'])} | "
+              f"{fmt_s(o['assemble'])} | {ref} | {merged} | {fmt_int(o['triangles'])} | "
               f"{PAPER_TRIANGLES.get((p[0], p[1]), 'n/a')} |")
         w("")
 
