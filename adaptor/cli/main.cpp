@@ -327,6 +327,23 @@ int run_mesh(const MeshArgs& args) {
                     {"projected", merged.projected},
                     {"split_passes", merged.split_passes},
                     {"components", merged.components}};
+    if (args.merge && args.quads) {
+      const ldimesh::QuadStats& q = merged.quads;
+      j["merging"]["quads"] = {{"input_triangles", q.input_triangles},
+                               {"input_quads", q.input_quads},
+                               {"paired", q.paired},
+                               {"paths", q.paths},
+                               {"path_rounds", q.path_rounds},
+                               {"path_splits", q.path_splits},
+                               {"turns", q.turns},
+                               {"quad_merges", q.quad_merges},
+                               {"flips", q.flips},
+                               {"boundary_splits", q.boundary_splits},
+                               {"leftover_triangles", q.leftover_triangles},
+                               {"projected", q.projected},
+                               {"output_quads", q.output_quads},
+                               {"seconds", q.seconds}};
+    }
     j["output"] = args.out.empty() ? nlohmann::json(nullptr) : nlohmann::json(args.out);
     j["seconds"] = {{"load", load_seconds},
                     {"scene", max_scene},
@@ -383,6 +400,14 @@ int run_mesh(const MeshArgs& args) {
         result.seconds.quality, merged.split_quads, merged.flips, merged.merges, merged.split_edges,
         merged.projected, merged.split_passes, merged.components,
         merged.components == 1 ? "" : "s");
+    if (args.quads) {
+      const ldimesh::QuadStats& q = merged.quads;
+      std::printf(
+          "  quads      %8.3f s  (in quality) %zu triangle pairs, %zu paths (%zu turns, %zu open "
+          "edges split), %zu quad merges, %zu flips; %zu triangles left\n",
+          q.seconds, q.paired, q.paths, q.turns, q.boundary_splits, q.quad_merges, q.flips,
+          q.leftover_triangles);
+    }
   }
   std::printf("  assemble   %8.3f s  %zu vertices, %zu %s\n", result.seconds.assemble,
               m.vertex_count(), m.face_count(), args.quads ? "quads" : "triangles");
@@ -609,8 +634,7 @@ int main(int argc, char** argv) {
                  "§4: no growth of the mesh across its boundaries and silhouettes");
   mesh->add_flag("--merge", args.merge,
                  "§5: merge the views into one mesh (trims with r = 1, bridges, hole filling, "
-                 "triangle enhancement; triangles only for now)")
-      ->excludes(quad_flag);
+                 "enhancement; with --quad converted to quads only)");
 
   mesh->add_flag("--lossless", args.lossless,
                  "send fragments to the root losslessly (default: quantized depths and normals)");

@@ -659,6 +659,8 @@ Mesh merge_views(const Mesh& mesh, FaceType faces, const MergeOptions& options, 
   start = std::chrono::steady_clock::now();
   if (options.enhance) merger.enhance(project);
   Mesh out = merger.output(faces);
+  if (faces == FaceType::quads && options.all_quads)
+    out = quadrangulate(out, options.quads, stats.quads, project);
   stats.quality_seconds = seconds_since(start);
   return out;
 }

@@ -62,9 +62,6 @@ MeshingResult mesh_ldis(std::span<const Ldi> ldis, const MeshingOptions& options
   const bool refine = options.refinement.levels != 0;
   if (refine && !samples) throw std::invalid_argument("refinement needs a sample source");
   const bool merge = options.merging.enabled;
-  if (merge && options.faces == FaceType::quads)
-    throw std::invalid_argument(
-        "merged all-quad output (paper §5 (iv)) is not available yet: merge with triangles");
   const double r = trim_r(options);
 
   MeshingResult result;

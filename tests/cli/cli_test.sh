@@ -34,7 +34,6 @@ expect_error "refine above 16" mesh --surface sphere --res 16 --refine 17
 expect_error "refine not a number" mesh --surface sphere --res 16 --refine two
 expect_error "refine-dot above 1" mesh --surface sphere --res 16 --refine 1 --refine-dot 2
 expect_error "refine-dot below -1" mesh --surface sphere --res 16 --refine-dot -1.5
-expect_error "merge with quads" mesh --surface sphere --res 16 --merge --quad
 
 # --merge (§5): the sphere becomes one closed triangle mesh; the summary says how.
 "$ldimesh" mesh --surface sphere --res 48 --merge --json --out "$tmp/merged.ply" >"$tmp/merged.json" \
@@ -50,6 +49,19 @@ assert j["triangles"] == 2 * (j["vertices"] - 2), (j["triangles"], j["vertices"]
 assert j["seconds"]["bridge"] > 0 and j["seconds"]["sew"] > 0, j["seconds"]
 PY
 [ -s "$tmp/merged.ply" ] || fail "merge run wrote no PLY"
+# --merge --quad (§5 (iv)): the torus becomes one closed mesh of quads only (V − E + F = 0, so
+# with E = 2F for quads: F = V).
+"$ldimesh" mesh --surface torus --res 48 --merge --quad --json >"$tmp/mq.json" ||
+  fail "merge --quad run failed"
+python3 - "$tmp/mq.json" <<'PY' || fail "merge --quad: implausible summary"
+import json, sys
+j = json.load(open(sys.argv[1]))
+m, q = j["merging"], j["merging"]["quads"]
+assert j["face_type"] == "quads" and j["faces"] == q["output_quads"] > 0 and j["triangles"] == 0, j
+assert q["leftover_triangles"] == 0 and q["input_triangles"] > 0, q
+assert m["unfilled_holes"] == 0 and m["components"] == 1, m
+assert j["faces"] == j["vertices"], (j["faces"], j["vertices"])  # closed, genus 1
+PY
 
 # ldimesh surfaces lists every built-in surface.
 "$ldimesh" surfaces >"$tmp/surfaces" || fail "surfaces: non-zero exit"

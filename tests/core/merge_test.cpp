@@ -289,16 +289,34 @@ TEST(Merge, KeepsTheForwardMeanDistance) {
     }
 }
 
-TEST(Merge, RefusesQuadOutputForNow) {
-  const auto source = make_surface_source("sphere");
-  const RayCaster caster(*source, 1.0);
-  std::vector<Ldi> ldis;
-  for (const View& view : make_axis_views(source->bounds(), 16))
-    ldis.push_back(caster.cast(view));
-  MeshingOptions options;
-  options.merging.enabled = true;
-  options.faces = FaceType::quads;
-  EXPECT_THROW(mesh_ldis(ldis, options), std::invalid_argument);
+// §5 (iv) through the pipeline: merged with quad output, the sphere and the torus are closed
+// manifolds of quads only, with the right Euler characteristic, in one piece.
+TEST(Merge, AllQuadOutputIsClosedQuads) {
+  for (const auto& [surface, euler] : {std::pair<std::string, long>{"sphere", 2}, {"torus", 0}})
+    for (int res : {64, 128}) {
+      const auto source = make_surface_source(surface);
+      const SurfaceInfo* info = find_surface(surface);
+      const RayCaster caster(*source, info->isovalue);
+      const std::vector<View> views = make_axis_views(source->bounds(), res);
+      std::vector<Ldi> ldis;
+      for (const View& view : views)
+        ldis.push_back(caster.cast(view));
+      MeshingOptions options;
+      options.merging.enabled = true;
+      options.faces = FaceType::quads;
+      LocalSampleSource samples(caster, views);
+      const MeshingResult r = mesh_ldis(ldis, options, &samples);
+      const Topology t = topology(r.mesh);
+      SCOPED_TRACE(surface + " " + std::to_string(res) + ": " + describe(t, r.merging));
+      EXPECT_EQ(r.mesh.triangle_count(), 0u);
+      EXPECT_EQ(r.merging.quads.leftover_triangles, 0u);
+      EXPECT_EQ(r.mesh.quad_count(), r.merging.quads.output_quads);
+      EXPECT_GT(r.merging.quads.input_triangles, 0u);
+      EXPECT_TRUE(t.closed_manifold());
+      EXPECT_EQ(t.euler(), euler);
+      EXPECT_EQ(t.pieces, 1u);
+      EXPECT_EQ(r.mesh.quad_view.size(), r.mesh.quad_count());
+    }
 }
 
 }  // namespace

@@ -6,6 +6,7 @@
 
 #include "ldimesh/core/mesh.hpp"
 #include "ldimesh/core/projection.hpp"
+#include "ldimesh/core/quadrangulate.hpp"
 #include "ldimesh/core/refine.hpp"
 
 namespace ldimesh {
@@ -45,6 +46,10 @@ struct MergeOptions {
   int split_passes = 6;
   // 3-to-1 merge: |det(a − v, b − v, c − v)| below this times the mean edge length cubed.
   double coplanar = 0.02;
+  // (iv) For FaceType::quads output: convert to quads only (quadrangulate, with `quads`); false
+  // keeps the untouched quads beside the triangles of the sewing region (quad-dominant).
+  bool all_quads = true;
+  QuadOptions quads;
 };
 
 struct MergeStats {
@@ -66,18 +71,21 @@ struct MergeStats {
   std::size_t components = 0;      // connected pieces of the output
   double bridge_seconds = 0.0;     // layer removal, patches and bridges (Table 1 "Bridge")
   double sew_seconds = 0.0;        // hole filling (Table 1 "Sew")
-  double quality_seconds = 0.0;    // enhancement and output (Table 1 "Qual.")
+  double quality_seconds = 0.0;    // enhancement, quads (iv) and output (Table 1 "Qual.")
+  QuadStats quads;                 // (iv), for FaceType::quads output
 };
 
 // Merges the per-view meshes in `mesh` (faces of different views share no vertex; quads and/or
 // triangles, each view's faces trimmed with r = 1 for best results) into one mesh: faces that
 // cannot be added without making it non-manifold are dropped and counted, the boundary layer
 // is removed, bridges join patches, holes are filled with triangles and improved. Output faces
-// are triangles (each remaining quad split along its shorter diagonal) for FaceType::triangles;
-// FaceType::quads keeps the untouched quads beside the triangles of the sewing region (§5 (iv),
-// the conversion to all quads, is not implemented yet). Face views: the view of the face's
-// first vertex. `project` (may be empty) moves the sewing region's new vertices onto the surface
-// (options.project). Deterministic.
+// are triangles (each remaining quad split along its shorter diagonal) for FaceType::triangles,
+// and quads only for FaceType::quads (§5 (iv), quadrangulate; a triangle it cannot convert is
+// kept and counted in stats.quads.leftover_triangles; options.all_quads = false keeps the
+// sewing region's triangles instead). Face views: the view of the face's first
+// vertex. `project` (may be empty) moves the sewing region's new vertices onto the surface
+// (options.project), and the new and smoothed vertices of the conversion to quads.
+// Deterministic.
 Mesh merge_views(const Mesh& mesh, FaceType faces, const MergeOptions& options, MergeStats& stats,
                  const SurfaceProjection& project = {});
 

@@ -51,9 +51,10 @@ inline double trim_r(const MeshingOptions& options) {
 // shared by the faces of its view), faces are quads or triangles (each quad split along its
 // shorter diagonal). With options.refinement.levels > 0 the trimmed meshes are refined (§4,
 // refine_views) with extra samples from `samples` before assembly. With options.merging.enabled
-// the views are trimmed with r = 1 and merged into one mesh (§5, merge_views; triangles only
-// for now); with `samples` the new vertices of its sewing region are moved onto the surface. Throws std::invalid_argument if r is outside [0, 1], more than 255 views,
-// refinement is asked for without a sample source, or merging with quad output.
+// the views are trimmed with r = 1 and merged into one mesh (§5, merge_views; all quads for
+// FaceType::quads); with `samples` the new vertices of its sewing region are moved onto the
+// surface. Throws std::invalid_argument if r is outside [0, 1], more than 255 views, or
+// refinement is asked for without a sample source.
 MeshingResult mesh_ldis(std::span<const Ldi> ldis, const MeshingOptions& options = {},
                         SampleSource* samples = nullptr);
 
