@@ -214,7 +214,7 @@ int main(int argc, char** argv) {
           const ldimesh::RefinementStats& s = result.refinement;
           mesh.push_back(result.seconds.match + result.seconds.trim);
           // The pipeline's time for refine_views: RefinementStats::seconds plus the freeing of
-          // refinement's working state after it (≈ 10–20 ms on Marschner–Lobb 64²).
+          // refinement's working state after it (< 0.1 ms on Marschner–Lobb 64²: flat arrays).
           refine.push_back(result.seconds.refine);
           sampling.push_back(s.sample_seconds);
           without.push_back(result.seconds.refine - s.sample_seconds);

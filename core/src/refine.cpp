@@ -5,10 +5,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
-#include <deque>
 #include <memory>
 #include <stdexcept>
-#include <unordered_map>
 
 #include <tbb/parallel_for.h>
 
@@ -25,18 +23,133 @@ std::uint64_t edge_key(std::uint32_t a, std::uint32_t b) {
   return a < b ? (std::uint64_t(a) << 32 | b) : (std::uint64_t(b) << 32 | a);
 }
 
-// Lattice cells (i, j) with i, j ≥ -1.
-std::uint64_t cell_key(glm::ivec2 p) {
-  return std::uint64_t(std::uint32_t(p.x + 1)) << 32 | std::uint32_t(p.y + 1);
+// A 64-bit mix (MurmurHash3's finaliser): IndexMap takes the low bits, and the keys (vertex
+// pairs, dyadic image positions) differ in few bits, often high ones.
+std::uint64_t mix(std::uint64_t x) {
+  x ^= x >> 33;
+  x *= 0xFF51AFD7ED558CCDull;
+  x ^= x >> 33;
+  x *= 0xC4CEB9FE1A85EC53ull;
+  return x ^ (x >> 33);
 }
 
+struct EdgeHash {
+  std::uint64_t operator()(std::uint64_t key) const { return mix(key); }
+};
+
 struct PositionHash {
-  std::size_t operator()(const glm::dvec2& p) const {
+  std::uint64_t operator()(const glm::dvec2& p) const {
     std::uint64_t a = 0, b = 0;
     std::memcpy(&a, &p.x, 8);
     std::memcpy(&b, &p.y, 8);
-    return std::hash<std::uint64_t>()(a * 0x9E3779B97F4A7C15ull ^ b);
+    return mix(a ^ mix(b));
   }
+};
+
+// A hash map from keys to indices, open addressing with linear probing in one array (at most
+// half full). The refiner looks up and adds millions of edges and positions in a run; a node per
+// entry (std::unordered_map) made allocating, chasing and freeing them a large part of its time.
+template <class Key, class Hash>
+class IndexMap {
+ public:
+  // The index stored under `key`, or kNone.
+  std::uint32_t find(const Key& key) const {
+    if (slots_.empty()) return kNone;
+    for (std::size_t i = Hash()(key) & mask_;; i = (i + 1) & mask_) {
+      const Slot& slot = slots_[i];
+      if (slot.index == kNone) return kNone;
+      if (slot.key == key) return slot.index;
+    }
+  }
+
+  // The index stored under `key`, and whether it is `index`, stored now because there was none.
+  std::pair<std::uint32_t, bool> try_emplace(const Key& key, std::uint32_t index) {
+    if (2 * (count_ + 1) > slots_.size()) reserve(count_ + 1);
+    for (std::size_t i = Hash()(key) & mask_;; i = (i + 1) & mask_) {
+      Slot& slot = slots_[i];
+      if (slot.index == kNone) {
+        slot = {key, index};
+        ++count_;
+        return {index, true};
+      }
+      if (slot.key == key) return {slot.index, false};
+    }
+  }
+
+  // Room for `count` entries without rehashing.
+  void reserve(std::size_t count) {
+    std::size_t capacity = 64;
+    while (capacity < 2 * count)
+      capacity *= 2;
+    if (capacity > slots_.size()) rehash(capacity);
+  }
+
+  // Empties the map and keeps its memory.
+  void clear() {
+    for (Slot& slot : slots_)
+      slot.index = kNone;
+    count_ = 0;
+  }
+
+ private:
+  struct Slot {
+    Key key{};
+    std::uint32_t index = kNone;
+  };
+
+  void rehash(std::size_t capacity) {
+    std::vector<Slot> old(capacity);
+    old.swap(slots_);
+    mask_ = capacity - 1;
+    count_ = 0;
+    for (const Slot& slot : old)
+      if (slot.index != kNone) try_emplace(slot.key, slot.index);
+  }
+
+  std::vector<Slot> slots_;  // capacity a power of two
+  std::size_t mask_ = 0, count_ = 0;
+};
+
+// Lists of values under dense list numbers (lattice positions, vertices), all in one pool:
+// appending allocates nothing per list, and a list keeps the order its values came in.
+template <class T>
+class ListPool {
+ public:
+  // Lists [0, lists) exist (empty) from now on; append makes more as needed.
+  void reserve_lists(std::size_t lists) {
+    if (lists > head_.size()) {
+      head_.resize(lists, kNone);
+      tail_.resize(lists, kNone);
+    }
+  }
+
+  void append(std::size_t list, const T& value) {
+    reserve_lists(list + 1);
+    const std::uint32_t node = std::uint32_t(nodes_.size());
+    nodes_.push_back({value, kNone});
+    if (head_[list] == kNone)
+      head_[list] = node;
+    else
+      nodes_[tail_[list]].next = node;
+    tail_[list] = node;
+  }
+
+  // The first value of `list`, in order, for which `pred` holds, or nullptr.
+  template <class Pred>
+  const T* find_if(std::size_t list, Pred pred) const {
+    if (list >= head_.size()) return nullptr;
+    for (std::uint32_t n = head_[list]; n != kNone; n = nodes_[n].next)
+      if (pred(nodes_[n].value)) return &nodes_[n].value;
+    return nullptr;
+  }
+
+ private:
+  struct Node {
+    T value;
+    std::uint32_t next;
+  };
+  std::vector<std::uint32_t> head_, tail_;
+  std::vector<Node> nodes_;
 };
 
 // A vertex of a view's refined mesh. Top-level vertices are LDI samples at pixel centres;
@@ -61,6 +174,12 @@ struct Cell {
   bool grown = false;
 };
 
+// How many untrimmed §3 quads and top-level cells have an edge.
+struct EdgeUse {
+  int untrimmed = 0;
+  int top = 0;
+};
+
 // What a new vertex is matched against (see ViewRefiner::match_references): reference
 // vertices and the cost threshold.
 struct References {
@@ -71,10 +190,10 @@ struct References {
 
 // A vertex made in the current pass, waiting for its ray.
 struct Pending {
-  std::uint32_t vertex;
-  std::array<std::uint32_t, 4> refs;
-  std::uint32_t ref_count;
-  std::uint32_t ray;
+  std::uint32_t vertex = 0;
+  std::array<std::uint32_t, 4> refs{};
+  std::uint32_t ref_count = 0;
+  std::uint32_t ray = 0;
   References match;  // set once the pass's templates are applied
 };
 
@@ -98,6 +217,11 @@ class ViewRefiner {
         r_(r),
         vertex_of_sample_(ldi.sample_count(), kNone) {
     pixel_of_sample_ = sample_pixels(ldi);
+    const std::size_t pixels = std::size_t(view_.width + 2) * (view_.height + 2);  // lattice_index
+    occupants_.reserve_lists(pixels);
+    invalid_at_.reserve_lists(pixels);
+    lattice_edges_.reserve_lists(2 * pixels);
+    edge_of_.reserve(quads.untrimmed.size() / 2);  // two edges per quad and some boundary
     // §3 quads come as (s0, right, top-right, top), or reversed where their normals face −dir.
     auto lattice = [&](const std::uint32_t* q, bool& flip) {
       flip = pixel_of_sample_[q[1]] != pixel_of_sample_[q[0]] + 1;
@@ -110,7 +234,7 @@ class ViewRefiner {
       bool flip = false;
       const std::array<std::uint32_t, 4> c = lattice(&quads.untrimmed[q], flip);
       for (int k = 0; k < 4; ++k)
-        ++untrimmed_edges_[edge_key(c[k], c[(k + 1) & 3])];
+        ++edges_[edge(c[k], c[(k + 1) & 3])].untrimmed;
       occupy(pixel_of(c[0]), c);
     }
     for (std::size_t q = 0; q < quads.kept.size(); q += 4) {
@@ -123,19 +247,19 @@ class ViewRefiner {
   // §4 (iii): new top-level cells across open edges that hold a valid vertex, until none is
   // left. Their far corners are LDI samples that match (§3 cost) or invalid vertices.
   void grow() {
-    std::deque<std::pair<std::uint32_t, int>> queue;
+    // A FIFO queue of (cell, edge): the front is queue[next].
+    std::vector<std::pair<std::uint32_t, int>> queue;
+    queue.reserve(4 * cells_.size());
     for (std::uint32_t t = 0; t < cells_.size(); ++t)
       for (int k = 0; k < 4; ++k)
         queue.emplace_back(t, k);
-    while (!queue.empty()) {
-      const auto [t, k] = queue.front();
-      queue.pop_front();
+    for (std::size_t next = 0; next < queue.size(); ++next) {
+      const auto [t, k] = queue[next];
       const Cell from = cells_[t];
       const std::uint32_t a = from.c[k], b = from.c[(k + 1) & 3];
-      const std::uint64_t e = edge_key(a, b);
-      if (top_edges_[e] != 1) continue;
-      const auto u = untrimmed_edges_.find(e);
-      if ((u == untrimmed_edges_.end() ? 0 : u->second) != (from.grown ? 0 : 1)) continue;
+      const EdgeUse e = edges_[top_cell_edges_[t][k]];
+      if (e.top != 1) continue;
+      if (e.untrimmed != (from.grown ? 0 : 1)) continue;
       if (!vertices_[a].valid && !vertices_[b].valid) continue;
 
       const glm::ivec2 at = pixel_of(from.c[0]), target = at + kAcross[k];
@@ -156,8 +280,8 @@ class ViewRefiner {
       if (occupied(target, cell.c)) continue;
       bool manifold = true;
       for (int q = 0; q < 4; ++q) {
-        const auto it = top_edges_.find(edge_key(cell.c[q], cell.c[(q + 1) & 3]));
-        if (it != top_edges_.end() && it->second >= 2) manifold = false;
+        const std::uint32_t e = edge_of_.find(edge_key(cell.c[q], cell.c[(q + 1) & 3]));
+        if (e != kNone && edges_[e].top >= 2) manifold = false;
       }
       if (!manifold || crosses_sheet_edge(cell)) continue;
       const std::uint32_t index = add_top_cell(cell);
@@ -171,27 +295,37 @@ class ViewRefiner {
   // One pass's topology: marks cells, applies the templates, and lists the rays the new
   // vertices need. Returns false when nothing was marked.
   bool split() {
+    ++pass_;
     pending_.clear();
     ray_of_.clear();
     rays_.clear();
-    std::vector<std::uint32_t> marked;
+    marked_.clear();
     for (std::uint32_t i = 0; i < cells_.size(); ++i)
       if (cells_[i].leaf && cells_[i].level < options_.levels && needs_refinement(cells_[i]))
-        marked.push_back(i);
-    if (marked.empty()) return false;
+        marked_.push_back(i);
+    if (marked_.empty()) return false;
     const std::size_t first_new = vertices_.size();
     if (faces_ == FaceType::triangles)
-      split_quadtree(marked);
+      split_quadtree();
     else
-      split_two_refinement(marked);
+      split_two_refinement();
     // The depths at which each ray's new vertices can match (see resolve): a matching hit lies
     // within the threshold of the mean prediction of its references. Each position's intervals
     // (one per vertex there, one per layer) are merged where they overlap and cast as separate
     // stretches of its ray, in depth order, so the position's hits stay one sorted run that
     // holds every hit the whole ray would give its vertices. The references are corners of cells
     // that existed before the pass (a cell split in a pass never needs splitting again in it), so
-    // their depths are known here.
-    std::vector<std::vector<glm::dvec2>> wanted(rays_.size());
+    // their depths are known here. The intervals are grouped by ray with a counting sort, stable
+    // so that each ray's keep the order of pending_ (std::sort below is not stable): counted at
+    // first_wanted_[ray + 2], summed into the starts at first_wanted_[ray + 1], and placed by
+    // advancing those to the ends, which leaves ray k's at wanted_[first_wanted_[k],
+    // first_wanted_[k + 1]).
+    first_wanted_.assign(rays_.size() + 2, 0);
+    for (const Pending& p : pending_)
+      ++first_wanted_[p.ray + 2];
+    for (std::size_t k = 2; k < first_wanted_.size(); ++k)
+      first_wanted_[k] += first_wanted_[k - 1];
+    wanted_.resize(pending_.size());
     const double pad = 1e-6 * (1.0 + view_.depth_extent);  // the hits' depths are floats
     for (Pending& p : pending_) {
       p.match = match_references(p, first_new);
@@ -201,14 +335,15 @@ class ViewRefiner {
         predicted += r.depth + glm::dot(r.slope, vertices_[p.vertex].image - r.image);
       }
       predicted /= p.match.n;
-      wanted[p.ray].push_back({std::max(0.0, predicted - p.match.threshold - pad),
-                               predicted + p.match.threshold + pad});
+      wanted_[first_wanted_[p.ray + 1]++] = {std::max(0.0, predicted - p.match.threshold - pad),
+                                             predicted + p.match.threshold + pad};
     }
     stretch_positions_.clear();
     stretch_ranges_.clear();
     first_stretch_.assign(1, 0);
     for (std::size_t ray = 0; ray < rays_.size(); ++ray) {
-      std::vector<glm::dvec2>& ranges = wanted[ray];
+      const std::span<glm::dvec2> ranges(wanted_.begin() + first_wanted_[ray],
+                                         wanted_.begin() + first_wanted_[ray + 1]);
       std::sort(ranges.begin(), ranges.end(), [](glm::dvec2 a, glm::dvec2 b) { return a.x < b.x; });
       for (const glm::dvec2& range : ranges) {
         if (stretch_ranges_.size() > first_stretch_.back() && range.x <= stretch_ranges_.back().y) {
@@ -230,7 +365,9 @@ class ViewRefiner {
   // The answers to the stretches: stretch k's hits are [offsets[first + k],
   // offsets[first + k + 1]) of `hits`.
   void resolve(const RayHitList& hits, std::size_t first) {
-    std::vector<std::uint8_t> claimed(hits.depth.size(), 0);
+    // Hits this view's vertices took, from this view's first hit on.
+    const std::uint32_t base = hits.offsets[first];
+    claimed_.assign(hits.offsets[first + stretch_ranges_.size()] - base, 0);
     for (const Pending& p : pending_) {
       Vertex& v = vertices_[p.vertex];
       const std::array<std::uint32_t, 4>& use = p.match.use;
@@ -240,7 +377,7 @@ class ViewRefiner {
       std::uint32_t best = kNone;
       double best_cost = p.match.threshold;
       for (std::uint32_t s = b; s < e; ++s) {
-        if (claimed[s]) continue;
+        if (claimed_[s - base]) continue;
         const double ds = hits.depth[s];
         const glm::dvec2 slope = slope_of(glm::dvec3(hits.normal[s]));
         double cost = 0.0;
@@ -257,7 +394,7 @@ class ViewRefiner {
         }
       }
       if (best != kNone) {
-        claimed[best] = 1;
+        claimed_[best - base] = 1;
         v.depth = hits.depth[best];
         v.normal = glm::dvec3(hits.normal[best]);
         v.scalar = hits.scalar.empty() ? 0.0f : hits.scalar[best];
@@ -309,59 +446,61 @@ class ViewRefiner {
   // The leaves as faces: quads as they are, triangles through the six templates. Faces with an
   // invalid vertex are dropped; faces of grown cells are trimmed like §3.
   RefinedView output(RefinementStats& stats) const {
-    std::vector<std::uint32_t> faces;
-    std::vector<std::uint8_t> from_grown;
     const int arity = faces_ == FaceType::quads ? 4 : 3;
-    std::vector<std::uint32_t> tris;
     std::vector<glm::vec3> world(vertices_.size());
     for (std::size_t v = 0; v < vertices_.size(); ++v)
       world[v] = position(vertices_[v]);
-    for (const Cell& cell : cells_) {
-      if (!cell.leaf) continue;
-      std::size_t before = faces.size();
-      if (faces_ == FaceType::quads) {
-        faces.insert(faces.end(), cell.c.begin(), cell.c.end());
-      } else {
-        tris.clear();
-        triangle_templates(cell, world, tris);
-        faces.insert(faces.end(), tris.begin(), tris.end());
-      }
-      if (cell.flip)
-        for (std::size_t f = before; f < faces.size(); f += arity)
-          std::reverse(faces.begin() + f, faces.begin() + f + arity);
-      from_grown.insert(from_grown.end(), (faces.size() - before) / arity, cell.grown);
-    }
-
-    RefinedView out;
-    std::vector<std::uint32_t> index(vertices_.size(), kNone);
     const glm::vec3 dq(view_.dir);
     const float rf = float(r_);
-    std::vector<std::uint32_t> kept;
-    for (std::size_t f = 0; f < faces.size(); f += arity) {
-      const std::uint32_t* c = &faces[f];
-      bool valid = true;
-      for (int k = 0; k < arity; ++k)
-        valid = valid && vertices_[c[k]].valid;
-      if (!valid) {
-        ++stats.removed_faces;
-        continue;
-      }
-      if (from_grown[f / arity]) {
-        for (int k = 0; k < arity && valid; ++k) {
-          const glm::vec3 v = world[c[k]], prev = world[c[(k + arity - 1) % arity]],
-                          next = world[c[(k + 1) % arity]];
-          valid = view_quality_ok(glm::cross(v - prev, v - next), dq, dirs_, rf);
-        }
+    RefinedView out;
+    // The kept faces, in vertex numbers until the end: each leaf's faces are appended, then the
+    // ones it keeps are moved down over those it drops.
+    std::vector<std::uint32_t>& faces = out.faces;
+    for (const Cell& cell : cells_) {
+      if (!cell.leaf) continue;
+      std::size_t kept = faces.size();
+      if (faces_ == FaceType::quads)
+        faces.insert(faces.end(), cell.c.begin(), cell.c.end());
+      else
+        triangle_templates(cell, world, faces);
+      for (std::size_t f = kept; f < faces.size(); f += arity) {
+        std::uint32_t* c = &faces[f];
+        if (cell.flip) std::reverse(c, c + arity);
+        bool valid = true;
+        for (int k = 0; k < arity; ++k)
+          valid = valid && vertices_[c[k]].valid;
         if (!valid) {
-          ++stats.trimmed_faces;
+          ++stats.removed_faces;
           continue;
         }
+        if (cell.grown) {
+          for (int k = 0; k < arity && valid; ++k) {
+            const glm::vec3 v = world[c[k]], prev = world[c[(k + arity - 1) % arity]],
+                            next = world[c[(k + 1) % arity]];
+            valid = view_quality_ok(glm::cross(v - prev, v - next), dq, dirs_, rf);
+          }
+          if (!valid) {
+            ++stats.trimmed_faces;
+            continue;
+          }
+        }
+        for (int k = 0; k < arity; ++k)  // kept ≤ f: no overlap ahead of the copy
+          faces[kept + k] = c[k];
+        kept += arity;
       }
-      kept.insert(kept.end(), c, c + arity);
+      faces.resize(kept);
     }
     // Vertices used by a kept face, in the order they were made.
-    for (std::uint32_t v : kept)
-      index[v] = 0;
+    std::vector<std::uint32_t> index(vertices_.size(), kNone);
+    std::uint32_t used = 0;
+    for (std::uint32_t v : faces)
+      if (index[v] == kNone) {
+        index[v] = 0;
+        ++used;
+      }
+    out.positions.reserve(used);
+    out.normals.reserve(used);
+    if (!ldi_.scalar.empty()) out.scalars.reserve(used);
     for (std::size_t v = 0; v < vertices_.size(); ++v) {
       if (index[v] == kNone) continue;
       index[v] = std::uint32_t(out.positions.size());
@@ -369,9 +508,8 @@ class ViewRefiner {
       out.normals.push_back(glm::vec3(vertices_[v].normal));
       if (!ldi_.scalar.empty()) out.scalars.push_back(vertices_[v].scalar);
     }
-    out.faces.reserve(kept.size());
-    for (std::uint32_t v : kept)
-      out.faces.push_back(index[v]);
+    for (std::uint32_t& v : faces)
+      v = index[v];
     stats.grown_cells += grown_;
     stats.subdivided_cells += subdivided_;
     stats.invalid_vertices += invalid_;
@@ -417,21 +555,37 @@ class ViewRefiner {
   std::uint32_t add_top_cell(const Cell& cell) {
     const std::uint32_t index = std::uint32_t(cells_.size());
     cells_.push_back(cell);
+    std::array<std::uint32_t, 4>& ids = top_cell_edges_.emplace_back();
     for (int k = 0; k < 4; ++k) {
       const std::uint32_t a = cell.c[k], b = cell.c[(k + 1) & 3];
-      if (top_edges_[edge_key(a, b)]++ == 0) {
-        top_neighbours_[a].push_back(b);
-        top_neighbours_[b].push_back(a);
-        lattice_edges_[lattice_edge_key(a, b)].push_back(edge_key(a, b));
+      ids[k] = edge(a, b);
+      if (edges_[ids[k]].top++ == 0) {
+        top_neighbours_.append(a, b);
+        top_neighbours_.append(b, a);
+        lattice_edges_.append(lattice_edge(a, b), edge_key(a, b));
       }
     }
     return index;
   }
 
-  // The lattice edge between the pixel centres of two top-level vertices.
-  std::pair<std::uint64_t, std::uint64_t> lattice_edge_key(std::uint32_t a, std::uint32_t b) const {
-    const std::uint64_t ka = cell_key(pixel_of(a)), kb = cell_key(pixel_of(b));
-    return {std::min(ka, kb), std::max(ka, kb)};
+  // The number in edges_ of the top-level edge a–b, added unused if new.
+  std::uint32_t edge(std::uint32_t a, std::uint32_t b) {
+    const auto [e, added] = edge_of_.try_emplace(edge_key(a, b), std::uint32_t(edges_.size()));
+    if (added) edges_.emplace_back();
+    return e;
+  }
+
+  // Pixels p ∈ [−1, width] × [−1, height] (of top-level vertices; lattice cells are numbered by
+  // their lower left corner's pixel) in the arrays over the lattice.
+  std::size_t lattice_index(glm::ivec2 p) const {
+    return std::size_t(p.y + 1) * std::size_t(view_.width + 2) + std::size_t(p.x + 1);
+  }
+
+  // The lattice edge between the pixel centres of two top-level vertices (4-neighbours): twice
+  // the lower or left one's index, plus one when it runs along v.
+  std::size_t lattice_edge(std::uint32_t a, std::uint32_t b) const {
+    const glm::ivec2 pa = pixel_of(a), pb = pixel_of(b);
+    return 2 * lattice_index(glm::min(pa, pb)) + (pa.x == pb.x ? 1 : 0);
   }
 
   // Whether an edge of `cell` runs along a top-level edge of the same sheet between other
@@ -440,16 +594,14 @@ class ViewRefiner {
   bool crosses_sheet_edge(const Cell& cell) const {
     for (int k = 0; k < 4; ++k) {
       const std::uint32_t a = cell.c[k], b = cell.c[(k + 1) & 3];
-      const auto it = lattice_edges_.find(lattice_edge_key(a, b));
-      if (it == lattice_edges_.end()) continue;
       const double depth = vertices_[a].depth + vertices_[b].depth;
-      for (std::uint64_t other : it->second) {
-        if (other == edge_key(a, b)) continue;
+      const auto same_sheet = [&](std::uint64_t other) {
+        if (other == edge_key(a, b)) return false;
         const std::uint32_t oa = std::uint32_t(other >> 32), ob = std::uint32_t(other);
-        if (oa == a || oa == b || ob == a || ob == b) return true;
-        if (std::abs(vertices_[oa].depth + vertices_[ob].depth - depth) <= 2.0 * tolerance_)
-          return true;
-      }
+        return oa == a || oa == b || ob == a || ob == b ||
+               std::abs(vertices_[oa].depth + vertices_[ob].depth - depth) <= 2.0 * tolerance_;
+      };
+      if (lattice_edges_.find_if(lattice_edge(a, b), same_sheet)) return true;
     }
     return false;
   }
@@ -460,21 +612,19 @@ class ViewRefiner {
   }
 
   void occupy(glm::ivec2 pixel, const std::array<std::uint32_t, 4>& c) {
-    occupants_[cell_key(pixel)].push_back(c);
+    occupants_.append(lattice_index(pixel), c);
   }
 
   // Whether a cell of the same sheet (a shared corner, or a mean depth within the match
   // tolerance) already sits at lattice cell `pixel`.
   bool occupied(glm::ivec2 pixel, const std::array<std::uint32_t, 4>& c) const {
-    const auto it = occupants_.find(cell_key(pixel));
-    if (it == occupants_.end()) return false;
     const double depth = mean_depth(c);
-    for (const auto& other : it->second) {
+    return occupants_.find_if(lattice_index(pixel), [&](const std::array<std::uint32_t, 4>& other) {
       if (std::abs(mean_depth(other) - depth) <= tolerance_) return true;
       for (std::uint32_t a : c)
         if (std::find(other.begin(), other.end(), a) != other.end()) return true;
-    }
-    return false;
+      return false;
+    });
   }
 
   // The corner of a grown cell at pixel p, next to the existing corner `near`: the sample of
@@ -485,9 +635,9 @@ class ViewRefiner {
     const glm::dvec2 image = glm::dvec2(p) + 0.5, step = image - n.image;
     // A top-level edge already joins `near` to a vertex there: the same sheet, so the same
     // vertex (two cells of one sheet meeting along one lattice edge share it).
-    if (const auto it = top_neighbours_.find(near); it != top_neighbours_.end())
-      for (std::uint32_t w : it->second)
-        if (vertices_[w].image == image) return w;
+    if (const std::uint32_t* w = top_neighbours_.find_if(
+            near, [&](std::uint32_t w) { return vertices_[w].image == image; }))
+      return *w;
     const double predicted = n.depth + glm::dot(n.slope, step);
     if (p.x >= 0 && p.y >= 0 && p.x < view_.width && p.y < view_.height) {
       const std::size_t pixel = std::size_t(p.y) * view_.width + p.x;
@@ -505,18 +655,20 @@ class ViewRefiner {
       }
       if (best != kNone) return sample_vertex(best);
     }
-    std::vector<std::uint32_t>& here = invalid_at_[cell_key(p)];
-    for (std::uint32_t v : here)
-      if (std::abs(vertices_[v].depth - predicted) <= tolerance_) return v;
+    if (const std::uint32_t* v = invalid_at_.find_if(lattice_index(p), [&](std::uint32_t v) {
+          return std::abs(vertices_[v].depth - predicted) <= tolerance_;
+        }))
+      return *v;
     Vertex v = n;
     v.image = image;
     v.depth = predicted;
     v.valid = false;
     v.edge_node = edge_node_at(p);
-    here.push_back(std::uint32_t(vertices_.size()));
+    const std::uint32_t index = std::uint32_t(vertices_.size());
+    invalid_at_.append(lattice_index(p), index);
     vertices_.push_back(v);
     ++invalid_;
-    return here.back();
+    return index;
   }
 
   // §4 marking: an invalid corner, or two corner normals further apart than the threshold.
@@ -533,43 +685,54 @@ class ViewRefiner {
 
   // A vertex of this pass between `refs` (their mean image position), waiting for its ray.
   std::uint32_t new_vertex(std::initializer_list<std::uint32_t> refs, bool edge_node) {
-    Pending p{};
-    p.vertex = std::uint32_t(vertices_.size());
-    p.ref_count = 0;
+    const std::uint32_t index = std::uint32_t(vertices_.size());
+    Pending& p = pending_.emplace_back();
+    p.vertex = index;
     glm::dvec2 image(0.0);
     for (std::uint32_t r : refs) {
       p.refs[p.ref_count++] = r;
       image += vertices_[r].image;
     }
     image /= double(p.ref_count);
-    const auto [it, added] = ray_of_.try_emplace(image, std::uint32_t(rays_.size()));
+    const auto [ray, added] = ray_of_.try_emplace(image, std::uint32_t(rays_.size()));
     if (added) rays_.push_back(image);
-    p.ray = it->second;
-    Vertex v;
+    p.ray = ray;
+    Vertex& v = vertices_.emplace_back();
     v.image = image;
     v.edge_node = edge_node;
-    vertices_.push_back(v);
-    pending_.push_back(p);
-    return p.vertex;
+    return index;
   }
 
   std::uint32_t midpoint(std::uint32_t a, std::uint32_t b) {
-    const auto [it, added] = midpoints_.try_emplace(edge_key(a, b), kNone);
-    if (added) it->second = new_vertex({a, b}, true);
-    return it->second;
+    // The vertex new_vertex makes next, unless the edge has one.
+    const auto [m, added] = midpoints_.try_emplace(edge_key(a, b), std::uint32_t(vertices_.size()));
+    if (added) {
+      new_vertex({a, b}, true);
+      split_edge_pass_.resize(vertices_.size(), 0);
+      split_edge_pass_[a] = split_edge_pass_[b] = pass_;
+    }
+    return m;
   }
 
+  // The midpoint of edge a–b, or kNone. Most edges asked about (every leaf's, in each sweep of
+  // the 1-level rule and in the output) have none; split_edge_pass_ answers those without a hash
+  // lookup.
   std::uint32_t find_midpoint(std::uint32_t a, std::uint32_t b) const {
-    const auto it = midpoints_.find(edge_key(a, b));
-    return it == midpoints_.end() ? kNone : it->second;
+    if (split_edge_pass(a) == 0 || split_edge_pass(b) == 0) return kNone;
+    return midpoints_.find(edge_key(a, b));
   }
 
+  // The last pass (counted from 1) that put a midpoint on an edge ending at v; 0: none did.
+  std::uint32_t split_edge_pass(std::uint32_t v) const {
+    return v < split_edge_pass_.size() ? split_edge_pass_[v] : 0;
+  }
+
+  // `parent` must not live in cells_, which may move.
   void add_child(const Cell& parent, std::array<std::uint32_t, 4> c) {
-    Cell child = parent;
+    Cell& child = cells_.emplace_back(parent);
     child.c = c;
     child.level = parent.level + 1;
     child.leaf = true;
-    cells_.push_back(child);
   }
 
   // Quadtree subdivision into four: midpoints of the edges (shared with the neighbours) and
@@ -591,14 +754,23 @@ class ViewRefiner {
   // Triangles: the marked cells split, then the 1-level difference rule: a leaf splits while
   // a neighbour across one of its edges is two levels finer (the edge's midpoint has one
   // itself).
-  void split_quadtree(const std::vector<std::uint32_t>& marked) {
-    for (std::uint32_t i : marked)
+  void split_quadtree() {
+    const std::size_t before = cells_.size();
+    for (std::uint32_t i : marked_)
       subdivide(i);
     for (bool changed = true; changed;) {
       changed = false;
       for (std::uint32_t i = 0; i < cells_.size(); ++i) {
         if (!cells_[i].leaf) continue;
         const Cell& cell = cells_[i];
+        // A leaf from before this pass kept the rule when the last pass ended (its last sweep
+        // split nothing; before the first pass there are no midpoints). Only a midpoint made in
+        // this pass can break it, on the leaf's edge or one of its halves: an edge that ends at
+        // a corner of the leaf. So a leaf with no such corner is skipped, as it would not split.
+        if (i < before && std::none_of(cell.c.begin(), cell.c.end(), [&](std::uint32_t v) {
+              return split_edge_pass(v) == pass_;
+            }))
+          continue;
         bool split = false;
         for (int k = 0; k < 4 && !split; ++k) {
           const std::uint32_t a = cell.c[k], b = cell.c[(k + 1) & 3], m = find_midpoint(a, b);
@@ -617,10 +789,10 @@ class ViewRefiner {
   // one gives the corner template (three quads around the active corner). Every edge at an
   // active node is split once and shared, so no hanging node remains. The active nodes stop
   // being edge nodes; the new midpoints become edge nodes.
-  void split_two_refinement(const std::vector<std::uint32_t>& marked) {
+  void split_two_refinement() {
     std::vector<std::uint32_t> active;
     std::vector<std::uint8_t> is_active(vertices_.size(), 0);
-    for (std::uint32_t i : marked)
+    for (std::uint32_t i : marked_)
       for (std::uint32_t v : cells_[i].c)
         if (vertices_[v].edge_node && !is_active[v]) {
           is_active[v] = 1;
@@ -722,25 +894,30 @@ class ViewRefiner {
   std::vector<std::uint32_t> vertex_of_sample_;
   std::vector<Vertex> vertices_;
   std::vector<Cell> cells_;  // top-level cells first
-  std::unordered_map<std::uint64_t, int> untrimmed_edges_;
-  std::unordered_map<std::uint64_t, int> top_edges_;
-  std::unordered_map<std::uint32_t, std::vector<std::uint32_t>> top_neighbours_;
-  struct PairHash {
-    std::size_t operator()(const std::pair<std::uint64_t, std::uint64_t>& p) const {
-      return std::hash<std::uint64_t>()(p.first * 0x9E3779B97F4A7C15ull ^ p.second);
-    }
-  };
-  std::unordered_map<std::pair<std::uint64_t, std::uint64_t>, std::vector<std::uint64_t>, PairHash>
-      lattice_edges_;
-  std::unordered_map<std::uint64_t, std::vector<std::array<std::uint32_t, 4>>> occupants_;
-  std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> invalid_at_;
-  std::unordered_map<std::uint64_t, std::uint32_t> midpoints_;
+  // Top-level edges (see edge()), numbered by edge_of_, and those of each top-level cell (the
+  // first cells_), so that growth, which visits every one, needs no lookup.
+  IndexMap<std::uint64_t, EdgeHash> edge_of_;
+  std::vector<EdgeUse> edges_;
+  std::vector<std::array<std::uint32_t, 4>> top_cell_edges_;
+  ListPool<std::uint32_t> top_neighbours_;            // per vertex, over top-level edges
+  ListPool<std::uint64_t> lattice_edges_;             // top-level edges per lattice_edge()
+  ListPool<std::array<std::uint32_t, 4>> occupants_;  // top-level cells per lattice cell
+  ListPool<std::uint32_t> invalid_at_;  // invalid top-level vertices per pixel (lattice_index)
+  IndexMap<std::uint64_t, EdgeHash> midpoints_;  // per edge_key: the vertex splitting the edge
+  // Per vertex: the last pass that split an edge ending there (see split_edge_pass()).
+  std::vector<std::uint32_t> split_edge_pass_;
+  std::uint32_t pass_ = 0;  // passes begun, the current one included
 
+  // One pass's state, kept to reuse its memory.
+  std::vector<std::uint32_t> marked_;
   std::vector<Pending> pending_;
   std::vector<glm::dvec2> rays_;  // image positions of this pass's new vertices
+  IndexMap<glm::dvec2, PositionHash> ray_of_;
+  std::vector<glm::dvec2> wanted_;           // depth intervals of rays_[k]: wanted_[first[k],
+  std::vector<std::uint32_t> first_wanted_;  // first[k + 1]) (see split())
   std::vector<glm::dvec2> stretch_positions_, stretch_ranges_;
   std::vector<std::uint32_t> first_stretch_;  // stretches of rays_[k]: [first[k], first[k + 1])
-  std::unordered_map<glm::dvec2, std::uint32_t, PositionHash> ray_of_;
+  std::vector<std::uint8_t> claimed_;         // see resolve()
 
   std::size_t grown_ = 0, subdivided_ = 0, invalid_ = 0;
 };
@@ -774,6 +951,10 @@ std::vector<RefinedView> refine_views(std::span<const Ldi> ldis, std::span<const
     // One round trip for the new vertices of all views.
     std::vector<SamplePoint> points;
     std::vector<std::size_t> first(n);
+    std::size_t total = 0;
+    for (std::size_t k = 0; k < n; ++k)
+      total += views[k]->stretch_positions().size();
+    points.reserve(total);
     for (std::size_t k = 0; k < n; ++k) {
       first[k] = points.size();
       const std::span<const glm::dvec2> positions = views[k]->stretch_positions(),
