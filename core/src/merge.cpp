@@ -7,12 +7,14 @@
 #include <cstdint>
 #include <numeric>
 #include <queue>
+#include <span>
 #include <unordered_map>
 #include <vector>
 
 #include <OpenMesh/Core/Mesh/PolyMesh_ArrayKernelT.hh>
 #include <OpenMesh/Core/System/omstream.hh>
 
+#include "ldimesh/core/geometry.hpp"
 #include "ldimesh/core/timing.hpp"
 
 namespace ldimesh {
@@ -278,7 +280,7 @@ class Merger {
   // into triangles; edge flips toward shorter edges; the sewing region's long edges split with
   // their new vertices moved onto the surface; flips again; 3-to-1 merges.
   void enhance(const SurfaceProjection& project) {
-    const bool refine = options_.project && project;
+    const bool refine = bool(project);
     std::vector<FH> quads;
     for (const auto& f : mesh_.faces()) {
       if (refine && mesh_.property(kind_, f) == Kind::kBridge) quads.push_back(f);
@@ -391,9 +393,7 @@ class Merger {
       p[count++] = point(v);
       n += to_glm(mesh_.normal(v));
     }
-    glm::dvec3 face(0.0);  // Newell's normal
-    for (std::size_t i = 0; i < count; ++i)
-      face += glm::cross(p[i], p[(i + 1) % count]);
+    const glm::dvec3 face = newell_normal(std::span(p.data(), count));
     const double a = glm::length(face), b = glm::length(n);
     return a > 0.0 && b > 0.0 && glm::dot(face, n) >= options_.min_facing * a * b;
   }
@@ -562,12 +562,13 @@ class Merger {
     return VH();
   }
 
-  // Newell's normal of a face (not normalised).
+  // Newell's normal of a triangle or quad (not normalised).
   glm::dvec3 face_normal(FH f) const {
-    glm::dvec3 n(0.0);
-    for (const auto& h : mesh_.fh_range(f))
-      n += glm::cross(point(mesh_.from_vertex_handle(h)), point(mesh_.to_vertex_handle(h)));
-    return n;
+    std::array<glm::dvec3, 4> p;
+    std::size_t count = 0;
+    for (const auto& v : mesh_.fv_range(f))
+      if (count < p.size()) p[count++] = point(v);
+    return newell_normal(std::span(p.data(), count));
   }
 
   void set_point(VH v, glm::dvec3 p, glm::dvec3 n) {
@@ -657,10 +658,12 @@ Mesh merge_views(const Mesh& mesh, FaceType faces, const MergeOptions& options, 
   merger.fill_holes();
   stats.sew_seconds = seconds_since(start);
   start = std::chrono::steady_clock::now();
-  if (options.enhance) merger.enhance(project);
+  const SurfaceProjection none;
+  const SurfaceProjection& onto_surface = options.project ? project : none;
+  if (options.enhance) merger.enhance(onto_surface);
   Mesh out = merger.output(faces);
   if (faces == FaceType::quads && options.all_quads)
-    out = quadrangulate(out, options.quads, stats.quads, project);
+    out = quadrangulate(out, options.quads, stats.quads, onto_surface);
   stats.quality_seconds = seconds_since(start);
   return out;
 }

@@ -115,8 +115,9 @@ MeshingResult mesh_ldis(std::span<const Ldi> ldis, const MeshingOptions& options
       if (options.merging.cell_size <= 0.0)
         merging.cell_size = std::max(merging.cell_size, ldi.view.spacing);
     }
-    const SurfaceProjection project =
-        samples && !views.empty() ? sample_projection(*samples, views) : SurfaceProjection();
+    const SurfaceProjection project = samples && !views.empty() && merging_projects(merging)
+                                          ? sample_projection(*samples, views)
+                                          : SurfaceProjection();
     mesh = merge_views(mesh, options.faces, merging, result.merging, project);
     result.seconds.bridge = result.merging.bridge_seconds;
     result.seconds.sew = result.merging.sew_seconds;

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "ldimesh/core/geometry.hpp"
 #include "ldimesh/core/timing.hpp"
 
 namespace ldimesh {
@@ -22,9 +23,7 @@ constexpr std::uint32_t kNone = UINT32_MAX;
 // Shortest over longest edge of the quad p[0..3] if it is convex seen along its (Newell) normal
 // and that normal points the way of `normals` (the sum of its vertex normals); 0 otherwise.
 double quad_quality(const std::array<glm::dvec3, 4>& p, const glm::dvec3& normals) {
-  glm::dvec3 n(0.0);
-  for (int i = 0; i < 4; ++i)
-    n += glm::cross(p[i], p[(i + 1) % 4]);
+  const glm::dvec3 n = newell_normal(p);
   if (!(glm::dot(n, normals) > 0.0)) return 0.0;
   double shortest = std::numeric_limits<double>::infinity(), longest = 0.0;
   for (int i = 0; i < 4; ++i) {
@@ -370,12 +369,8 @@ class Quadrangulator {
   }
 
   bool faces_its_normals(const std::array<std::uint32_t, 4>& v) const {
-    glm::dvec3 n(0.0), normals(0.0);
-    for (int i = 0; i < 4; ++i) {
-      n += glm::cross(pos_[v[i]], pos_[v[(i + 1) % 4]]);
-      normals += nrm_[v[i]];
-    }
-    return glm::dot(n, normals) > 0.0;
+    const std::array<glm::dvec3, 4> p{pos_[v[0]], pos_[v[1]], pos_[v[2]], pos_[v[3]]};
+    return glm::dot(newell_normal(p), nrm_[v[0]] + nrm_[v[1]] + nrm_[v[2]] + nrm_[v[3]]) > 0.0;
   }
 
   glm::dvec3 centroid(std::uint32_t f) const {

@@ -55,6 +55,20 @@ function instrument() {
     const last = window.testShown[window.testShown.length - 1];
     if (step !== undefined && (!last || last.step !== Number(step))) window.testShown.push({ step: Number(step), t: Date.now() });
   }).observe(document, { subtree: true, attributes: true, attributeFilter: ['data-loaded-step'] });
+  // The canvas's pixels that differ from the background #1d2026 (where the mesh shows), row by
+  // row: { width, height, mesh } with mesh[y * width + x] true there.
+  window.testMeshPixels = () => {
+    const gl = document.getElementById('view');
+    const copy = document.createElement('canvas');
+    copy.width = gl.width; copy.height = gl.height;
+    const ctx = copy.getContext('2d');
+    ctx.drawImage(gl, 0, 0);
+    const d = ctx.getImageData(0, 0, copy.width, copy.height).data;
+    const mesh = new Array(d.length / 4);
+    for (let i = 0; i < d.length; i += 4)
+      mesh[i / 4] = Math.abs(d[i] - 0x1d) + Math.abs(d[i + 1] - 0x20) + Math.abs(d[i + 2] - 0x26) > 24;
+    return { width: copy.width, height: copy.height, mesh };
+  };
 }
 
 let browser;
@@ -101,17 +115,11 @@ try {
   // background (a surface cut off by the edges shows there) and how far the corners of the
   // mesh's bounding box project from the canvas centre (> 1: outside the view).
   const inView = () => page.evaluate(() => new Promise((resolve) => requestAnimationFrame(async () => {
-    const gl = document.getElementById('view');
-    const copy = document.createElement('canvas');
-    copy.width = gl.width; copy.height = gl.height;
-    const ctx = copy.getContext('2d');
-    ctx.drawImage(gl, 0, 0);
-    const d = ctx.getImageData(0, 0, copy.width, copy.height).data;
+    const { width, height, mesh: shown } = window.testMeshPixels();
     let edge = 0;
-    for (let y = 0; y < copy.height; ++y) for (let x = 0; x < copy.width; ++x) {
-      if (y > 0 && y < copy.height - 1 && x > 0 && x < copy.width - 1) continue;
-      const i = 4 * (y * copy.width + x);
-      if (Math.abs(d[i] - 0x1d) + Math.abs(d[i + 1] - 0x20) + Math.abs(d[i + 2] - 0x26) > 24) edge++;
+    for (let y = 0; y < height; ++y) for (let x = 0; x < width; ++x) {
+      if (y > 0 && y < height - 1 && x > 0 && x < width - 1) continue;
+      if (shown[y * width + x]) edge++;
     }
     const THREE = await import('/vendor/three/build/three.module.js');
     const { camera, mesh } = window.ldimesh;
@@ -138,16 +146,8 @@ try {
 
   await page.waitForTimeout(500);  // a few frames
   const drawn = await page.evaluate(() => {
-    const gl = document.getElementById('view');
-    const copy = document.createElement('canvas');
-    copy.width = gl.width; copy.height = gl.height;
-    const ctx = copy.getContext('2d');
-    ctx.drawImage(gl, 0, 0);
-    const d = ctx.getImageData(0, 0, copy.width, copy.height).data;
-    let differing = 0;
-    for (let i = 0; i < d.length; i += 4)  // background #1d2026
-      if (Math.abs(d[i] - 0x1d) + Math.abs(d[i + 1] - 0x20) + Math.abs(d[i + 2] - 0x26) > 24) differing++;
-    return differing / (d.length / 4);
+    const { mesh: shown } = window.testMeshPixels();
+    return shown.filter(Boolean).length / shown.length;
   });
   check(drawn > 0.03, `the canvas is not blank (${(100 * drawn).toFixed(1)} % of its pixels show the mesh)`);
   await page.screenshot({ path: `${artifacts}/viewer_step1.png` });

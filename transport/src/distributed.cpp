@@ -82,9 +82,8 @@ Status mesh_distributed(MPI_Comm comm, const RayCaster& caster, const Subdomain&
   MPI_Reduce(&sent, &result.bytes_moved, 1, MPI_UINT64_T, MPI_SUM, 0, comm);
   // Every rank learns whether the step failed anywhere, so all return the same status.
   const int levels = options.meshing.refinement.levels;
-  // §5 merging moves the sewing region's new vertices onto the surface with samples, too.
-  const MergeOptions& merging = options.meshing.merging;
-  const bool projects = merging.enabled && merging.enhance && merging.project;
+  // §5 merging moves new vertices onto the surface with samples, too.
+  const bool projects = merging_projects(options.meshing.merging);
   const Agreement agreed = agree(comm, bool(reduced), levels, projects);
   if (!agreed.reduced) {
     return reduced ? Status::error("reduction failed on another rank") : reduced;

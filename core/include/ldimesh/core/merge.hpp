@@ -37,7 +37,9 @@ struct MergeOptions {
   // Vertices on the surface in the sewing region: bridges and fill triangles span gaps of a few
   // cells with flat faces between samples. Their edges longer than split_length times the length
   // scale are split, and the new vertices moved onto the surface (one projection batch per
-  // pass, at most split_passes passes). Needs a SurfaceProjection; without one nothing is split.
+  // pass, at most split_passes passes); the conversion to quads projects its new and smoothed
+  // vertices too. Needs a SurfaceProjection; without one (or with project = false) nothing is
+  // split and the quads' smoothing is limited instead.
   // A new vertex is looked for on the surface within project_reach times the length scale
   // along a view's ray: a long fill edge across a ripple has its midpoint that far off.
   bool project = true;
@@ -51,6 +53,12 @@ struct MergeOptions {
   bool all_quads = true;
   QuadOptions quads;
 };
+
+// Whether merging with these options asks for samples (a SurfaceProjection): the pipeline makes
+// one from its sample source, and in a parallel run every rank serves requests while it merges.
+inline bool merging_projects(const MergeOptions& options) {
+  return options.enabled && options.project;
+}
 
 struct MergeStats {
   std::size_t dropped_faces = 0;   // input faces that would have made the mesh non-manifold

@@ -18,7 +18,7 @@ struct MeshingOptions {
   MatchOptions matching;
   RefinementOptions refinement;  // §4; levels > 0 needs a SampleSource
   // §5; merging.project uses the SampleSource when there is one
-  MergeOptions merging;          // §5; trims with r = 1 instead of `r` when enabled
+  MergeOptions merging;  // §5; trims with r = 1 instead of `r` when enabled
 };
 
 struct MeshingTimes {
