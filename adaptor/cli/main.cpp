@@ -342,7 +342,13 @@ int run_mesh(const MeshArgs& args) {
                                {"leftover_triangles", q.leftover_triangles},
                                {"projected", q.projected},
                                {"output_quads", q.output_quads},
-                               {"seconds", q.seconds}};
+                               {"seconds", q.seconds},
+                               {"stage_seconds",
+                                {{"setup", q.setup_seconds},
+                                 {"pair", q.pair_seconds},
+                                 {"paths", q.path_seconds},
+                                 {"cleanup", q.cleanup_seconds},
+                                 {"smooth", q.smooth_seconds}}}};
     }
     j["output"] = args.out.empty() ? nlohmann::json(nullptr) : nlohmann::json(args.out);
     j["seconds"] = {{"load", load_seconds},

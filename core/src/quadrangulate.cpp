@@ -214,10 +214,11 @@ class Quadrangulator {
     }
   }
 
-  // Laplacian smoothing of the faces this conversion made (tangential step toward the mean of
-  // the edge neighbours), then back onto the surface with `project`, or, without it, limited to
-  // max_unprojected_move median edges from where each vertex started. Open-boundary vertices
-  // stay.
+  // Laplacian smoothing of the faces this conversion made (tangential steps toward the mean of
+  // the edge neighbours), then back onto the surface with `project` in one batch after the last
+  // step (tangential steps of a fraction of an edge stay well within its reach, and one batch
+  // of rays costs a quarter of one per step), or, without it, limited to max_unprojected_move
+  // median edges from where each vertex started. Open-boundary vertices stay.
   void smooth(const SurfaceProjection& project) {
     if (options_.smoothing_iterations <= 0) return;
     const std::size_t nv = pos_.size();
@@ -254,18 +255,22 @@ class Quadrangulator {
         glm::dvec3 step = options_.smoothing_step * (mean - pos_[v]);
         step -= glm::dot(step, nrm_[v]) * nrm_[v];
         points[i] = pos_[v] + step;
-        normals[i] = nrm_[v];
         if (!project) {
           const glm::dvec3 moved = points[i] - start[i];
           const double d = glm::length(moved);
           if (d > limit) points[i] = start[i] + moved * (limit / d);
         }
       }
-      if (project) stats_.projected += project(points, normals, reach());
-      for (std::size_t i = 0; i < region.size(); ++i) {
+      for (std::size_t i = 0; i < region.size(); ++i)
         pos_[region[i]] = points[i];
-        nrm_[region[i]] = normals[i];
-      }
+    }
+    if (!project) return;
+    for (std::size_t i = 0; i < region.size(); ++i)
+      normals[i] = nrm_[region[i]];
+    stats_.projected += project(points, normals, reach());
+    for (std::size_t i = 0; i < region.size(); ++i) {
+      pos_[region[i]] = points[i];
+      nrm_[region[i]] = normals[i];
     }
   }
 
