@@ -325,6 +325,7 @@ int run_mesh(const MeshArgs& args) {
                     {"merges", merged.merges},
                     {"split_edges", merged.split_edges},
                     {"projected", merged.projected},
+                    {"crossings_undone", merged.crossings_undone},
                     {"split_passes", merged.split_passes},
                     {"components", merged.components}};
     if (args.merge && args.quads) {
@@ -341,6 +342,7 @@ int run_mesh(const MeshArgs& args) {
                                {"boundary_splits", q.boundary_splits},
                                {"leftover_triangles", q.leftover_triangles},
                                {"projected", q.projected},
+                               {"crossings_undone", q.crossings_undone},
                                {"output_quads", q.output_quads},
                                {"seconds", q.seconds},
                                {"stage_seconds",

@@ -14,6 +14,7 @@
 #include <OpenMesh/Core/Mesh/PolyMesh_ArrayKernelT.hh>
 #include <OpenMesh/Core/System/omstream.hh>
 
+#include "ldimesh/core/crossings.hpp"
 #include "ldimesh/core/geometry.hpp"
 #include "ldimesh/core/timing.hpp"
 
@@ -357,8 +358,16 @@ class Merger {
     for (std::uint32_t v = 0; v < out.positions.size(); ++v)
       if (pieces.find(v) == v) ++stats_.components;
     stats_.unfilled_holes = count_loops();
+    moved_out_.clear();
+    for (const Move& m : moves_)
+      if (index[m.v.idx()] != UINT32_MAX)
+        moved_out_.push_back({index[m.v.idx()], glm::vec3(m.point), glm::vec3(m.normal)});
     return out;
   }
+
+  // The output's vertices moved onto the surface, with their midpoints (for undo_crossing_moves).
+  const std::vector<VertexMove>& moved() const { return moved_out_; }
+  double scale() const { return scale_; }
 
  private:
   glm::dvec3 point(VH v) const { return to_glm(mesh_.point(v)); }
@@ -527,6 +536,7 @@ class Merger {
           set_point(fresh[k], mid[k], mid_normals[k]);
         } else {
           ++stats_.projected;
+          moves_.push_back({fresh[k], mid[k], mid_normals[k]});
         }
       }
     }
@@ -641,6 +651,13 @@ class Merger {
   OpenMesh::VPropHandleT<float> scalar_;
   double scale_ = 0.0;            // the length scale of the limits: cell_size or the median edge
   std::vector<FH> region_faces_;  // faces added by bridging, filling and enhancement
+  // The sewing region's vertices moved onto the surface, with their midpoint and its normal.
+  struct Move {
+    VH v;
+    glm::dvec3 point, normal;
+  };
+  std::vector<Move> moves_;
+  std::vector<VertexMove> moved_out_;
 };
 
 }  // namespace
@@ -662,6 +679,15 @@ Mesh merge_views(const Mesh& mesh, FaceType faces, const MergeOptions& options, 
   const SurfaceProjection& onto_surface = options.project ? project : none;
   if (options.enhance) merger.enhance(onto_surface);
   Mesh out = merger.output(faces);
+  // Projected vertices whose faces pass through other faces go back to their edge midpoints
+  // (crossings.hpp): without the moves no face crossed; with them, Barth's merged meshes had
+  // crossing pairs near its double points, where the cone's two nappes are a cell or two apart.
+  if (!merger.moved().empty() && merger.scale() > 0.0) {
+    stats.crossings_undone = undo_crossing_moves(
+        out, merger.moved(), std::max(1.0, options.split_length) * merger.scale(),
+        options.crossing_min_move * merger.scale());
+    stats.projected -= stats.crossings_undone;
+  }
   if (faces == FaceType::quads && options.all_quads)
     out = quadrangulate(out, options.quads, stats.quads, onto_surface);
   stats.quality_seconds = seconds_since(start);

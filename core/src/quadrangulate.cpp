@@ -10,8 +10,10 @@
 #include <queue>
 #include <stdexcept>
 #include <string>
+#include <tuple>
 #include <vector>
 
+#include "ldimesh/core/crossings.hpp"
 #include "ldimesh/core/geometry.hpp"
 #include "ldimesh/core/timing.hpp"
 
@@ -242,8 +244,10 @@ class Quadrangulator {
     for (std::uint32_t v = 0; v < nv; ++v)
       if (moves[v] && !boundary[v] && count[v + 1] > count[v]) region.push_back(v);
     std::vector<glm::dvec3> start(region.size()), points(region.size()), normals(region.size());
-    for (std::size_t i = 0; i < region.size(); ++i)
+    for (std::size_t i = 0; i < region.size(); ++i) {
       start[i] = pos_[region[i]];
+      remember(region[i]);
+    }
     const double limit = options_.max_unprojected_move * median_edge_;
     for (int it = 0; it < options_.smoothing_iterations; ++it) {
       for (std::size_t i = 0; i < region.size(); ++i) {
@@ -274,6 +278,22 @@ class Quadrangulator {
     }
   }
 
+  // Keeps where v was before its first move (a path vertex: its edge's midpoint).
+  void remember(std::uint32_t v) {
+    if (v >= before_.size()) before_.resize(pos_.size(), {glm::dvec3(0.0), glm::dvec3(0.0)});
+    if (remembered_.size() < before_.size()) remembered_.resize(before_.size(), 0);
+    if (remembered_[v]) return;
+    remembered_[v] = 1;
+    before_[v] = {pos_[v], nrm_[v]};
+    moved_.push_back(v);
+  }
+
+  // The output's moved vertices (projected path vertices, smoothed vertices) with where each was
+  // before its first move (for undo_crossing_moves).
+  std::vector<VertexMove> moved_out_;
+  const std::vector<VertexMove>& moved() const { return moved_out_; }
+  double median_edge() const { return median_edge_; }
+
   Mesh output() {
     Mesh out;
     out.view_dirs = in_.view_dirs;
@@ -297,6 +317,9 @@ class Quadrangulator {
       (n == 4 ? out.quad_view : out.triangle_view).push_back(face_view_[f]);
     }
     stats_.output_quads = out.quad_count();
+    moved_out_.clear();
+    for (std::uint32_t v : moved_)
+      if (index[v] != kNone) moved_out_.push_back({index[v], before_[v].first, before_[v].second});
     return out;
   }
 
@@ -624,6 +647,8 @@ class Quadrangulator {
 
   void project_new(std::uint32_t first, const SurfaceProjection& project) {
     if (!project || first == pos_.size()) return;
+    for (std::uint32_t v = first; v < pos_.size(); ++v)
+      remember(v);
     std::vector<glm::dvec3> points(pos_.begin() + first, pos_.end());
     std::vector<glm::dvec3> normals(nrm_.begin() + first, nrm_.end());
     stats_.projected += project(points, normals, reach());
@@ -755,6 +780,10 @@ class Quadrangulator {
   // Vertex rings for merges and flips.
   std::vector<std::uint32_t> out_he_, valence_;
   std::vector<std::uint8_t> boundary_;
+  // Moved vertices (projection and smoothing) and where each was before.
+  std::vector<std::pair<glm::dvec3, glm::dvec3>> before_;  // position, normal
+  std::vector<std::uint8_t> remembered_;
+  std::vector<std::uint32_t> moved_;
 };
 
 }  // namespace
@@ -779,6 +808,11 @@ Mesh quadrangulate(const Mesh& mesh, const QuadOptions& options, QuadStats& stat
   lap(stats.cleanup_seconds);
   q.smooth(project);
   Mesh out = q.output();
+  // Moved vertices whose faces pass through other faces go back (crossings.hpp): near Barth's
+  // double points a path vertex projected onto the surface can land on the other sheet.
+  if (!q.moved().empty() && q.median_edge() > 0.0)
+    stats.crossings_undone = undo_crossing_moves(out, q.moved(), 2.0 * q.median_edge(),
+                                                 options.crossing_min_move * q.median_edge());
   lap(stats.smooth_seconds);
   stats.seconds = seconds_since(start);
   return out;

@@ -1,6 +1,7 @@
 // Small geometric value types shared by the whole core.
 #pragma once
 
+#include <cmath>
 #include <cstddef>
 #include <span>
 
@@ -26,6 +27,20 @@ inline glm::dvec3 newell_normal(std::span<const glm::dvec3> p) {
   for (std::size_t i = 0; i < p.size(); ++i)
     n += glm::cross(p[i], p[(i + 1) % p.size()]);
   return n;
+}
+
+// Whether the segment p–q passes through the triangle (a, b, c) strictly inside both (by more
+// than eps in the barycentric and segment parameters): touching, sharing an edge or running in
+// the triangle's plane do not count. Two triangles pass through each other when an edge of one
+// crosses the other.
+inline bool segment_crosses_triangle(glm::dvec3 p, glm::dvec3 q, glm::dvec3 a, glm::dvec3 b,
+                                     glm::dvec3 c, double eps = 1e-9) {
+  const glm::dvec3 d = q - p, e1 = b - a, e2 = c - a, h = glm::cross(d, e2);
+  const double det = glm::dot(e1, h);
+  if (!(std::abs(det) > 1e-18)) return false;
+  const glm::dvec3 s = p - a, sq = glm::cross(s, e1);
+  const double u = glm::dot(s, h) / det, v = glm::dot(d, sq) / det, t = glm::dot(e2, sq) / det;
+  return u > eps && v > eps && u + v < 1.0 - eps && t > eps && t < 1.0 - eps;
 }
 
 }  // namespace ldimesh

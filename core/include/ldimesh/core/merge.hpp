@@ -46,6 +46,9 @@ struct MergeOptions {
   double split_length = 1.5;
   double project_reach = 4.0;
   int split_passes = 6;
+  // A moved vertex whose faces pass through another face goes back to its edge midpoint
+  // (crossings.hpp); moves shorter than this times the length scale are not checked.
+  double crossing_min_move = 0.05;
   // 3-to-1 merge: |det(a − v, b − v, c − v)| below this times the mean edge length cubed.
   double coplanar = 0.02;
   // (iv) For FaceType::quads output: convert to quads only (quadrangulate, with `quads`); false
@@ -61,26 +64,27 @@ inline bool merging_projects(const MergeOptions& options) {
 }
 
 struct MergeStats {
-  std::size_t dropped_faces = 0;   // input faces that would have made the mesh non-manifold
-  std::size_t boundary_faces = 0;  // faces removed as the boundary layer
-  std::size_t patches = 0;         // connected pieces before bridging
-  std::size_t bridge_pairs = 0;    // patch pairs close enough to test
-  std::size_t bridges = 0;         // (i) bridge quads inserted
-  std::size_t holes = 0;           // (ii) boundary loops before filling
-  std::size_t fill_triangles = 0;  // (ii) triangles added by ear cutting
-  std::size_t unfilled_holes = 0;  // boundary loops of the output (reported, not hidden)
-  std::size_t split_quads = 0;     // (iii) quads next to fill triangles split
-  std::size_t flips = 0;           // (iii) edge flips
-  std::size_t merges = 0;          // (iii) 3-to-1 merges
-  std::size_t split_edges = 0;     // sewing-region edges split (a new vertex each)
-  std::size_t projected = 0;       // of those new vertices, moved onto the surface
-  std::size_t split_passes = 0;    // projection batches (round trips to the ray casters)
-  std::size_t lost_faces = 0;      // (iii) faces OpenMesh refused to re-add (holes count them)
-  std::size_t components = 0;      // connected pieces of the output
-  double bridge_seconds = 0.0;     // layer removal, patches and bridges (Table 1 "Bridge")
-  double sew_seconds = 0.0;        // hole filling (Table 1 "Sew")
-  double quality_seconds = 0.0;    // enhancement, quads (iv) and output (Table 1 "Qual.")
-  QuadStats quads;                 // (iv), for FaceType::quads output
+  std::size_t dropped_faces = 0;     // input faces that would have made the mesh non-manifold
+  std::size_t boundary_faces = 0;    // faces removed as the boundary layer
+  std::size_t patches = 0;           // connected pieces before bridging
+  std::size_t bridge_pairs = 0;      // patch pairs close enough to test
+  std::size_t bridges = 0;           // (i) bridge quads inserted
+  std::size_t holes = 0;             // (ii) boundary loops before filling
+  std::size_t fill_triangles = 0;    // (ii) triangles added by ear cutting
+  std::size_t unfilled_holes = 0;    // boundary loops of the output (reported, not hidden)
+  std::size_t split_quads = 0;       // (iii) quads next to fill triangles split
+  std::size_t flips = 0;             // (iii) edge flips
+  std::size_t merges = 0;            // (iii) 3-to-1 merges
+  std::size_t split_edges = 0;       // sewing-region edges split (a new vertex each)
+  std::size_t projected = 0;         // of those new vertices, moved onto the surface (and kept)
+  std::size_t crossings_undone = 0;  // moves undone: a face of the vertex crossed another face
+  std::size_t split_passes = 0;      // projection batches (round trips to the ray casters)
+  std::size_t lost_faces = 0;        // (iii) faces OpenMesh refused to re-add (holes count them)
+  std::size_t components = 0;        // connected pieces of the output
+  double bridge_seconds = 0.0;       // layer removal, patches and bridges (Table 1 "Bridge")
+  double sew_seconds = 0.0;          // hole filling (Table 1 "Sew")
+  double quality_seconds = 0.0;      // enhancement, quads (iv) and output (Table 1 "Qual.")
+  QuadStats quads;                   // (iv), for FaceType::quads output
 };
 
 // Merges the per-view meshes in `mesh` (faces of different views share no vertex; quads and/or

@@ -33,6 +33,9 @@ struct QuadOptions {
   double max_unprojected_move = 0.25;
   // Projection reach, in median edge lengths of the input.
   double projection_reach = 1.0;
+  // Moved vertices (projected, smoothed) whose faces pass through another face go back to where
+  // they were (crossings.hpp); moves shorter than this many median edges are not checked.
+  double crossing_min_move = 0.05;
 };
 
 struct QuadStats {
@@ -48,6 +51,7 @@ struct QuadStats {
   std::size_t boundary_splits = 0;     // paths from a triangle to an open edge, split there
   std::size_t leftover_triangles = 0;  // triangles that could not be converted (kept)
   std::size_t projected = 0;           // vertices the projection moved (all stages)
+  std::size_t crossings_undone = 0;    // moved vertices put back: a face of theirs crossed another
   std::size_t output_quads = 0;
   double median_edge = 0.0;      // of the input: the unit of max_unprojected_move and the reach
   double setup_seconds = 0.0;    // checks and half-edges

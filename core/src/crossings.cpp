@@ -1,0 +1,268 @@
+#include "ldimesh/core/crossings.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <vector>
+
+#include "ldimesh/core/geometry.hpp"
+
+namespace ldimesh {
+namespace {
+
+// The triangles a face is tested as: a triangle itself, a quad both ways.
+std::size_t split(const CrossingPolygon& g, std::array<std::array<glm::dvec3, 3>, 4>& t) {
+  if (g.n == 3) {
+    t[0] = {g.p[0], g.p[1], g.p[2]};
+    return 1;
+  }
+  t[0] = {g.p[0], g.p[1], g.p[2]};
+  t[1] = {g.p[0], g.p[2], g.p[3]};
+  t[2] = {g.p[1], g.p[2], g.p[3]};
+  t[3] = {g.p[1], g.p[3], g.p[0]};
+  return 4;
+}
+
+std::uint64_t cell_key(int x, int y, int z) {
+  return (std::uint64_t(std::uint32_t(x) & 0x1FFFFF) << 42) |
+         (std::uint64_t(std::uint32_t(y) & 0x1FFFFF) << 21) |
+         std::uint64_t(std::uint32_t(z) & 0x1FFFFF);
+}
+
+struct Bounds {
+  glm::dvec3 lo, hi;
+  Bounds(glm::dvec3 l, glm::dvec3 h) : lo(l), hi(h) {}
+  explicit Bounds(const CrossingPolygon& g) : lo(g.p[0]), hi(g.p[0]) {
+    for (std::size_t i = 1; i < g.n; ++i)
+      lo = glm::min(lo, g.p[i]), hi = glm::max(hi, g.p[i]);
+  }
+  bool overlaps(const Bounds& o) const {
+    return lo.x <= o.hi.x && o.lo.x <= hi.x && lo.y <= o.hi.y && o.lo.y <= hi.y && lo.z <= o.hi.z &&
+           o.lo.z <= hi.z;
+  }
+  // Calls f with the key of every cell of size `cell` the box touches.
+  template <class F>
+  void cells(double cell, F&& f) const {
+    const glm::ivec3 a(glm::floor(lo / cell)), b(glm::floor(hi / cell));
+    for (int z = a.z; z <= b.z; ++z)
+      for (int y = a.y; y <= b.y; ++y)
+        for (int x = a.x; x <= b.x; ++x)
+          f(cell_key(x, y, z));
+  }
+};
+
+// A set of cells as bits of a hashed table, in front of the grid's map: most faces are far from
+// every star, and a false positive only costs a look.
+class CellBits {
+ public:
+  CellBits() : bits_(std::size_t(1) << 16, 0) {}  // 2^22 bits
+  void set(std::uint64_t k) { bits_[hash(k) >> 6] |= std::uint64_t(1) << (hash(k) & 63); }
+  bool test(std::uint64_t k) const { return bits_[hash(k) >> 6] >> (hash(k) & 63) & 1; }
+
+ private:
+  static std::uint64_t hash(std::uint64_t k) { return (k * 0x9E3779B97F4A7C15ull) >> 42; }
+  std::vector<std::uint64_t> bits_;
+};
+
+}  // namespace
+
+bool polygons_cross(const CrossingPolygon& a, const CrossingPolygon& b) {
+  for (std::size_t i = 0; i < a.n; ++i)
+    for (std::size_t j = 0; j < b.n; ++j)
+      if (a.v[i] == b.v[j]) return false;  // neighbours meet at a vertex or an edge
+  std::array<std::array<glm::dvec3, 3>, 4> ta, tb;
+  const std::size_t na = split(a, ta), nb = split(b, tb);
+  // A triangle wholly on one side of the other's plane cannot meet it (the cheap test that
+  // settles most pairs of nearby faces of a smooth surface).
+  auto apart = [](const std::array<glm::dvec3, 3>& s, const std::array<glm::dvec3, 3>& t) {
+    const glm::dvec3 n = glm::cross(t[1] - t[0], t[2] - t[0]);
+    const double d0 = glm::dot(n, s[0] - t[0]), d1 = glm::dot(n, s[1] - t[0]),
+                 d2 = glm::dot(n, s[2] - t[0]);
+    return (d0 > 0.0 && d1 > 0.0 && d2 > 0.0) || (d0 < 0.0 && d1 < 0.0 && d2 < 0.0);
+  };
+  for (std::size_t i = 0; i < na; ++i)
+    for (std::size_t j = 0; j < nb; ++j) {
+      const auto &s = ta[i], &t = tb[j];
+      if (apart(s, t) || apart(t, s)) continue;
+      for (int k = 0; k < 3; ++k)
+        if (segment_crosses_triangle(s[k], s[(k + 1) % 3], t[0], t[1], t[2]) ||
+            segment_crosses_triangle(t[k], t[(k + 1) % 3], s[0], s[1], s[2]))
+          return true;
+    }
+  return false;
+}
+
+namespace {
+// A cell → stars table: entries sorted by cell, an open-addressing index over the cells.
+class StarGrid {
+ public:
+  void add(std::uint64_t key, std::uint32_t star) { entries_.push_back({key, star}); }
+  void build() {
+    std::sort(entries_.begin(), entries_.end());
+    std::size_t size = 16;
+    while (size < 2 * entries_.size())
+      size *= 2;
+    slots_.assign(size, UINT32_MAX);
+    for (std::uint32_t i = 0; i < entries_.size(); ++i) {
+      if (i > 0 && entries_[i].first == entries_[i - 1].first) continue;
+      std::size_t at = slot(entries_[i].first);
+      while (slots_[at] != UINT32_MAX)
+        at = (at + 1) & (slots_.size() - 1);
+      slots_[at] = i;
+    }
+  }
+  // Calls f(star) for each star in the cell.
+  template <class F>
+  void for_each(std::uint64_t key, F&& f) const {
+    if (entries_.empty()) return;
+    for (std::size_t at = slot(key); slots_[at] != UINT32_MAX;
+         at = (at + 1) & (slots_.size() - 1)) {
+      if (entries_[slots_[at]].first != key) continue;
+      for (std::uint32_t i = slots_[at]; i < entries_.size() && entries_[i].first == key; ++i)
+        f(entries_[i].second);
+      return;
+    }
+  }
+
+ private:
+  std::size_t slot(std::uint64_t key) const {
+    return std::size_t((key * 0x9E3779B97F4A7C15ull) >> 20) & (slots_.size() - 1);
+  }
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> entries_;
+  std::vector<std::uint32_t> slots_;
+};
+}  // namespace
+
+std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, double cell,
+                                double min_move, int max_rounds) {
+  if (!(cell > 0.0) || !std::isfinite(cell))
+    throw std::invalid_argument("undo_crossing_moves: the cell size must be positive");
+  const std::size_t nv = mesh.positions.size();
+  if (mesh.normals.size() != nv)
+    throw std::invalid_argument("undo_crossing_moves: one normal per vertex needed");
+  if (mesh.triangles.size() % 3 != 0 || mesh.quads.size() % 4 != 0)
+    throw std::invalid_argument("undo_crossing_moves: incomplete face");
+  const std::size_t nt = mesh.triangle_count(), nf = nt + mesh.quad_count();
+  for (std::uint32_t v : mesh.triangles)
+    if (v >= nv) throw std::invalid_argument("undo_crossing_moves: face vertex out of range");
+  for (std::uint32_t v : mesh.quads)
+    if (v >= nv) throw std::invalid_argument("undo_crossing_moves: face vertex out of range");
+  std::vector<std::uint32_t> move_of(nv, UINT32_MAX);  // vertex → its (first) entry in moves
+  std::vector<std::uint32_t> check;
+  for (std::uint32_t i = 0; i < moves.size(); ++i) {
+    const std::uint32_t v = moves[i].vertex;
+    if (v >= nv) throw std::invalid_argument("undo_crossing_moves: moved vertex out of range");
+    if (move_of[v] != UINT32_MAX) continue;
+    move_of[v] = i;
+    if (!(glm::distance(moves[i].position, mesh.positions[v]) >= min_move)) continue;
+    check.push_back(v);
+  }
+  if (check.empty()) return 0;
+  auto polygon = [&](std::uint32_t f) {
+    CrossingPolygon g;
+    const std::uint32_t* c = f < nt ? &mesh.triangles[3 * f] : &mesh.quads[4 * (f - nt)];
+    g.n = f < nt ? 3 : 4;
+    for (std::size_t k = 0; k < g.n; ++k) {
+      g.v[k] = c[k];
+      g.p[k] = glm::dvec3(mesh.positions[c[k]]);
+    }
+    return g;
+  };
+  // The faces around each vertex (counting sort of the corners).
+  std::vector<std::uint32_t> first(nv + 1, 0);
+  for (std::uint32_t v : mesh.triangles)
+    ++first[v + 1];
+  for (std::uint32_t v : mesh.quads)
+    ++first[v + 1];
+  for (std::size_t v = 0; v < nv; ++v)
+    first[v + 1] += first[v];
+  std::vector<std::uint32_t> faces_of(first[nv]), fill(first.begin(), first.end() - 1);
+  double widest = 0.0;  // the largest box diagonal of a face
+  for (std::uint32_t f = 0; f < nf; ++f) {
+    const CrossingPolygon g = polygon(f);
+    for (std::size_t k = 0; k < g.n; ++k)
+      faces_of[fill[g.v[k]]++] = f;
+    const Bounds b(g);
+    widest = std::max(widest, glm::distance(b.lo, b.hi));
+  }
+  // A face that meets a star has every corner within its own box diagonal of the star's box:
+  // the faces to test are found through their corners in `near` cells of that size around the
+  // stars (in the first round that is most of the mesh near the moves; in later ones, few).
+  const double near_cell = std::max(widest, cell);
+  auto near_key = [&](glm::dvec3 p) {
+    const glm::ivec3 c(glm::floor(p / near_cell));
+    return cell_key(c.x, c.y, c.z);
+  };
+  std::vector<std::uint8_t> still(nv, 0), star_of(nf, 0);
+  for (std::uint32_t v : check)
+    still[v] = 1;
+  std::size_t put_back = 0;
+  for (int round = 0; round < max_rounds && !check.empty(); ++round) {
+    std::vector<std::uint32_t> star;  // faces around the vertices to check, each once
+    for (std::uint32_t v : check)
+      for (std::uint32_t k = first[v]; k < first[v + 1]; ++k)
+        if (!star_of[faces_of[k]]) {
+          star_of[faces_of[k]] = 1;
+          star.push_back(faces_of[k]);
+        }
+    std::sort(star.begin(), star.end());
+    std::vector<CrossingPolygon> stars;
+    std::vector<Bounds> star_bounds;
+    StarGrid grid;
+    CellBits in_grid, near;
+    for (std::uint32_t f : star) {
+      star_of[f] = 0;
+      stars.push_back(polygon(f));
+      star_bounds.emplace_back(stars.back());
+      const Bounds& b = star_bounds.back();
+      b.cells(cell, [&](std::uint64_t k) {
+        grid.add(k, std::uint32_t(stars.size() - 1));
+        in_grid.set(k);
+      });
+      Bounds{b.lo - near_cell, b.hi + near_cell}.cells(near_cell,
+                                                       [&](std::uint64_t k) { near.set(k); });
+    }
+    std::vector<std::uint32_t> back;
+    auto note = [&](const CrossingPolygon& g) {
+      for (std::size_t i = 0; i < g.n; ++i)
+        if (still[g.v[i]]) back.push_back(g.v[i]);
+    };
+    grid.build();
+    auto is_near = [&](std::uint32_t v) {
+      return near.test(near_key(glm::dvec3(mesh.positions[v])));
+    };
+    for (std::uint32_t v = 0; v < nv; ++v) {
+      if (!is_near(v)) continue;
+      for (std::uint32_t i = first[v]; i < first[v + 1]; ++i) {
+        const CrossingPolygon g = polygon(faces_of[i]);
+        std::size_t k0 = 0;  // each face once: from its first near corner
+        while (!is_near(g.v[k0]))
+          ++k0;
+        if (g.v[k0] != v) continue;
+        const Bounds b(g);
+        b.cells(cell, [&](std::uint64_t k) {
+          if (!in_grid.test(k)) return;
+          grid.for_each(k, [&](std::uint32_t s) {
+            if (b.overlaps(star_bounds[s]) && polygons_cross(g, stars[s])) {
+              note(g);
+              note(stars[s]);
+            }
+          });
+        });
+      }
+    }
+    std::sort(back.begin(), back.end());
+    back.erase(std::unique(back.begin(), back.end()), back.end());
+    for (std::uint32_t v : back) {
+      const VertexMove& m = moves[move_of[v]];
+      mesh.positions[v] = m.position;
+      mesh.normals[v] = m.normal;
+      still[v] = 0;
+    }
+    put_back += back.size();
+    check = std::move(back);
+  }
+  return put_back;
+}
+
+}  // namespace ldimesh
