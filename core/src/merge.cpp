@@ -99,7 +99,6 @@ class Merger {
     };
     add_input(in.quads, in.quad_view, 4);
     add_input(in.triangles, in.triangle_view, 3);
-    // A length scale for the limits: the median edge of the input.
     // The length scale for the limits: the LDI cell size when the caller knows it (refined
     // meshes have many short edges, their median would make every limit too tight), else the
     // median edge of the input.

@@ -10,7 +10,6 @@
 #include <queue>
 #include <stdexcept>
 #include <string>
-#include <tuple>
 #include <vector>
 
 #include "ldimesh/core/crossings.hpp"
