@@ -289,7 +289,6 @@ class Quadrangulator {
 
   // The output's moved vertices (projected path vertices, smoothed vertices) with where each was
   // before its first move (for undo_crossing_moves).
-  std::vector<VertexMove> moved_out_;
   const std::vector<VertexMove>& moved() const { return moved_out_; }
   double median_edge() const { return median_edge_; }
 
@@ -783,6 +782,7 @@ class Quadrangulator {
   std::vector<std::pair<glm::dvec3, glm::dvec3>> before_;  // position, normal
   std::vector<std::uint8_t> remembered_;
   std::vector<std::uint32_t> moved_;
+  std::vector<VertexMove> moved_out_;  // the same in output indices
 };
 
 }  // namespace
