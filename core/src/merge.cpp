@@ -602,6 +602,15 @@ class Merger {
     if (mesh_.find_halfedge(c, d).is_valid()) return HH();
     if (mesh_.valence(a) <= 3 || mesh_.valence(b) <= 3) return HH();
     if (!faces_its_normals({a, d, c}) || !faces_its_normals({d, b, c})) return HH();
+    // The flip must not fold the pair more sharply than it is: where two sheets meet (Barth's
+    // double points) the other diagonal of a folded pair cuts through the other sheet (without
+    // this, Barth 64² kept three crossing pairs; with it none, and the same forward mean).
+    auto cosine = [&](VH p, VH q, VH r, VH s, VH t, VH u) {
+      const glm::dvec3 n1 = glm::cross(point(q) - point(p), point(r) - point(p));
+      const glm::dvec3 n2 = glm::cross(point(t) - point(s), point(u) - point(s));
+      return glm::dot(n1, n2) / (glm::length(n1) * glm::length(n2));
+    };
+    if (!(cosine(a, d, c, d, b, c) >= cosine(a, b, c, b, a, d))) return HH();
     const Kind kf = mesh_.property(kind_, f), kg = mesh_.property(kind_, g);
     mesh_.delete_face(f, false);
     mesh_.delete_face(g, false);

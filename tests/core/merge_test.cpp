@@ -205,12 +205,15 @@ TEST(Merge, CrossingCheckSeesCrossingTriangles) {
 }
 
 // Bridges and fill triangles never pass through other faces: the merged meshes of the sphere and
-// the torus have no crossing faces, with triangle and with quad output. (The Klein bottle
-// crosses itself, so it is not in this test; Barth's sextic is in the next.)
+// the torus have no crossing faces, with triangle and with quad output, and Barth's sextic none
+// with triangle output (its conical double points, where two sheets are a cell apart, are the
+// hard case: crossing moves undone, no flip that folds a pair more sharply; docs/method.md, §5).
+// (The Klein bottle crosses itself, so it is not in this test; Barth's quads are in the next.)
 TEST(Merge, BridgesAndFillsDoNotOverlap) {
-  for (const char* surface : {"sphere", "torus"})
+  for (const char* surface : {"sphere", "torus", "barth"})
     for (int res : {64, 128})
       for (FaceType faces : {FaceType::triangles, FaceType::quads}) {
+        if (std::string(surface) == "barth" && faces == FaceType::quads) continue;
         SCOPED_TRACE(std::string(surface) + " " + std::to_string(res) +
                      (faces == FaceType::quads ? " quads" : " triangles"));
         const MeshingResult r = merged(surface, res, true, faces);
@@ -221,11 +224,10 @@ TEST(Merge, BridgesAndFillsDoNotOverlap) {
       }
 }
 
-// Barth's conical double points, where two sheets are a cell apart: moving the sewing region's
-// new vertices onto the surface (and the quad conversion's path vertices and smoothing) pushes
-// faces through the other sheet; those moves are undone (crossings.hpp). Not every crossing
-// comes from a move (docs/method.md, §5): the test holds the undo to removing most of them, and
-// the triangle output at 128² to none.
+// Near Barth's double points, moving the sewing region's new vertices onto the surface (and the
+// quad conversion's path vertices and smoothing) pushes faces through the other sheet; those
+// moves are undone (crossings.hpp). With quad output not every crossing comes from a move
+// (docs/method.md, §5): the test holds the undo to removing at least three in four there.
 TEST(Merge, CrossingMovesAreUndoneNearDoublePoints) {
   for (int res : {64, 128})
     for (FaceType faces : {FaceType::triangles, FaceType::quads}) {
@@ -238,8 +240,10 @@ TEST(Merge, CrossingMovesAreUndoneNearDoublePoints) {
       EXPECT_GT(quads ? undone.merging.quads.crossings_undone : undone.merging.crossings_undone,
                 0u);
       EXPECT_GT(before, 0u);
-      EXPECT_LE(5 * after, before) << before << " → " << after;
-      if (!quads && res == 128) EXPECT_EQ(after, 0u);
+      if (quads)
+        EXPECT_LE(4 * after, before) << before << " → " << after;
+      else
+        EXPECT_EQ(after, 0u) << before << " → " << after;
     }
 }
 
