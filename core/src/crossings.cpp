@@ -5,6 +5,7 @@
 #include <stdexcept>
 #include <vector>
 
+#include "index_map.hpp"
 #include "ldimesh/core/geometry.hpp"
 
 namespace ldimesh {
@@ -23,12 +24,6 @@ std::size_t split(const CrossingPolygon& g, std::array<std::array<glm::dvec3, 3>
   return 4;
 }
 
-std::uint64_t cell_key(int x, int y, int z) {
-  return (std::uint64_t(std::uint32_t(x) & 0x1FFFFF) << 42) |
-         (std::uint64_t(std::uint32_t(y) & 0x1FFFFF) << 21) |
-         std::uint64_t(std::uint32_t(z) & 0x1FFFFF);
-}
-
 struct Bounds {
   glm::dvec3 lo, hi;
   Bounds(glm::dvec3 l, glm::dvec3 h) : lo(l), hi(h) {}
@@ -43,25 +38,34 @@ struct Bounds {
   // Calls f with the key of every cell of size `cell` the box touches.
   template <class F>
   void cells(double cell, F&& f) const {
-    const glm::ivec3 a(glm::floor(lo / cell)), b(glm::floor(hi / cell));
+    const glm::ivec3 a = grid_cell(lo, cell), b = grid_cell(hi, cell);
     for (int z = a.z; z <= b.z; ++z)
       for (int y = a.y; y <= b.y; ++y)
         for (int x = a.x; x <= b.x; ++x)
-          f(cell_key(x, y, z));
+          f(grid_cell_key({x, y, z}));
   }
 };
 
-// A set of cells as bits of a hashed table, in front of the grid's map: most faces are far from
-// every star, and a false positive only costs a look.
-class CellBits {
+// A cell → stars table: (cell, star) entries sorted by cell, and the first entry of each cell.
+class StarGrid {
  public:
-  CellBits() : bits_(std::size_t(1) << 16, 0) {}  // 2^22 bits
-  void set(std::uint64_t k) { bits_[hash(k) >> 6] |= std::uint64_t(1) << (hash(k) & 63); }
-  bool test(std::uint64_t k) const { return bits_[hash(k) >> 6] >> (hash(k) & 63) & 1; }
+  void add(std::uint64_t key, std::uint32_t star) { entries_.push_back({key, star}); }
+  void build() {
+    std::sort(entries_.begin(), entries_.end());
+    first_.reserve(entries_.size());
+    for (std::uint32_t i = 0; i < entries_.size(); ++i)
+      first_.try_emplace(entries_[i].first, i);
+  }
+  // Calls f(star) for each star in the cell.
+  template <class F>
+  void for_each(std::uint64_t key, F&& f) const {
+    for (std::uint32_t i = first_.find(key); i < entries_.size() && entries_[i].first == key; ++i)
+      f(entries_[i].second);
+  }
 
  private:
-  static std::uint64_t hash(std::uint64_t k) { return (k * 0x9E3779B97F4A7C15ull) >> 42; }
-  std::vector<std::uint64_t> bits_;
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> entries_;
+  IndexMap<std::uint64_t, MixHash> first_;
 };
 
 }  // namespace
@@ -91,47 +95,6 @@ bool polygons_cross(const CrossingPolygon& a, const CrossingPolygon& b) {
     }
   return false;
 }
-
-namespace {
-// A cell → stars table: entries sorted by cell, an open-addressing index over the cells.
-class StarGrid {
- public:
-  void add(std::uint64_t key, std::uint32_t star) { entries_.push_back({key, star}); }
-  void build() {
-    std::sort(entries_.begin(), entries_.end());
-    std::size_t size = 16;
-    while (size < 2 * entries_.size())
-      size *= 2;
-    slots_.assign(size, UINT32_MAX);
-    for (std::uint32_t i = 0; i < entries_.size(); ++i) {
-      if (i > 0 && entries_[i].first == entries_[i - 1].first) continue;
-      std::size_t at = slot(entries_[i].first);
-      while (slots_[at] != UINT32_MAX)
-        at = (at + 1) & (slots_.size() - 1);
-      slots_[at] = i;
-    }
-  }
-  // Calls f(star) for each star in the cell.
-  template <class F>
-  void for_each(std::uint64_t key, F&& f) const {
-    if (entries_.empty()) return;
-    for (std::size_t at = slot(key); slots_[at] != UINT32_MAX;
-         at = (at + 1) & (slots_.size() - 1)) {
-      if (entries_[slots_[at]].first != key) continue;
-      for (std::uint32_t i = slots_[at]; i < entries_.size() && entries_[i].first == key; ++i)
-        f(entries_[i].second);
-      return;
-    }
-  }
-
- private:
-  std::size_t slot(std::uint64_t key) const {
-    return std::size_t((key * 0x9E3779B97F4A7C15ull) >> 20) & (slots_.size() - 1);
-  }
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> entries_;
-  std::vector<std::uint32_t> slots_;
-};
-}  // namespace
 
 std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, double cell,
                                 double min_move, int max_rounds) {
@@ -189,10 +152,6 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
   // the faces to test are found through their corners in `near` cells of that size around the
   // stars (in the first round that is most of the mesh near the moves; in later ones, few).
   const double near_cell = std::max(widest, cell);
-  auto near_key = [&](glm::dvec3 p) {
-    const glm::ivec3 c(glm::floor(p / near_cell));
-    return cell_key(c.x, c.y, c.z);
-  };
   std::vector<std::uint8_t> still(nv, 0), star_of(nf, 0);
   for (std::uint32_t v : check)
     still[v] = 1;
@@ -209,18 +168,15 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
     std::vector<CrossingPolygon> stars;
     std::vector<Bounds> star_bounds;
     StarGrid grid;
-    CellBits in_grid, near;
+    IndexMap<std::uint64_t, MixHash> near;  // cells within near_cell of a star
     for (std::uint32_t f : star) {
       star_of[f] = 0;
       stars.push_back(polygon(f));
       star_bounds.emplace_back(stars.back());
       const Bounds& b = star_bounds.back();
-      b.cells(cell, [&](std::uint64_t k) {
-        grid.add(k, std::uint32_t(stars.size() - 1));
-        in_grid.set(k);
-      });
-      Bounds{b.lo - near_cell, b.hi + near_cell}.cells(near_cell,
-                                                       [&](std::uint64_t k) { near.set(k); });
+      b.cells(cell, [&](std::uint64_t k) { grid.add(k, std::uint32_t(stars.size() - 1)); });
+      Bounds{b.lo - near_cell, b.hi + near_cell}.cells(
+          near_cell, [&](std::uint64_t k) { near.try_emplace(k, 0); });
     }
     std::vector<std::uint32_t> back;
     auto note = [&](const CrossingPolygon& g) {
@@ -229,7 +185,8 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
     };
     grid.build();
     auto is_near = [&](std::uint32_t v) {
-      return near.test(near_key(glm::dvec3(mesh.positions[v])));
+      return near.find(grid_cell_key(grid_cell(glm::dvec3(mesh.positions[v]), near_cell))) !=
+             near.kNone;
     };
     for (std::uint32_t v = 0; v < nv; ++v) {
       if (!is_near(v)) continue;
@@ -241,7 +198,6 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
         if (g.v[k0] != v) continue;
         const Bounds b(g);
         b.cells(cell, [&](std::uint64_t k) {
-          if (!in_grid.test(k)) return;
           grid.for_each(k, [&](std::uint32_t s) {
             if (b.overlaps(star_bounds[s]) && polygons_cross(g, stars[s])) {
               note(g);

@@ -151,13 +151,9 @@ class Merger {
     // longest connecting edge a bridge may have, so each half-edge looks at 27 cells.
     const double reach = options_.bridge_limit * std::min(2.0 * longest, 8.0 * scale_);
     const double cell = std::max(2.0 * scale_, reach);
-    auto key = [&](glm::dvec3 p) {
-      const glm::i64vec3 c = glm::i64vec3(glm::floor(p / cell)) & std::int64_t(0x1FFFFF);
-      return std::uint64_t(c.x) << 42 | std::uint64_t(c.y) << 21 | std::uint64_t(c.z);
-    };
     std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> grid;
     for (std::uint32_t k = 0; k < open.size(); ++k)
-      grid[key(point(mesh_.from_vertex_handle(open[k])))].push_back(k);
+      grid[grid_cell_key(grid_cell(point(mesh_.from_vertex_handle(open[k])), cell))].push_back(k);
 
     struct Candidate {
       double cost;
@@ -175,12 +171,11 @@ class Merger {
       const std::uint32_t pa = pieces.find(p.idx());
       const glm::dvec3 P = point(p), Q = point(q);
       const double la = glm::distance(P, Q);
-      const glm::i64vec3 c0 = glm::i64vec3(glm::floor(Q / cell));
+      const glm::ivec3 c0 = grid_cell(Q, cell);
       for (int dz = -span; dz <= span; ++dz)
         for (int dy = -span; dy <= span; ++dy)
           for (int dx = -span; dx <= span; ++dx) {
-            const glm::dvec3 corner = glm::dvec3(c0 + glm::i64vec3(dx, dy, dz)) * cell;
-            const auto it = grid.find(key(corner + 0.5 * cell));
+            const auto it = grid.find(grid_cell_key(c0 + glm::ivec3(dx, dy, dz)));
             if (it == grid.end()) continue;
             for (std::uint32_t k : it->second) {
               const HH hb = open[k];

@@ -10,7 +10,7 @@
 namespace ldimesh {
 namespace {
 
-// Appends view k's kept §3 quads: one vertex per sample they use, in sample order.
+// Appends the kept §3 quads of view `view`: one vertex per sample they use, in sample order.
 void append_view(Mesh& mesh, const Ldi& ldi, const std::vector<glm::vec3>& positions,
                  const std::vector<std::uint32_t>& quads, std::uint8_t view, FaceType faces) {
   constexpr std::uint32_t kUnused = UINT32_MAX;
@@ -38,7 +38,7 @@ void append_view(Mesh& mesh, const Ldi& ldi, const std::vector<glm::vec3>& posit
   }
 }
 
-// Appends view k's refined faces.
+// Appends the refined faces of view `view`.
 void append_refined(Mesh& mesh, const RefinedView& r, std::uint8_t view, FaceType faces) {
   const std::uint32_t base = std::uint32_t(mesh.positions.size());
   mesh.positions.insert(mesh.positions.end(), r.positions.begin(), r.positions.end());

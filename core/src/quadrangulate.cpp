@@ -279,8 +279,10 @@ class Quadrangulator {
 
   // Keeps where v was before its first move (a path vertex: its edge's midpoint).
   void remember(std::uint32_t v) {
-    if (v >= before_.size()) before_.resize(pos_.size(), {glm::dvec3(0.0), glm::dvec3(0.0)});
-    if (remembered_.size() < before_.size()) remembered_.resize(before_.size(), 0);
+    if (v >= remembered_.size()) {
+      remembered_.resize(pos_.size(), 0);
+      before_.resize(pos_.size());
+    }
     if (remembered_[v]) return;
     remembered_[v] = 1;
     before_[v] = {pos_[v], nrm_[v]};

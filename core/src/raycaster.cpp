@@ -1,4 +1,5 @@
 #include "ldimesh/core/raycaster.hpp"
+#include "ldimesh/core/timing.hpp"
 
 #include <algorithm>
 #include <array>
@@ -62,7 +63,7 @@ RayCaster::RayCaster(std::span<const FieldSource* const> sources, double isovalu
     rtcReleaseDevice(device_);
     throw;
   }
-  build_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  build_seconds_ = seconds_since(start);
 }
 
 RayCaster::~RayCaster() {

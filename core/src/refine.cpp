@@ -10,6 +10,7 @@
 
 #include <tbb/parallel_for.h>
 
+#include "index_map.hpp"
 #include "ldimesh/core/mesh.hpp"
 #include "ldimesh/core/timing.hpp"
 #include "ldimesh/core/trim.hpp"
@@ -23,20 +24,6 @@ std::uint64_t edge_key(std::uint32_t a, std::uint32_t b) {
   return a < b ? (std::uint64_t(a) << 32 | b) : (std::uint64_t(b) << 32 | a);
 }
 
-// A 64-bit mix (MurmurHash3's finaliser): IndexMap takes the low bits, and the keys (vertex
-// pairs, dyadic image positions) differ in few bits, often high ones.
-std::uint64_t mix(std::uint64_t x) {
-  x ^= x >> 33;
-  x *= 0xFF51AFD7ED558CCDull;
-  x ^= x >> 33;
-  x *= 0xC4CEB9FE1A85EC53ull;
-  return x ^ (x >> 33);
-}
-
-struct EdgeHash {
-  std::uint64_t operator()(std::uint64_t key) const { return mix(key); }
-};
-
 struct PositionHash {
   std::uint64_t operator()(const glm::dvec2& p) const {
     std::uint64_t a = 0, b = 0;
@@ -44,70 +31,6 @@ struct PositionHash {
     std::memcpy(&b, &p.y, 8);
     return mix(a ^ mix(b));
   }
-};
-
-// A hash map from keys to indices, open addressing with linear probing in one array (at most
-// half full). The refiner looks up and adds millions of edges and positions in a run; a node per
-// entry (std::unordered_map) made allocating, chasing and freeing them a large part of its time.
-template <class Key, class Hash>
-class IndexMap {
- public:
-  // The index stored under `key`, or kNone.
-  std::uint32_t find(const Key& key) const {
-    if (slots_.empty()) return kNone;
-    for (std::size_t i = Hash()(key) & mask_;; i = (i + 1) & mask_) {
-      const Slot& slot = slots_[i];
-      if (slot.index == kNone) return kNone;
-      if (slot.key == key) return slot.index;
-    }
-  }
-
-  // The index stored under `key`, and whether it is `index`, stored now because there was none.
-  std::pair<std::uint32_t, bool> try_emplace(const Key& key, std::uint32_t index) {
-    if (2 * (count_ + 1) > slots_.size()) reserve(count_ + 1);
-    for (std::size_t i = Hash()(key) & mask_;; i = (i + 1) & mask_) {
-      Slot& slot = slots_[i];
-      if (slot.index == kNone) {
-        slot = {key, index};
-        ++count_;
-        return {index, true};
-      }
-      if (slot.key == key) return {slot.index, false};
-    }
-  }
-
-  // Room for `count` entries without rehashing.
-  void reserve(std::size_t count) {
-    std::size_t capacity = 64;
-    while (capacity < 2 * count)
-      capacity *= 2;
-    if (capacity > slots_.size()) rehash(capacity);
-  }
-
-  // Empties the map and keeps its memory.
-  void clear() {
-    for (Slot& slot : slots_)
-      slot.index = kNone;
-    count_ = 0;
-  }
-
- private:
-  struct Slot {
-    Key key{};
-    std::uint32_t index = kNone;
-  };
-
-  void rehash(std::size_t capacity) {
-    std::vector<Slot> old(capacity);
-    old.swap(slots_);
-    mask_ = capacity - 1;
-    count_ = 0;
-    for (const Slot& slot : old)
-      if (slot.index != kNone) try_emplace(slot.key, slot.index);
-  }
-
-  std::vector<Slot> slots_;  // capacity a power of two
-  std::size_t mask_ = 0, count_ = 0;
 };
 
 // Lists of values under dense list numbers (lattice positions, vertices), all in one pool:
@@ -186,6 +109,7 @@ struct References {
   std::array<std::uint32_t, 4> use{};
   std::uint32_t n = 0;
   double threshold = 0.0;
+  double predicted = 0.0;  // the mean of their depth predictions at the vertex
 };
 
 // A vertex made in the current pass, waiting for its ray.
@@ -315,11 +239,11 @@ class ViewRefiner {
     // stretches of its ray, in depth order, so the position's hits stay one sorted run that
     // holds every hit the whole ray would give its vertices. The references are corners of cells
     // that existed before the pass (a cell split in a pass never needs splitting again in it), so
-    // their depths are known here. The intervals are grouped by ray with a counting sort, stable
-    // so that each ray's keep the order of pending_ (std::sort below is not stable): counted at
-    // first_wanted_[ray + 2], summed into the starts at first_wanted_[ray + 1], and placed by
-    // advancing those to the ends, which leaves ray k's at wanted_[first_wanted_[k],
-    // first_wanted_[k + 1]).
+    // their depths are known here. The intervals are grouped by ray with a counting sort (one
+    // pass, no comparison sort over all of them): counted at first_wanted_[ray + 2], summed into
+    // the starts at first_wanted_[ray + 1], and placed by advancing those to the ends, which
+    // leaves ray k's at wanted_[first_wanted_[k], first_wanted_[k + 1]); each ray's few are then
+    // sorted by start and merged (their order before does not change the union).
     first_wanted_.assign(rays_.size() + 2, 0);
     for (const Pending& p : pending_)
       ++first_wanted_[p.ray + 2];
@@ -329,7 +253,7 @@ class ViewRefiner {
     const double pad = 1e-6 * (1.0 + view_.depth_extent);  // the hits' depths are floats
     for (Pending& p : pending_) {
       p.match = match_references(p, first_new);
-      double predicted = 0.0;
+      double& predicted = p.match.predicted;
       for (std::uint32_t k = 0; k < p.match.n; ++k) {
         const Vertex& r = vertices_[p.match.use[k]];
         predicted += r.depth + glm::dot(r.slope, vertices_[p.vertex].image - r.image);
@@ -400,15 +324,13 @@ class ViewRefiner {
         v.scalar = hits.scalar.empty() ? 0.0f : hits.scalar[best];
         v.valid = true;
       } else {
-        double depth = 0.0, scalar = 0.0;
+        double scalar = 0.0;
         glm::dvec3 normal(0.0);
         for (std::uint32_t k = 0; k < n; ++k) {
-          const Vertex& r = vertices_[use[k]];
-          depth += r.depth + glm::dot(r.slope, v.image - r.image);
-          normal += r.normal;
-          scalar += r.scalar;
+          normal += vertices_[use[k]].normal;
+          scalar += vertices_[use[k]].scalar;
         }
-        v.depth = depth / n;
+        v.depth = p.match.predicted;
         const double length = glm::length(normal);
         v.normal = length > 0.0 ? normal / length : vertices_[use[0]].normal;
         v.scalar = float(scalar / n);
@@ -896,14 +818,14 @@ class ViewRefiner {
   std::vector<Cell> cells_;  // top-level cells first
   // Top-level edges (see edge()), numbered by edge_of_, and those of each top-level cell (the
   // first cells_), so that growth, which visits every one, needs no lookup.
-  IndexMap<std::uint64_t, EdgeHash> edge_of_;
+  IndexMap<std::uint64_t, MixHash> edge_of_;
   std::vector<EdgeUse> edges_;
   std::vector<std::array<std::uint32_t, 4>> top_cell_edges_;
   ListPool<std::uint32_t> top_neighbours_;            // per vertex, over top-level edges
   ListPool<std::uint64_t> lattice_edges_;             // top-level edges per lattice_edge()
   ListPool<std::array<std::uint32_t, 4>> occupants_;  // top-level cells per lattice cell
   ListPool<std::uint32_t> invalid_at_;  // invalid top-level vertices per pixel (lattice_index)
-  IndexMap<std::uint64_t, EdgeHash> midpoints_;  // per edge_key: the vertex splitting the edge
+  IndexMap<std::uint64_t, MixHash> midpoints_;  // per edge_key: the vertex splitting the edge
   // Per vertex: the last pass that split an edge ending there (see split_edge_pass()).
   std::vector<std::uint32_t> split_edge_pass_;
   std::uint32_t pass_ = 0;  // passes begun, the current one included

@@ -7,6 +7,7 @@
 #include <limits>
 #include <map>
 #include <set>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -14,6 +15,7 @@
 
 #include "ldimesh/core/distance.hpp"
 #include "ldimesh/core/pipeline.hpp"
+#include "ldimesh/core/projection.hpp"
 #include "ldimesh/core/raycaster.hpp"
 #include "ldimesh/core/sample_source.hpp"
 #include "ldimesh/core/surfaces.hpp"
@@ -282,6 +284,30 @@ TEST(Merge, AllQuadOutputIsClosedQuads) {
       EXPECT_EQ(t.pieces, 1u);
       EXPECT_EQ(r.mesh.quad_view.size(), r.mesh.quad_count());
     }
+}
+
+// The projection merging uses: a point near the sphere moves onto it along the view closest to
+// its normal; one beyond the reach, or whose normal faces the other way, stays.
+TEST(Projection, MovesPointsOntoTheSurfaceWithinReach) {
+  const auto source = make_surface_source("sphere");
+  const RayCaster caster(*source, find_surface("sphere")->isovalue);
+  const std::vector<View> views = make_axis_views(source->bounds(), 64);
+  LocalSampleSource samples(caster, views);
+  const SurfaceProjection project = sample_projection(samples, views);
+  const glm::dvec3 dir = glm::normalize(glm::dvec3(1.0, 2.0, 3.0));
+  std::vector<glm::dvec3> points = {1.02 * dir, 1.3 * dir, 1.02 * dir};
+  std::vector<glm::dvec3> normals = {dir, dir, -dir};
+  const std::vector<glm::dvec3> before = points;
+  EXPECT_EQ(project(points, normals, 0.1), 1u);
+  EXPECT_NEAR(glm::length(points[0]), 1.0, 1e-6);
+  EXPECT_GT(glm::dot(normals[0], dir), 0.99);
+  // Moved along the z view (the axis closest to the normal): x and y stay.
+  EXPECT_NEAR(points[0].x, before[0].x, 1e-12);
+  EXPECT_NEAR(points[0].y, before[0].y, 1e-12);
+  EXPECT_EQ(points[1], before[1]);
+  EXPECT_EQ(points[2], before[2]);
+  std::vector<glm::dvec3> one = {dir};
+  EXPECT_THROW(project(one, normals, 0.1), std::invalid_argument);
 }
 
 }  // namespace

@@ -79,6 +79,25 @@ QuadOptions exact_options() {
   return o;
 }
 
+// A closed quad mesh of one piece with the given Euler characteristic, nothing left over.
+void expect_closed_quad_mesh(const Mesh& out, const QuadStats& stats, long euler) {
+  const Topology t = topology(out);
+  SCOPED_TRACE(t.describe() + "; paired " + std::to_string(stats.paired) + ", paths " +
+               std::to_string(stats.paths) + ", rounds " + std::to_string(stats.path_rounds) +
+               ", turns " + std::to_string(stats.turns) + ", merges " +
+               std::to_string(stats.quad_merges) + ", flips " + std::to_string(stats.flips));
+  EXPECT_TRUE(t.closed_manifold());
+  EXPECT_EQ(t.euler(), euler);
+  EXPECT_EQ(t.pieces, 1u);
+  EXPECT_EQ(out.triangle_count(), 0u);
+  EXPECT_EQ(stats.leftover_triangles, 0u);
+  EXPECT_EQ(out.quad_count(), stats.output_quads);
+  ASSERT_EQ(out.quad_view.size(), out.quad_count());
+  for (std::uint8_t view : out.quad_view)
+    EXPECT_LT(view, out.view_dirs.size());
+  EXPECT_EQ(out.normals.size(), out.positions.size());
+}
+
 // A triangular prism, its sides k quads long: the path from one end triangle to the other
 // crosses k quads straight, each splits in two.
 TEST(QuadHandMade, StraightPathSplitsEachQuadInTwo) {
@@ -99,18 +118,12 @@ TEST(QuadHandMade, StraightPathSplitsEachQuadInTwo) {
     b.mesh.scalars.push_back(p.z);
   QuadStats stats;
   const Mesh out = quadrangulate(b.mesh, exact_options(), stats);
-  const Topology t = topology(out);
-  SCOPED_TRACE(t.describe());
-  EXPECT_TRUE(t.closed_manifold());
-  EXPECT_EQ(t.euler(), 2);
-  EXPECT_EQ(out.triangle_count(), 0u);
+  expect_closed_quad_mesh(out, stats, 2);
   EXPECT_EQ(out.quad_count(), 3u * k + k + 2u);
   EXPECT_EQ(stats.paired, 0u);
   EXPECT_EQ(stats.paths, 1u);
   EXPECT_EQ(stats.turns, 0u);
   EXPECT_EQ(stats.path_splits, std::size_t(k + 1));
-  EXPECT_EQ(stats.leftover_triangles, 0u);
-  EXPECT_EQ(out.quad_view.size(), out.quad_count());
   // New vertices are interpolated: the scalar (z) stays equal to z.
   ASSERT_EQ(out.scalars.size(), out.positions.size());
   for (std::size_t v = 0; v < out.positions.size(); ++v)
@@ -139,11 +152,7 @@ TEST(QuadHandMade, TurningPathMakesThreeQuads) {
   ASSERT_TRUE(topology(b.mesh).closed_manifold());
   QuadStats stats;
   const Mesh out = quadrangulate(b.mesh, exact_options(), stats);
-  const Topology t = topology(out);
-  SCOPED_TRACE(t.describe());
-  EXPECT_TRUE(t.closed_manifold());
-  EXPECT_EQ(t.euler(), 2);
-  EXPECT_EQ(out.triangle_count(), 0u);
+  expect_closed_quad_mesh(out, stats, 2);
   EXPECT_EQ(stats.paired, 0u);
   EXPECT_EQ(stats.paths, 1u);
   EXPECT_EQ(stats.turns, 1u);
@@ -271,24 +280,6 @@ double off_surface(const std::string& surface, const glm::dvec3& p) {
   if (surface == "sphere") return std::abs(glm::length(p) - 1.0);
   const glm::dvec3 ring = glm::normalize(glm::dvec3(p.x, p.y, 0.0));
   return std::abs(glm::distance(p, ring) - 0.4);
-}
-
-void expect_closed_quad_mesh(const Mesh& out, const QuadStats& stats, long euler) {
-  const Topology t = topology(out);
-  SCOPED_TRACE(t.describe() + "; paired " + std::to_string(stats.paired) + ", paths " +
-               std::to_string(stats.paths) + ", rounds " + std::to_string(stats.path_rounds) +
-               ", turns " + std::to_string(stats.turns) + ", merges " +
-               std::to_string(stats.quad_merges) + ", flips " + std::to_string(stats.flips));
-  EXPECT_TRUE(t.closed_manifold());
-  EXPECT_EQ(t.euler(), euler);
-  EXPECT_EQ(t.pieces, 1u);
-  EXPECT_EQ(out.triangle_count(), 0u);
-  EXPECT_EQ(stats.leftover_triangles, 0u);
-  EXPECT_EQ(out.quad_count(), stats.output_quads);
-  ASSERT_EQ(out.quad_view.size(), out.quad_count());
-  for (std::uint8_t view : out.quad_view)
-    EXPECT_LT(view, out.view_dirs.size());
-  EXPECT_EQ(out.normals.size(), out.positions.size());
 }
 
 TEST(QuadMerged, SurfacesBecomeClosedQuadMeshes) {

@@ -298,9 +298,7 @@ bool same_error_on_every_rank(const Status& status) {
   return all == 1;
 }
 
-// Refinement that fails on the root (here: more levels than allowed) fails on every rank with
-// the root's message, and leaves no rank waiting for requests.
-// One step of the sphere at 16² with this rank's refinement `levels`.
+// One step of the sphere at 16² with this rank's refinement `levels`, merged or not.
 Status mesh_sphere_step(int levels, DistributedResult& result, bool merge = false) {
   const SurfaceInfo* s = find_surface("sphere");
   const auto source = make_surface_source("sphere");
@@ -313,6 +311,8 @@ Status mesh_sphere_step(int levels, DistributedResult& result, bool merge = fals
                           result);
 }
 
+// Refinement that fails on the root (here: more levels than allowed) fails on every rank with
+// the root's message, and leaves no rank waiting for requests.
 TEST(MpiPipeline, RefinementFailingOnTheRootFailsOnEveryRank) {
   DistributedResult result;
   const Status status = mesh_sphere_step(17, result);
@@ -338,18 +338,26 @@ TEST(MpiPipeline, RefinementLevelsThatDifferBetweenRanksAreAnError) {
 }
 
 // §5 merging asks for samples too (its new vertices are projected onto the surface): every rank
-// serves, and the root gets the same closed mesh for any number of ranks.
+// serves, and the root gets the one-process merged mesh, closed, for any number of ranks.
 TEST(MpiPipeline, MergingProjectsWithSamplesFromAllRanks) {
   DistributedResult result;
   const Status status = mesh_sphere_step(0, result, true);
   EXPECT_TRUE(status) << status.message();
-  if (rank_of() == 0) {
-    const MergeStats& m = result.meshing.merging;
-    EXPECT_GT(m.split_edges, 0u);
-    EXPECT_GT(m.projected, 0u);
-    EXPECT_EQ(m.components, 1u);
-    EXPECT_EQ(m.unfilled_holes, 0u);
-  }
+  if (rank_of() != 0 || !status) return;
+  const MergeStats& m = result.meshing.merging;
+  EXPECT_GT(m.split_edges, 0u);
+  EXPECT_GT(m.projected, 0u);
+  EXPECT_EQ(m.components, 1u);
+  EXPECT_EQ(m.unfilled_holes, 0u);
+  const SurfaceInfo* s = find_surface("sphere");
+  const auto source = make_surface_source("sphere");
+  const RayCaster caster(*source, s->isovalue);
+  const std::vector<View> views = make_axis_views(s->domain, 16);
+  LocalSampleSource local(caster, views);
+  MeshingOptions options;
+  options.merging.enabled = true;
+  const MeshingResult expected = mesh_ldis(result.ldis, options, &local);
+  expect_identical_mesh(result.meshing.mesh, expected.mesh);
 }
 
 // Ranks that disagree on merging would disagree on serving samples: an error, not a hang.

@@ -7,6 +7,7 @@
 #include <stdexcept>
 #include <string>
 #include <tuple>
+
 #include "ldimesh/core/timing.hpp"
 
 namespace ldimesh {

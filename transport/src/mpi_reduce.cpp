@@ -5,6 +5,7 @@
 #include <cstring>
 #include <stdexcept>
 #include <string>
+
 #include "ldimesh/core/timing.hpp"
 
 namespace ldimesh {

@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <span>
 
 #include <glm/glm.hpp>
@@ -27,6 +28,17 @@ inline glm::dvec3 newell_normal(std::span<const glm::dvec3> p) {
   for (std::size_t i = 0; i < p.size(); ++i)
     n += glm::cross(p[i], p[(i + 1) % p.size()]);
   return n;
+}
+
+// A cell of a uniform grid (integer coordinates, 21 bits each, wrapping: far cells may share a
+// key, which only costs a look) packed into one 64-bit key; the cell of size `cell` holding p.
+inline std::uint64_t grid_cell_key(glm::ivec3 c) {
+  return (std::uint64_t(std::uint32_t(c.x) & 0x1FFFFF) << 42) |
+         (std::uint64_t(std::uint32_t(c.y) & 0x1FFFFF) << 21) |
+         std::uint64_t(std::uint32_t(c.z) & 0x1FFFFF);
+}
+inline glm::ivec3 grid_cell(glm::dvec3 p, double cell) {
+  return glm::ivec3(glm::floor(p / cell));
 }
 
 // Whether the segment p–q passes through the triangle (a, b, c) strictly inside both (by more

@@ -17,8 +17,9 @@ struct MeshingOptions {
   FaceType faces = FaceType::triangles;
   MatchOptions matching;
   RefinementOptions refinement;  // §4; levels > 0 needs a SampleSource
-  // §5; merging.project uses the SampleSource when there is one
-  MergeOptions merging;  // §5; trims with r = 1 instead of `r` when enabled
+  // §5: trims with r = 1 instead of `r` when enabled; merging.project uses the SampleSource
+  // when there is one.
+  MergeOptions merging;
 };
 
 struct MeshingTimes {

@@ -58,22 +58,24 @@ struct QuadStats {
   double pair_seconds = 0.0;     // greedy pairing
   double path_seconds = 0.0;     // Dijkstra rounds, splits and their projection
   double cleanup_seconds = 0.0;  // quad merges and flips
-  double smooth_seconds = 0.0;   // smoothing and output
+  double smooth_seconds = 0.0;   // smoothing, output and the crossing check
   double seconds = 0.0;          // all of it
 };
 
 // Converts a mesh of triangles and quads (an oriented 2-manifold: every edge in at most two
 // faces, running opposite ways; open boundary loops allowed) into quads only (§5 (iv)).
 // `project` (may be empty) moves points onto the surface: the new vertices of the paths (one
-// call) and the smoothed vertices after each smoothing iteration (one call each); without it the
-// smoothing is limited (options.max_unprojected_move). Output: the vertices that faces use
-// (input vertices first, in input order, then new ones; positions, normals, and scalars if the
-// input has them, new ones interpolated), quads wound like the input with quad_view the view of
-// the face each came from, view_dirs copied, triangles empty unless a triangle could not be
-// converted (counted in stats.leftover_triangles and kept as a triangle). Closed input gives
-// closed output; an open edge stays open (it may be split). Deterministic (single-threaded).
-// Throws std::invalid_argument on inconsistent array sizes, a face index out of range, a face
-// with a repeated vertex, or an edge used twice in one direction (so also by three faces).
+// call) and the smoothed vertices after the last smoothing iteration (one call); without it the
+// smoothing is limited (options.max_unprojected_move). Moved vertices whose faces then cross
+// another face go back to where they were (options.crossing_min_move, crossings.hpp). Output: the
+// vertices that faces use (input vertices first, in input order, then new ones; positions, normals,
+// and scalars if the input has them, new ones interpolated), quads wound like the input with
+// quad_view the view of the face each came from, view_dirs copied, triangles empty unless a
+// triangle could not be converted (counted in stats.leftover_triangles and kept as a triangle).
+// Closed input gives closed output; an open edge stays open (it may be split). Deterministic
+// (single-threaded). Throws std::invalid_argument on inconsistent array sizes, a face index out of
+// range, a face with a repeated vertex, or an edge used twice in one direction (so also by three
+// faces).
 Mesh quadrangulate(const Mesh& mesh, const QuadOptions& options, QuadStats& stats,
                    const SurfaceProjection& project = {});
 

@@ -70,7 +70,8 @@ class RayCaster {
   // All hits along the rays of `view` through the given image positions (pixel units, see
   // View::point), optionally only those `sub` owns and, where `depth_ranges` is not empty, only
   // those with depth in [depth_ranges[k].x, depth_ranges[k].y] for ray k (one range per ray).
-  // Used for extra samples between pixel centres (§4). Throws std::invalid_argument when
+  // Used for extra samples between pixel centres (§4) and to put merging's new vertices onto the
+  // surface (§5). Throws std::invalid_argument when
   // `depth_ranges` is neither empty nor one per ray.
   RayHitList cast_points(const View& view, std::span<const glm::dvec2> image_positions,
                          const Subdomain* sub = nullptr,

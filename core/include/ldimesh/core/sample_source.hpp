@@ -1,7 +1,9 @@
-// Where refinement (§4 (ii)) gets extra samples: rays through arbitrary image positions of the
-// step's views, all hits each. One interface, served by the local ray caster in one process
-// and by an MPI round trip to the ranks that own the rays in a parallel run. One call is one
-// round trip: a refinement pass asks for all its samples, of all views, in one call.
+// Where refinement (§4 (ii)) gets extra samples and merging (§5) moves new vertices onto the
+// surface (projection.hpp): rays through arbitrary image positions of the step's views, all hits
+// each within a depth range per ray. One interface, served by the local ray caster in one
+// process and by an MPI round trip to the ranks that own the rays in a parallel run. One call is
+// one round trip: a refinement pass (or a merging batch) asks for all its samples, of all views,
+// in one call.
 #pragma once
 
 #include <cmath>
