@@ -322,6 +322,9 @@ class Merger {
     Mesh out;
     out.view_dirs = in_.view_dirs;
     std::vector<std::uint32_t> index(mesh_.n_vertices(), UINT32_MAX);
+    out.positions.reserve(mesh_.n_vertices());
+    out.normals.reserve(mesh_.n_vertices());
+    if (!in_.scalars.empty()) out.scalars.reserve(mesh_.n_vertices());
     for (const auto& v : mesh_.vertices()) {
       if (mesh_.is_isolated(v)) continue;
       index[v.idx()] = std::uint32_t(out.positions.size());
@@ -331,8 +334,9 @@ class Merger {
       if (!in_.scalars.empty()) out.scalars.push_back(mesh_.property(scalar_, v));
     }
     UnionFind pieces(out.positions.size());
+    std::vector<std::uint32_t> c;
     for (const auto& f : mesh_.faces()) {
-      std::vector<std::uint32_t> c;
+      c.clear();
       for (const auto& v : f.vertices())
         c.push_back(index[v.idx()]);
       for (std::uint32_t k : c)

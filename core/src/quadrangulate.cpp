@@ -279,14 +279,10 @@ class Quadrangulator {
 
   // Keeps where v was before its first move (a path vertex: its edge's midpoint).
   void remember(std::uint32_t v) {
-    if (v >= remembered_.size()) {
-      remembered_.resize(pos_.size(), 0);
-      before_.resize(pos_.size());
-    }
+    if (v >= remembered_.size()) remembered_.resize(pos_.size(), 0);
     if (remembered_[v]) return;
     remembered_[v] = 1;
-    before_[v] = {pos_[v], nrm_[v]};
-    moved_.push_back(v);
+    moved_.push_back({v, glm::vec3(pos_[v]), glm::vec3(nrm_[v])});
   }
 
   // The output's moved vertices (projected path vertices, smoothed vertices) with where each was
@@ -298,8 +294,16 @@ class Quadrangulator {
     Mesh out;
     out.view_dirs = in_.view_dirs;
     std::vector<std::uint32_t> index(pos_.size(), kNone);
+    std::size_t used = 0, quads = 0;
     for (std::uint32_t h = 0; h < to_.size(); ++h)
-      if (face_[h] != kNone) index[from_[h]] = 0;
+      if (face_[h] != kNone && index[from_[h]] == kNone) index[from_[h]] = 0, ++used;
+    for (std::uint32_t f = 0; f < face_he_.size(); ++f)
+      if (face_he_[f] != kNone) ++quads;  // triangles left are few: room for all as quads
+    out.positions.reserve(used);
+    out.normals.reserve(used);
+    if (!scalar_.empty()) out.scalars.reserve(used);
+    out.quads.reserve(4 * quads);
+    out.quad_view.reserve(quads);
     for (std::uint32_t v = 0; v < pos_.size(); ++v) {
       if (index[v] == kNone) continue;
       index[v] = std::uint32_t(out.positions.size());
@@ -318,8 +322,8 @@ class Quadrangulator {
     }
     stats_.output_quads = out.quad_count();
     moved_out_.clear();
-    for (std::uint32_t v : moved_)
-      if (index[v] != kNone) moved_out_.push_back({index[v], before_[v].first, before_[v].second});
+    for (const VertexMove& m : moved_)
+      if (index[m.vertex] != kNone) moved_out_.push_back({index[m.vertex], m.position, m.normal});
     return out;
   }
 
@@ -781,9 +785,8 @@ class Quadrangulator {
   std::vector<std::uint32_t> out_he_, valence_;
   std::vector<std::uint8_t> boundary_;
   // Moved vertices (projection and smoothing) and where each was before.
-  std::vector<std::pair<glm::dvec3, glm::dvec3>> before_;  // position, normal
   std::vector<std::uint8_t> remembered_;
-  std::vector<std::uint32_t> moved_;
+  std::vector<VertexMove> moved_;      // vertex: this conversion's index
   std::vector<VertexMove> moved_out_;  // the same in output indices
 };
 
