@@ -443,12 +443,20 @@ class Merger {
   // the whole mesh. Drops deleted faces from region_faces_ on the way.
   std::vector<HH> region_edges() {
     std::erase_if(region_faces_, [&](FH f) { return mesh_.status(f).deleted(); });
-    std::vector<HH> edges;
+    // Marks instead of sorting: a scan over the marks is ordered and far cheaper than sorting
+    // the region's half-edges (which made this a tenth of the merge on ML 512²).
+    edge_mark_.assign(mesh_.n_edges(), 0);
+    std::size_t count = 0;
     for (FH f : region_faces_)
-      for (const auto& h : mesh_.fh_range(f))
-        edges.push_back(mesh_.halfedge_handle(mesh_.edge_handle(h), 0));
-    std::sort(edges.begin(), edges.end());
-    edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+      for (const auto& h : mesh_.fh_range(f)) {
+        std::uint8_t& mark = edge_mark_[mesh_.edge_handle(h).idx()];
+        count += mark == 0;
+        mark = 1;
+      }
+    std::vector<HH> edges;
+    edges.reserve(count);
+    for (std::size_t e = 0; e < edge_mark_.size(); ++e)
+      if (edge_mark_[e]) edges.push_back(mesh_.halfedge_handle(OpenMesh::EdgeHandle(int(e)), 0));
     return edges;
   }
 
@@ -658,6 +666,7 @@ class Merger {
   OpenMesh::VPropHandleT<float> scalar_;
   double scale_ = 0.0;            // the length scale of the limits: cell_size or the median edge
   std::vector<FH> region_faces_;  // faces added by bridging, filling and enhancement
+  std::vector<std::uint8_t> edge_mark_;  // region_edges' scratch
   // The sewing region's vertices moved onto the surface, with their midpoint and its normal.
   struct Move {
     VH v;
