@@ -12,19 +12,6 @@
 namespace ldimesh {
 namespace {
 
-// The triangles a face is tested as: a triangle itself, a quad both ways.
-std::size_t split(const CrossingPolygon& g, std::array<std::array<glm::dvec3, 3>, 4>& t) {
-  if (g.n == 3) {
-    t[0] = {g.p[0], g.p[1], g.p[2]};
-    return 1;
-  }
-  t[0] = {g.p[0], g.p[1], g.p[2]};
-  t[1] = {g.p[0], g.p[2], g.p[3]};
-  t[2] = {g.p[1], g.p[2], g.p[3]};
-  t[3] = {g.p[1], g.p[3], g.p[0]};
-  return 4;
-}
-
 struct Bounds {
   glm::dvec3 lo, hi;
   Bounds(glm::dvec3 l, glm::dvec3 h) : lo(l), hi(h) {}
@@ -92,23 +79,54 @@ class StarGrid {
 }  // namespace
 
 bool polygons_cross(const CrossingPolygon& a, const CrossingPolygon& b) {
+  // Per corner of a, the bit of the b corner it is. Triangles that share a corner are not
+  // tested (neighbours meet at a vertex or an edge); the other triangles of neighbouring faces
+  // are (a face folded over its neighbour).
+  std::array<unsigned, 4> same{};
+  unsigned shared = 0;
   for (std::size_t i = 0; i < a.n; ++i)
     for (std::size_t j = 0; j < b.n; ++j)
-      if (a.v[i] == b.v[j]) return false;  // neighbours meet at a vertex or an edge
-  std::array<std::array<glm::dvec3, 3>, 4> ta, tb;
-  const std::size_t na = split(a, ta), nb = split(b, tb);
-  // A triangle wholly on one side of the other's plane cannot meet it (the cheap test that
-  // settles most pairs of nearby faces of a smooth surface).
-  auto apart = [](const std::array<glm::dvec3, 3>& s, const std::array<glm::dvec3, 3>& t) {
-    const glm::dvec3 n = glm::cross(t[1] - t[0], t[2] - t[0]);
-    const double d0 = glm::dot(n, s[0] - t[0]), d1 = glm::dot(n, s[1] - t[0]),
-                 d2 = glm::dot(n, s[2] - t[0]);
-    return (d0 > 0.0 && d1 > 0.0 && d2 > 0.0) || (d0 < 0.0 && d1 < 0.0 && d2 < 0.0);
+      if (a.v[i] == b.v[j]) same[i] = 1u << j, ++shared;
+  // The triangle pairs to test: (i, j) with bit 4 i + j (no shared corner).
+  static constexpr std::array<std::array<int, 3>, 4> kCorners{
+      {{0, 1, 2}, {0, 2, 3}, {1, 2, 3}, {1, 3, 0}}};
+  const std::size_t na = a.n == 3 ? 1 : 4, nb = b.n == 3 ? 1 : 4;
+  unsigned pairs = 0;
+  for (std::size_t i = 0; i < na; ++i) {
+    const auto& c = kCorners[i];
+    const unsigned touched = same[c[0]] | same[c[1]] | same[c[2]];
+    for (std::size_t j = 0; j < nb; ++j) {
+      const auto& d = kCorners[j];
+      if (!(touched & ((1u << d[0]) | (1u << d[1]) | (1u << d[2])))) pairs |= 1u << (4 * i + j);
+    }
+  }
+  if (pairs == 0) return false;  // the same face, or neighbouring triangles
+  // Signed distances (unnormalised) of one face's corners to the planes of the other's
+  // triangles: a triangle wholly on one side of the other's plane cannot meet it (the cheap
+  // test that settles most pairs of nearby faces of a smooth surface).
+  auto sides = [](const CrossingPolygon& f, std::size_t n, const CrossingPolygon& g,
+                  std::array<std::array<double, 4>, 4>& d) {
+    for (std::size_t i = 0; i < n; ++i) {
+      const auto& c = kCorners[i];
+      const glm::dvec3 normal = glm::cross(f.p[c[1]] - f.p[c[0]], f.p[c[2]] - f.p[c[0]]);
+      for (std::size_t k = 0; k < g.n; ++k)
+        d[i][k] = glm::dot(normal, g.p[k] - f.p[c[0]]);
+    }
+  };
+  std::array<std::array<double, 4>, 4> to_a, to_b;  // b's corners to a's planes, a's to b's
+  sides(a, na, b, to_a);
+  sides(b, nb, a, to_b);
+  auto apart = [](const std::array<double, 4>& d, const std::array<int, 3>& c) {
+    return (d[c[0]] > 0.0 && d[c[1]] > 0.0 && d[c[2]] > 0.0) ||
+           (d[c[0]] < 0.0 && d[c[1]] < 0.0 && d[c[2]] < 0.0);
   };
   for (std::size_t i = 0; i < na; ++i)
     for (std::size_t j = 0; j < nb; ++j) {
-      const auto &s = ta[i], &t = tb[j];
-      if (apart(s, t) || apart(t, s)) continue;
+      if (!(pairs & (1u << (4 * i + j)))) continue;
+      const auto &ci = kCorners[i], &cj = kCorners[j];
+      if (apart(to_b[j], ci) || apart(to_a[i], cj)) continue;
+      const std::array<glm::dvec3, 3> s{a.p[ci[0]], a.p[ci[1]], a.p[ci[2]]},
+          t{b.p[cj[0]], b.p[cj[1]], b.p[cj[2]]};
       for (int k = 0; k < 3; ++k)
         if (segment_crosses_triangle(s[k], s[(k + 1) % 3], t[0], t[1], t[2]) ||
             segment_crosses_triangle(t[k], t[(k + 1) % 3], s[0], s[1], s[2]))
@@ -173,7 +191,8 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
   // the faces to test are found through their corners in `near` cells of that size around the
   // stars (in the first round that is most of the mesh near the moves; in later ones, few).
   const double near_cell = std::max(widest, cell);
-  std::vector<std::uint8_t> still(nv, 0), star_of(nf, 0), is_near(nv, 0);
+  std::vector<std::uint8_t> still(nv, 0), is_near(nv, 0);
+  std::vector<std::uint32_t> star_index(nf, UINT32_MAX);  // a face's place among the stars
   for (std::uint32_t v : check)
     still[v] = 1;
   std::size_t put_back = 0;
@@ -181,8 +200,8 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
     std::vector<std::uint32_t> star;  // faces around the vertices to check, each once
     for (std::uint32_t v : check)
       for (std::uint32_t k = first[v]; k < first[v + 1]; ++k)
-        if (!star_of[faces_of[k]]) {
-          star_of[faces_of[k]] = 1;
+        if (star_index[faces_of[k]] == UINT32_MAX) {
+          star_index[faces_of[k]] = 0;
           star.push_back(faces_of[k]);
         }
     std::sort(star.begin(), star.end());
@@ -192,7 +211,7 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
     IndexMap<std::uint64_t, MixHash> occupied, near;  // cells (near_cell) of stars, and around
     std::vector<glm::ivec3> occupied_cells;
     for (std::uint32_t f : star) {
-      star_of[f] = 0;
+      star_index[f] = std::uint32_t(stars.size());
       stars.push_back(polygon(f));
       const Bounds b(stars.back());
       const glm::ivec3 lo_cell = grid_cell(b.lo, cell);
@@ -227,10 +246,12 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
       const Bounds b(g);
       // A pair whose boxes share several cells is tested in one: the cell where their common
       // box starts (the cell of the larger low corner, per axis: cells grow with coordinates).
+      // Two stars are tested once (from the one that comes first), a star not with itself.
       const glm::ivec3 lo_cell = grid_cell(b.lo, cell);
+      const std::uint32_t own = star_index[f];
       b.cells(cell, [&](std::uint64_t k, const glm::ivec3& at) {
         grid.for_each_overlapping(k, b, [&](std::uint32_t s, const glm::ivec3& star_lo_cell) {
-          if (glm::max(lo_cell, star_lo_cell) != at) return;
+          if ((own != UINT32_MAX && own >= s) || glm::max(lo_cell, star_lo_cell) != at) return;
           if (polygons_cross(g, stars[s])) {
             note(g);
             note(stars[s]);
@@ -238,6 +259,8 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
         });
       });
     }
+    for (std::uint32_t f : star)
+      star_index[f] = UINT32_MAX;
     std::sort(back.begin(), back.end());
     back.erase(std::unique(back.begin(), back.end()), back.end());
     for (std::uint32_t v : back) {

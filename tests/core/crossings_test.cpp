@@ -83,8 +83,25 @@ TEST(Crossings, QuadsCountBothDiagonals) {
   needle.v = {4, 5, 6};
   EXPECT_TRUE(polygons_cross(quad, needle));
   EXPECT_TRUE(polygons_cross(needle, quad));
+  // Triangles that share a vertex never count; a neighbour's other triangles do (a face folded
+  // over its neighbour). Given the quad's vertex 0, the needle still passes through (1, 2, 3);
+  // given vertex 2 it could only meet (1, 3, 0), which it misses.
   needle.v[0] = 0;
+  EXPECT_TRUE(polygons_cross(quad, needle));
+  EXPECT_TRUE(polygons_cross(needle, quad));
+  needle.v[0] = 2;
   EXPECT_FALSE(polygons_cross(quad, needle));
+  EXPECT_FALSE(polygons_cross(needle, quad));
+  CrossingPolygon triangle;  // (1, 2, 3) alone
+  triangle.n = 3;
+  for (std::uint32_t k = 0; k < 3; ++k)
+    triangle.v[k] = k + 1, triangle.p[k] = quad.p[k + 1];
+  needle.v[0] = 0;
+  EXPECT_TRUE(polygons_cross(triangle, needle));
+  needle.v[0] = 3;
+  EXPECT_FALSE(polygons_cross(triangle, needle));
+  // The same face never crosses itself.
+  EXPECT_FALSE(polygons_cross(quad, quad));
 }
 
 TEST(Crossings, InvalidInputIsRefused) {

@@ -23,9 +23,11 @@ struct CrossingPolygon {
   std::size_t n = 0;
 };
 
-// Whether a and b share no vertex and pass through each other: an edge of a triangle of one
-// crosses a triangle of the other strictly inside both. A quad (not necessarily planar) counts
-// as both its splits, (0, 1, 2) + (0, 2, 3) and (1, 2, 3) + (1, 3, 0).
+// Whether a and b pass through each other: an edge of a triangle of one crosses a triangle of
+// the other strictly inside both, for two triangles that share no vertex (neighbouring faces
+// count too, through their other triangles: a face folded over its neighbour). A quad (not
+// necessarily planar) counts as both its splits, (0, 1, 2) + (0, 2, 3) and (1, 2, 3) +
+// (1, 3, 0). A face never crosses itself.
 bool polygons_cross(const CrossingPolygon& a, const CrossingPolygon& b);
 
 // A vertex that was moved, and where it was before (position and normal).
@@ -37,7 +39,8 @@ struct VertexMove {
 // Puts moved vertices back where they were when one of their faces crosses another face of the
 // mesh. Moves shorter than `min_move` are left alone (their faces sweep no farther than that:
 // they can only meet a face that was already that close; this keeps the check cheap where most
-// moves are tiny, as on Marschner–Lobb at 512², median 0.002 cells). The faces around the
+// moves are tiny, as merging's on Marschner–Lobb at 512², median 0.002 cells; where faces are
+// that close, as a smoothed face and its neighbour, even tiny moves matter). The faces around the
 // vertices to check (at first every moved one checked) go into a hash grid
 // of `cell`-sized cells (about an edge is fastest; any size finds the same crossings), every
 // face is tested against those in the cells of its box, and each still-moved vertex of a

@@ -34,8 +34,10 @@ struct QuadOptions {
   // Projection reach, in median edge lengths of the input.
   double projection_reach = 1.0;
   // Moved vertices (projected, smoothed) whose faces pass through another face go back to where
-  // they were (crossings.hpp); moves shorter than this many median edges are not checked.
-  double crossing_min_move = 0.05;
+  // they were (crossings.hpp); moves shorter than this many median edges are not checked. All
+  // are by default: on Marschner–Lobb 128² moves under 0.05 median edges folded smoothed faces
+  // over their neighbours (1 575 crossing pairs left with 0.05, 5 with 0).
+  double crossing_min_move = 0.0;
 };
 
 struct QuadStats {
