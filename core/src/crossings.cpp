@@ -14,7 +14,6 @@ namespace {
 
 struct Bounds {
   glm::dvec3 lo, hi;
-  Bounds(glm::dvec3 l, glm::dvec3 h) : lo(l), hi(h) {}
   explicit Bounds(const CrossingPolygon& g) : lo(g.p[0]), hi(g.p[0]) {
     for (std::size_t i = 1; i < g.n; ++i)
       lo = glm::min(lo, g.p[i]), hi = glm::max(hi, g.p[i]);
@@ -83,10 +82,9 @@ bool polygons_cross(const CrossingPolygon& a, const CrossingPolygon& b) {
   // tested (neighbours meet at a vertex or an edge); the other triangles of neighbouring faces
   // are (a face folded over its neighbour).
   std::array<unsigned, 4> same{};
-  unsigned shared = 0;
   for (std::size_t i = 0; i < a.n; ++i)
     for (std::size_t j = 0; j < b.n; ++j)
-      if (a.v[i] == b.v[j]) same[i] = 1u << j, ++shared;
+      if (a.v[i] == b.v[j]) same[i] = 1u << j;
   // The triangle pairs to test: (i, j) with bit 4 i + j (no shared corner).
   static constexpr std::array<std::array<int, 3>, 4> kCorners{
       {{0, 1, 2}, {0, 2, 3}, {1, 2, 3}, {1, 3, 0}}};
