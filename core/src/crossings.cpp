@@ -168,41 +168,37 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
     }
     return g;
   };
-  // The faces around each vertex (counting sort of the corners).
-  std::vector<std::uint32_t> first(nv + 1, 0);
-  for (std::uint32_t v : mesh.triangles)
-    ++first[v + 1];
-  for (std::uint32_t v : mesh.quads)
-    ++first[v + 1];
-  for (std::size_t v = 0; v < nv; ++v)
-    first[v + 1] += first[v];
-  std::vector<std::uint32_t> faces_of(first[nv]), fill(first.begin(), first.end() - 1);
   double widest = 0.0;  // the largest box diagonal of a face
   for (std::uint32_t f = 0; f < nf; ++f) {
-    const CrossingPolygon g = polygon(f);
-    for (std::size_t k = 0; k < g.n; ++k)
-      faces_of[fill[g.v[k]]++] = f;
-    const Bounds b(g);
+    const Bounds b(polygon(f));
     widest = std::max(widest, glm::distance(b.lo, b.hi));
   }
   // A face that meets a star has every corner within its own box diagonal of the star's box:
   // the faces to test are found through their corners in `near` cells of that size around the
   // stars (in the first round that is most of the mesh near the moves; in later ones, few).
   const double near_cell = std::max(widest, cell);
-  std::vector<std::uint8_t> still(nv, 0), is_near(nv, 0);
+  std::vector<std::uint8_t> still(nv, 0), is_near(nv, 0), checking(nv, 0);
   std::vector<std::uint32_t> star_index(nf, UINT32_MAX);  // a face's place among the stars
   for (std::uint32_t v : check)
     still[v] = 1;
+  auto corners = [&](std::uint32_t f) {
+    return f < nt ? std::span<const std::uint32_t>(&mesh.triangles[3 * f], 3)
+                  : std::span<const std::uint32_t>(&mesh.quads[4 * (f - nt)], 4);
+  };
   std::size_t put_back = 0;
   for (int round = 0; round < max_rounds && !check.empty(); ++round) {
-    std::vector<std::uint32_t> star;  // faces around the vertices to check, each once
+    // The faces around the vertices to check (one scan over the faces: cheaper than a
+    // vertex → faces table for the whole mesh).
     for (std::uint32_t v : check)
-      for (std::uint32_t k = first[v]; k < first[v + 1]; ++k)
-        if (star_index[faces_of[k]] == UINT32_MAX) {
-          star_index[faces_of[k]] = 0;
-          star.push_back(faces_of[k]);
-        }
-    std::sort(star.begin(), star.end());
+      checking[v] = 1;
+    std::vector<std::uint32_t> star;
+    for (std::uint32_t f = 0; f < nf; ++f) {
+      const auto c = corners(f);
+      if (std::any_of(c.begin(), c.end(), [&](std::uint32_t v) { return checking[v]; }))
+        star.push_back(f);
+    }
+    for (std::uint32_t v : check)
+      checking[v] = 0;
     std::vector<CrossingPolygon> stars;
     stars.reserve(star.size());
     StarGrid grid;
@@ -237,9 +233,8 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
         if (still[g.v[i]]) back.push_back(g.v[i]);
     };
     for (std::uint32_t f = 0; f < nf; ++f) {
-      const std::uint32_t* c = f < nt ? &mesh.triangles[3 * f] : &mesh.quads[4 * (f - nt)];
-      const std::size_t n = f < nt ? 3 : 4;
-      if (!std::any_of(c, c + n, [&](std::uint32_t v) { return is_near[v]; })) continue;
+      const auto c = corners(f);
+      if (std::none_of(c.begin(), c.end(), [&](std::uint32_t v) { return is_near[v]; })) continue;
       const CrossingPolygon g = polygon(f);
       const Bounds b(g);
       // A pair whose boxes share several cells is tested in one: the cell where their common
