@@ -6,6 +6,10 @@
 #include <stdexcept>
 #include <vector>
 
+#include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+
 #include "index_map.hpp"
 #include "ldimesh/core/geometry.hpp"
 
@@ -224,36 +228,52 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
           for (int x = -1; x <= 1; ++x)
             near.try_emplace(grid_cell_key(c + glm::ivec3(x, y, z)), 0);
     grid.build();
-    for (std::uint32_t v = 0; v < nv; ++v)
-      is_near[v] = near.find(grid_cell_key(grid_cell(glm::dvec3(mesh.positions[v]), near_cell))) !=
-                   near.kNone;
-    std::vector<std::uint32_t> back;
-    auto note = [&](const CrossingPolygon& g) {
-      for (std::size_t i = 0; i < g.n; ++i)
-        if (still[g.v[i]]) back.push_back(g.v[i]);
-    };
-    for (std::uint32_t f = 0; f < nf; ++f) {
-      const auto c = corners(f);
-      if (std::none_of(c.begin(), c.end(), [&](std::uint32_t v) { return is_near[v]; })) continue;
-      const CrossingPolygon g = polygon(f);
-      const Bounds b(g);
-      // A pair whose boxes share several cells is tested in one: the cell where their common
-      // box starts (the cell of the larger low corner, per axis: cells grow with coordinates).
-      // Two stars are tested once (from the one that comes first), a star not with itself.
-      const glm::ivec3 lo_cell = grid_cell(b.lo, cell);
-      const std::uint32_t own = star_index[f];
-      b.cells(cell, [&](std::uint64_t k, const glm::ivec3& at) {
-        grid.for_each_overlapping(k, b, [&](std::uint32_t s, const glm::ivec3& star_lo_cell) {
-          if ((own != UINT32_MAX && own >= s) || glm::max(lo_cell, star_lo_cell) != at) return;
-          if (polygons_cross(g, stars[s])) {
-            note(g);
-            note(stars[s]);
+    // In parallel (the faces are independent; the vertices to put back are sorted after, so
+    // the result is the same for any number of threads).
+    tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, std::uint32_t(nv), 4096),
+                      [&](const tbb::blocked_range<std::uint32_t>& r) {
+                        for (std::uint32_t v = r.begin(); v < r.end(); ++v)
+                          is_near[v] =
+                              near.find(grid_cell_key(grid_cell(glm::dvec3(mesh.positions[v]),
+                                                                near_cell))) != near.kNone;
+                      });
+    tbb::enumerable_thread_specific<std::vector<std::uint32_t>> found;
+    tbb::parallel_for(
+        tbb::blocked_range<std::uint32_t>(0, std::uint32_t(nf), 1024), [&](const auto& r) {
+          std::vector<std::uint32_t>& back = found.local();
+          auto note = [&](const CrossingPolygon& g) {
+            for (std::size_t i = 0; i < g.n; ++i)
+              if (still[g.v[i]]) back.push_back(g.v[i]);
+          };
+          for (std::uint32_t f = r.begin(); f < r.end(); ++f) {
+            const auto c = corners(f);
+            if (std::none_of(c.begin(), c.end(), [&](std::uint32_t v) { return is_near[v]; }))
+              continue;
+            const CrossingPolygon g = polygon(f);
+            const Bounds b(g);
+            // A pair whose boxes share several cells is tested in one: the cell where their common
+            // box starts (the cell of the larger low corner, per axis: cells grow with
+            // coordinates). Two stars are tested once (from the one that comes first), a star not
+            // with itself.
+            const glm::ivec3 lo_cell = grid_cell(b.lo, cell);
+            const std::uint32_t own = star_index[f];
+            b.cells(cell, [&](std::uint64_t k, const glm::ivec3& at) {
+              grid.for_each_overlapping(k, b, [&](std::uint32_t s, const glm::ivec3& star_lo_cell) {
+                if ((own != UINT32_MAX && own >= s) || glm::max(lo_cell, star_lo_cell) != at)
+                  return;
+                if (polygons_cross(g, stars[s])) {
+                  note(g);
+                  note(stars[s]);
+                }
+              });
+            });
           }
         });
-      });
-    }
     for (std::uint32_t f : star)
       star_index[f] = UINT32_MAX;
+    std::vector<std::uint32_t> back;
+    for (const std::vector<std::uint32_t>& part : found)
+      back.insert(back.end(), part.begin(), part.end());
     std::sort(back.begin(), back.end());
     back.erase(std::unique(back.begin(), back.end()), back.end());
     for (std::uint32_t v : back) {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -11,6 +12,9 @@
 #include <stdexcept>
 #include <string>
 #include <vector>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 
 #include "ldimesh/core/crossings.hpp"
 #include "ldimesh/core/geometry.hpp"
@@ -248,22 +252,27 @@ class Quadrangulator {
       remember(region[i]);
     }
     const double limit = options_.max_unprojected_move * median_edge_;
+    // Each step reads the old positions only (Jacobi), so the vertices go in parallel with the
+    // same result for any number of threads.
     for (int it = 0; it < options_.smoothing_iterations; ++it) {
-      for (std::size_t i = 0; i < region.size(); ++i) {
-        const std::uint32_t v = region[i];
-        glm::dvec3 mean(0.0);
-        for (std::uint32_t k = count[v]; k < count[v + 1]; ++k)
-          mean += pos_[neighbours[k]];
-        mean /= double(count[v + 1] - count[v]);
-        glm::dvec3 step = options_.smoothing_step * (mean - pos_[v]);
-        step -= glm::dot(step, nrm_[v]) * nrm_[v];
-        points[i] = pos_[v] + step;
-        if (!project) {
-          const glm::dvec3 moved = points[i] - start[i];
-          const double d = glm::length(moved);
-          if (d > limit) points[i] = start[i] + moved * (limit / d);
-        }
-      }
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, region.size(), 2048),
+                        [&](const auto& r) {
+                          for (std::size_t i = r.begin(); i < r.end(); ++i) {
+                            const std::uint32_t v = region[i];
+                            glm::dvec3 mean(0.0);
+                            for (std::uint32_t k = count[v]; k < count[v + 1]; ++k)
+                              mean += pos_[neighbours[k]];
+                            mean /= double(count[v + 1] - count[v]);
+                            glm::dvec3 step = options_.smoothing_step * (mean - pos_[v]);
+                            step -= glm::dot(step, nrm_[v]) * nrm_[v];
+                            points[i] = pos_[v] + step;
+                            if (!project) {
+                              const glm::dvec3 moved = points[i] - start[i];
+                              const double d = glm::length(moved);
+                              if (d > limit) points[i] = start[i] + moved * (limit / d);
+                            }
+                          }
+                        });
       for (std::size_t i = 0; i < region.size(); ++i)
         pos_[region[i]] = points[i];
     }
@@ -364,15 +373,20 @@ class Quadrangulator {
     for (std::uint32_t h = 0; h < from_.size(); ++h)
       leaving[fill[from_[h]]++] = h;
     opp_.assign(to_.size(), kNone);
-    for (std::uint32_t h = 0; h < to_.size(); ++h) {
-      const std::uint32_t u = from_[h], v = to_[h];
-      for (std::uint32_t k = start[u]; k < start[u + 1]; ++k)
-        if (leaving[k] != h && to_[leaving[k]] == v)
-          throw std::invalid_argument(
-              "quadrangulate: an edge is used twice in one direction (not an oriented manifold)");
-      for (std::uint32_t k = start[v]; k < start[v + 1]; ++k)
-        if (to_[leaving[k]] == u) opp_[h] = leaving[k];
-    }
+    std::atomic<bool> twice{false};
+    tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, std::uint32_t(to_.size()), 8192),
+                      [&](const auto& r) {
+                        for (std::uint32_t h = r.begin(); h < r.end(); ++h) {
+                          const std::uint32_t u = from_[h], v = to_[h];
+                          for (std::uint32_t k = start[u]; k < start[u + 1]; ++k)
+                            if (leaving[k] != h && to_[leaving[k]] == v) twice = true;
+                          for (std::uint32_t k = start[v]; k < start[v + 1]; ++k)
+                            if (to_[leaving[k]] == u) opp_[h] = leaving[k];
+                        }
+                      });
+    if (twice)
+      throw std::invalid_argument(
+          "quadrangulate: an edge is used twice in one direction (not an oriented manifold)");
   }
 
   std::size_t face_size(std::uint32_t f) const {

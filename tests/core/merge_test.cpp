@@ -12,6 +12,7 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <tbb/global_control.h>
 
 #include "ldimesh/core/distance.hpp"
 #include "ldimesh/core/pipeline.hpp"
@@ -263,6 +264,22 @@ TEST(Merge, SmoothingFoldsAreUndoneBetweenThinWalls) {
   EXPECT_EQ(undone.merging.quads.leftover_triangles, 0u);
   std::string where;
   EXPECT_EQ(crossing_pairs(undone.mesh, &where), 0u) << "first at" << where;
+}
+
+// The conversion's half-edge links, smoothing steps and crossing check run in parallel: the
+// merged quad mesh is the same with one thread and with four (Marschner–Lobb 64², where the
+// check puts thousands of moves back).
+TEST(Merge, QuadOutputIsTheSameForAnyNumberOfThreads) {
+  auto run = [](std::size_t threads) {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+    return merged("marschner-lobb", 64, true, FaceType::quads);
+  };
+  const MeshingResult one = run(1), four = run(4);
+  EXPECT_GT(one.merging.quads.crossings_undone, 1000u);
+  EXPECT_EQ(one.merging.quads.crossings_undone, four.merging.quads.crossings_undone);
+  EXPECT_EQ(one.mesh.quads, four.mesh.quads);
+  EXPECT_EQ(one.mesh.positions, four.mesh.positions);
+  EXPECT_EQ(one.mesh.normals, four.mesh.normals);
 }
 
 // Merging keeps the surface's accuracy: the forward mean distance to the true surface grows by

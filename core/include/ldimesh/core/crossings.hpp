@@ -47,7 +47,8 @@ struct VertexMove {
 // crossing pair is put back. Rounds repeat with the faces of the vertices put back (in their
 // old places they can meet a face a moved neighbour made) while any is put back, at most
 // `max_rounds`. Returns the number of vertices put back. Throws std::invalid_argument for a
-// vertex index out of range or a cell size that is not positive. Deterministic.
+// vertex index out of range or a cell size that is not positive. Deterministic: the faces are
+// tested in parallel, with the same result for any number of threads.
 std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, double cell,
                                 double min_move = 0.0, int max_rounds = 4);
 

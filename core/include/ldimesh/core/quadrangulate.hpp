@@ -74,10 +74,11 @@ struct QuadStats {
 // and scalars if the input has them, new ones interpolated), quads wound like the input with
 // quad_view the view of the face each came from, view_dirs copied, triangles empty unless a
 // triangle could not be converted (counted in stats.leftover_triangles and kept as a triangle).
-// Closed input gives closed output; an open edge stays open (it may be split). Deterministic
-// (single-threaded). Throws std::invalid_argument on inconsistent array sizes, a face index out of
-// range, a face with a repeated vertex, or an edge used twice in one direction (so also by three
-// faces).
+// Closed input gives closed output; an open edge stays open (it may be split). Deterministic:
+// the same output for any number of threads (the half-edge links, the smoothing steps and the
+// crossing check run in parallel; the pairing, paths, merges and flips in order). Throws
+// std::invalid_argument on inconsistent array sizes, a face index out of range, a face with a
+// repeated vertex, or an edge used twice in one direction (so also by three faces).
 Mesh quadrangulate(const Mesh& mesh, const QuadOptions& options, QuadStats& stats,
                    const SurfaceProjection& project = {});
 
