@@ -502,9 +502,13 @@ class Merger {
   void refine_region(const SurfaceProjection& project) {
     const double limit = options_.split_length * scale_;
     if (!(limit > 0.0)) return;
+    // The first pass looks at every edge of the region; a later one at the long edges the
+    // previous pass left and the edges of the faces it made (no other edge's length or faces
+    // changed).
+    std::vector<HH> candidates = region_edges();
     for (int pass = 0; pass < options_.split_passes; ++pass) {
       std::vector<std::pair<double, HH>> long_edges;
-      for (const HH h : region_edges()) {
+      for (const HH h : candidates) {
         const HH o = mesh_.opposite_halfedge_handle(h);
         const FH f = mesh_.face_handle(h), g = mesh_.face_handle(o);
         if (!f.is_valid() || !g.is_valid() || !is_triangle(f) || !is_triangle(g)) continue;
@@ -517,6 +521,7 @@ class Merger {
         return x.first != y.first ? x.first > y.first : x.second < y.second;
       });
       std::vector<std::uint8_t> touched(mesh_.n_faces(), 0);
+      const std::size_t first_new_face = region_faces_.size();
       std::vector<VH> fresh;
       std::vector<glm::dvec3> points, normals;
       for (const auto& [l, h] : long_edges) {
@@ -536,6 +541,18 @@ class Merger {
       if (fresh.empty()) break;
       stats_.split_edges += fresh.size();
       ++stats_.split_passes;
+      edge_mark_.assign(mesh_.n_edges(), 0);
+      for (const auto& [l, h] : long_edges)
+        if (!mesh_.status(mesh_.edge_handle(h)).deleted())
+          edge_mark_[mesh_.edge_handle(h).idx()] = 1;
+      for (std::size_t i = first_new_face; i < region_faces_.size(); ++i)
+        if (!mesh_.status(region_faces_[i]).deleted())
+          for (const auto& h : mesh_.fh_range(region_faces_[i]))
+            edge_mark_[mesh_.edge_handle(h).idx()] = 1;
+      candidates.clear();
+      for (std::size_t e = 0; e < edge_mark_.size(); ++e)
+        if (edge_mark_[e])
+          candidates.push_back(mesh_.halfedge_handle(OpenMesh::EdgeHandle(int(e)), 0));
       const std::vector<glm::dvec3> mid = points, mid_normals = normals;
       project(points, normals, options_.project_reach * scale_);
       for (std::size_t k = 0; k < fresh.size(); ++k) {
