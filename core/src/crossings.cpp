@@ -137,6 +137,15 @@ bool polygons_cross(const CrossingPolygon& a, const CrossingPolygon& b) {
   return false;
 }
 
+std::vector<VertexMove> renumber_moves(std::span<const VertexMove> moves,
+                                       std::span<const std::uint32_t> index) {
+  std::vector<VertexMove> out;
+  for (const VertexMove& m : moves)
+    if (m.vertex < index.size() && index[m.vertex] != UINT32_MAX)
+      out.push_back({index[m.vertex], m.position, m.normal});
+  return out;
+}
+
 std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, double cell,
                                 double min_move, int max_rounds) {
   if (!(cell > 0.0) || !std::isfinite(cell))
@@ -162,10 +171,14 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
     check.push_back(v);
   }
   if (check.empty()) return 0;
+  auto corners = [&](std::uint32_t f) {
+    return f < nt ? std::span<const std::uint32_t>(&mesh.triangles[3 * f], 3)
+                  : std::span<const std::uint32_t>(&mesh.quads[4 * (f - nt)], 4);
+  };
   auto polygon = [&](std::uint32_t f) {
     CrossingPolygon g;
-    const std::uint32_t* c = f < nt ? &mesh.triangles[3 * f] : &mesh.quads[4 * (f - nt)];
-    g.n = f < nt ? 3 : 4;
+    const auto c = corners(f);
+    g.n = c.size();
     for (std::size_t k = 0; k < g.n; ++k) {
       g.v[k] = c[k];
       g.p[k] = glm::dvec3(mesh.positions[c[k]]);
@@ -185,10 +198,6 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
   std::vector<std::uint32_t> star_index(nf, UINT32_MAX);  // a face's place among the stars
   for (std::uint32_t v : check)
     still[v] = 1;
-  auto corners = [&](std::uint32_t f) {
-    return f < nt ? std::span<const std::uint32_t>(&mesh.triangles[3 * f], 3)
-                  : std::span<const std::uint32_t>(&mesh.quads[4 * (f - nt)], 4);
-  };
   std::size_t put_back = 0;
   for (int round = 0; round < max_rounds && !check.empty(); ++round) {
     // The faces around the vertices to check (one scan over the faces: cheaper than a

@@ -361,10 +361,7 @@ class Merger {
     for (std::uint32_t v = 0; v < out.positions.size(); ++v)
       if (pieces.find(v) == v) ++stats_.components;
     stats_.unfilled_holes = count_loops();
-    moved_out_.clear();
-    for (const Move& m : moves_)
-      if (index[m.v.idx()] != UINT32_MAX)
-        moved_out_.push_back({index[m.v.idx()], glm::vec3(m.point), glm::vec3(m.normal)});
+    moved_out_ = renumber_moves(moves_, index);
     return out;
   }
 
@@ -458,15 +455,19 @@ class Merger {
     // Marks instead of sorting: a scan over the marks is ordered and far cheaper than sorting
     // the region's half-edges (which made this a tenth of the merge on ML 512²).
     edge_mark_.assign(mesh_.n_edges(), 0);
-    std::size_t count = 0;
     for (FH f : region_faces_)
-      for (const auto& h : mesh_.fh_range(f)) {
-        std::uint8_t& mark = edge_mark_[mesh_.edge_handle(h).idx()];
-        count += mark == 0;
-        mark = 1;
-      }
+      mark_edges(f);
+    return marked_edges();
+  }
+
+  void mark_edges(FH f) {
+    for (const auto& h : mesh_.fh_range(f))
+      edge_mark_[mesh_.edge_handle(h).idx()] = 1;
+  }
+
+  // The marked edges (each as its first half-edge) in index order.
+  std::vector<HH> marked_edges() const {
     std::vector<HH> edges;
-    edges.reserve(count);
     for (std::size_t e = 0; e < edge_mark_.size(); ++e)
       if (edge_mark_[e]) edges.push_back(mesh_.halfedge_handle(OpenMesh::EdgeHandle(int(e)), 0));
     return edges;
@@ -546,13 +547,8 @@ class Merger {
         if (!mesh_.status(mesh_.edge_handle(h)).deleted())
           edge_mark_[mesh_.edge_handle(h).idx()] = 1;
       for (std::size_t i = first_new_face; i < region_faces_.size(); ++i)
-        if (!mesh_.status(region_faces_[i]).deleted())
-          for (const auto& h : mesh_.fh_range(region_faces_[i]))
-            edge_mark_[mesh_.edge_handle(h).idx()] = 1;
-      candidates.clear();
-      for (std::size_t e = 0; e < edge_mark_.size(); ++e)
-        if (edge_mark_[e])
-          candidates.push_back(mesh_.halfedge_handle(OpenMesh::EdgeHandle(int(e)), 0));
+        if (!mesh_.status(region_faces_[i]).deleted()) mark_edges(region_faces_[i]);
+      candidates = marked_edges();
       const std::vector<glm::dvec3> mid = points, mid_normals = normals;
       project(points, normals, options_.project_reach * scale_);
       for (std::size_t k = 0; k < fresh.size(); ++k) {
@@ -570,7 +566,8 @@ class Merger {
           set_point(fresh[k], mid[k], mid_normals[k]);
         } else {
           ++stats_.projected;
-          moves_.push_back({fresh[k], mid[k], mid_normals[k]});
+          moves_.push_back(
+              {std::uint32_t(fresh[k].idx()), glm::vec3(mid[k]), glm::vec3(mid_normals[k])});
         }
       }
     }
@@ -695,11 +692,7 @@ class Merger {
   std::vector<FH> region_faces_;  // faces added by bridging, filling and enhancement
   std::vector<std::uint8_t> edge_mark_;  // region_edges' scratch
   // The sewing region's vertices moved onto the surface, with their midpoint and its normal.
-  struct Move {
-    VH v;
-    glm::dvec3 point, normal;
-  };
-  std::vector<Move> moves_;
+  std::vector<VertexMove> moves_;
   std::vector<VertexMove> moved_out_;
 };
 

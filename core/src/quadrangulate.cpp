@@ -286,13 +286,9 @@ class Quadrangulator {
     }
   }
 
-  // Keeps where v was before its first move (a path vertex: its edge's midpoint).
-  void remember(std::uint32_t v) {
-    if (v >= remembered_.size()) remembered_.resize(pos_.size(), 0);
-    if (remembered_[v]) return;
-    remembered_[v] = 1;
-    moved_.push_back({v, glm::vec3(pos_[v]), glm::vec3(nrm_[v])});
-  }
+  // Keeps where v is before a move (undo_crossing_moves takes a vertex's first entry: a path
+  // vertex goes back to its edge's midpoint, not to where the projection put it).
+  void remember(std::uint32_t v) { moved_.push_back({v, glm::vec3(pos_[v]), glm::vec3(nrm_[v])}); }
 
   // The output's moved vertices (projected path vertices, smoothed vertices) with where each was
   // before its first move (for undo_crossing_moves).
@@ -330,9 +326,7 @@ class Quadrangulator {
       (n == 4 ? out.quad_view : out.triangle_view).push_back(face_view_[f]);
     }
     stats_.output_quads = out.quad_count();
-    moved_out_.clear();
-    for (const VertexMove& m : moved_)
-      if (index[m.vertex] != kNone) moved_out_.push_back({index[m.vertex], m.position, m.normal});
+    moved_out_ = renumber_moves(moved_, index);
     return out;
   }
 
@@ -799,7 +793,6 @@ class Quadrangulator {
   std::vector<std::uint32_t> out_he_, valence_;
   std::vector<std::uint8_t> boundary_;
   // Moved vertices (projection and smoothing) and where each was before.
-  std::vector<std::uint8_t> remembered_;
   std::vector<VertexMove> moved_;      // vertex: this conversion's index
   std::vector<VertexMove> moved_out_;  // the same in output indices
 };

@@ -39,6 +39,23 @@ TEST(Crossings, MoveThroughAnotherSheetIsPutBack) {
   EXPECT_EQ(m.positions[5], glm::vec3(-2.0f, -2.0f, 0.5f));
 }
 
+// A vertex listed twice (a projected path vertex that was smoothed too) goes back to its first
+// entry; renumber_moves keeps the moves of kept vertices under their new indices.
+TEST(Crossings, FirstEntryWinsAndMovesFollowTheRenumbering) {
+  Mesh m = two_sheets({0.0f, 0.0f, 1.0f});
+  std::vector<VertexMove> moved = kMoved;
+  moved.push_back({0, {0.0f, 0.0f, 0.9f}, {0.0f, 0.0f, 1.0f}});
+  EXPECT_EQ(undo_crossing_moves(m, moved, 1.0), 1u);
+  EXPECT_EQ(m.positions[0], glm::vec3(0.0f));
+  const std::vector<std::uint32_t> index = {UINT32_MAX, 0, 1};
+  const std::vector<VertexMove> moves = {
+      {0, {1.0f, 0.0f, 0.0f}, {}}, {2, {2.0f, 0.0f, 0.0f}, {}}, {7, {3.0f, 0.0f, 0.0f}, {}}};
+  const std::vector<VertexMove> renumbered = renumber_moves(moves, index);
+  ASSERT_EQ(renumbered.size(), 1u);
+  EXPECT_EQ(renumbered[0].vertex, 1u);
+  EXPECT_EQ(renumbered[0].position, glm::vec3(2.0f, 0.0f, 0.0f));
+}
+
 TEST(Crossings, MoveThatCrossesNothingStays) {
   Mesh m = two_sheets({0.0f, 0.0f, 0.2f});  // still below sheet B
   EXPECT_EQ(undo_crossing_moves(m, kMoved, 1.0), 0u);

@@ -9,6 +9,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <span>
+#include <vector>
 
 #include <glm/glm.hpp>
 
@@ -36,17 +37,22 @@ struct VertexMove {
   glm::vec3 position{0.0f}, normal{0.0f};
 };
 
+// The moves of the vertices `index` keeps (old → new vertex index; UINT32_MAX: dropped), with
+// their new indices: a mesh builder's moves for its output mesh.
+std::vector<VertexMove> renumber_moves(std::span<const VertexMove> moves,
+                                       std::span<const std::uint32_t> index);
+
 // Puts moved vertices back where they were when one of their faces crosses another face of the
-// mesh. Moves shorter than `min_move` are left alone (their faces sweep no farther than that:
-// they can only meet a face that was already that close; this keeps the check cheap where most
-// moves are tiny, as merging's on Marschner–Lobb at 512², median 0.002 cells; where faces are
-// that close, as a smoothed face and its neighbour, even tiny moves matter). The faces around the
-// vertices to check (at first every moved one checked) go into a hash grid
-// of `cell`-sized cells (about an edge is fastest; any size finds the same crossings), every
-// face is tested against those in the cells of its box, and each still-moved vertex of a
-// crossing pair is put back. Rounds repeat with the faces of the vertices put back (in their
-// old places they can meet a face a moved neighbour made) while any is put back, at most
-// `max_rounds`. Returns the number of vertices put back. Throws std::invalid_argument for a
+// mesh (a vertex listed more than once goes back to its first entry). Moves shorter than `min_move`
+// are left alone (their faces sweep no farther than that: they can only meet a face that was
+// already that close; this keeps the check cheap where most moves are tiny, as merging's on
+// Marschner–Lobb at 512², median 0.002 cells; where faces are that close, as a smoothed face and
+// its neighbour, even tiny moves matter). The faces around the vertices to check (at first every
+// moved one checked) go into a hash grid of `cell`-sized cells (about an edge is fastest; any size
+// finds the same crossings), every face is tested against those in the cells of its box, and each
+// still-moved vertex of a crossing pair is put back. Rounds repeat with the faces of the vertices
+// put back (in their old places they can meet a face a moved neighbour made) while any is put back,
+// at most `max_rounds`. Returns the number of vertices put back. Throws std::invalid_argument for a
 // vertex index out of range or a cell size that is not positive. Deterministic: the faces are
 // tested in parallel, with the same result for any number of threads.
 std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, double cell,
