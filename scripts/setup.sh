@@ -10,6 +10,7 @@ packages=(
   libtbb-dev                    # threads
   libcli11-dev                  # command line
   nlohmann-json3-dev            # JSON summaries
+  libcpp-httplib-dev pkg-config # the job's HTTP server (found through pkg-config)
   libzstd-dev                   # fragment compression
   libopenmesh-dev               # half-edge meshes for §5 merging
   libdraco-dev libeigen3-dev draco  # GLB meshes (Draco glTF encoder; draco_decoder CLI)
