@@ -40,6 +40,125 @@ double quad_quality(const std::array<glm::dvec3, 4>& p, const glm::dvec3& normal
   return longest > 0.0 ? shortest / longest : 0.0;
 }
 
+void validate(const Mesh& m) {
+  const std::size_t nv = m.positions.size();
+  auto fail = [](const std::string& what) {
+    throw std::invalid_argument("quadrangulate: " + what);
+  };
+  if (m.normals.size() != nv) fail("normals and positions differ in number");
+  if (!m.scalars.empty() && m.scalars.size() != nv) fail("scalars and positions differ");
+  if (m.quads.size() % 4 != 0 || m.triangles.size() % 3 != 0) fail("partial face");
+  if (!m.quad_view.empty() && m.quad_view.size() != m.quad_count()) fail("quad_view size");
+  if (!m.triangle_view.empty() && m.triangle_view.size() != m.triangle_count())
+    fail("triangle_view size");
+  auto check = [&](const std::vector<std::uint32_t>& faces, std::size_t arity) {
+    for (std::size_t f = 0; f < faces.size(); f += arity)
+      for (std::size_t i = 0; i < arity; ++i) {
+        if (faces[f + i] >= nv) fail("face index out of range");
+        for (std::size_t j = i + 1; j < arity; ++j)
+          if (faces[f + i] == faces[f + j]) fail("face with a repeated vertex");
+      }
+  };
+  check(m.quads, 4);
+  check(m.triangles, 3);
+}
+
+// The faces the conversion rewrites (QuadOptions::region_rings), numbered on their own: region
+// vertices in input order. The whole input when `whole` (the same numbers, no copy).
+struct Region {
+  const Mesh* input = nullptr;
+  bool whole = true;
+  Mesh mesh;                          // the region's faces: its quads in input order, then all
+                                      // triangles (empty when whole)
+  std::vector<std::uint32_t> global;  // region vertex → input vertex
+  std::vector<std::uint32_t> local;   // input vertex → region vertex (kNone: outside)
+  std::vector<std::uint8_t> inside;   // per input quad: in the region
+  std::vector<std::uint8_t> pinned;   // per region vertex: also a corner of a quad outside
+  std::vector<std::uint64_t> cut;     // region half-edges (from << 32 | to) whose opposite lies
+                                      // in a quad outside, sorted
+
+  const Mesh& faces() const { return whole ? *input : mesh; }
+  std::size_t vertices() const { return whole ? input->positions.size() : global.size(); }
+  std::uint32_t to_input(std::uint32_t v) const { return whole ? v : global[v]; }
+  std::uint32_t from_input(std::uint32_t v) const { return whole ? v : local[v]; }
+};
+
+std::uint64_t edge_key(std::uint32_t from, std::uint32_t to) {
+  return std::uint64_t(from) << 32 | to;
+}
+
+// The triangles and the quads within `rings` rings of them (sharing a vertex); the whole mesh
+// for negative `rings` or when that is every quad.
+Region select_region(const Mesh& m, int rings) {
+  Region r;
+  r.input = &m;
+  if (rings < 0) return r;
+  const std::size_t nv = m.positions.size(), nq = m.quad_count();
+  std::vector<std::uint8_t> in(nv, 0);
+  for (std::uint32_t v : m.triangles)
+    in[v] = 1;
+  r.inside.assign(nq, 0);
+  std::size_t inside = 0;
+  std::vector<std::uint32_t> added;
+  for (int ring = 0; ring < rings; ++ring) {
+    added.clear();
+    for (std::uint32_t q = 0; q < nq; ++q) {
+      const std::uint32_t* c = &m.quads[4 * std::size_t(q)];
+      if (!r.inside[q] && (in[c[0]] | in[c[1]] | in[c[2]] | in[c[3]])) added.push_back(q);
+    }
+    if (added.empty()) break;
+    for (std::uint32_t q : added) {
+      r.inside[q] = 1;
+      for (int k = 0; k < 4; ++k)
+        in[m.quads[4 * std::size_t(q) + k]] = 1;
+    }
+    inside += added.size();
+  }
+  if (inside == nq) {
+    r.inside.clear();
+    return r;
+  }
+  r.whole = false;
+  r.local.assign(nv, kNone);
+  for (std::uint32_t v = 0; v < nv; ++v)
+    if (in[v]) {
+      r.local[v] = std::uint32_t(r.global.size());
+      r.global.push_back(v);
+    }
+  Mesh& sub = r.mesh;
+  sub.view_dirs = m.view_dirs;
+  sub.positions.reserve(r.global.size());
+  sub.normals.reserve(r.global.size());
+  for (std::uint32_t v : r.global) {
+    sub.positions.push_back(m.positions[v]);
+    sub.normals.push_back(m.normals[v]);
+    if (!m.scalars.empty()) sub.scalars.push_back(m.scalars[v]);
+  }
+  sub.quads.reserve(4 * inside);
+  if (!m.quad_view.empty()) sub.quad_view.reserve(inside);
+  r.pinned.assign(r.global.size(), 0);
+  for (std::uint32_t q = 0; q < nq; ++q) {
+    const std::uint32_t* c = &m.quads[4 * std::size_t(q)];
+    if (r.inside[q]) {
+      for (int k = 0; k < 4; ++k)
+        sub.quads.push_back(r.local[c[k]]);
+      if (!m.quad_view.empty()) sub.quad_view.push_back(m.quad_view[q]);
+      continue;
+    }
+    for (int k = 0; k < 4; ++k) {
+      const std::uint32_t a = r.local[c[k]], b = r.local[c[(k + 1) % 4]];
+      if (a != kNone) r.pinned[a] = 1;
+      if (a != kNone && b != kNone) r.cut.push_back(edge_key(b, a));
+    }
+  }
+  std::sort(r.cut.begin(), r.cut.end());
+  sub.triangles.reserve(m.triangles.size());
+  for (std::uint32_t v : m.triangles)
+    sub.triangles.push_back(r.local[v]);
+  sub.triangle_view = m.triangle_view;
+  return r;
+}
+
 // The conversion works on its own half-edge arrays rather than OpenMesh (merge.cpp): every step
 // is a local rewrite of faces of at most six corners (edge splits, face splits, two-face merges
 // and flips), faces briefly become hexagons, and the Dijkstra rounds need per-face scratch that
@@ -48,9 +167,9 @@ double quad_quality(const std::array<glm::dvec3, 4>& p, const glm::dvec3& normal
 // (determinism). Open edges have no opposite half-edge (kNone).
 class Quadrangulator {
  public:
-  Quadrangulator(const Mesh& in, const QuadOptions& options, QuadStats& stats)
-      : in_(in), options_(options), stats_(stats) {
-    validate();
+  Quadrangulator(const Region& region, const QuadOptions& options, QuadStats& stats)
+      : region_(region), options_(options), stats_(stats) {
+    const Mesh& in = region.faces();
     const std::size_t nv = in.positions.size();
     pos_.resize(nv);
     nrm_.resize(nv);
@@ -59,8 +178,7 @@ class Quadrangulator {
       nrm_[v] = glm::dvec3(in.normals[v]);
     }
     scalar_ = in.scalars;
-    stats_.input_quads = in.quad_count();
-    stats_.input_triangles = in.triangle_count();
+    stats_.region_faces = in.face_count();
     const std::size_t halfedges = in.quads.size() + in.triangles.size();
     for (auto* v : {&from_, &to_, &next_, &face_})
       v->reserve(halfedges + halfedges / 8);
@@ -84,6 +202,13 @@ class Quadrangulator {
     add_faces(in.quads, in.quad_view, 4);
     add_faces(in.triangles, in.triangle_view, 3);
     link_opposites();
+    if (!region_.cut.empty()) {  // the region's edge to the quads outside
+      cut_.assign(to_.size(), 0);
+      for (std::uint32_t h = 0; h < to_.size(); ++h)
+        if (opp_[h] == kNone)
+          cut_[h] = std::binary_search(region_.cut.begin(), region_.cut.end(),
+                                       edge_key(from_[h], to_[h]));
+    }
     // The length unit of the limits: the median edge.
     std::vector<double> lengths;
     for (std::uint32_t h = 0; h < to_.size(); ++h)
@@ -161,7 +286,7 @@ class Quadrangulator {
     build_vertex_rings();
     std::vector<std::uint32_t> work;
     for (std::uint32_t v = 0; v < pos_.size(); ++v)
-      if (valence_[v] == 2 && !boundary_[v]) work.push_back(v);
+      if (valence_[v] == 2 && !boundary_[v] && !is_pinned(v)) work.push_back(v);
     std::reverse(work.begin(), work.end());  // a stack, lowest index first
     while (!work.empty()) {
       const std::uint32_t v = work.back();
@@ -195,7 +320,7 @@ class Quadrangulator {
       out_he_[a] = x1;
       out_he_[b] = y1;
       for (std::uint32_t u : {a, b})
-        if (--valence_[u] == 2 && !boundary_[u]) work.push_back(u);
+        if (--valence_[u] == 2 && !boundary_[u] && !is_pinned(u)) work.push_back(u);
       ++stats_.quad_merges;
     }
   }
@@ -245,7 +370,7 @@ class Quadrangulator {
     }
     std::vector<std::uint32_t> region;
     for (std::uint32_t v = 0; v < nv; ++v)
-      if (moves[v] && !boundary[v] && count[v + 1] > count[v]) region.push_back(v);
+      if (moves[v] && !boundary[v] && !is_pinned(v) && count[v + 1] > count[v]) region.push_back(v);
     std::vector<glm::dvec3> start(region.size()), points(region.size()), normals(region.size());
     for (std::size_t i = 0; i < region.size(); ++i) {
       start[i] = pos_[region[i]];
@@ -295,66 +420,75 @@ class Quadrangulator {
   const std::vector<VertexMove>& moved() const { return moved_out_; }
   double median_edge() const { return median_edge_; }
 
+  // The whole mesh: the quads outside the region as they were, then the region's faces.
   Mesh output() {
+    const Mesh& input = *region_.input;
     Mesh out;
-    out.view_dirs = in_.view_dirs;
-    std::vector<std::uint32_t> index(pos_.size(), kNone);
-    std::size_t used = 0, quads = 0;
+    out.view_dirs = input.view_dirs;
+    const std::size_t n_input = input.positions.size(), n_region = region_.vertices();
+    // Output order: input vertices (by input number), then the new ones.
+    auto number = [&](std::uint32_t v) {
+      return v < n_region ? region_.to_input(v) : std::uint32_t(n_input + (v - n_region));
+    };
+    std::vector<std::uint32_t> index(n_input + (pos_.size() - n_region), kNone);
+    std::vector<std::uint32_t> outside;  // input quads outside the region
+    for (std::uint32_t q = 0; q < region_.inside.size(); ++q)
+      if (!region_.inside[q]) {
+        outside.push_back(q);
+        for (int k = 0; k < 4; ++k)
+          index[input.quads[4 * std::size_t(q) + k]] = 0;
+      }
     for (std::uint32_t h = 0; h < to_.size(); ++h)
-      if (face_[h] != kNone && index[from_[h]] == kNone) index[from_[h]] = 0, ++used;
+      if (face_[h] != kNone) index[number(from_[h])] = 0;
+    std::size_t used = 0, faces = outside.size();
+    for (std::uint32_t x : index)
+      used += x != kNone;
     for (std::uint32_t f = 0; f < face_he_.size(); ++f)
-      if (face_he_[f] != kNone) ++quads;  // triangles left are few: room for all as quads
+      if (face_he_[f] != kNone) ++faces;  // triangles left are few: room for all as quads
     out.positions.reserve(used);
     out.normals.reserve(used);
-    if (!scalar_.empty()) out.scalars.reserve(used);
-    out.quads.reserve(4 * quads);
-    out.quad_view.reserve(quads);
-    for (std::uint32_t v = 0; v < pos_.size(); ++v) {
-      if (index[v] == kNone) continue;
-      index[v] = std::uint32_t(out.positions.size());
-      out.positions.emplace_back(pos_[v]);
-      out.normals.emplace_back(nrm_[v]);
-      if (!scalar_.empty()) out.scalars.push_back(scalar_[v]);
+    const bool scalars = !input.scalars.empty();
+    if (scalars) out.scalars.reserve(used);
+    out.quads.reserve(4 * faces);
+    out.quad_view.reserve(faces);
+    for (std::uint32_t g = 0; g < index.size(); ++g) {
+      if (index[g] == kNone) continue;
+      index[g] = std::uint32_t(out.positions.size());
+      const std::uint32_t v =
+          g < n_input ? region_.from_input(g) : std::uint32_t(n_region + (g - n_input));
+      if (v == kNone) {  // outside the region: as it was
+        out.positions.push_back(input.positions[g]);
+        out.normals.push_back(input.normals[g]);
+        if (scalars) out.scalars.push_back(input.scalars[g]);
+      } else {
+        out.positions.emplace_back(pos_[v]);
+        out.normals.emplace_back(nrm_[v]);
+        if (scalars) out.scalars.push_back(scalar_[v]);
+      }
+    }
+    for (std::uint32_t q : outside) {
+      for (int k = 0; k < 4; ++k)
+        out.quads.push_back(index[input.quads[4 * std::size_t(q) + k]]);
+      out.quad_view.push_back(input.quad_view.empty() ? 0 : input.quad_view[q]);
     }
     for (std::uint32_t f = 0; f < face_he_.size(); ++f) {
       if (face_he_[f] == kNone) continue;
       const std::size_t n = face_size(f);
-      std::vector<std::uint32_t>& faces = n == 4 ? out.quads : out.triangles;
+      std::vector<std::uint32_t>& target = n == 4 ? out.quads : out.triangles;
       std::uint32_t h = face_he_[f];
       for (std::size_t k = 0; k < n; ++k, h = next_[h])
-        faces.push_back(index[from_[h]]);
+        target.push_back(index[number(from_[h])]);
       (n == 4 ? out.quad_view : out.triangle_view).push_back(face_view_[f]);
     }
     stats_.output_quads = out.quad_count();
-    moved_out_ = renumber_moves(moved_, index);
+    std::vector<std::uint32_t> renumber(pos_.size());
+    for (std::uint32_t v = 0; v < pos_.size(); ++v)
+      renumber[v] = index[number(v)];
+    moved_out_ = renumber_moves(moved_, renumber);
     return out;
   }
 
  private:
-  void validate() const {
-    const Mesh& m = in_;
-    const std::size_t nv = m.positions.size();
-    auto fail = [](const std::string& what) {
-      throw std::invalid_argument("quadrangulate: " + what);
-    };
-    if (m.normals.size() != nv) fail("normals and positions differ in number");
-    if (!m.scalars.empty() && m.scalars.size() != nv) fail("scalars and positions differ");
-    if (m.quads.size() % 4 != 0 || m.triangles.size() % 3 != 0) fail("partial face");
-    if (!m.quad_view.empty() && m.quad_view.size() != m.quad_count()) fail("quad_view size");
-    if (!m.triangle_view.empty() && m.triangle_view.size() != m.triangle_count())
-      fail("triangle_view size");
-    auto check = [&](const std::vector<std::uint32_t>& faces, std::size_t arity) {
-      for (std::size_t f = 0; f < faces.size(); f += arity)
-        for (std::size_t i = 0; i < arity; ++i) {
-          if (faces[f + i] >= nv) fail("face index out of range");
-          for (std::size_t j = i + 1; j < arity; ++j)
-            if (faces[f + i] == faces[f + j]) fail("face with a repeated vertex");
-        }
-    };
-    check(m.quads, 4);
-    check(m.triangles, 3);
-  }
-
   // Opposite half-edges through the half-edges leaving each vertex (counting sort by start).
   void link_opposites() {
     const std::size_t nv = pos_.size();
@@ -399,6 +533,9 @@ class Quadrangulator {
       p = next_[p];
     return p;
   }
+
+  bool is_cut(std::uint32_t h) const { return h < cut_.size() && cut_[h]; }
+  bool is_pinned(std::uint32_t v) const { return v < region_.pinned.size() && region_.pinned[v]; }
 
   double length(std::uint32_t h) const { return glm::distance(pos_[from_[h]], pos_[to_[h]]); }
   double reach() const { return options_.projection_reach * median_edge_; }
@@ -536,9 +673,11 @@ class Quadrangulator {
       do {
         const std::uint32_t o = opp_[hx];
         if (o == kNone) {
-          const double cost = item.d + glm::distance(glm::dvec3(cx), midpoint(hx));
-          candidates.push_back({cost, hx, x, kNone});
-          note(search_[x].source, cost);
+          if (!is_cut(hx)) {  // an open edge of the mesh, not the region's edge
+            const double cost = item.d + glm::distance(glm::dvec3(cx), midpoint(hx));
+            candidates.push_back({cost, hx, x, kNone});
+            note(search_[x].source, cost);
+          }
         } else if (const std::uint32_t y = face_[o]; y != x) {
           const double w = glm::distance(cx, centroid_[y]);
           if (search_[y].settled) {
@@ -723,6 +862,9 @@ class Quadrangulator {
     const std::uint32_t fa1 = next_[h], fa2 = next_[fa1], fa3 = next_[fa2];
     const std::uint32_t gb1 = next_[o], gb2 = next_[gb1], gb3 = next_[gb2];
     const std::uint32_t a1 = to_[fa1], a2 = to_[fa2], b1 = to_[gb1], b2 = to_[gb2];
+    // Valences at the region's edge count only its own faces.
+    for (std::uint32_t x : {u, v, a1, a2, b1, b2})
+      if (is_pinned(x)) return false;
     const int before = energy(u, 0) + energy(v, 0);
     const int gain_a = before - energy(u, -1) - energy(v, -1) + energy(a1, 0) + energy(b1, 0) -
                        energy(a1, 1) - energy(b1, 1);
@@ -767,7 +909,7 @@ class Quadrangulator {
     return false;
   }
 
-  const Mesh& in_;
+  const Region& region_;
   QuadOptions options_;
   QuadStats& stats_;
   std::vector<glm::dvec3> pos_, nrm_;
@@ -777,6 +919,7 @@ class Quadrangulator {
   std::vector<std::uint32_t> from_, to_, next_, opp_, face_;
   std::vector<std::uint32_t> face_he_;
   std::vector<std::uint8_t> face_view_, face_new_;
+  std::vector<std::uint8_t> cut_;  // per half-edge of the input: on the region's edge
   double median_edge_ = 0.0;
   // Dijkstra: face centroids (kept up to date by the paths), scratch reset where touched.
   std::vector<glm::vec3> centroid_;  // float: the search is bound by memory traffic
@@ -803,28 +946,48 @@ Mesh quadrangulate(const Mesh& mesh, const QuadOptions& options, QuadStats& stat
                    const SurfaceProjection& project) {
   stats = {};
   const auto start = std::chrono::steady_clock::now();
-  auto stage = start;
-  auto lap = [&stage](double& seconds) {
-    seconds = seconds_since(stage);
-    stage = std::chrono::steady_clock::now();
+  validate(mesh);
+  auto convert = [&](const Region& region) {
+    auto stage = std::chrono::steady_clock::now();
+    auto lap = [&stage](double& seconds) {
+      seconds += seconds_since(stage);
+      stage = std::chrono::steady_clock::now();
+    };
+    Quadrangulator q(region, options, stats);
+    lap(stats.setup_seconds);
+    q.pair_triangles();
+    lap(stats.pair_seconds);
+    q.connect_triangles(project);
+    lap(stats.path_seconds);
+    q.merge_quad_pairs();
+    q.flip_edges();
+    lap(stats.cleanup_seconds);
+    q.smooth(project);
+    Mesh out = q.output();
+    // Moved vertices whose faces pass through other faces go back (crossings.hpp): near Barth's
+    // double points a path vertex projected onto the surface can land on the other sheet.
+    if (!q.moved().empty() && q.median_edge() > 0.0)
+      stats.crossings_undone = undo_crossing_moves(out, q.moved(), 2.0 * q.median_edge(),
+                                                   options.crossing_min_move * q.median_edge());
+    lap(stats.smooth_seconds);
+    return out;
   };
-  Quadrangulator q(mesh, options, stats);
-  lap(stats.setup_seconds);
-  q.pair_triangles();
-  lap(stats.pair_seconds);
-  q.connect_triangles(project);
-  lap(stats.path_seconds);
-  q.merge_quad_pairs();
-  q.flip_edges();
-  lap(stats.cleanup_seconds);
-  q.smooth(project);
-  Mesh out = q.output();
-  // Moved vertices whose faces pass through other faces go back (crossings.hpp): near Barth's
-  // double points a path vertex projected onto the surface can land on the other sheet.
-  if (!q.moved().empty() && q.median_edge() > 0.0)
-    stats.crossings_undone = undo_crossing_moves(out, q.moved(), 2.0 * q.median_edge(),
-                                                 options.crossing_min_move * q.median_edge());
-  lap(stats.smooth_seconds);
+  auto region_start = std::chrono::steady_clock::now();
+  Region region = select_region(mesh, mesh.triangles.empty() ? -1 : options.region_rings);
+  stats.setup_seconds = seconds_since(region_start);
+  Mesh out = convert(region);
+  if (!region.whole && stats.leftover_triangles > 0) {
+    // A part of the region with an odd number of triangles and no open edge: pair them over
+    // the whole mesh instead (the times add up).
+    const QuadStats first = stats;
+    stats = {};
+    stats.setup_seconds = first.setup_seconds + first.pair_seconds + first.path_seconds +
+                          first.cleanup_seconds + first.smooth_seconds;
+    out = convert(select_region(mesh, -1));
+  }
+  stats.whole_mesh = stats.region_faces == mesh.face_count();
+  stats.input_quads = mesh.quad_count();
+  stats.input_triangles = mesh.triangle_count();
   stats.seconds = seconds_since(start);
   return out;
 }

@@ -98,10 +98,9 @@ void expect_closed_quad_mesh(const Mesh& out, const QuadStats& stats, long euler
   EXPECT_EQ(out.normals.size(), out.positions.size());
 }
 
-// A triangular prism, its sides k quads long: the path from one end triangle to the other
-// crosses k quads straight, each splits in two.
-TEST(QuadHandMade, StraightPathSplitsEachQuadInTwo) {
-  constexpr int k = 3;
+// A triangular prism, its sides k quads long, closed by a triangle at either end; the scalar is
+// z.
+Builder prism(int k) {
   Builder b;
   b.centre = {0.0, 0.0, 0.5 * k};
   b.mesh.view_dirs = {{0.0, 0.0, 1.0}};
@@ -116,6 +115,14 @@ TEST(QuadHandMade, StraightPathSplitsEachQuadInTwo) {
   b.triangle({ring(0, 0), ring(2, 0), ring(1, 0)});
   for (const glm::vec3& p : b.mesh.positions)
     b.mesh.scalars.push_back(p.z);
+  return b;
+}
+
+// The path from one end triangle of a prism to the other crosses k quads straight, each splits
+// in two.
+TEST(QuadHandMade, StraightPathSplitsEachQuadInTwo) {
+  constexpr int k = 3;
+  const Builder b = prism(k);
   QuadStats stats;
   const Mesh out = quadrangulate(b.mesh, exact_options(), stats);
   expect_closed_quad_mesh(out, stats, 2);
@@ -337,6 +344,51 @@ TEST(QuadSmoothing, WithoutProjectionVerticesMoveAtMostTheLimit) {
     moved = std::max(moved, double(glm::distance(after.positions[v], before.positions[v])));
   EXPECT_GT(moved, 0.1 * limit);
   EXPECT_LE(moved, limit * (1.0 + 1e-4) + 1e-6);
+}
+
+// Two rings around each end triangle of a long prism are two separate regions with one triangle
+// each and no open edge: the conversion runs again on the whole mesh, as without regions.
+TEST(QuadRegion, TrianglesARegionCannotPairAreConvertedOverTheWholeMesh) {
+  const Builder b = prism(12);
+  QuadOptions whole = exact_options(), rings = exact_options();
+  whole.region_rings = -1;
+  rings.region_rings = 2;
+  QuadStats whole_stats, stats;
+  const Mesh expected = quadrangulate(b.mesh, whole, whole_stats);
+  const Mesh out = quadrangulate(b.mesh, rings, stats);
+  expect_closed_quad_mesh(out, stats, 2);
+  EXPECT_TRUE(stats.whole_mesh);
+  EXPECT_EQ(stats.region_faces, b.mesh.face_count());
+  EXPECT_EQ(stats.paths, 1u);
+  EXPECT_EQ(out.positions, expected.positions);
+  EXPECT_EQ(out.quads, expected.quads);
+}
+
+// On a merged sphere the region is the sewing region and a few rings: the quads beyond come
+// out as they went in (same corners, same places: the region's edge does not move either).
+TEST(QuadRegion, QuadsAwayFromTrianglesPassThroughUnchanged) {
+  const Mesh& in = merged("sphere", 128, true);
+  QuadStats stats;
+  const Mesh out = quadrangulate(in, {}, stats, onto_sphere);
+  expect_closed_quad_mesh(out, stats, 2);
+  EXPECT_FALSE(stats.whole_mesh);
+  EXPECT_GT(stats.region_faces, in.triangle_count());
+  EXPECT_LT(stats.region_faces, in.face_count() / 2);
+  using Corners = std::array<float, 12>;
+  auto corners = [](const Mesh& m, std::size_t q) {
+    Corners c;
+    for (int k = 0; k < 4; ++k)
+      for (int d = 0; d < 3; ++d)
+        c[3 * k + d] = m.positions[m.quads[4 * q + k]][d];
+    return c;
+  };
+  std::set<Corners> output;
+  for (std::size_t q = 0; q < out.quad_count(); ++q)
+    output.insert(corners(out, q));
+  std::size_t kept = 0;
+  for (std::size_t q = 0; q < in.quad_count(); ++q)
+    kept += output.count(corners(in, q));
+  EXPECT_GE(kept, in.face_count() - stats.region_faces);
 }
 
 TEST(QuadDeterminism, TwoRunsGiveTheSameMesh) {

@@ -13,6 +13,14 @@
 namespace ldimesh {
 
 struct QuadOptions {
+  // The faces converted: the triangles and the quads within this many rings of them (faces
+  // sharing a vertex, ring by ring); the other quads (the views' regular grids, most of a merged
+  // mesh) pass through unchanged, so the conversion costs what the sewing region holds. The
+  // region's edge to the quads outside is fixed: no path crosses or ends there, its vertices
+  // neither move nor flip. Should triangles be left that a region cannot pair (an odd number
+  // in a part of the region with no open edge), the conversion runs again on the whole mesh.
+  // Negative: always the whole mesh.
+  int region_rings = 4;
   // Pairing: a triangle pair becomes a quad if the quad is convex (seen along its normal) and
   // its shortest edge is at least this fraction of its longest (the paper's quality metric).
   double min_pair_quality = 0.0;
@@ -43,6 +51,8 @@ struct QuadOptions {
 struct QuadStats {
   std::size_t input_triangles = 0;
   std::size_t input_quads = 0;
+  std::size_t region_faces = 0;        // input faces in the region converted (see region_rings)
+  bool whole_mesh = false;             // the region was the whole mesh (or fell back to it)
   std::size_t paired = 0;              // triangle pairs merged into one quad each
   std::size_t paths = 0;               // shortest paths between two triangles
   std::size_t path_rounds = 0;         // Dijkstra rounds
@@ -55,8 +65,8 @@ struct QuadStats {
   std::size_t projected = 0;           // vertices the projection moved (all stages)
   std::size_t crossings_undone = 0;    // moved vertices put back: a face of theirs crossed another
   std::size_t output_quads = 0;
-  double median_edge = 0.0;      // of the input: the unit of max_unprojected_move and the reach
-  double setup_seconds = 0.0;    // checks and half-edges
+  double median_edge = 0.0;      // of the region: the unit of max_unprojected_move and the reach
+  double setup_seconds = 0.0;    // checks, the region and its half-edges
   double pair_seconds = 0.0;     // greedy pairing
   double path_seconds = 0.0;     // Dijkstra rounds, splits and their projection
   double cleanup_seconds = 0.0;  // quad merges and flips
@@ -72,13 +82,15 @@ struct QuadStats {
 // another face go back to where they were (options.crossing_min_move, crossings.hpp). Output: the
 // vertices that faces use (input vertices first, in input order, then new ones; positions, normals,
 // and scalars if the input has them, new ones interpolated), quads wound like the input with
-// quad_view the view of the face each came from, view_dirs copied, triangles empty unless a
+// quad_view the view of the face each came from (the quads outside the region first, in input
+// order, then the region's), view_dirs copied, triangles empty unless a
 // triangle could not be converted (counted in stats.leftover_triangles and kept as a triangle).
 // Closed input gives closed output; an open edge stays open (it may be split). Deterministic:
 // the same output for any number of threads (the half-edge links, the smoothing steps and the
 // crossing check run in parallel; the pairing, paths, merges and flips in order). Throws
 // std::invalid_argument on inconsistent array sizes, a face index out of range, a face with a
-// repeated vertex, or an edge used twice in one direction (so also by three faces).
+// repeated vertex, or an edge of the region used twice in one direction (so also by three
+// faces).
 Mesh quadrangulate(const Mesh& mesh, const QuadOptions& options, QuadStats& stats,
                    const SurfaceProjection& project = {});
 
