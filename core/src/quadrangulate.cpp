@@ -919,7 +919,7 @@ class Quadrangulator {
   std::vector<std::uint32_t> from_, to_, next_, opp_, face_;
   std::vector<std::uint32_t> face_he_;
   std::vector<std::uint8_t> face_view_, face_new_;
-  std::vector<std::uint8_t> cut_;  // per half-edge of the input: on the region's edge
+  std::vector<std::uint8_t> cut_;  // per half-edge made in set-up: on the region's edge
   double median_edge_ = 0.0;
   // Dijkstra: face centroids (kept up to date by the paths), scratch reset where touched.
   std::vector<glm::vec3> centroid_;  // float: the search is bound by memory traffic
