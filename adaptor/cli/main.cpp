@@ -334,7 +334,6 @@ int run_mesh(const MeshArgs& args) {
                                {"input_quads", q.input_quads},
                                {"paired", q.paired},
                                {"region_faces", q.region_faces},
-                               {"whole_mesh", q.whole_mesh},
                                {"paths", q.paths},
                                {"path_rounds", q.path_rounds},
                                {"path_splits", q.path_splits},

@@ -973,7 +973,7 @@ Mesh quadrangulate(const Mesh& mesh, const QuadOptions& options, QuadStats& stat
     return out;
   };
   auto region_start = std::chrono::steady_clock::now();
-  Region region = select_region(mesh, mesh.triangles.empty() ? -1 : options.region_rings);
+  Region region = select_region(mesh, options.region_rings);
   stats.setup_seconds = seconds_since(region_start);
   Mesh out = convert(region);
   if (!region.whole && stats.leftover_triangles > 0) {
@@ -985,7 +985,6 @@ Mesh quadrangulate(const Mesh& mesh, const QuadOptions& options, QuadStats& stat
                           first.cleanup_seconds + first.smooth_seconds;
     out = convert(select_region(mesh, -1));
   }
-  stats.whole_mesh = stats.region_faces == mesh.face_count();
   stats.input_quads = mesh.quad_count();
   stats.input_triangles = mesh.triangle_count();
   stats.seconds = seconds_since(start);

@@ -357,11 +357,23 @@ TEST(QuadRegion, TrianglesARegionCannotPairAreConvertedOverTheWholeMesh) {
   const Mesh expected = quadrangulate(b.mesh, whole, whole_stats);
   const Mesh out = quadrangulate(b.mesh, rings, stats);
   expect_closed_quad_mesh(out, stats, 2);
-  EXPECT_TRUE(stats.whole_mesh);
-  EXPECT_EQ(stats.region_faces, b.mesh.face_count());
+  EXPECT_EQ(stats.region_faces, b.mesh.face_count());  // fell back to the whole mesh
   EXPECT_EQ(stats.paths, 1u);
   EXPECT_EQ(out.positions, expected.positions);
   EXPECT_EQ(out.quads, expected.quads);
+}
+
+// Without triangles the region is empty: every quad and vertex comes out as it went in.
+TEST(QuadRegion, QuadsOnlyInputPassesThrough) {
+  const Builder b = cube(3, [](int, int, int, int) { return false; });
+  QuadStats stats;
+  const Mesh out = quadrangulate(b.mesh, {}, stats);
+  EXPECT_EQ(stats.region_faces, 0u);
+  EXPECT_EQ(out.positions, b.mesh.positions);
+  EXPECT_EQ(out.normals, b.mesh.normals);
+  EXPECT_EQ(out.quads, b.mesh.quads);
+  EXPECT_EQ(out.quad_view, b.mesh.quad_view);
+  EXPECT_EQ(out.triangle_count(), 0u);
 }
 
 // On a merged sphere the region is the sewing region and a few rings: the quads beyond come
@@ -371,7 +383,6 @@ TEST(QuadRegion, QuadsAwayFromTrianglesPassThroughUnchanged) {
   QuadStats stats;
   const Mesh out = quadrangulate(in, {}, stats, onto_sphere);
   expect_closed_quad_mesh(out, stats, 2);
-  EXPECT_FALSE(stats.whole_mesh);
   EXPECT_GT(stats.region_faces, in.triangle_count());
   EXPECT_LT(stats.region_faces, in.face_count() / 2);
   using Corners = std::array<float, 12>;

@@ -51,8 +51,7 @@ struct QuadOptions {
 struct QuadStats {
   std::size_t input_triangles = 0;
   std::size_t input_quads = 0;
-  std::size_t region_faces = 0;        // input faces in the region converted (see region_rings)
-  bool whole_mesh = false;             // the region was the whole mesh (or fell back to it)
+  std::size_t region_faces = 0;        // input faces converted (all: the whole mesh, region_rings)
   std::size_t paired = 0;              // triangle pairs merged into one quad each
   std::size_t paths = 0;               // shortest paths between two triangles
   std::size_t path_rounds = 0;         // Dijkstra rounds
