@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iterator>
 #include <limits>
 #include <stdexcept>
 #include <vector>
@@ -38,13 +39,18 @@ struct Bounds {
 // are read in one sweep instead of one cache miss each, with the cell of the box's low corner.
 class StarGrid {
  public:
-  void add(std::uint64_t key, std::uint32_t star, const Bounds& b, const glm::ivec3& lo_cell) {
-    Entry e{key, star, lo_cell, {}, {}};
+  void reserve(std::size_t entries) { entries_.reserve(entries); }
+  // Enters the star with box b into every cell (of size `cell`) the box touches.
+  void add(std::uint32_t star, const Bounds& b, double cell) {
+    Entry e{0, star, grid_cell(b.lo, cell), {}, {}};
     for (int k = 0; k < 3; ++k) {
-      e.lo[k] = std::nextafter(float(b.lo[k]), -std::numeric_limits<float>::infinity());
-      e.hi[k] = std::nextafter(float(b.hi[k]), std::numeric_limits<float>::infinity());
+      e.lo[k] = round_down(b.lo[k]);
+      e.hi[k] = -round_down(-b.hi[k]);
     }
-    entries_.push_back(e);
+    b.cells(cell, [&](std::uint64_t key, const glm::ivec3&) {
+      e.key = key;
+      entries_.push_back(e);
+    });
   }
   void build() {
     std::sort(entries_.begin(), entries_.end(), [](const Entry& a, const Entry& b) {
@@ -69,6 +75,11 @@ class StarGrid {
   }
 
  private:
+  // The largest float not above x (nextafter only where the nearest float is above it).
+  static float round_down(double x) {
+    const float f = float(x);
+    return double(f) <= x ? f : std::nextafter(f, -std::numeric_limits<float>::infinity());
+  }
   struct Entry {
     std::uint64_t key;
     std::uint32_t star;
@@ -199,32 +210,38 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
   for (std::uint32_t v : check)
     still[v] = 1;
   std::size_t put_back = 0;
+  // The faces around the vertices to check: in the first round one scan over the faces (cheaper
+  // than a vertex → faces table for the whole mesh); a later round checks vertices put back,
+  // which were checked in the first, so its faces are among the first round's.
+  std::vector<std::uint32_t> first_star;
   for (int round = 0; round < max_rounds && !check.empty(); ++round) {
-    // The faces around the vertices to check (one scan over the faces: cheaper than a
-    // vertex → faces table for the whole mesh).
     for (std::uint32_t v : check)
       checking[v] = 1;
     std::vector<std::uint32_t> star;
-    for (std::uint32_t f = 0; f < nf; ++f) {
+    auto around = [&](std::uint32_t f) {
       const auto c = corners(f);
-      if (std::any_of(c.begin(), c.end(), [&](std::uint32_t v) { return checking[v]; }))
-        star.push_back(f);
+      return std::any_of(c.begin(), c.end(), [&](std::uint32_t v) { return checking[v]; });
+    };
+    if (round == 0) {
+      for (std::uint32_t f = 0; f < nf; ++f)
+        if (around(f)) star.push_back(f);
+      first_star = star;
+    } else {
+      std::copy_if(first_star.begin(), first_star.end(), std::back_inserter(star), around);
     }
     for (std::uint32_t v : check)
       checking[v] = 0;
     std::vector<CrossingPolygon> stars;
     stars.reserve(star.size());
     StarGrid grid;
+    grid.reserve(4 * star.size());
     IndexMap<std::uint64_t, MixHash> occupied, near;  // cells (near_cell) of stars, and around
     std::vector<glm::ivec3> occupied_cells;
     for (std::uint32_t f : star) {
       star_index[f] = std::uint32_t(stars.size());
       stars.push_back(polygon(f));
       const Bounds b(stars.back());
-      const glm::ivec3 lo_cell = grid_cell(b.lo, cell);
-      b.cells(cell, [&](std::uint64_t k, const glm::ivec3&) {
-        grid.add(k, std::uint32_t(stars.size() - 1), b, lo_cell);
-      });
+      grid.add(std::uint32_t(stars.size() - 1), b, cell);
       b.cells(near_cell, [&](std::uint64_t k, const glm::ivec3& at) {
         if (occupied.try_emplace(k, std::uint32_t(occupied_cells.size())).second)
           occupied_cells.push_back(at);
