@@ -312,6 +312,7 @@ int run_mesh(const MeshArgs& args) {
                        {"sample_seconds", refined.sample_seconds}};
     const ldimesh::MergeStats& merged = result.merging;
     j["merging"] = {{"enabled", args.merge},
+                    {"region_faces", merged.region_faces},
                     {"dropped_faces", merged.dropped_faces},
                     {"boundary_faces", merged.boundary_faces},
                     {"patches", merged.patches},

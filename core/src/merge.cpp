@@ -8,6 +8,8 @@
 #include <numeric>
 #include <queue>
 #include <span>
+#include <stdexcept>
+#include <string>
 #include <unordered_map>
 #include <vector>
 
@@ -59,6 +61,148 @@ struct UnionFind {
   }
 };
 
+constexpr std::uint32_t kNone = UINT32_MAX;
+// The boundary layer's faces touch the region's seeds, their neighbours one ring further out:
+// with fewer rings, removing the layer would open edges the region's mesh does not have.
+constexpr int kMinRegionRings = 2;
+
+// The part of the input that merging builds as a half-edge mesh (MergeOptions::region_rings):
+// the faces within `rings` rings (faces sharing a vertex) of the vertices that are not inside a
+// closed disk of faces: open-boundary vertices and any vertex where OpenMesh could refuse a face.
+// Every step of merging happens within a ring or two of the open boundaries, so the other faces
+// (most of a merged mesh: the views' regular grids) pass through as they are, and the mesh is the
+// same as when all of it is built. Faces are numbered quads first, then triangles, as in the input.
+struct InputRegion {
+  bool whole = true;                      // every face is in the region
+  std::vector<std::uint8_t> inside;       // per input face
+  std::vector<std::uint32_t> local;       // input vertex → region vertex (kNone: outside)
+  std::vector<std::uint32_t> global;      // region vertex → input vertex
+  std::vector<std::uint8_t> pinned;       // per region vertex: also a corner of a face outside
+  std::vector<std::uint8_t> used;         // per input vertex: a corner of some face
+  std::vector<std::uint8_t> vertex_view;  // per input vertex: the view of the last face using it
+  std::size_t faces = 0;                  // in the region
+};
+
+// Calls f(corners) with the corners of input face `face` (quads first, then triangles).
+inline std::span<const std::uint32_t> face_corners(const Mesh& m, std::size_t face) {
+  const std::size_t nq = m.quad_count();
+  return face < nq ? std::span<const std::uint32_t>(&m.quads[4 * face], 4)
+                   : std::span<const std::uint32_t>(&m.triangles[3 * (face - nq)], 3);
+}
+
+InputRegion select_input_region(const Mesh& m, int rings) {
+  InputRegion r;
+  const std::size_t nv = m.positions.size(), nq = m.quad_count(), nf = nq + m.triangle_count();
+  // The view each vertex gets: that of the last face using it (as building the mesh sets it).
+  r.vertex_view.assign(nv, 0);
+  r.used.assign(nv, 0);
+  for (std::size_t f = 0; f < nf; ++f) {
+    const auto views = f < nq ? std::span(m.quad_view) : std::span(m.triangle_view);
+    const std::size_t i = f < nq ? f : f - nq;
+    for (std::uint32_t v : face_corners(m, f)) {
+      r.used[v] = 1;
+      if (i < views.size()) r.vertex_view[v] = views[i];
+    }
+  }
+  if (rings < 0) return r;
+  // Vertex → corners (corner c of face f: 4 f + k for quads, 4 nq + 3 (f − nq) + k for triangles).
+  std::vector<std::uint32_t> start(nv + 1, 0);
+  for (std::uint32_t v : m.quads)
+    ++start[v + 1];
+  for (std::uint32_t v : m.triangles)
+    ++start[v + 1];
+  for (std::size_t v = 0; v < nv; ++v)
+    start[v + 1] += start[v];
+  std::vector<std::uint32_t> corners(start[nv]);
+  {
+    std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
+    for (std::uint32_t c = 0; c < m.quads.size(); ++c)
+      corners[fill[m.quads[c]]++] = c;
+    for (std::uint32_t c = 0; c < m.triangles.size(); ++c)
+      corners[fill[m.triangles[c]]++] = std::uint32_t(m.quads.size()) + c;
+  }
+  const std::uint32_t quad_corners = std::uint32_t(m.quads.size());
+  auto face_of = [&](std::uint32_t c) {
+    return c < quad_corners ? c / 4 : std::uint32_t(nq) + (c - quad_corners) / 3;
+  };
+  // The corners after and before corner c in its face.
+  auto around = [&](std::uint32_t c) {
+    if (c < quad_corners) {
+      const std::uint32_t base = c - c % 4;
+      return std::pair(m.quads[base + (c + 1) % 4], m.quads[base + (c + 3) % 4]);
+    }
+    const std::uint32_t t = c - quad_corners, base = t - t % 3;
+    return std::pair(m.triangles[base + (t % 3 + 1) % 3], m.triangles[base + (t % 3 + 2) % 3]);
+  };
+  // A vertex is inside a closed disk when the faces around it form one cycle in which each face's
+  // incoming edge is the next face's outgoing edge, every edge used once each way: OpenMesh
+  // accepts all those faces in any order. Anything else (an open boundary, a repeated or
+  // one-way edge, two fans meeting at the vertex, a face with a repeated vertex) seeds the region.
+  std::vector<std::uint8_t> in_vertex(nv, 0);
+  std::vector<std::uint32_t> frontier;
+  for (std::uint32_t v = 0; v < nv; ++v) {
+    const std::uint32_t first = start[v], n = start[v + 1] - first;
+    if (n == 0) continue;
+    bool disk = n >= 3 && n <= 32;
+    for (std::uint32_t i = 0; disk && i < n; ++i) {
+      const auto [out, in] = around(corners[first + i]);
+      if (out == v || in == v || out == in) disk = false;
+    }
+    if (disk) {
+      // Walk: from a face, the next is the one whose outgoing edge runs back along this face's
+      // incoming edge; exactly one must, and the walk must visit all n faces.
+      std::uint32_t i = 0, visited = 0, seen = 0;
+      do {
+        const std::uint32_t in = around(corners[first + i]).second;
+        std::uint32_t next = kNone, matches = 0;
+        for (std::uint32_t j = 0; j < n; ++j)
+          if (around(corners[first + j]).first == in) next = j, ++matches;
+        if (matches != 1 || (seen >> next & 1u)) break;
+        seen |= 1u << next;
+        ++visited;
+        i = next;
+      } while (i != 0);
+      disk = visited == n && seen == (n == 32 ? ~0u : (1u << n) - 1u);
+    }
+    if (!disk) {
+      in_vertex[v] = 1;
+      frontier.push_back(v);
+    }
+  }
+  r.inside.assign(nf, 0);
+  std::vector<std::uint32_t> next;
+  for (int ring = 0; ring <= rings && !frontier.empty(); ++ring) {
+    next.clear();
+    for (std::uint32_t v : frontier)
+      for (std::uint32_t k = start[v]; k < start[v + 1]; ++k) {
+        const std::uint32_t f = face_of(corners[k]);
+        if (r.inside[f]) continue;
+        r.inside[f] = 1;
+        ++r.faces;
+        for (std::uint32_t u : face_corners(m, f))
+          if (!in_vertex[u]) in_vertex[u] = 1, next.push_back(u);
+      }
+    frontier.swap(next);
+  }
+  if (r.faces == nf) {
+    r.inside.clear();
+    return r;
+  }
+  r.whole = false;
+  r.local.assign(nv, kNone);
+  for (std::uint32_t v = 0; v < nv; ++v)
+    if (in_vertex[v]) {
+      r.local[v] = std::uint32_t(r.global.size());
+      r.global.push_back(v);
+    }
+  r.pinned.assign(r.global.size(), 0);
+  for (std::size_t f = 0; f < nf; ++f)
+    if (!r.inside[f])
+      for (std::uint32_t v : face_corners(m, f))
+        if (r.local[v] != kNone) r.pinned[r.local[v]] = 1;
+  return r;
+}
+
 // OpenMesh reports refused faces on its error stream; merging tests before adding and treats a
 // refusal as "not added", so the stream is quiet while a Merger lives.
 class QuietOpenMesh {
@@ -74,36 +218,42 @@ class QuietOpenMesh {
 
 class Merger {
  public:
-  Merger(const Mesh& in, const MergeOptions& options, MergeStats& stats)
-      : in_(in), options_(options), stats_(stats) {
+  Merger(const Mesh& in, const InputRegion& region, const MergeOptions& options, MergeStats& stats)
+      : in_(in), region_(region), options_(options), stats_(stats) {
     mesh_.add_property(kind_);
     mesh_.add_property(view_);
     mesh_.add_property(scalar_);
-    // Room for the input and the faces merging adds (a sixth more covers Marschner–Lobb 512²):
-    // growing OpenMesh's arrays one face at a time copied them over and over.
-    const std::size_t faces = in.quad_count() + in.triangle_count();
-    const std::size_t edges = (in.quads.size() + in.triangles.size()) / 2 + faces / 8;
-    mesh_.reserve(in.positions.size() + faces / 16, edges + edges / 6, faces + faces / 6);
-    for (std::size_t v = 0; v < in.positions.size(); ++v) {
+    // Room for the region and the faces merging adds: growing OpenMesh's arrays one face at a
+    // time copied them over and over. Deleted faces keep their slots (no garbage collection):
+    // on Marschner–Lobb 512² the splits of enhancement take a third as many again as the input.
+    // Reserved room costs address space only until it is used.
+    const std::size_t nq = in.quad_count(), nf = nq + in.triangle_count();
+    const std::size_t faces = region.whole ? nf : region.faces;
+    const std::size_t vertices = region.whole ? in.positions.size() : region.global.size();
+    const std::size_t corners = region.whole ? in.quads.size() + in.triangles.size() : 4 * faces;
+    const std::size_t edges = corners / 2 + faces / 8;
+    mesh_.reserve(vertices + faces / 8, edges + edges / 2, faces + faces / 2);
+    for (std::size_t i = 0; i < vertices; ++i) {
+      const std::uint32_t v = region.whole ? std::uint32_t(i) : region.global[i];
       const VH vh = mesh_.add_vertex({in.positions[v].x, in.positions[v].y, in.positions[v].z});
       mesh_.set_normal(vh, {in.normals[v].x, in.normals[v].y, in.normals[v].z});
       mesh_.property(scalar_, vh) = in.scalars.empty() ? 0.0f : in.scalars[v];
-      mesh_.property(view_, vh) = 0;
+      mesh_.property(view_, vh) = region.vertex_view[v];
     }
-    auto add_input = [&](const std::vector<std::uint32_t>& faces,
-                         const std::vector<std::uint8_t>& views, int arity) {
-      std::vector<VH> vs;
-      for (std::size_t f = 0; f * arity < faces.size(); ++f) {
-        vs.clear();
-        for (int k = 0; k < arity; ++k) {
-          vs.emplace_back(int(faces[f * arity + k]));
-          if (f < views.size()) mesh_.property(view_, vs.back()) = views[f];
-        }
-        if (!add(vs, Kind::kInput)) ++stats_.dropped_faces;
-      }
-    };
-    add_input(in.quads, in.quad_view, 4);
-    add_input(in.triangles, in.triangle_view, 3);
+    // The region's faces in input order (all of them for the whole mesh).
+    input_face_.assign(region.whole ? 0 : nf, FH());
+    std::vector<VH> vs;
+    for (std::size_t f = 0; f < nf; ++f) {
+      if (!region.whole && !region.inside[f]) continue;
+      vs.clear();
+      for (std::uint32_t v : face_corners(in, f))
+        vs.emplace_back(int(region.whole ? v : region.local[v]));
+      const FH added = insert(vs, Kind::kInput);
+      if (!added.is_valid()) ++stats_.dropped_faces;
+      if (!region.whole) input_face_[f] = added;
+    }
+    built_faces_ = mesh_.n_faces();
+    built_ = true;
     // The length scale for the limits: the LDI cell size when the caller knows it (refined
     // meshes have many short edges, their median would make every limit too tight), else the
     // median edge of the input.
@@ -122,12 +272,12 @@ class Merger {
     std::vector<FH> layer;
     for (const auto& f : mesh_.faces())
       for (const auto& h : f.halfedges())
-        if (h.opp().is_boundary()) {
+        if (is_open(h.opp())) {
           layer.push_back(f);
           break;
         }
     for (FH f : layer)
-      mesh_.delete_face(f, true);
+      erase(f, true);
     stats_.boundary_faces = layer.size();
   }
 
@@ -135,22 +285,40 @@ class Merger {
   // p→q of patch a and s→t of patch b with the shortest connecting edges q–s and t–p, kept if
   // neither exceeds l = |e_a| + |e_b| (times options.bridge_limit).
   void bridge() {
-    // Patches: connected pieces, through shared vertices.
-    UnionFind pieces(mesh_.n_vertices());
+    // Patches: connected pieces of the whole mesh, through shared vertices (input numbers: a
+    // piece is named by its smallest vertex, as when the whole mesh is built).
+    UnionFind pieces(region_.whole ? mesh_.n_vertices() : in_.positions.size());
     for (const auto& f : mesh_.faces()) {
-      const int first = f.halfedge().from().idx();
+      const std::uint32_t first = global(f.halfedge().from());
       for (const auto& v : f.vertices())
-        pieces.join(std::uint32_t(first), std::uint32_t(v.idx()));
+        pieces.join(first, global(v));
     }
+    for (std::size_t f = 0; f < region_.inside.size(); ++f)
+      if (!region_.inside[f]) {
+        const auto c = face_corners(in_, f);
+        for (std::uint32_t v : c)
+          pieces.join(c[0], v);
+      }
     std::vector<HH> open;
     double longest = 0.0;
     for (const auto& h : mesh_.halfedges())
-      if (h.is_boundary()) {
+      if (is_open(h)) {
         open.push_back(h);
         longest = std::max(longest, length(h));
       }
-    for (const auto& v : mesh_.vertices())
-      if (!mesh_.is_isolated(v) && pieces.find(v.idx()) == std::uint32_t(v.idx())) ++stats_.patches;
+    if (region_.whole) {
+      for (const auto& v : mesh_.vertices())
+        if (!mesh_.is_isolated(v) && pieces.find(v.idx()) == std::uint32_t(v.idx()))
+          ++stats_.patches;
+    } else {
+      for (std::uint32_t g = 0; g < in_.positions.size(); ++g) {
+        const std::uint32_t l = region_.local[g];
+        const bool used =
+            l == kNone ? bool(region_.used[g])
+                       : !mesh_.status(VH(int(l))).deleted() && !mesh_.is_isolated(VH(int(l)));
+        if (used && pieces.find(g) == g) ++stats_.patches;
+      }
+    }
     if (open.empty() || scale_ <= 0.0) return;
     // Open half-edges by their start vertex in a uniform grid whose cells are as wide as the
     // longest connecting edge a bridge may have, so each half-edge looks at 27 cells.
@@ -173,7 +341,7 @@ class Merger {
     const int span = int(std::ceil(reach / cell));
     for (const HH ha : open) {
       const VH p = mesh_.from_vertex_handle(ha), q = mesh_.to_vertex_handle(ha);
-      const std::uint32_t pa = pieces.find(p.idx());
+      const std::uint32_t pa = pieces.find(global(p));
       const glm::dvec3 P = point(p), Q = point(q);
       const double la = glm::distance(P, Q);
       const glm::ivec3 c0 = grid_cell(Q, cell);
@@ -185,7 +353,7 @@ class Merger {
             for (std::uint32_t k : it->second) {
               const HH hb = open[k];
               const VH s = mesh_.from_vertex_handle(hb), t = mesh_.to_vertex_handle(hb);
-              const std::uint32_t pb = pieces.find(s.idx());
+              const std::uint32_t pb = pieces.find(global(s));
               if (pb == pa) continue;
               const std::uint64_t pair = std::uint64_t(std::min(pa, pb)) << 32 | std::max(pa, pb);
               const glm::dvec3 S = point(s), T = point(t);
@@ -242,7 +410,7 @@ class Merger {
       const bool strict = round == 0;
       std::priority_queue<Ear, std::vector<Ear>, std::greater<Ear>> ears;
       auto consider = [&](HH in) {
-        if (!in.is_valid() || !mesh_.is_boundary(in)) return;
+        if (!in.is_valid() || !is_open(in)) return;
         const HH out = mesh_.next_halfedge_handle(in);
         const VH u = mesh_.from_vertex_handle(in), v = mesh_.to_vertex_handle(in);
         const VH w = mesh_.to_vertex_handle(out);
@@ -250,7 +418,7 @@ class Merger {
         ears.push({glm::distance(point(u), point(w)), u.idx(), v.idx(), w.idx()});
       };
       for (const auto& h : mesh_.halfedges())
-        if (h.is_boundary()) consider(h);
+        if (is_open(h)) consider(h);
       while (!ears.empty()) {
         const Ear e = ears.top();
         ears.pop();
@@ -296,7 +464,7 @@ class Merger {
         c.push_back(v);
       // Bridges stay bridges (they are the sewing region already); input quads become kSplit.
       const Kind kind = mesh_.property(kind_, f) == Kind::kBridge ? Kind::kBridge : Kind::kSplit;
-      mesh_.delete_face(f, false);
+      erase(f, false);
       const bool along_02 =
           glm::distance(point(c[0]), point(c[2])) <= glm::distance(point(c[1]), point(c[3]));
       const bool ok = along_02 ? add({c[0], c[1], c[2]}, kind) && add({c[0], c[2], c[3]}, kind)
@@ -323,30 +491,58 @@ class Merger {
       if (!mesh_.status(v).deleted() && try_merge(v)) ++stats_.merges;
   }
 
+  // The whole mesh: vertices in input order (those some face uses), then the new ones; faces
+  // in input order (outside the region as they were), then the new ones.
   Mesh output(FaceType faces) {
     Mesh out;
     out.view_dirs = in_.view_dirs;
-    std::vector<std::uint32_t> index(mesh_.n_vertices(), UINT32_MAX);
-    out.positions.reserve(mesh_.n_vertices());
-    out.normals.reserve(mesh_.n_vertices());
-    if (!in_.scalars.empty()) out.scalars.reserve(mesh_.n_vertices());
-    for (const auto& v : mesh_.vertices()) {
-      if (mesh_.is_isolated(v)) continue;
+    const std::size_t n_input = in_.positions.size();
+    const std::size_t outside_faces = region_.whole ? 0 : region_.inside.size() - region_.faces;
+    const std::size_t most_vertices = mesh_.n_vertices() + (region_.whole ? 0 : n_input);
+    std::vector<std::uint32_t> index(mesh_.n_vertices(), kNone);             // OpenMesh → output
+    std::vector<std::uint32_t> outside(region_.whole ? 0 : n_input, kNone);  // input → output
+    out.positions.reserve(most_vertices);
+    out.normals.reserve(most_vertices);
+    const bool scalars = !in_.scalars.empty();
+    if (scalars) out.scalars.reserve(most_vertices);
+    auto emit_vertex = [&](VH v) {
+      if (mesh_.status(v).deleted() || mesh_.is_isolated(v)) return;
       index[v.idx()] = std::uint32_t(out.positions.size());
-      const glm::dvec3 p = point(v), n = to_glm(mesh_.normal(v));
-      out.positions.emplace_back(p);
-      out.normals.emplace_back(n);
-      if (!in_.scalars.empty()) out.scalars.push_back(mesh_.property(scalar_, v));
+      out.positions.emplace_back(point(v));
+      out.normals.emplace_back(to_glm(mesh_.normal(v)));
+      if (scalars) out.scalars.push_back(mesh_.property(scalar_, v));
+    };
+    if (region_.whole) {
+      for (const auto& v : mesh_.vertices())
+        emit_vertex(v);
+    } else {
+      for (std::uint32_t g = 0; g < n_input; ++g) {
+        if (region_.local[g] != kNone) {
+          emit_vertex(VH(int(region_.local[g])));
+        } else if (region_.used[g]) {
+          outside[g] = std::uint32_t(out.positions.size());
+          out.positions.push_back(in_.positions[g]);
+          out.normals.push_back(in_.normals[g]);
+          if (scalars) out.scalars.push_back(in_.scalars[g]);
+        }
+      }
+      for (std::size_t v = region_.global.size(); v < mesh_.n_vertices(); ++v)
+        emit_vertex(VH(int(v)));
+    }
+    // Room for every face (deleted slots included: an upper bound that costs address space
+    // only), so the arrays are not copied over while they grow.
+    const std::size_t most = mesh_.n_faces() + outside_faces;
+    if (faces == FaceType::quads) {
+      out.quads.reserve(4 * most);
+      out.quad_view.reserve(most);
+    } else {
+      out.triangles.reserve(6 * most);
+      out.triangle_view.reserve(2 * most);
     }
     UnionFind pieces(out.positions.size());
-    std::vector<std::uint32_t> c;
-    for (const auto& f : mesh_.faces()) {
-      c.clear();
-      for (const auto& v : f.vertices())
-        c.push_back(index[v.idx()]);
+    auto emit_face = [&](std::span<const std::uint32_t> c, std::uint8_t view) {
       for (std::uint32_t k : c)
         pieces.join(c[0], k);
-      const std::uint8_t view = mesh_.property(view_, f.halfedge().from());
       if (c.size() == 3) {
         out.triangles.insert(out.triangles.end(), c.begin(), c.end());
         out.triangle_view.push_back(view);
@@ -357,6 +553,34 @@ class Merger {
         append_quad_triangles(out.positions, c.data(), out.triangles);
         out.triangle_view.insert(out.triangle_view.end(), {view, view});
       }
+    };
+    std::vector<std::uint32_t> c;
+    auto emit_mesh_face = [&](FH f) {
+      if (mesh_.status(f).deleted()) return;
+      c.clear();
+      for (const auto& v : mesh_.fv_range(f))
+        c.push_back(index[v.idx()]);
+      emit_face(c, mesh_.property(view_, mesh_.from_vertex_handle(mesh_.halfedge_handle(f))));
+    };
+    if (region_.whole) {
+      for (const auto& f : mesh_.faces())
+        emit_mesh_face(f);
+    } else {
+      // A face outside as OpenMesh keeps an added face: corners from the first on, its
+      // half-edge from the last corner (whose view the face takes).
+      for (std::size_t f = 0; f < region_.inside.size(); ++f) {
+        if (region_.inside[f]) {
+          if (input_face_[f].is_valid()) emit_mesh_face(input_face_[f]);
+          continue;
+        }
+        const auto corners = face_corners(in_, f);
+        c.clear();
+        for (std::uint32_t v : corners)  // pinned corners are the region's
+          c.push_back(region_.local[v] != kNone ? index[region_.local[v]] : outside[v]);
+        emit_face(c, region_.vertex_view[corners.back()]);
+      }
+      for (std::size_t f = built_faces_; f < mesh_.n_faces(); ++f)
+        emit_mesh_face(FH(int(f)));
     }
     for (std::uint32_t v = 0; v < out.positions.size(); ++v)
       if (pieces.find(v) == v) ++stats_.components;
@@ -368,6 +592,8 @@ class Merger {
   // The output's vertices moved onto the surface, with their midpoints (for undo_crossing_moves).
   const std::vector<VertexMove>& moved() const { return moved_out_; }
   double scale() const { return scale_; }
+  // Whether a step reached the region's edge: the result may differ from the whole mesh's.
+  bool reached_region_edge() const { return cut_touched_ > 0; }
 
  private:
   glm::dvec3 point(VH v) const { return to_glm(mesh_.point(v)); }
@@ -384,21 +610,60 @@ class Merger {
 
   // Adds the face if the mesh stays a 2-manifold: every edge it uses is new or open on the side
   // the face takes, and OpenMesh accepts it.
-  bool add(const std::vector<VH>& vs, Kind kind) {
+  bool add(const std::vector<VH>& vs, Kind kind) { return insert(vs, kind).is_valid(); }
+  FH insert(const std::vector<VH>& vs, Kind kind) {
     const std::size_t n = vs.size();
     for (std::size_t i = 0; i < n; ++i) {
       for (std::size_t j = i + 1; j < n; ++j)
-        if (vs[i] == vs[j]) return false;
-      if (!mesh_.is_isolated(vs[i]) && !mesh_.is_boundary(vs[i])) return false;
+        if (vs[i] == vs[j]) return FH();
+      if (!mesh_.is_isolated(vs[i]) && !mesh_.is_boundary(vs[i])) return FH();
       const HH h = mesh_.find_halfedge(vs[i], vs[(i + 1) % n]);
-      if (h.is_valid() && !mesh_.is_boundary(h)) return false;
+      if (h.is_valid() && !mesh_.is_boundary(h)) return FH();
     }
+    // After the build, a face at the region's edge would differ from the whole mesh's (there
+    // its vertices are inside closed disks and take no face): refused, and merging runs again
+    // on the whole mesh.
+    if (built_)
+      for (VH v : vs)
+        if (is_pinned(v)) {
+          ++cut_touched_;
+          return FH();
+        }
     const FH f = mesh_.add_face(vs);
-    if (!f.is_valid()) return false;
+    if (!f.is_valid()) return FH();
     mesh_.property(kind_, f) = kind;
     if (kind != Kind::kInput) region_faces_.push_back(f);
-    return true;
+    return f;
   }
+
+  // The vertex's number in the whole mesh: its input number, or after the input's for a new one.
+  std::uint32_t global(VH v) const {
+    const std::uint32_t i = std::uint32_t(v.idx());
+    if (region_.whole) return i;
+    return i < region_.global.size()
+               ? region_.global[i]
+               : std::uint32_t(in_.positions.size() + (i - region_.global.size()));
+  }
+  // Deletes a face; one at the region's edge is noted (see insert).
+  void erase(FH f, bool delete_isolated_vertices) {
+    if (built_)
+      for (const auto& v : mesh_.fv_range(f))
+        if (is_pinned(v)) ++cut_touched_;
+    mesh_.delete_face(f, delete_isolated_vertices);
+  }
+  // A corner of a face outside the region (never one of the whole mesh's new vertices).
+  bool is_pinned(VH v) const {
+    return std::size_t(v.idx()) < region_.pinned.size() && region_.pinned[v.idx()];
+  }
+  // A half-edge on the region's edge to the faces outside: open in the region's mesh, not in
+  // the whole one (both ends pinned: a pinned vertex is inside a closed disk of the whole mesh,
+  // so an open edge between two of them is one whose other face lies outside).
+  bool is_cut(HH h) const {
+    return mesh_.is_boundary(h) && is_pinned(mesh_.from_vertex_handle(h)) &&
+           is_pinned(mesh_.to_vertex_handle(h));
+  }
+  // An open half-edge of the whole mesh.
+  bool is_open(HH h) const { return mesh_.is_boundary(h) && !is_cut(h); }
 
   // The face through `vs` (counter-clockwise) faces the way the mean of their normals points.
   bool faces_its_normals(std::initializer_list<VH> vs) const {
@@ -436,7 +701,7 @@ class Merger {
     std::vector<std::uint8_t> seen(mesh_.n_halfedges(), 0);
     std::size_t loops = 0;
     for (const auto& h : mesh_.halfedges()) {
-      if (!h.is_boundary() || seen[h.idx()]) continue;
+      if (!is_open(h) || seen[h.idx()]) continue;
       ++loops;
       HH g = h;
       do {
@@ -588,8 +853,8 @@ class Merger {
     mesh_.set_normal(m, glm::length(n) > 0.0 ? to_om(glm::normalize(n)) : mesh_.normal(a));
     mesh_.property(scalar_, m) = 0.5f * (mesh_.property(scalar_, a) + mesh_.property(scalar_, b));
     mesh_.property(view_, m) = mesh_.property(view_, a);
-    mesh_.delete_face(f, false);
-    mesh_.delete_face(g, false);
+    erase(f, false);
+    erase(g, false);
     if (add({a, m, c}, kf) && add({m, b, c}, kf) && add({b, m, d}, kg) && add({m, a, d}, kg))
       return m;
     // OpenMesh refused: take the new faces away (m stays isolated, output skips it) and put the
@@ -598,7 +863,7 @@ class Merger {
     for (const auto& f2 : mesh_.vf_range(m))
       added.push_back(f2);
     for (FH f2 : added)
-      mesh_.delete_face(f2, false);
+      erase(f2, false);
     if (!add({a, b, c}, kf) || !add({b, a, d}, kg)) ++stats_.lost_faces;
     return VH();
   }
@@ -627,6 +892,11 @@ class Merger {
     const VH a = mesh_.from_vertex_handle(h), b = mesh_.to_vertex_handle(h);
     const VH c = mesh_.to_vertex_handle(mesh_.next_halfedge_handle(h));
     const VH d = mesh_.to_vertex_handle(mesh_.next_halfedge_handle(o));
+    // At the region's edge the valences are not the whole mesh's (see insert).
+    if (is_pinned(a) || is_pinned(b) || is_pinned(c) || is_pinned(d)) {
+      ++cut_touched_;
+      return HH();
+    }
     // Cheapest tests first: most edges of the region are not longer than their other diagonal.
     if (c == d || glm::distance(point(c), point(d)) >= glm::distance(point(a), point(b)))
       return HH();
@@ -643,11 +913,11 @@ class Merger {
     };
     if (!(cosine(a, d, c, d, b, c) >= cosine(a, b, c, b, a, d))) return HH();
     const Kind kf = mesh_.property(kind_, f), kg = mesh_.property(kind_, g);
-    mesh_.delete_face(f, false);
-    mesh_.delete_face(g, false);
+    erase(f, false);
+    erase(g, false);
     if (add({a, d, c}, kf)) {
       if (add({d, b, c}, kg)) return mesh_.find_halfedge(c, d);
-      mesh_.delete_face(mesh_.face_handle(mesh_.find_halfedge(a, d)), false);
+      erase(mesh_.face_handle(mesh_.find_halfedge(a, d)), false);
     }
     // Put the two triangles back as they were (OpenMesh refused the flip).
     if (!add({a, b, c}, kf) || !add({b, a, d}, kg)) ++stats_.lost_faces;
@@ -675,13 +945,14 @@ class Merger {
       return false;
     if (!faces_its_normals({a, b, c})) return false;
     for (FH f : fan)
-      mesh_.delete_face(f, true);
+      erase(f, true);
     if (add({a, b, c}, Kind::kFill)) return true;
     ++stats_.lost_faces;  // the fan's vertex is gone: the hole stays and is counted
     return false;
   }
 
   const Mesh& in_;
+  const InputRegion& region_;
   MergeOptions options_;
   MergeStats& stats_;
   HalfEdgeMesh mesh_;
@@ -694,39 +965,95 @@ class Merger {
   // The sewing region's vertices moved onto the surface, with their midpoint and its normal.
   std::vector<VertexMove> moves_;
   std::vector<VertexMove> moved_out_;
+  // The region's input faces as added (invalid: refused), per input face; empty for the whole
+  // mesh. Faces and vertices from these numbers on are merging's own.
+  std::vector<FH> input_face_;
+  std::size_t built_faces_ = 0;
+  bool built_ = false;
+  std::size_t cut_touched_ = 0;  // steps refused at the region's edge (see insert)
 };
+
+// Bad input gets a clear error: sizes that disagree or a face index out of range.
+void validate(const Mesh& m) {
+  const std::size_t nv = m.positions.size();
+  auto fail = [](const char* what) {
+    throw std::invalid_argument(std::string("merge_views: ") + what);
+  };
+  if (m.normals.size() != nv) fail("normals and positions differ in number");
+  if (!m.scalars.empty() && m.scalars.size() != nv) fail("scalars and positions differ in number");
+  if (m.quads.size() % 4 != 0 || m.triangles.size() % 3 != 0) fail("partial face");
+  if (!m.quad_view.empty() && m.quad_view.size() != m.quad_count()) fail("quad_view size");
+  if (!m.triangle_view.empty() && m.triangle_view.size() != m.triangle_count())
+    fail("triangle_view size");
+  for (std::uint32_t v : m.quads)
+    if (v >= nv) fail("face index out of range");
+  for (std::uint32_t v : m.triangles)
+    if (v >= nv) fail("face index out of range");
+}
 
 }  // namespace
 
 Mesh merge_views(const Mesh& mesh, FaceType faces, const MergeOptions& options, MergeStats& stats,
                  const SurfaceProjection& project) {
   stats = {};
+  validate(mesh);
   const QuietOpenMesh quiet;
-  auto start = std::chrono::steady_clock::now();
-  Merger merger(mesh, options, stats);
-  if (options.remove_boundary_layer) merger.remove_boundary_layer();
-  merger.bridge();
-  stats.bridge_seconds = seconds_since(start);
-  start = std::chrono::steady_clock::now();
-  merger.fill_holes();
-  stats.sew_seconds = seconds_since(start);
-  start = std::chrono::steady_clock::now();
   const SurfaceProjection none;
   const SurfaceProjection& onto_surface = options.project ? project : none;
-  if (options.enhance) merger.enhance(onto_surface);
-  Mesh out = merger.output(faces);
-  // Projected vertices whose faces pass through other faces go back to their edge midpoints
-  // (crossings.hpp): without the moves no face crossed; with them, Barth's merged meshes had
-  // crossing pairs near its double points, where the cone's two nappes are a cell or two apart.
-  if (!merger.moved().empty() && merger.scale() > 0.0) {
-    stats.crossings_undone = undo_crossing_moves(
-        out, merger.moved(), std::max(1.0, options.split_length) * merger.scale(),
-        options.crossing_min_move * merger.scale());
-    stats.projected -= stats.crossings_undone;
+  // Views, boundary layer, bridges, holes, enhancement and the crossing check on the faces of
+  // `region`; sets reached_edge when a step was refused at the region's edge.
+  auto merge = [&](const InputRegion& region, bool& reached_edge) {
+    auto start = std::chrono::steady_clock::now();
+    Merger merger(mesh, region, options, stats);
+    if (options.remove_boundary_layer) merger.remove_boundary_layer();
+    merger.bridge();
+    stats.bridge_seconds += seconds_since(start);
+    start = std::chrono::steady_clock::now();
+    merger.fill_holes();
+    stats.sew_seconds = seconds_since(start);
+    start = std::chrono::steady_clock::now();
+    if (options.enhance) merger.enhance(onto_surface);
+    reached_edge = merger.reached_region_edge();
+    if (reached_edge) return Mesh();  // merged again on the whole mesh
+    Mesh out = merger.output(faces);
+    // Projected vertices whose faces pass through other faces go back to their edge midpoints
+    // (crossings.hpp): without the moves no face crossed; with them, Barth's merged meshes had
+    // crossing pairs near its double points, where the cone's two nappes are a cell or two
+    // apart.
+    if (!merger.moved().empty() && merger.scale() > 0.0) {
+      stats.crossings_undone = undo_crossing_moves(
+          out, merger.moved(), std::max(1.0, options.split_length) * merger.scale(),
+          options.crossing_min_move * merger.scale());
+      stats.projected -= stats.crossings_undone;
+    }
+    stats.quality_seconds = seconds_since(start);
+    return out;
+  };
+  auto start = std::chrono::steady_clock::now();
+  // The region needs the length scale up front (the median edge would need every edge).
+  const bool by_region = options.region_rings >= 0 && options.cell_size > 0.0;
+  InputRegion region =
+      select_input_region(mesh, by_region ? std::max(options.region_rings, kMinRegionRings) : -1);
+  stats.bridge_seconds = seconds_since(start);
+  bool reached_edge = false;
+  Mesh out = merge(region, reached_edge);
+  stats.region_faces = region.whole ? mesh.face_count() : region.faces;
+  if (reached_edge) {
+    // A step wanted a face at the region's edge: merge the whole mesh instead (the times add
+    // up in the bridge column).
+    const double first = stats.bridge_seconds + stats.sew_seconds + stats.quality_seconds;
+    stats = {};
+    start = std::chrono::steady_clock::now();
+    region = select_input_region(mesh, -1);
+    stats.bridge_seconds = first + seconds_since(start);
+    out = merge(region, reached_edge);
+    stats.region_faces = mesh.face_count();
   }
-  if (faces == FaceType::quads && options.all_quads)
+  if (faces == FaceType::quads && options.all_quads) {
+    start = std::chrono::steady_clock::now();
     out = quadrangulate(out, options.quads, stats.quads, onto_surface);
-  stats.quality_seconds = seconds_since(start);
+    stats.quality_seconds += seconds_since(start);
+  }
   return out;
 }
 

@@ -38,9 +38,10 @@ std::string describe(const Topology& t, const MergeStats& s) {
 // through a local sample source), or, with merge = false, trimmed with r = 1 and not merged.
 // undo_crossings = false: moves that make faces cross are kept (the check is switched off).
 // refine_levels > 0: the views are refined (§4) before merging.
+// region_rings: MergeOptions::region_rings.
 MeshingResult merged(const std::string& surface, int res, bool merge = true,
                      FaceType faces = FaceType::triangles, bool undo_crossings = true,
-                     int refine_levels = 0) {
+                     int refine_levels = 0, int region_rings = MergeOptions{}.region_rings) {
   const auto source = make_surface_source(surface);
   const SurfaceInfo* info = find_surface(surface);
   const RayCaster caster(*source, info->isovalue);
@@ -53,6 +54,7 @@ MeshingResult merged(const std::string& surface, int res, bool merge = true,
   options.faces = faces;
   options.merging.enabled = merge;
   options.refinement.levels = refine_levels;
+  options.merging.region_rings = region_rings;
   if (!undo_crossings)
     options.merging.crossing_min_move = options.merging.quads.crossing_min_move =
         std::numeric_limits<double>::infinity();
@@ -280,6 +282,52 @@ TEST(Merge, QuadOutputIsTheSameForAnyNumberOfThreads) {
   EXPECT_EQ(one.mesh.quads, four.mesh.quads);
   EXPECT_EQ(one.mesh.positions, four.mesh.positions);
   EXPECT_EQ(one.mesh.normals, four.mesh.normals);
+}
+
+// Merging builds only the faces near open boundaries (and non-manifold spots) as a half-edge
+// mesh; the rest passes through. The result is the whole mesh's, array for array: on closed
+// surfaces, with refined views, with quads, and on the Klein bottle, whose views have
+// non-manifold spots (dropped faces). With the fewest rings a step reaches the region's edge on
+// the Klein bottle (its dropped faces move the boundary a ring inward), and merging runs again
+// on the whole mesh: the same result again.
+TEST(Merge, RegionGivesTheWholeMeshResult) {
+  struct Case {
+    const char* surface;
+    int res;
+    FaceType faces;
+    int refine;
+  };
+  std::size_t reruns = 0;
+  for (const Case& c :
+       {Case{"torus", 128, FaceType::triangles, 0}, Case{"barth", 128, FaceType::quads, 0},
+        Case{"klein", 64, FaceType::triangles, 0}, Case{"marschner-lobb", 64, FaceType::quads, 0},
+        Case{"sphere", 32, FaceType::quads, 1}}) {
+    const MeshingResult whole = merged(c.surface, c.res, true, c.faces, true, c.refine, -1);
+    for (int rings : {MergeOptions{}.region_rings, 2}) {
+      const MeshingResult part = merged(c.surface, c.res, true, c.faces, true, c.refine, rings);
+      SCOPED_TRACE(std::string(c.surface) + " " + std::to_string(c.res) + ", rings " +
+                   std::to_string(rings) + ": region " + std::to_string(part.merging.region_faces) +
+                   " of " + std::to_string(whole.merging.region_faces) + " faces");
+      if (rings == MergeOptions{}.region_rings) {
+        EXPECT_LT(part.merging.region_faces, whole.merging.region_faces);
+      }
+      reruns += part.merging.region_faces == whole.merging.region_faces;
+      EXPECT_EQ(part.mesh.positions, whole.mesh.positions);
+      EXPECT_EQ(part.mesh.normals, whole.mesh.normals);
+      EXPECT_EQ(part.mesh.triangles, whole.mesh.triangles);
+      EXPECT_EQ(part.mesh.quads, whole.mesh.quads);
+      EXPECT_EQ(part.mesh.triangle_view, whole.mesh.triangle_view);
+      EXPECT_EQ(part.mesh.quad_view, whole.mesh.quad_view);
+      EXPECT_EQ(part.merging.dropped_faces, whole.merging.dropped_faces);
+      EXPECT_EQ(part.merging.boundary_faces, whole.merging.boundary_faces);
+      EXPECT_EQ(part.merging.patches, whole.merging.patches);
+      EXPECT_EQ(part.merging.bridges, whole.merging.bridges);
+      EXPECT_EQ(part.merging.unfilled_holes, whole.merging.unfilled_holes);
+      EXPECT_EQ(part.merging.components, whole.merging.components);
+      EXPECT_GT(part.mesh.face_count(), 0u);
+    }
+  }
+  EXPECT_GT(reruns, 0u);  // the Klein bottle with 2 rings
 }
 
 // Merging keeps the surface's accuracy: the forward mean distance to the true surface grows by

@@ -16,6 +16,14 @@ struct MergeOptions {
   // The length scale of the limits below, in world units: the LDIs' pixel size (mesh_ldis sets
   // it when it is 0). 0 in merge_views: the median edge of the input mesh.
   double cell_size = 0.0;
+  // The faces built as a half-edge mesh: those within this many rings (faces sharing a vertex)
+  // of the vertices not inside a closed disk of faces (open boundaries, and wherever the input
+  // is not a manifold); the others (the views' regular grids, most of the mesh) pass through
+  // unchanged, so merging costs what the boundaries hold. Every step happens within two rings of
+  // an open boundary, so the result is the same as for the whole mesh; should a step reach the
+  // region's edge, merging runs again on the whole mesh. Needs cell_size (the limits' scale);
+  // at least 2 (fewer count as 2); negative: always the whole mesh.
+  int region_rings = 3;
   // Remove the faces that have an open edge before bridging (§5: the ragged "boundary layer"
   // the r = 1 trim leaves).
   bool remove_boundary_layer = true;
@@ -64,6 +72,7 @@ inline bool merging_projects(const MergeOptions& options) {
 }
 
 struct MergeStats {
+  std::size_t region_faces = 0;      // input faces built as a half-edge mesh (region_rings)
   std::size_t dropped_faces = 0;     // input faces that would have made the mesh non-manifold
   std::size_t boundary_faces = 0;    // faces removed as the boundary layer
   std::size_t patches = 0;           // connected pieces before bridging
@@ -97,7 +106,8 @@ struct MergeStats {
 // sewing region's triangles instead). Face views: the view of the face's first
 // vertex. `project` (may be empty) moves the sewing region's new vertices onto the surface
 // (options.project), and the new and smoothed vertices of the conversion to quads.
-// Deterministic.
+// Deterministic. Throws std::invalid_argument on array sizes that disagree or a face index out
+// of range.
 Mesh merge_views(const Mesh& mesh, FaceType faces, const MergeOptions& options, MergeStats& stats,
                  const SurfaceProjection& project = {});
 
