@@ -171,17 +171,26 @@ class Quadrangulator {
       : region_(region), options_(options), stats_(stats) {
     const Mesh& in = region.faces();
     const std::size_t nv = in.positions.size();
+    // Room for what the paths add (Marschner–Lobb 512²: a fifth more half-edges, half as many
+    // faces and vertices again): growing these arrays copied them over in the middle of the
+    // paths. Reserved room costs address space only until it is used.
+    const std::size_t faces = in.face_count(), halfedges = in.quads.size() + in.triangles.size();
+    for (auto* v : {&pos_, &nrm_})
+      v->reserve(nv + nv / 2);
+    if (!in.scalars.empty()) scalar_.reserve(nv + nv / 2);
+    for (auto* v : {&from_, &to_, &next_, &face_, &opp_})
+      v->reserve(halfedges + halfedges / 2);
+    face_he_.reserve(faces + faces / 2);
+    for (auto* v : {&face_view_, &face_new_})
+      v->reserve(faces + faces / 2);
     pos_.resize(nv);
     nrm_.resize(nv);
     for (std::size_t v = 0; v < nv; ++v) {
       pos_[v] = glm::dvec3(in.positions[v]);
       nrm_[v] = glm::dvec3(in.normals[v]);
     }
-    scalar_ = in.scalars;
-    stats_.region_faces = in.face_count();
-    const std::size_t halfedges = in.quads.size() + in.triangles.size();
-    for (auto* v : {&from_, &to_, &next_, &face_})
-      v->reserve(halfedges + halfedges / 8);
+    scalar_.assign(in.scalars.begin(), in.scalars.end());
+    stats_.region_faces = faces;
     auto add_faces = [&](const std::vector<std::uint32_t>& faces,
                          const std::vector<std::uint8_t>& views, std::size_t arity) {
       for (std::size_t f = 0; f * arity < faces.size(); ++f) {
