@@ -613,18 +613,15 @@ class Merger {
     return glm::distance(point(mesh_.from_vertex_handle(h)), point(mesh_.to_vertex_handle(h)));
   }
 
-  // Adds the face if the mesh stays a 2-manifold: every edge it uses is new or open on the side
-  // the face takes, and OpenMesh accepts it.
+  // Adds the face if the mesh stays a 2-manifold: no repeated corner, and OpenMesh accepts it
+  // (add_face refuses a corner that is neither isolated nor on an open edge, and an edge that is
+  // not new or open on the side the face takes).
   bool add(const std::vector<VH>& vs, Kind kind) { return insert(vs, kind).is_valid(); }
   FH insert(const std::vector<VH>& vs, Kind kind) {
     const std::size_t n = vs.size();
-    for (std::size_t i = 0; i < n; ++i) {
+    for (std::size_t i = 0; i < n; ++i)
       for (std::size_t j = i + 1; j < n; ++j)
         if (vs[i] == vs[j]) return FH();
-      if (!mesh_.is_isolated(vs[i]) && !mesh_.is_boundary(vs[i])) return FH();
-      const HH h = mesh_.find_halfedge(vs[i], vs[(i + 1) % n]);
-      if (h.is_valid() && !mesh_.is_boundary(h)) return FH();
-    }
     // After the build, a face at the region's edge would differ from the whole mesh's (there
     // its vertices are inside closed disks and take no face): refused, and merging runs again
     // on the whole mesh.
