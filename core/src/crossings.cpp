@@ -19,6 +19,7 @@ namespace {
 
 struct Bounds {
   glm::dvec3 lo, hi;
+  Bounds(const glm::dvec3& l, const glm::dvec3& h) : lo(l), hi(h) {}
   explicit Bounds(const CrossingPolygon& g) : lo(g.p[0]), hi(g.p[0]) {
     for (std::size_t i = 1; i < g.n; ++i)
       lo = glm::min(lo, g.p[i]), hi = glm::max(hi, g.p[i]);
@@ -88,6 +89,63 @@ class StarGrid {
   };
   std::vector<Entry> entries_;
   IndexMap<std::uint64_t, MixHash> first_;
+};
+
+// The cells that star boxes touch, as bits over the box around all stars, cells `cell` wide (or
+// twice, four times... that, whatever keeps it under kMaxBits). A face whose box touches none of
+// them meets no star's box (a point they share lies in a cell both touch): a few bit tests
+// instead of the grid's hash look-ups for the near faces that are not that near.
+class StarCells {
+ public:
+  StarCells(const std::vector<CrossingPolygon>& stars, double cell) {
+    glm::dvec3 lo(std::numeric_limits<double>::infinity()), hi(-lo);
+    for (const CrossingPolygon& g : stars) {
+      const Bounds b(g);
+      lo = glm::min(lo, b.lo), hi = glm::max(hi, b.hi);
+    }
+    if (stars.empty()) return;
+    origin_ = lo, size_ = cell;
+    for (;;) {
+      dims_ = glm::ivec3(glm::floor((hi - lo) / size_)) + 1;
+      if (std::uint64_t(dims_.x) * std::uint64_t(dims_.y) * std::uint64_t(dims_.z) <= kMaxBits)
+        break;
+      size_ *= 2.0;
+    }
+    bits_.assign((std::size_t(dims_.x) * dims_.y * dims_.z + 63) / 64, 0);
+    for (const CrossingPolygon& g : stars)
+      visit(Bounds(g), [&](std::size_t i) {
+        bits_[i / 64] |= std::uint64_t(1) << (i % 64);
+        return false;
+      });
+  }
+  // Whether the box touches a cell a star box touches.
+  bool touches(const Bounds& b) const {
+    return !bits_.empty() &&
+           visit(b, [&](std::size_t i) { return (bits_[i / 64] >> (i % 64) & 1u) != 0; });
+  }
+
+ private:
+  static constexpr std::uint64_t kMaxBits = std::uint64_t(1) << 26;  // 8 MB
+  // Calls f(bit) for the cells of the box (clipped to the stars' box) until f returns true.
+  template <class F>
+  bool visit(const Bounds& b, F&& f) const {
+    auto index = [&](const glm::dvec3& p) {  // clamped before the conversion to int
+      const glm::dvec3 c =
+          glm::clamp(glm::floor((p - origin_) / size_), glm::dvec3(-1.0), glm::dvec3(dims_));
+      return glm::ivec3(c);
+    };
+    const glm::ivec3 a = glm::max(index(b.lo), glm::ivec3(0));
+    const glm::ivec3 c = glm::min(index(b.hi), dims_ - 1);
+    for (int z = a.z; z <= c.z; ++z)
+      for (int y = a.y; y <= c.y; ++y)
+        for (int x = a.x; x <= c.x; ++x)
+          if (f((std::size_t(z) * dims_.y + y) * dims_.x + x)) return true;
+    return false;
+  }
+  glm::dvec3 origin_{0.0};
+  double size_ = 1.0;
+  glm::ivec3 dims_{0};
+  std::vector<std::uint64_t> bits_;
 };
 
 }  // namespace
@@ -254,6 +312,7 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
           for (int x = -1; x <= 1; ++x)
             near.try_emplace(grid_cell_key(c + glm::ivec3(x, y, z)), 0);
     grid.build();
+    const StarCells touched(stars, cell);
     // In parallel (the faces are independent; the vertices to put back are sorted after, so
     // the result is the same for any number of threads).
     tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, std::uint32_t(nv), 4096),
@@ -275,6 +334,13 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
             const auto c = corners(f);
             if (std::none_of(c.begin(), c.end(), [&](std::uint32_t v) { return is_near[v]; }))
               continue;
+            // Then the face's box (from its float corners: the same box as its polygon's) must
+            // touch a cell a star box touches: of Marschner–Lobb 512²'s 341 k near faces,
+            // 191 k do.
+            glm::vec3 lo = mesh.positions[c[0]], hi = lo;
+            for (std::size_t k = 1; k < c.size(); ++k)
+              lo = glm::min(lo, mesh.positions[c[k]]), hi = glm::max(hi, mesh.positions[c[k]]);
+            if (!touched.touches(Bounds(glm::dvec3(lo), glm::dvec3(hi)))) continue;
             const CrossingPolygon g = polygon(f);
             const Bounds b(g);
             // A pair whose boxes share several cells is tested in one: the cell where their common
