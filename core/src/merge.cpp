@@ -83,7 +83,7 @@ struct InputRegion {
   std::size_t faces = 0;                  // in the region
 };
 
-// Calls f(corners) with the corners of input face `face` (quads first, then triangles).
+// The corners of input face `face` (quads first, then triangles).
 inline std::span<const std::uint32_t> face_corners(const Mesh& m, std::size_t face) {
   const std::size_t nq = m.quad_count();
   return face < nq ? std::span<const std::uint32_t>(&m.quads[4 * face], 4)
