@@ -105,12 +105,10 @@ class StarCells {
     }
     if (stars.empty()) return;
     origin_ = lo, size_ = cell;
-    for (;;) {
-      dims_ = glm::ivec3(glm::floor((hi - lo) / size_)) + 1;
-      if (std::uint64_t(dims_.x) * std::uint64_t(dims_.y) * std::uint64_t(dims_.z) <= kMaxBits)
-        break;
+    auto cells = [&] { return glm::floor((hi - lo) / size_) + 1.0; };  // in double: no overflow
+    while (cells().x * cells().y * cells().z > double(kMaxBits))
       size_ *= 2.0;
-    }
+    dims_ = glm::ivec3(cells());
     bits_.assign((std::size_t(dims_.x) * dims_.y * dims_.z + 63) / 64, 0);
     for (const CrossingPolygon& g : stars)
       visit(Bounds(g), [&](std::size_t i) {
