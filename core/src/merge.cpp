@@ -73,7 +73,7 @@ constexpr int kMinRegionRings = 2;
 // (most of a merged mesh: the views' regular grids) pass through as they are, and the mesh is the
 // same as when all of it is built. Faces are numbered quads first, then triangles, as in the input.
 struct InputRegion {
-  bool whole = true;                      // every face is in the region
+  bool whole = true;                      // every face is in the region, numbered as in the input
   std::vector<std::uint8_t> inside;       // per input face
   std::vector<std::uint32_t> local;       // input vertex → region vertex (kNone: outside)
   std::vector<std::uint32_t> global;      // region vertex → input vertex
@@ -90,6 +90,17 @@ inline std::span<const std::uint32_t> face_corners(const Mesh& m, std::size_t fa
                    : std::span<const std::uint32_t>(&m.triangles[3 * (face - nq)], 3);
 }
 
+// Every face and vertex, numbered as in the input (no vertex pinned).
+void make_whole(InputRegion& r, std::size_t faces) {
+  r.whole = true;
+  r.faces = faces;
+  r.inside.assign(faces, 1);
+  r.global.resize(r.used.size());
+  std::iota(r.global.begin(), r.global.end(), 0u);
+  r.local = r.global;
+  r.pinned.clear();
+}
+
 InputRegion select_input_region(const Mesh& m, int rings) {
   InputRegion r;
   const std::size_t nv = m.positions.size(), nq = m.quad_count(), nf = nq + m.triangle_count();
@@ -104,7 +115,10 @@ InputRegion select_input_region(const Mesh& m, int rings) {
       if (i < views.size()) r.vertex_view[v] = views[i];
     }
   }
-  if (rings < 0) return r;
+  if (rings < 0) {
+    make_whole(r, nf);
+    return r;
+  }
   // Vertex → corners (corner c of face f: 4 f + k for quads, 4 nq + 3 (f − nq) + k for triangles).
   std::vector<std::uint32_t> start(nv + 1, 0);
   for (std::uint32_t v : m.quads)
@@ -185,7 +199,7 @@ InputRegion select_input_region(const Mesh& m, int rings) {
     frontier.swap(next);
   }
   if (r.faces == nf) {
-    r.inside.clear();
+    make_whole(r, nf);
     return r;
   }
   r.whole = false;
@@ -230,32 +244,29 @@ class Merger {
     // 128² 5.6), twice its edges and a third more vertices; the whole mesh, half as many faces
     // again. Reserved room costs address space only until it is used.
     const std::size_t nq = in.quad_count(), nf = nq + in.triangle_count();
-    const std::size_t faces = region.whole ? nf : region.faces;
-    const std::size_t vertices = region.whole ? in.positions.size() : region.global.size();
-    const std::size_t corners = region.whole ? in.quads.size() + in.triangles.size() : 4 * faces;
-    const std::size_t edges = corners / 2 + faces / 8;
+    const std::size_t faces = region.faces, vertices = region.global.size();
+    const std::size_t edges = 2 * faces + faces / 8;
     if (region.whole)
       mesh_.reserve(vertices + faces / 8, edges + edges / 2, faces + faces / 2);
     else
       mesh_.reserve(vertices + vertices / 2, 5 * edges / 2, 6 * faces);
     for (std::size_t i = 0; i < vertices; ++i) {
-      const std::uint32_t v = region.whole ? std::uint32_t(i) : region.global[i];
+      const std::uint32_t v = region.global[i];
       const VH vh = mesh_.add_vertex({in.positions[v].x, in.positions[v].y, in.positions[v].z});
       mesh_.set_normal(vh, {in.normals[v].x, in.normals[v].y, in.normals[v].z});
       mesh_.property(scalar_, vh) = in.scalars.empty() ? 0.0f : in.scalars[v];
       mesh_.property(view_, vh) = region.vertex_view[v];
     }
-    // The region's faces in input order (all of them for the whole mesh).
-    input_face_.assign(region.whole ? 0 : nf, FH());
+    // The region's faces in input order.
+    input_face_.assign(nf, FH());
     std::vector<VH> vs;
     for (std::size_t f = 0; f < nf; ++f) {
-      if (!region.whole && !region.inside[f]) continue;
+      if (!region.inside[f]) continue;
       vs.clear();
       for (std::uint32_t v : face_corners(in, f))
-        vs.emplace_back(int(region.whole ? v : region.local[v]));
-      const FH added = insert(vs, Kind::kInput);
-      if (!added.is_valid()) ++stats_.dropped_faces;
-      if (!region.whole) input_face_[f] = added;
+        vs.emplace_back(int(region.local[v]));
+      input_face_[f] = insert(vs, Kind::kInput);
+      if (!input_face_[f].is_valid()) ++stats_.dropped_faces;
     }
     built_faces_ = mesh_.n_faces();
     built_ = true;
@@ -292,7 +303,7 @@ class Merger {
   void bridge() {
     // Patches: connected pieces of the whole mesh, through shared vertices (input numbers: a
     // piece is named by its smallest vertex, as when the whole mesh is built).
-    UnionFind pieces(region_.whole ? mesh_.n_vertices() : in_.positions.size());
+    UnionFind pieces(in_.positions.size());
     for (const auto& f : mesh_.faces()) {
       const std::uint32_t first = global(f.halfedge().from());
       for (const auto& v : f.vertices())
@@ -311,18 +322,10 @@ class Merger {
         open.push_back(h);
         longest = std::max(longest, length(h));
       }
-    if (region_.whole) {
-      for (const auto& v : mesh_.vertices())
-        if (!mesh_.is_isolated(v) && pieces.find(v.idx()) == std::uint32_t(v.idx()))
-          ++stats_.patches;
-    } else {
-      for (std::uint32_t g = 0; g < in_.positions.size(); ++g) {
-        const std::uint32_t l = region_.local[g];
-        const bool used =
-            l == kNone ? bool(region_.used[g])
-                       : !mesh_.status(VH(int(l))).deleted() && !mesh_.is_isolated(VH(int(l)));
-        if (used && pieces.find(g) == g) ++stats_.patches;
-      }
+    for (std::uint32_t g = 0; g < in_.positions.size(); ++g) {
+      const std::uint32_t l = region_.local[g];
+      const bool used = l == kNone ? bool(region_.used[g]) : alive(VH(int(l)));
+      if (used && pieces.find(g) == g) ++stats_.patches;
     }
     if (open.empty() || scale_ <= 0.0) return;
     // Open half-edges by their start vertex in a uniform grid whose cells are as wide as the
@@ -502,38 +505,33 @@ class Merger {
     Mesh out;
     out.view_dirs = in_.view_dirs;
     const std::size_t n_input = in_.positions.size();
-    const std::size_t outside_faces = region_.whole ? 0 : region_.inside.size() - region_.faces;
-    const std::size_t most_vertices = mesh_.n_vertices() + (region_.whole ? 0 : n_input);
-    std::vector<std::uint32_t> index(mesh_.n_vertices(), kNone);             // OpenMesh → output
-    std::vector<std::uint32_t> outside(region_.whole ? 0 : n_input, kNone);  // input → output
+    const std::size_t outside_faces = region_.inside.size() - region_.faces;
+    const std::size_t most_vertices = mesh_.n_vertices() + (n_input - region_.global.size());
+    std::vector<std::uint32_t> index(mesh_.n_vertices(), kNone);  // OpenMesh → output
+    std::vector<std::uint32_t> outside(n_input, kNone);           // input → output
     out.positions.reserve(most_vertices);
     out.normals.reserve(most_vertices);
     const bool scalars = !in_.scalars.empty();
     if (scalars) out.scalars.reserve(most_vertices);
     auto emit_vertex = [&](VH v) {
-      if (mesh_.status(v).deleted() || mesh_.is_isolated(v)) return;
+      if (!alive(v)) return;
       index[v.idx()] = std::uint32_t(out.positions.size());
       out.positions.emplace_back(point(v));
       out.normals.emplace_back(to_glm(mesh_.normal(v)));
       if (scalars) out.scalars.push_back(mesh_.property(scalar_, v));
     };
-    if (region_.whole) {
-      for (const auto& v : mesh_.vertices())
-        emit_vertex(v);
-    } else {
-      for (std::uint32_t g = 0; g < n_input; ++g) {
-        if (region_.local[g] != kNone) {
-          emit_vertex(VH(int(region_.local[g])));
-        } else if (region_.used[g]) {
-          outside[g] = std::uint32_t(out.positions.size());
-          out.positions.push_back(in_.positions[g]);
-          out.normals.push_back(in_.normals[g]);
-          if (scalars) out.scalars.push_back(in_.scalars[g]);
-        }
+    for (std::uint32_t g = 0; g < n_input; ++g) {
+      if (region_.local[g] != kNone) {
+        emit_vertex(VH(int(region_.local[g])));
+      } else if (region_.used[g]) {
+        outside[g] = std::uint32_t(out.positions.size());
+        out.positions.push_back(in_.positions[g]);
+        out.normals.push_back(in_.normals[g]);
+        if (scalars) out.scalars.push_back(in_.scalars[g]);
       }
-      for (std::size_t v = region_.global.size(); v < mesh_.n_vertices(); ++v)
-        emit_vertex(VH(int(v)));
     }
+    for (std::size_t v = region_.global.size(); v < mesh_.n_vertices(); ++v)
+      emit_vertex(VH(int(v)));
     // Room for every face (deleted slots included: an upper bound that costs address space
     // only), so the arrays are not copied over while they grow.
     const std::size_t most = mesh_.n_faces() + outside_faces;
@@ -567,26 +565,21 @@ class Merger {
         c.push_back(index[v.idx()]);
       emit_face(c, mesh_.property(view_, mesh_.from_vertex_handle(mesh_.halfedge_handle(f))));
     };
-    if (region_.whole) {
-      for (const auto& f : mesh_.faces())
-        emit_mesh_face(f);
-    } else {
-      // A face outside as OpenMesh keeps an added face: corners from the first on, its
-      // half-edge from the last corner (whose view the face takes).
-      for (std::size_t f = 0; f < region_.inside.size(); ++f) {
-        if (region_.inside[f]) {
-          if (input_face_[f].is_valid()) emit_mesh_face(input_face_[f]);
-          continue;
-        }
-        const auto corners = face_corners(in_, f);
-        c.clear();
-        for (std::uint32_t v : corners)  // pinned corners are the region's
-          c.push_back(region_.local[v] != kNone ? index[region_.local[v]] : outside[v]);
-        emit_face(c, region_.vertex_view[corners.back()]);
+    // A face outside as OpenMesh keeps an added face: corners from the first on, its half-edge
+    // from the last corner (whose view the face takes).
+    for (std::size_t f = 0; f < region_.inside.size(); ++f) {
+      if (region_.inside[f]) {
+        if (input_face_[f].is_valid()) emit_mesh_face(input_face_[f]);
+        continue;
       }
-      for (std::size_t f = built_faces_; f < mesh_.n_faces(); ++f)
-        emit_mesh_face(FH(int(f)));
+      const auto corners = face_corners(in_, f);
+      c.clear();
+      for (std::uint32_t v : corners)  // pinned corners are the region's
+        c.push_back(region_.local[v] != kNone ? index[region_.local[v]] : outside[v]);
+      emit_face(c, region_.vertex_view[corners.back()]);
     }
+    for (std::size_t f = built_faces_; f < mesh_.n_faces(); ++f)
+      emit_mesh_face(FH(int(f)));
     for (std::uint32_t v = 0; v < out.positions.size(); ++v)
       if (pieces.find(v) == v) ++stats_.components;
     stats_.unfilled_holes = count_loops();
@@ -641,7 +634,6 @@ class Merger {
   // The vertex's number in the whole mesh: its input number, or after the input's for a new one.
   std::uint32_t global(VH v) const {
     const std::uint32_t i = std::uint32_t(v.idx());
-    if (region_.whole) return i;
     return i < region_.global.size()
                ? region_.global[i]
                : std::uint32_t(in_.positions.size() + (i - region_.global.size()));
@@ -653,6 +645,8 @@ class Merger {
         if (is_pinned(v)) ++cut_touched_;
     mesh_.delete_face(f, delete_isolated_vertices);
   }
+  // Not deleted and in some face.
+  bool alive(VH v) const { return !mesh_.status(v).deleted() && !mesh_.is_isolated(v); }
   // A corner of a face outside the region (never one of the whole mesh's new vertices).
   bool is_pinned(VH v) const {
     return std::size_t(v.idx()) < region_.pinned.size() && region_.pinned[v.idx()];
@@ -967,8 +961,8 @@ class Merger {
   // The sewing region's vertices moved onto the surface, with their midpoint and its normal.
   std::vector<VertexMove> moves_;
   std::vector<VertexMove> moved_out_;
-  // The region's input faces as added (invalid: refused), per input face; empty for the whole
-  // mesh. Faces and vertices from these numbers on are merging's own.
+  // The region's input faces as added (invalid: refused or outside), per input face. Faces from
+  // built_faces_ on are merging's own.
   std::vector<FH> input_face_;
   std::size_t built_faces_ = 0;
   bool built_ = false;
@@ -1016,7 +1010,10 @@ Mesh merge_views(const Mesh& mesh, FaceType faces, const MergeOptions& options, 
     start = std::chrono::steady_clock::now();
     if (options.enhance) merger.enhance(onto_surface);
     reached_edge = merger.reached_region_edge();
-    if (reached_edge) return Mesh();  // merged again on the whole mesh
+    if (reached_edge) {  // merged again on the whole mesh
+      stats.quality_seconds = seconds_since(start);
+      return Mesh();
+    }
     Mesh out = merger.output(faces);
     // Projected vertices whose faces pass through other faces go back to their edge midpoints
     // (crossings.hpp): without the moves no face crossed; with them, Barth's merged meshes had
@@ -1039,7 +1036,7 @@ Mesh merge_views(const Mesh& mesh, FaceType faces, const MergeOptions& options, 
   stats.bridge_seconds = seconds_since(start);
   bool reached_edge = false;
   Mesh out = merge(region, reached_edge);
-  stats.region_faces = region.whole ? mesh.face_count() : region.faces;
+  stats.region_faces = region.faces;
   if (reached_edge) {
     // A step wanted a face at the region's edge: merge the whole mesh instead (the times add
     // up in the bridge column).
@@ -1049,7 +1046,7 @@ Mesh merge_views(const Mesh& mesh, FaceType faces, const MergeOptions& options, 
     region = select_input_region(mesh, -1);
     stats.bridge_seconds = first + seconds_since(start);
     out = merge(region, reached_edge);
-    stats.region_faces = mesh.face_count();
+    stats.region_faces = region.faces;
   }
   if (faces == FaceType::quads && options.all_quads) {
     start = std::chrono::steady_clock::now();
