@@ -1,6 +1,7 @@
 #include "ldimesh/core/crossings.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <iterator>
 #include <limits>
@@ -11,7 +12,6 @@
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
-#include "index_map.hpp"
 #include "ldimesh/core/geometry.hpp"
 
 namespace ldimesh {
@@ -24,55 +24,147 @@ struct Bounds {
     for (std::size_t i = 1; i < g.n; ++i)
       lo = glm::min(lo, g.p[i]), hi = glm::max(hi, g.p[i]);
   }
-  // Calls f(key, cell) for every cell of size `cell` the box touches.
-  template <class F>
-  void cells(double cell, F&& f) const {
-    const glm::ivec3 a = grid_cell(lo, cell), b = grid_cell(hi, cell);
-    for (int z = a.z; z <= b.z; ++z)
-      for (int y = a.y; y <= b.y; ++y)
-        for (int x = a.x; x <= b.x; ++x)
-          f(grid_cell_key({x, y, z}), glm::ivec3(x, y, z));
-  }
 };
 
-// A cell → stars table: (cell, star, star's box) entries sorted by cell, and the first entry of
-// each cell. The boxes sit in the entries (floats, rounded outward) so that a cell's candidates
-// are read in one sweep instead of one cache miss each, with the cell of the box's low corner.
+// Cells of one size over a box, numbered x fastest, at most kMaxCells of them (the size given,
+// doubled until they fit: any size finds the same pairs, a coarser one tests more). Dense
+// numbers instead of hashed keys: a cell's bit and its entries are a few instructions away.
+class CellGrid {
+ public:
+  CellGrid() = default;
+  CellGrid(const glm::dvec3& lo, const glm::dvec3& hi, double size) : origin_(lo), size_(size) {
+    auto cells = [&] { return glm::floor((hi - lo) / size_) + 1.0; };  // in double: no overflow
+    while (cells().x * cells().y * cells().z > double(kMaxCells))
+      size_ *= 2.0;
+    dims_ = glm::ivec3(cells());
+  }
+  std::size_t size() const { return std::size_t(dims_.x) * dims_.y * dims_.z; }
+  // The cell holding p, per axis clamped to [-1, dims] (before the conversion to int).
+  glm::ivec3 cell(const glm::dvec3& p) const {
+    return glm::ivec3(
+        glm::clamp(glm::floor((p - origin_) / size_), glm::dvec3(-1.0), glm::dvec3(dims_)));
+  }
+  bool inside(const glm::ivec3& c) const {
+    return glm::all(glm::greaterThanEqual(c, glm::ivec3(0))) && glm::all(glm::lessThan(c, dims_));
+  }
+  std::size_t index(const glm::ivec3& c) const {
+    return (std::size_t(c.z) * dims_.y + c.y) * dims_.x + c.x;
+  }
+  // Calls f(index, cell) for the cells of the box (clipped to the grid) until f returns true.
+  template <class F>
+  bool visit(const Bounds& b, F&& f) const {
+    const glm::ivec3 a = glm::max(cell(b.lo), glm::ivec3(0));
+    const glm::ivec3 c = glm::min(cell(b.hi), dims_ - 1);
+    for (int z = a.z; z <= c.z; ++z)
+      for (int y = a.y; y <= c.y; ++y) {
+        const std::size_t row = (std::size_t(z) * dims_.y + y) * dims_.x;
+        for (int x = a.x; x <= c.x; ++x)
+          if (f(row + x, glm::ivec3(x, y, z))) return true;
+      }
+    return false;
+  }
+
+ private:
+  static constexpr std::uint64_t kMaxCells = std::uint64_t(1) << 26;  // 8 MB of bits
+  glm::dvec3 origin_{0.0};
+  double size_ = 1.0;
+  glm::ivec3 dims_{0};
+};
+
+// A set of a grid's cells as bits; after rank(), each set cell's number among the set ones.
+class CellSet {
+ public:
+  explicit CellSet(std::size_t cells) : bits_((cells + 63) / 64, 0) {}
+  void insert(std::size_t i) { bits_[i / 64] |= std::uint64_t(1) << (i % 64); }
+  bool contains(std::size_t i) const { return (bits_[i / 64] >> (i % 64) & 1u) != 0; }
+  // Numbers the set cells in index order; returns how many there are.
+  std::uint32_t rank() {
+    before_.resize(bits_.size());
+    std::uint32_t n = 0;
+    for (std::size_t w = 0; w < bits_.size(); ++w) {
+      before_[w] = n;
+      n += std::uint32_t(std::popcount(bits_[w]));
+    }
+    return n;
+  }
+  // A set cell's number (after rank()).
+  std::uint32_t number(std::size_t i) const {
+    const std::uint64_t below = (std::uint64_t(1) << (i % 64)) - 1;
+    return before_[i / 64] + std::uint32_t(std::popcount(bits_[i / 64] & below));
+  }
+
+ private:
+  std::vector<std::uint64_t> bits_;
+  std::vector<std::uint32_t> before_;  // per word: set bits in the words before
+};
+
+// A cell → stars table over the stars' box: the cells star boxes touch as bits, and per touched
+// cell its (star, star box's low cell, star box) entries, in star order (counting sort: one
+// pass to count, one to place). The boxes sit in the entries (floats, rounded outward) so that a
+// cell's candidates are read in one sweep instead of one cache miss each.
 class StarGrid {
  public:
-  void reserve(std::size_t entries) { entries_.reserve(entries); }
-  // Enters the star with box b into every cell (of size `cell`) the box touches.
-  void add(std::uint32_t star, const Bounds& b, double cell) {
-    Entry e{0, star, grid_cell(b.lo, cell), {}, {}};
-    for (int k = 0; k < 3; ++k) {
-      e.lo[k] = round_down(b.lo[k]);
-      e.hi[k] = -round_down(-b.hi[k]);
+  StarGrid(const std::vector<CrossingPolygon>& stars, double cell) {
+    if (stars.empty()) return;
+    glm::dvec3 lo(std::numeric_limits<double>::infinity()), hi(-lo);
+    std::vector<Bounds> boxes;
+    boxes.reserve(stars.size());
+    double extent = 0.0;  // of the boxes' longest sides
+    for (const CrossingPolygon& g : stars) {
+      const Bounds& b = boxes.emplace_back(g);
+      lo = glm::min(lo, b.lo), hi = glm::max(hi, b.hi);
+      const glm::dvec3 d = b.hi - b.lo;
+      extent += std::max({d.x, d.y, d.z});
     }
-    b.cells(cell, [&](std::uint64_t key, const glm::ivec3&) {
-      e.key = key;
-      entries_.push_back(e);
-    });
+    // Cells no narrower than the mean box: a box spans a few cells, whatever `cell` is.
+    grid_ = CellGrid(lo, hi, std::max(cell, extent / double(boxes.size())));
+    touched_ = CellSet(grid_.size());
+    for (const Bounds& b : boxes)
+      grid_.visit(b, [&](std::size_t i, const glm::ivec3&) {
+        touched_.insert(i);
+        return false;
+      });
+    first_.assign(std::size_t(touched_.rank()) + 1, 0);
+    for (const Bounds& b : boxes)
+      grid_.visit(b, [&](std::size_t i, const glm::ivec3&) {
+        ++first_[touched_.number(i) + 1];
+        return false;
+      });
+    for (std::size_t c = 1; c < first_.size(); ++c)
+      first_[c] += first_[c - 1];
+    entries_.resize(first_.back());
+    std::vector<std::uint32_t> fill(first_.begin(), first_.end() - 1);
+    for (std::uint32_t s = 0; s < boxes.size(); ++s) {
+      const Bounds& b = boxes[s];
+      Entry e{s, grid_.cell(b.lo), {}, {}};
+      for (int k = 0; k < 3; ++k) {
+        e.lo[k] = round_down(b.lo[k]);
+        e.hi[k] = -round_down(-b.hi[k]);
+      }
+      grid_.visit(b, [&](std::size_t i, const glm::ivec3&) {
+        entries_[fill[touched_.number(i)]++] = e;
+        return false;
+      });
+    }
   }
-  void build() {
-    std::sort(entries_.begin(), entries_.end(), [](const Entry& a, const Entry& b) {
-      return a.key != b.key ? a.key < b.key : a.star < b.star;
-    });
-    first_.reserve(entries_.size());
-    for (std::uint32_t i = 0; i < entries_.size(); ++i)
-      first_.try_emplace(entries_[i].key, i);
-  }
-  // Calls f(star, cell of the star box's low corner) for each star in the cell whose box
-  // overlaps b.
+  // Calls f(star, cell) for each star whose box overlaps b, in each cell where both boxes'
+  // common part starts (the cell of the larger low corner, per axis: cells grow with the
+  // coordinates), so once per star.
   template <class F>
-  void for_each_overlapping(std::uint64_t key, const Bounds& b, F&& f) const {
-    std::uint32_t i = first_.find(key);
-    if (i == first_.kNone) return;
-    for (; i < entries_.size() && entries_[i].key == key; ++i) {
-      const Entry& e = entries_[i];
-      if (b.lo.x <= e.hi[0] && e.lo[0] <= b.hi.x && b.lo.y <= e.hi[1] && e.lo[1] <= b.hi.y &&
-          b.lo.z <= e.hi[2] && e.lo[2] <= b.hi.z)
-        f(e.star, e.lo_cell);
-    }
+  void for_each_overlapping(const Bounds& b, F&& f) const {
+    if (entries_.empty()) return;
+    const glm::ivec3 lo_cell = grid_.cell(b.lo);
+    grid_.visit(b, [&](std::size_t i, const glm::ivec3& at) {
+      if (!touched_.contains(i)) return false;
+      const std::uint32_t c = touched_.number(i);
+      for (std::uint32_t k = first_[c]; k < first_[c + 1]; ++k) {
+        const Entry& e = entries_[k];
+        if (b.lo.x <= e.hi[0] && e.lo[0] <= b.hi.x && b.lo.y <= e.hi[1] && e.lo[1] <= b.hi.y &&
+            b.lo.z <= e.hi[2] && e.lo[2] <= b.hi.z && glm::max(lo_cell, e.lo_cell) == at)
+          f(e.star);
+      }
+      return false;
+    });
   }
 
  private:
@@ -82,68 +174,45 @@ class StarGrid {
     return double(f) <= x ? f : std::nextafter(f, -std::numeric_limits<float>::infinity());
   }
   struct Entry {
-    std::uint64_t key;
     std::uint32_t star;
     glm::ivec3 lo_cell;
     float lo[3], hi[3];
   };
+  CellGrid grid_;
+  CellSet touched_{0};
+  std::vector<std::uint32_t> first_;  // per touched cell (in index order): its first entry
   std::vector<Entry> entries_;
-  IndexMap<std::uint64_t, MixHash> first_;
 };
 
-// The cells that star boxes touch, as bits over the box around all stars, cells `cell` wide (or
-// twice, four times... that, whatever keeps it under kMaxBits). A face whose box touches none of
-// them meets no star's box (a point they share lies in a cell both touch): a few bit tests
-// instead of the grid's hash look-ups for the near faces that are not that near.
-class StarCells {
+// The cells (of a grid `cell` wide or wider) that the stars' boxes grown by `reach` touch: a
+// point outside them is farther than `reach` (along some axis) from every star's box.
+class NearCells {
  public:
-  StarCells(const std::vector<CrossingPolygon>& stars, double cell) {
+  NearCells(const std::vector<CrossingPolygon>& stars, double reach) {
+    if (stars.empty()) return;
     glm::dvec3 lo(std::numeric_limits<double>::infinity()), hi(-lo);
     for (const CrossingPolygon& g : stars) {
       const Bounds b(g);
-      lo = glm::min(lo, b.lo), hi = glm::max(hi, b.hi);
+      lo = glm::min(lo, b.lo - reach), hi = glm::max(hi, b.hi + reach);
     }
-    if (stars.empty()) return;
-    origin_ = lo, size_ = cell;
-    auto cells = [&] { return glm::floor((hi - lo) / size_) + 1.0; };  // in double: no overflow
-    while (cells().x * cells().y * cells().z > double(kMaxBits))
-      size_ *= 2.0;
-    dims_ = glm::ivec3(cells());
-    bits_.assign((std::size_t(dims_.x) * dims_.y * dims_.z + 63) / 64, 0);
-    for (const CrossingPolygon& g : stars)
-      visit(Bounds(g), [&](std::size_t i) {
-        bits_[i / 64] |= std::uint64_t(1) << (i % 64);
+    grid_ = CellGrid(lo, hi, reach);
+    cells_ = CellSet(grid_.size());
+    for (const CrossingPolygon& g : stars) {
+      const Bounds b(g);
+      grid_.visit(Bounds(b.lo - reach, b.hi + reach), [&](std::size_t i, const glm::ivec3&) {
+        cells_.insert(i);
         return false;
       });
+    }
   }
-  // Whether the box touches a cell a star box touches.
-  bool touches(const Bounds& b) const {
-    return !bits_.empty() &&
-           visit(b, [&](std::size_t i) { return (bits_[i / 64] >> (i % 64) & 1u) != 0; });
+  bool contains(const glm::dvec3& p) const {
+    const glm::ivec3 c = grid_.cell(p);
+    return grid_.size() > 0 && grid_.inside(c) && cells_.contains(grid_.index(c));
   }
 
  private:
-  static constexpr std::uint64_t kMaxBits = std::uint64_t(1) << 26;  // 8 MB
-  // Calls f(bit) for the cells of the box (clipped to the stars' box) until f returns true.
-  template <class F>
-  bool visit(const Bounds& b, F&& f) const {
-    auto index = [&](const glm::dvec3& p) {  // clamped before the conversion to int
-      const glm::dvec3 c =
-          glm::clamp(glm::floor((p - origin_) / size_), glm::dvec3(-1.0), glm::dvec3(dims_));
-      return glm::ivec3(c);
-    };
-    const glm::ivec3 a = glm::max(index(b.lo), glm::ivec3(0));
-    const glm::ivec3 c = glm::min(index(b.hi), dims_ - 1);
-    for (int z = a.z; z <= c.z; ++z)
-      for (int y = a.y; y <= c.y; ++y)
-        for (int x = a.x; x <= c.x; ++x)
-          if (f((std::size_t(z) * dims_.y + y) * dims_.x + x)) return true;
-    return false;
-  }
-  glm::dvec3 origin_{0.0};
-  double size_ = 1.0;
-  glm::ivec3 dims_{0};
-  std::vector<std::uint64_t> bits_;
+  CellGrid grid_;
+  CellSet cells_{0};
 };
 
 }  // namespace
@@ -227,6 +296,9 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
     if (v >= nv) throw std::invalid_argument("undo_crossing_moves: face vertex out of range");
   for (std::uint32_t v : mesh.quads)
     if (v >= nv) throw std::invalid_argument("undo_crossing_moves: face vertex out of range");
+  for (const glm::vec3& p : mesh.positions)
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+      throw std::invalid_argument("undo_crossing_moves: a position is not finite");
   std::vector<std::uint32_t> move_of(nv, UINT32_MAX);  // vertex → its (first) entry in moves
   std::vector<std::uint32_t> check;
   for (std::uint32_t i = 0; i < moves.size(); ++i) {
@@ -254,8 +326,11 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
   };
   double widest = 0.0;  // the largest box diagonal of a face
   for (std::uint32_t f = 0; f < nf; ++f) {
-    const Bounds b(polygon(f));
-    widest = std::max(widest, glm::distance(b.lo, b.hi));
+    const auto c = corners(f);
+    glm::vec3 lo = mesh.positions[c[0]], hi = lo;
+    for (std::size_t k = 1; k < c.size(); ++k)
+      lo = glm::min(lo, mesh.positions[c[k]]), hi = glm::max(hi, mesh.positions[c[k]]);
+    widest = std::max(widest, glm::distance(glm::dvec3(lo), glm::dvec3(hi)));
   }
   // A face that meets a star has every corner within its own box diagonal of the star's box:
   // the faces to test are found through their corners in `near` cells of that size around the
@@ -289,36 +364,18 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
       checking[v] = 0;
     std::vector<CrossingPolygon> stars;
     stars.reserve(star.size());
-    StarGrid grid;
-    grid.reserve(4 * star.size());
-    IndexMap<std::uint64_t, MixHash> occupied, near;  // cells (near_cell) of stars, and around
-    std::vector<glm::ivec3> occupied_cells;
     for (std::uint32_t f : star) {
       star_index[f] = std::uint32_t(stars.size());
       stars.push_back(polygon(f));
-      const Bounds b(stars.back());
-      grid.add(std::uint32_t(stars.size() - 1), b, cell);
-      b.cells(near_cell, [&](std::uint64_t k, const glm::ivec3& at) {
-        if (occupied.try_emplace(k, std::uint32_t(occupied_cells.size())).second)
-          occupied_cells.push_back(at);
-      });
     }
-    // A star's box grown by near_cell lies in its cells and their neighbours.
-    for (const glm::ivec3& c : occupied_cells)
-      for (int z = -1; z <= 1; ++z)
-        for (int y = -1; y <= 1; ++y)
-          for (int x = -1; x <= 1; ++x)
-            near.try_emplace(grid_cell_key(c + glm::ivec3(x, y, z)), 0);
-    grid.build();
-    const StarCells touched(stars, cell);
+    const StarGrid grid(stars, cell);
+    const NearCells near(stars, near_cell);
     // In parallel (the faces are independent; the vertices to put back are sorted after, so
     // the result is the same for any number of threads).
     tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, std::uint32_t(nv), 4096),
                       [&](const tbb::blocked_range<std::uint32_t>& r) {
                         for (std::uint32_t v = r.begin(); v < r.end(); ++v)
-                          is_near[v] =
-                              near.find(grid_cell_key(grid_cell(glm::dvec3(mesh.positions[v]),
-                                                                near_cell))) != near.kNone;
+                          is_near[v] = near.contains(glm::dvec3(mesh.positions[v]));
                       });
     tbb::enumerable_thread_specific<std::vector<std::uint32_t>> found;
     tbb::parallel_for(
@@ -332,30 +389,15 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
             const auto c = corners(f);
             if (std::none_of(c.begin(), c.end(), [&](std::uint32_t v) { return is_near[v]; }))
               continue;
-            // Then the face's box (from its float corners: the same box as its polygon's) must
-            // touch a cell a star box touches: of Marschner–Lobb 512²'s 341 k near faces,
-            // 191 k do.
-            glm::vec3 lo = mesh.positions[c[0]], hi = lo;
-            for (std::size_t k = 1; k < c.size(); ++k)
-              lo = glm::min(lo, mesh.positions[c[k]]), hi = glm::max(hi, mesh.positions[c[k]]);
-            if (!touched.touches(Bounds(glm::dvec3(lo), glm::dvec3(hi)))) continue;
             const CrossingPolygon g = polygon(f);
-            const Bounds b(g);
-            // A pair whose boxes share several cells is tested in one: the cell where their common
-            // box starts (the cell of the larger low corner, per axis: cells grow with
-            // coordinates). Two stars are tested once (from the one that comes first), a star not
-            // with itself.
-            const glm::ivec3 lo_cell = grid_cell(b.lo, cell);
+            // Two stars are tested once (from the one that comes first), a star not with itself.
             const std::uint32_t own = star_index[f];
-            b.cells(cell, [&](std::uint64_t k, const glm::ivec3& at) {
-              grid.for_each_overlapping(k, b, [&](std::uint32_t s, const glm::ivec3& star_lo_cell) {
-                if ((own != UINT32_MAX && own >= s) || glm::max(lo_cell, star_lo_cell) != at)
-                  return;
-                if (polygons_cross(g, stars[s])) {
-                  note(g);
-                  note(stars[s]);
-                }
-              });
+            grid.for_each_overlapping(Bounds(g), [&](std::uint32_t s) {
+              if (own != UINT32_MAX && own >= s) return;
+              if (polygons_cross(g, stars[s])) {
+                note(g);
+                note(stars[s]);
+              }
             });
           }
         });

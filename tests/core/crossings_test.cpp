@@ -63,7 +63,8 @@ TEST(Crossings, MoveThatCrossesNothingStays) {
 }
 
 TEST(Crossings, AnyCellSizeFindsTheCrossing) {
-  for (double cell : {0.05, 0.3, 1.0, 10.0}) {
+  // 1e-7 and 1e-12: far more cells than the grids hold, so they take coarser ones.
+  for (double cell : {1e-12, 1e-7, 0.05, 0.3, 1.0, 10.0}) {
     Mesh m = two_sheets({0.0f, 0.0f, 1.0f});
     EXPECT_EQ(undo_crossing_moves(m, kMoved, cell), 1u) << cell;
   }
@@ -135,6 +136,9 @@ TEST(Crossings, InvalidInputIsRefused) {
   EXPECT_THROW(undo_crossing_moves(bad, kMoved, 1.0), std::invalid_argument);
   bad = m;
   bad.triangles.pop_back();
+  EXPECT_THROW(undo_crossing_moves(bad, kMoved, 1.0), std::invalid_argument);
+  bad = m;
+  bad.positions[6].y = std::numeric_limits<float>::quiet_NaN();
   EXPECT_THROW(undo_crossing_moves(bad, kMoved, 1.0), std::invalid_argument);
   bad = m;
   bad.normals.pop_back();
