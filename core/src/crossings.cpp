@@ -1,6 +1,7 @@
 #include "ldimesh/core/crossings.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <bit>
 #include <cmath>
 #include <iterator>
@@ -11,11 +12,21 @@
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
 #include "ldimesh/core/geometry.hpp"
 
 namespace ldimesh {
 namespace {
+
+// f(i) for i in [0, n), in parallel.
+template <class F>
+void parallel_each(std::size_t n, F&& f) {
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096), [&](const auto& r) {
+    for (std::size_t i = r.begin(); i < r.end(); ++i)
+      f(i);
+  });
+}
 
 struct Bounds {
   glm::dvec3 lo, hi;
@@ -75,7 +86,11 @@ class CellGrid {
 class CellSet {
  public:
   explicit CellSet(std::size_t cells) : bits_((cells + 63) / 64, 0) {}
-  void insert(std::size_t i) { bits_[i / 64] |= std::uint64_t(1) << (i % 64); }
+  // Safe from several threads at once (the bits end up the same in any order).
+  void insert(std::size_t i) {
+    std::atomic_ref<std::uint64_t>(bits_[i / 64]).fetch_or(std::uint64_t(1) << (i % 64),
+                                                            std::memory_order_relaxed);
+  }
   bool contains(std::size_t i) const { return (bits_[i / 64] >> (i % 64) & 1u) != 0; }
   // Numbers the set cells in index order; returns how many there are.
   std::uint32_t rank() {
@@ -99,19 +114,19 @@ class CellSet {
 };
 
 // A cell → stars table over the stars' box: the cells star boxes touch as bits, and per touched
-// cell its (star, star box's low cell, star box) entries, in star order (counting sort: one
-// pass to count, one to place). The boxes sit in the entries (floats, rounded outward) so that a
+// cell its (star, star box's low cell, star box) entries (counting sort: one pass to count, one
+// to place, both in parallel; a cell's entries come in any order, which changes no result: the
+// vertices found are sorted). The boxes sit in the entries (floats, rounded outward) so that a
 // cell's candidates are read in one sweep instead of one cache miss each.
 class StarGrid {
  public:
   StarGrid(const std::vector<CrossingPolygon>& stars, double cell) {
     if (stars.empty()) return;
     glm::dvec3 lo(std::numeric_limits<double>::infinity()), hi(-lo);
-    std::vector<Bounds> boxes;
-    boxes.reserve(stars.size());
+    std::vector<Bounds> boxes(stars.size(), Bounds(lo, hi));
+    parallel_each(stars.size(), [&](std::size_t s) { boxes[s] = Bounds(stars[s]); });
     double extent = 0.0;  // of the boxes' longest sides
-    for (const CrossingPolygon& g : stars) {
-      const Bounds& b = boxes.emplace_back(g);
+    for (const Bounds& b : boxes) {
       lo = glm::min(lo, b.lo), hi = glm::max(hi, b.hi);
       const glm::dvec3 d = b.hi - b.lo;
       extent += std::max({d.x, d.y, d.z});
@@ -119,33 +134,38 @@ class StarGrid {
     // Cells no narrower than the mean box: a box spans a few cells, whatever `cell` is.
     grid_ = CellGrid(lo, hi, std::max(cell, extent / double(boxes.size())));
     touched_ = CellSet(grid_.size());
-    for (const Bounds& b : boxes)
-      grid_.visit(b, [&](std::size_t i, const glm::ivec3&) {
+    parallel_each(boxes.size(), [&](std::size_t s) {
+      grid_.visit(boxes[s], [&](std::size_t i, const glm::ivec3&) {
         touched_.insert(i);
         return false;
       });
+    });
     first_.assign(std::size_t(touched_.rank()) + 1, 0);
-    for (const Bounds& b : boxes)
-      grid_.visit(b, [&](std::size_t i, const glm::ivec3&) {
-        ++first_[touched_.number(i) + 1];
+    parallel_each(boxes.size(), [&](std::size_t s) {
+      grid_.visit(boxes[s], [&](std::size_t i, const glm::ivec3&) {
+        std::atomic_ref<std::uint32_t>(first_[touched_.number(i) + 1])
+            .fetch_add(1, std::memory_order_relaxed);
         return false;
       });
+    });
     for (std::size_t c = 1; c < first_.size(); ++c)
       first_[c] += first_[c - 1];
     entries_.resize(first_.back());
     std::vector<std::uint32_t> fill(first_.begin(), first_.end() - 1);
-    for (std::uint32_t s = 0; s < boxes.size(); ++s) {
+    parallel_each(boxes.size(), [&](std::size_t s) {
       const Bounds& b = boxes[s];
-      Entry e{s, grid_.cell(b.lo), {}, {}};
+      Entry e{std::uint32_t(s), grid_.cell(b.lo), {}, {}};
       for (int k = 0; k < 3; ++k) {
         e.lo[k] = round_down(b.lo[k]);
         e.hi[k] = -round_down(-b.hi[k]);
       }
       grid_.visit(b, [&](std::size_t i, const glm::ivec3&) {
-        entries_[fill[touched_.number(i)]++] = e;
+        const std::uint32_t at = std::atomic_ref<std::uint32_t>(fill[touched_.number(i)])
+                                     .fetch_add(1, std::memory_order_relaxed);
+        entries_[at] = e;
         return false;
       });
-    }
+    });
   }
   // Calls f(star, cell) for each star whose box overlaps b, in each cell where both boxes'
   // common part starts (the cell of the larger low corner, per axis: cells grow with the
@@ -197,13 +217,13 @@ class NearCells {
     }
     grid_ = CellGrid(lo, hi, reach);
     cells_ = CellSet(grid_.size());
-    for (const CrossingPolygon& g : stars) {
-      const Bounds b(g);
+    parallel_each(stars.size(), [&](std::size_t s) {
+      const Bounds b(stars[s]);
       grid_.visit(Bounds(b.lo - reach, b.hi + reach), [&](std::size_t i, const glm::ivec3&) {
         cells_.insert(i);
         return false;
       });
-    }
+    });
   }
   bool contains(const glm::dvec3& p) const {
     const glm::ivec3 c = grid_.cell(p);
@@ -324,14 +344,20 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
     }
     return g;
   };
-  double widest = 0.0;  // the largest box diagonal of a face
-  for (std::uint32_t f = 0; f < nf; ++f) {
-    const auto c = corners(f);
-    glm::vec3 lo = mesh.positions[c[0]], hi = lo;
-    for (std::size_t k = 1; k < c.size(); ++k)
-      lo = glm::min(lo, mesh.positions[c[k]]), hi = glm::max(hi, mesh.positions[c[k]]);
-    widest = std::max(widest, glm::distance(glm::dvec3(lo), glm::dvec3(hi)));
-  }
+  // The largest box diagonal of a face (a maximum: the same for any split among threads).
+  const double widest = tbb::parallel_reduce(
+      tbb::blocked_range<std::uint32_t>(0, std::uint32_t(nf), 8192), 0.0,
+      [&](const auto& r, double widest) {
+        for (std::uint32_t f = r.begin(); f < r.end(); ++f) {
+          const auto c = corners(f);
+          glm::vec3 lo = mesh.positions[c[0]], hi = lo;
+          for (std::size_t k = 1; k < c.size(); ++k)
+            lo = glm::min(lo, mesh.positions[c[k]]), hi = glm::max(hi, mesh.positions[c[k]]);
+          widest = std::max(widest, glm::distance(glm::dvec3(lo), glm::dvec3(hi)));
+        }
+        return widest;
+      },
+      [](double a, double b) { return std::max(a, b); });
   // A face that meets a star has every corner within its own box diagonal of the star's box:
   // the faces to test are found through their corners in `near` cells of that size around the
   // stars (in the first round that is most of the mesh near the moves; in later ones, few).
@@ -362,12 +388,11 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
     }
     for (std::uint32_t v : check)
       checking[v] = 0;
-    std::vector<CrossingPolygon> stars;
-    stars.reserve(star.size());
-    for (std::uint32_t f : star) {
-      star_index[f] = std::uint32_t(stars.size());
-      stars.push_back(polygon(f));
-    }
+    std::vector<CrossingPolygon> stars(star.size());
+    parallel_each(star.size(), [&](std::size_t i) {
+      star_index[star[i]] = std::uint32_t(i);
+      stars[i] = polygon(star[i]);
+    });
     const StarGrid grid(stars, cell);
     const NearCells near(stars, near_cell);
     // In parallel (the faces are independent; the vertices to put back are sorted after, so
