@@ -88,8 +88,8 @@ class CellSet {
   explicit CellSet(std::size_t cells) : bits_((cells + 63) / 64, 0) {}
   // Safe from several threads at once (the bits end up the same in any order).
   void insert(std::size_t i) {
-    std::atomic_ref<std::uint64_t>(bits_[i / 64]).fetch_or(std::uint64_t(1) << (i % 64),
-                                                            std::memory_order_relaxed);
+    std::atomic_ref<std::uint64_t>(bits_[i / 64])
+        .fetch_or(std::uint64_t(1) << (i % 64), std::memory_order_relaxed);
   }
   bool contains(std::size_t i) const { return (bits_[i / 64] >> (i % 64) & 1u) != 0; }
   // Numbers the set cells in index order; returns how many there are.

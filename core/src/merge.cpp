@@ -1054,7 +1054,7 @@ Mesh merge_views(const Mesh& mesh, FaceType faces, const MergeOptions& options, 
   }
   if (faces == FaceType::quads && options.all_quads) {
     start = std::chrono::steady_clock::now();
-    out = quadrangulate(out, options.quads, stats.quads, onto_surface);
+    out = quadrangulate(std::move(out), options.quads, stats.quads, onto_surface);
     stats.quality_seconds += seconds_since(start);
   }
   return out;

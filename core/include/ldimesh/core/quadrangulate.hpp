@@ -92,5 +92,8 @@ struct QuadStats {
 // faces).
 Mesh quadrangulate(const Mesh& mesh, const QuadOptions& options, QuadStats& stats,
                    const SurfaceProjection& project = {});
+// The same, written over the mesh's own arrays (no second copy of a large mesh).
+Mesh quadrangulate(Mesh&& mesh, const QuadOptions& options, QuadStats& stats,
+                   const SurfaceProjection& project = {});
 
 }  // namespace ldimesh
