@@ -500,49 +500,72 @@ class Merger {
   }
 
   // The whole mesh: vertices in input order (those some face uses), then the new ones; faces
-  // in input order (outside the region as they were), then the new ones.
-  Mesh output(FaceType faces) {
-    Mesh out;
-    out.view_dirs = in_.view_dirs;
+  // in input order (outside the region as they were), then the new ones. With `in_place` (the
+  // input mesh itself, quad output only) written over the input's arrays: a vertex or a quad
+  // moves to the same or a lower place, so an entry is read before anything is written over it
+  // (the input's triangles are read until the end, so the output's go to new arrays); this
+  // spares the fresh arrays, whose first touch was most of the output's time on Marschner–Lobb
+  // 512².
+  Mesh output(FaceType faces, Mesh* in_place = nullptr) {
+    Mesh fresh;
+    Mesh& out = in_place ? *in_place : fresh;
     const std::size_t n_input = in_.positions.size();
     const std::size_t outside_faces = region_.inside.size() - region_.faces;
     const std::size_t most_vertices = mesh_.n_vertices() + (n_input - region_.global.size());
     std::vector<std::uint32_t> index(mesh_.n_vertices(), kNone);  // OpenMesh → output
     std::vector<std::uint32_t> outside(n_input, kNone);           // input → output
-    out.positions.reserve(most_vertices);
-    out.normals.reserve(most_vertices);
     const bool scalars = !in_.scalars.empty();
-    if (scalars) out.scalars.reserve(most_vertices);
+    // Room for every face (deleted slots included: an upper bound that costs address space
+    // only), so the arrays are not copied over while they grow.
+    const std::size_t most = mesh_.n_faces() + outside_faces;
+    std::vector<std::uint32_t> triangles;
+    std::vector<std::uint8_t> triangle_view;
+    if (!in_place) {
+      out.view_dirs = in_.view_dirs;
+      out.positions.reserve(most_vertices);
+      out.normals.reserve(most_vertices);
+      if (scalars) out.scalars.reserve(most_vertices);
+      if (faces == FaceType::quads) {
+        out.quads.reserve(4 * most);
+        out.quad_view.reserve(most);
+      } else {
+        triangles.reserve(6 * most);
+        triangle_view.reserve(2 * most);
+      }
+    }
+    auto put = [](auto& array, std::size_t at, const auto& value) {
+      if (at < array.size()) {
+        array[at] = value;
+      } else {
+        array.push_back(value);
+      }
+    };
+    std::size_t vertices = 0;
+    auto emit = [&](const glm::vec3& p, const glm::vec3& n, float scalar) {
+      put(out.positions, vertices, p);
+      put(out.normals, vertices, n);
+      if (scalars) put(out.scalars, vertices, scalar);
+      return std::uint32_t(vertices++);
+    };
     auto emit_vertex = [&](VH v) {
-      if (!alive(v)) return;
-      index[v.idx()] = std::uint32_t(out.positions.size());
-      out.positions.emplace_back(point(v));
-      out.normals.emplace_back(to_glm(mesh_.normal(v)));
-      if (scalars) out.scalars.push_back(mesh_.property(scalar_, v));
+      if (alive(v))
+        index[v.idx()] = emit(glm::vec3(point(v)), glm::vec3(to_glm(mesh_.normal(v))),
+                              mesh_.property(scalar_, v));
     };
     for (std::uint32_t g = 0; g < n_input; ++g) {
       if (region_.local[g] != kNone) {
         emit_vertex(VH(int(region_.local[g])));
       } else if (region_.used[g]) {
-        outside[g] = std::uint32_t(out.positions.size());
-        out.positions.push_back(in_.positions[g]);
-        out.normals.push_back(in_.normals[g]);
-        if (scalars) out.scalars.push_back(in_.scalars[g]);
+        outside[g] = emit(in_.positions[g], in_.normals[g], scalars ? in_.scalars[g] : 0.0f);
       }
     }
     for (std::size_t v = region_.global.size(); v < mesh_.n_vertices(); ++v)
       emit_vertex(VH(int(v)));
-    // Room for every face (deleted slots included: an upper bound that costs address space
-    // only), so the arrays are not copied over while they grow.
-    const std::size_t most = mesh_.n_faces() + outside_faces;
-    if (faces == FaceType::quads) {
-      out.quads.reserve(4 * most);
-      out.quad_view.reserve(most);
-    } else {
-      out.triangles.reserve(6 * most);
-      out.triangle_view.reserve(2 * most);
-    }
-    UnionFind pieces(out.positions.size());
+    out.positions.resize(vertices);
+    out.normals.resize(vertices);
+    if (scalars) out.scalars.resize(vertices);
+    UnionFind pieces(vertices);
+    std::size_t quads = 0;
     // Corners one by one: a range insert of three or four numbers was a memmove call per face
     // (a twentieth of merging on Marschner–Lobb 512²).
     auto emit_face = [&](std::span<const std::uint32_t> c, std::uint8_t view) {
@@ -550,15 +573,15 @@ class Merger {
         pieces.join(c[0], c[k]);
       if (c.size() == 3) {
         for (std::uint32_t v : c)
-          out.triangles.push_back(v);
-        out.triangle_view.push_back(view);
+          triangles.push_back(v);
+        triangle_view.push_back(view);
       } else if (faces == FaceType::quads) {
-        for (std::uint32_t v : c)
-          out.quads.push_back(v);
-        out.quad_view.push_back(view);
+        for (std::size_t k = 0; k < 4; ++k)
+          put(out.quads, 4 * quads + k, c[k]);
+        put(out.quad_view, quads++, view);
       } else {
-        append_quad_triangles(out.positions, c.data(), out.triangles);
-        out.triangle_view.insert(out.triangle_view.end(), {view, view});
+        append_quad_triangles(out.positions, c.data(), triangles);
+        triangle_view.insert(triangle_view.end(), {view, view});
       }
     };
     std::vector<std::uint32_t> c;
@@ -584,11 +607,15 @@ class Merger {
     }
     for (std::size_t f = built_faces_; f < mesh_.n_faces(); ++f)
       emit_mesh_face(FH(int(f)));
+    out.quads.resize(4 * quads);
+    out.quad_view.resize(quads);
+    out.triangles = std::move(triangles);
+    out.triangle_view = std::move(triangle_view);
     for (std::uint32_t v = 0; v < out.positions.size(); ++v)
       if (pieces.find(v) == v) ++stats_.components;
     stats_.unfilled_holes = count_loops();
     moved_out_ = renumber_moves(moves_, index);
-    return out;
+    return in_place ? Mesh() : std::move(fresh);
   }
 
   // The output's vertices moved onto the surface, with their midpoints (for undo_crossing_moves).
@@ -993,8 +1020,12 @@ void validate(const Mesh& m) {
 
 }  // namespace
 
-Mesh merge_views(const Mesh& mesh, FaceType faces, const MergeOptions& options, MergeStats& stats,
-                 const SurfaceProjection& project) {
+namespace {
+
+// merge_views; with `writable` (the input mesh itself) and quad output, the result is written
+// over the input's arrays.
+Mesh merge_mesh(const Mesh& mesh, Mesh* writable, FaceType faces, const MergeOptions& options,
+                MergeStats& stats, const SurfaceProjection& project) {
   stats = {};
   validate(mesh);
   const QuietOpenMesh quiet;
@@ -1018,7 +1049,9 @@ Mesh merge_views(const Mesh& mesh, FaceType faces, const MergeOptions& options, 
       stats.quality_seconds = seconds_since(start);
       return Mesh();
     }
-    Mesh out = merger.output(faces);
+    Mesh* in_place = faces == FaceType::quads ? writable : nullptr;
+    Mesh out = merger.output(faces, in_place);
+    if (in_place) out = std::move(*in_place);
     // Projected vertices whose faces pass through other faces go back to their edge midpoints
     // (crossings.hpp): without the moves no face crossed; with them, Barth's merged meshes had
     // crossing pairs near its double points, where the cone's two nappes are a cell or two
@@ -1058,6 +1091,18 @@ Mesh merge_views(const Mesh& mesh, FaceType faces, const MergeOptions& options, 
     stats.quality_seconds += seconds_since(start);
   }
   return out;
+}
+
+}  // namespace
+
+Mesh merge_views(const Mesh& mesh, FaceType faces, const MergeOptions& options, MergeStats& stats,
+                 const SurfaceProjection& project) {
+  return merge_mesh(mesh, nullptr, faces, options, stats, project);
+}
+
+Mesh merge_views(Mesh&& mesh, FaceType faces, const MergeOptions& options, MergeStats& stats,
+                 const SurfaceProjection& project) {
+  return merge_mesh(mesh, &mesh, faces, options, stats, project);
 }
 
 }  // namespace ldimesh

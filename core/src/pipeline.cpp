@@ -121,7 +121,7 @@ MeshingResult mesh_ldis(std::span<const Ldi> ldis, const MeshingOptions& options
     const SurfaceProjection project = samples && !views.empty() && merging_projects(merging)
                                           ? sample_projection(*samples, views)
                                           : SurfaceProjection();
-    mesh = merge_views(mesh, options.faces, merging, result.merging, project);
+    mesh = merge_views(std::move(mesh), options.faces, merging, result.merging, project);
     result.seconds.bridge = result.merging.bridge_seconds;
     result.seconds.sew = result.merging.sew_seconds;
     result.seconds.quality = result.merging.quality_seconds;

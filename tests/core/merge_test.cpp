@@ -330,6 +330,60 @@ TEST(Merge, RegionGivesTheWholeMeshResult) {
   EXPECT_GT(reruns, 0u);  // the Klein bottle with 2 rings
 }
 
+// merge_views on a mesh handed over (Mesh&&) writes the quad output over the input's arrays; the
+// result must be the copying version's, array by array, with and without the conversion to quads
+// (which then also works in place) and for triangle output (never in place).
+TEST(Merge, HandedOverMeshGivesTheCopysResult) {
+  // Both with faces and vertices outside merging's region (which pass through, moved down in
+  // place).
+  for (const auto& [surface, res] : {std::pair("barth", 128), std::pair("marschner-lobb", 64)}) {
+    const auto source = make_surface_source(surface);
+    const RayCaster caster(*source, find_surface(surface)->isovalue);
+    const std::vector<View> views = make_axis_views(source->bounds(), res);
+    std::vector<Ldi> ldis;
+    for (const View& view : views)
+      ldis.push_back(caster.cast(view));
+    LocalSampleSource samples(caster, views);
+    const SurfaceProjection project = sample_projection(samples, views);
+    for (FaceType faces : {FaceType::quads, FaceType::triangles}) {
+      MeshingOptions options;
+      options.r = 1.0;
+      options.faces = faces;
+      const Mesh views_mesh = mesh_ldis(ldis, options).mesh;
+      for (bool all_quads : {true, false}) {
+        SCOPED_TRACE(std::string(surface) + " " + std::to_string(res) +
+                     (faces == FaceType::quads ? " quads" : " triangles") +
+                     (all_quads ? ", all quads" : ", quad-dominant"));
+        MergeOptions merging;
+        merging.enabled = true;
+        merging.cell_size = views[0].spacing;
+        merging.region_rings = 2;  // the fewest: more vertices outside
+        merging.all_quads = all_quads;
+        MergeStats copy_stats, moved_stats;
+        const Mesh copy = merge_views(views_mesh, faces, merging, copy_stats, project);
+        Mesh handed = views_mesh;
+        const Mesh moved = merge_views(std::move(handed), faces, merging, moved_stats, project);
+        EXPECT_EQ(moved.positions, copy.positions);
+        EXPECT_EQ(moved.normals, copy.normals);
+        EXPECT_EQ(moved.scalars, copy.scalars);
+        EXPECT_EQ(moved.triangles, copy.triangles);
+        EXPECT_EQ(moved.quads, copy.quads);
+        EXPECT_EQ(moved.triangle_view, copy.triangle_view);
+        EXPECT_EQ(moved.quad_view, copy.quad_view);
+        EXPECT_EQ(moved.view_dirs, copy.view_dirs);
+        EXPECT_EQ(moved_stats.components, copy_stats.components);
+        EXPECT_EQ(moved_stats.crossings_undone, copy_stats.crossings_undone);
+        EXPECT_EQ(moved_stats.quads.crossings_undone, copy_stats.quads.crossings_undone);
+        EXPECT_GT(copy.face_count(), 0u);
+        EXPECT_LT(copy_stats.region_faces, views_mesh.face_count());
+        if (faces == FaceType::quads && all_quads) {
+          EXPECT_EQ(copy.triangle_count(), 0u);
+        }
+      }
+    }
+  }
+}
+
 // Merging keeps the surface's accuracy: the forward mean distance to the true surface grows by
 // at most 10 % over the r = 1 per-view meshes (flat bridges and fills across gaps of a few
 // cells would add more; their long edges are split and the new vertices projected).

@@ -110,5 +110,9 @@ struct MergeStats {
 // of range.
 Mesh merge_views(const Mesh& mesh, FaceType faces, const MergeOptions& options, MergeStats& stats,
                  const SurfaceProjection& project = {});
+// The same; with quad output written over the mesh's own arrays (no second copy of a large
+// mesh: the pipeline hands its views' mesh over).
+Mesh merge_views(Mesh&& mesh, FaceType faces, const MergeOptions& options, MergeStats& stats,
+                 const SurfaceProjection& project = {});
 
 }  // namespace ldimesh
