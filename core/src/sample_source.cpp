@@ -31,13 +31,11 @@ RayHitList cast_sample_points(const RayCaster& caster, std::span<const View> vie
   for (std::size_t k = 0; k < points.size(); ++k) {
     const RayHitList& h = hits[points[k].view];
     const std::uint32_t b = h.offsets[slot[k]], e = h.offsets[slot[k] + 1];
-    out.depth.insert(out.depth.end(), h.depth.begin() + b, h.depth.begin() + e);
-    out.normal.insert(out.normal.end(), h.normal.begin() + b, h.normal.begin() + e);
-    if (with_scalar) {
-      if (h.scalar.empty())
-        out.scalar.insert(out.scalar.end(), e - b, 0.0f);
-      else
-        out.scalar.insert(out.scalar.end(), h.scalar.begin() + b, h.scalar.begin() + e);
+    // Hit by hit: a range insert of the few hits of a ray was a memmove call each.
+    for (std::uint32_t i = b; i < e; ++i) {
+      out.depth.push_back(h.depth[i]);
+      out.normal.push_back(h.normal[i]);
+      if (with_scalar) out.scalar.push_back(h.scalar.empty() ? 0.0f : h.scalar[i]);
     }
     out.offsets.push_back(std::uint32_t(out.depth.size()));
   }

@@ -264,6 +264,23 @@ RayHitList MpiSampleSource::sample(std::span<const SamplePoint> points) {
   for (const SamplePoint& p : points)
     if (p.view >= views_.size()) throw std::out_of_range("sample request for an unknown view");
   if (points.size() > kMaxRays) throw std::invalid_argument("too many sample requests");
+  int ranks = 1;
+  MPI_Comm_size(comm_, &ranks);
+  std::vector<RayHitList> answers;
+  if (ranks == 1) {
+    // Alone: the own answer as it is, without the trip through bytes (the same hits).
+    try {
+      answers.push_back(cast_sample_points(caster_, views_, points, &sub_));
+    } catch (const std::exception& e) {
+      throw std::runtime_error(std::string("sampling failed on rank 0: ") + e.what());
+    }
+  } else {
+    answers = ask_all(points);
+  }
+  return merge_answers(answers, points.size());
+}
+
+std::vector<RayHitList> MpiSampleSource::ask_all(std::span<const SamplePoint> points) {
   std::vector<double> rays(kDoublesPerRay * points.size());
   for (std::size_t k = 0; k < points.size(); ++k) {
     double* ray = &rays[kDoublesPerRay * k];
@@ -285,6 +302,11 @@ RayHitList MpiSampleSource::sample(std::span<const SamplePoint> points) {
     if (!deserialize(parts[r], points.size(), answers[r]))
       throw std::runtime_error("sample answer of rank " + std::to_string(r) + " is malformed");
   }
+  return answers;
+}
+
+RayHitList MpiSampleSource::merge_answers(const std::vector<RayHitList>& answers,
+                                          std::size_t rays) const {
   const bool with_scalar = std::any_of(answers.begin(), answers.end(),
                                        [](const RayHitList& a) { return !a.scalar.empty(); });
   struct Hit {
@@ -293,10 +315,10 @@ RayHitList MpiSampleSource::sample(std::span<const SamplePoint> points) {
     float scalar;
   };
   RayHitList merged;
-  merged.offsets.reserve(points.size() + 1);
+  merged.offsets.reserve(rays + 1);
   merged.offsets.push_back(0);
   std::vector<Hit> hits;
-  for (std::size_t k = 0; k < points.size(); ++k) {
+  for (std::size_t k = 0; k < rays; ++k) {
     hits.clear();
     for (const RayHitList& a : answers)
       for (std::uint32_t s = a.offsets[k]; s < a.offsets[k + 1]; ++s)

@@ -95,6 +95,11 @@ class MpiSampleSource final : public SampleSource {
  private:
   // This rank's serialized answer: its hits of `points`, or the error that stopped it.
   std::vector<std::uint8_t> answer(std::span<const SamplePoint> points) const;
+  // Every rank's hits of `points` (the request broadcast, the answers gathered).
+  std::vector<RayHitList> ask_all(std::span<const SamplePoint> points);
+  // Per ray, the hits of all answers by depth, those within tolerance of the previous one
+  // dropped (a hit on a shared face, seen by both ranks).
+  RayHitList merge_answers(const std::vector<RayHitList>& answers, std::size_t rays) const;
   MPI_Comm comm_;
   const RayCaster& caster_;
   Subdomain sub_;
