@@ -114,19 +114,30 @@ class CellSet {
 };
 
 // A cell → stars table over the stars' box: the cells star boxes touch as bits, and per touched
-// cell its (star, star box's low cell, star box) entries (counting sort: one pass to count, one
-// to place, both in parallel; a cell's entries come in any order, which changes no result: the
+// cell its (star, star box) entries (counting sort: one pass to count, one to place, both in
+// parallel; a cell's entries come in any order, which changes no result: the
 // vertices found are sorted). The boxes sit in the entries (floats, rounded outward) so that a
 // cell's candidates are read in one sweep instead of one cache miss each.
 class StarGrid {
  public:
   StarGrid(const std::vector<CrossingPolygon>& stars, double cell) {
     if (stars.empty()) return;
+    // Each star's box in floats, rounded outward: what the entries hold, and what the grid's
+    // cells are found from (the cell where a pair is tested must be one both were entered in).
+    std::vector<Entry> boxes(stars.size());
+    parallel_each(stars.size(), [&](std::size_t s) {
+      const Bounds b(stars[s]);
+      Entry& e = boxes[s];
+      e.star = std::uint32_t(s);
+      for (int k = 0; k < 3; ++k) {
+        e.lo[k] = round_down(b.lo[k]);
+        e.hi[k] = -round_down(-b.hi[k]);
+      }
+    });
     glm::dvec3 lo(std::numeric_limits<double>::infinity()), hi(-lo);
-    std::vector<Bounds> boxes(stars.size(), Bounds(lo, hi));
-    parallel_each(stars.size(), [&](std::size_t s) { boxes[s] = Bounds(stars[s]); });
     double extent = 0.0;  // of the boxes' longest sides
-    for (const Bounds& b : boxes) {
+    for (const Entry& e : boxes) {
+      const Bounds b = e.bounds();
       lo = glm::min(lo, b.lo), hi = glm::max(hi, b.hi);
       const glm::dvec3 d = b.hi - b.lo;
       extent += std::max({d.x, d.y, d.z});
@@ -135,14 +146,14 @@ class StarGrid {
     grid_ = CellGrid(lo, hi, std::max(cell, extent / double(boxes.size())));
     touched_ = CellSet(grid_.size());
     parallel_each(boxes.size(), [&](std::size_t s) {
-      grid_.visit(boxes[s], [&](std::size_t i, const glm::ivec3&) {
+      grid_.visit(boxes[s].bounds(), [&](std::size_t i, const glm::ivec3&) {
         touched_.insert(i);
         return false;
       });
     });
     first_.assign(std::size_t(touched_.rank()) + 1, 0);
     parallel_each(boxes.size(), [&](std::size_t s) {
-      grid_.visit(boxes[s], [&](std::size_t i, const glm::ivec3&) {
+      grid_.visit(boxes[s].bounds(), [&](std::size_t i, const glm::ivec3&) {
         std::atomic_ref<std::uint32_t>(first_[touched_.number(i) + 1])
             .fetch_add(1, std::memory_order_relaxed);
         return false;
@@ -153,23 +164,17 @@ class StarGrid {
     entries_.resize(first_.back());
     std::vector<std::uint32_t> fill(first_.begin(), first_.end() - 1);
     parallel_each(boxes.size(), [&](std::size_t s) {
-      const Bounds& b = boxes[s];
-      Entry e{std::uint32_t(s), grid_.cell(b.lo), {}, {}};
-      for (int k = 0; k < 3; ++k) {
-        e.lo[k] = round_down(b.lo[k]);
-        e.hi[k] = -round_down(-b.hi[k]);
-      }
-      grid_.visit(b, [&](std::size_t i, const glm::ivec3&) {
+      grid_.visit(boxes[s].bounds(), [&](std::size_t i, const glm::ivec3&) {
         const std::uint32_t at = std::atomic_ref<std::uint32_t>(fill[touched_.number(i)])
                                      .fetch_add(1, std::memory_order_relaxed);
-        entries_[at] = e;
+        entries_[at] = boxes[s];
         return false;
       });
     });
   }
-  // Calls f(star, cell) for each star whose box overlaps b, in each cell where both boxes'
-  // common part starts (the cell of the larger low corner, per axis: cells grow with the
-  // coordinates), so once per star.
+  // Calls f(star) for each star whose box overlaps b, in the cell where both boxes' common part
+  // starts (the cell of the larger low corner, per axis: cells grow with the coordinates), so
+  // once per star.
   template <class F>
   void for_each_overlapping(const Bounds& b, F&& f) const {
     if (entries_.empty()) return;
@@ -180,7 +185,8 @@ class StarGrid {
       for (std::uint32_t k = first_[c]; k < first_[c + 1]; ++k) {
         const Entry& e = entries_[k];
         if (b.lo.x <= e.hi[0] && e.lo[0] <= b.hi.x && b.lo.y <= e.hi[1] && e.lo[1] <= b.hi.y &&
-            b.lo.z <= e.hi[2] && e.lo[2] <= b.hi.z && glm::max(lo_cell, e.lo_cell) == at)
+            b.lo.z <= e.hi[2] && e.lo[2] <= b.hi.z &&
+            glm::max(lo_cell, grid_.cell(glm::dvec3(e.lo[0], e.lo[1], e.lo[2]))) == at)
           f(e.star);
       }
       return false;
@@ -195,8 +201,10 @@ class StarGrid {
   }
   struct Entry {
     std::uint32_t star;
-    glm::ivec3 lo_cell;
     float lo[3], hi[3];
+    Bounds bounds() const {
+      return Bounds(glm::dvec3(lo[0], lo[1], lo[2]), glm::dvec3(hi[0], hi[1], hi[2]));
+    }
   };
   CellGrid grid_;
   CellSet touched_{0};
