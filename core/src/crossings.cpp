@@ -301,13 +301,12 @@ bool polygons_cross(const CrossingPolygon& a, const CrossingPolygon& b) {
   return false;
 }
 
-std::vector<VertexMove> renumber_moves(std::span<const VertexMove> moves,
-                                       std::span<const std::uint32_t> index) {
-  std::vector<VertexMove> out;
+void renumber_moves(std::vector<VertexMove>& moves, std::span<const std::uint32_t> index) {
+  std::size_t kept = 0;
   for (const VertexMove& m : moves)
     if (m.vertex < index.size() && index[m.vertex] != UINT32_MAX)
-      out.push_back({index[m.vertex], m.position, m.normal});
-  return out;
+      moves[kept++] = {index[m.vertex], m.position, m.normal};
+  moves.resize(kept);
 }
 
 std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, double cell,

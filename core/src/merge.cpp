@@ -614,12 +614,12 @@ class Merger {
     for (std::uint32_t v = 0; v < out.positions.size(); ++v)
       if (pieces.find(v) == v) ++stats_.components;
     stats_.unfilled_holes = count_loops();
-    moved_out_ = renumber_moves(moves_, index);
+    renumber_moves(moves_, index);
     return in_place ? Mesh() : std::move(fresh);
   }
 
   // The output's vertices moved onto the surface, with their midpoints (for undo_crossing_moves).
-  const std::vector<VertexMove>& moved() const { return moved_out_; }
+  const std::vector<VertexMove>& moved() const { return moves_; }
   double scale() const { return scale_; }
   // Whether a step reached the region's edge: the result may differ from the whole mesh's.
   bool reached_region_edge() const { return cut_touched_ > 0; }
@@ -989,9 +989,9 @@ class Merger {
   double scale_ = 0.0;            // the length scale of the limits: cell_size or the median edge
   std::vector<FH> region_faces_;  // faces added by bridging, filling and enhancement
   std::vector<std::uint8_t> edge_mark_;  // region_edges' scratch
-  // The sewing region's vertices moved onto the surface, with their midpoint and its normal.
+  // The sewing region's vertices moved onto the surface, with their midpoint and its normal
+  // (OpenMesh's vertex numbers; output() renumbers them as the output's).
   std::vector<VertexMove> moves_;
-  std::vector<VertexMove> moved_out_;
   // The region's input faces as added (invalid: refused or outside), per input face. Faces from
   // built_faces_ on are merging's own.
   std::vector<FH> input_face_;

@@ -426,7 +426,7 @@ class Quadrangulator {
 
   // The output's moved vertices (projected path vertices, smoothed vertices) with where each was
   // before its first move (for undo_crossing_moves).
-  const std::vector<VertexMove>& moved() const { return moved_out_; }
+  const std::vector<VertexMove>& moved() const { return moved_; }
   double median_edge() const { return median_edge_; }
 
   // The whole mesh, written over the input mesh `m` (the one the region was selected from): the
@@ -510,7 +510,7 @@ class Quadrangulator {
     std::vector<std::uint32_t> renumber(pos_.size());
     for (std::uint32_t v = 0; v < pos_.size(); ++v)
       renumber[v] = index[number(v)];
-    moved_out_ = renumber_moves(moved_, renumber);
+    renumber_moves(moved_, renumber);
   }
 
  private:
@@ -961,8 +961,7 @@ class Quadrangulator {
   std::vector<std::uint32_t> out_he_, valence_;
   std::vector<std::uint8_t> boundary_;
   // Moved vertices (projection and smoothing) and where each was before.
-  std::vector<VertexMove> moved_;      // vertex: this conversion's index
-  std::vector<VertexMove> moved_out_;  // the same in output indices
+  std::vector<VertexMove> moved_;  // this conversion's vertex numbers; output's after output()
 };
 
 }  // namespace

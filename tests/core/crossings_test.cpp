@@ -48,12 +48,16 @@ TEST(Crossings, FirstEntryWinsAndMovesFollowTheRenumbering) {
   EXPECT_EQ(undo_crossing_moves(m, moved, 1.0), 1u);
   EXPECT_EQ(m.positions[0], glm::vec3(0.0f));
   const std::vector<std::uint32_t> index = {UINT32_MAX, 0, 1};
-  const std::vector<VertexMove> moves = {
-      {0, {1.0f, 0.0f, 0.0f}, {}}, {2, {2.0f, 0.0f, 0.0f}, {}}, {7, {3.0f, 0.0f, 0.0f}, {}}};
-  const std::vector<VertexMove> renumbered = renumber_moves(moves, index);
-  ASSERT_EQ(renumbered.size(), 1u);
-  EXPECT_EQ(renumbered[0].vertex, 1u);
-  EXPECT_EQ(renumbered[0].position, glm::vec3(2.0f, 0.0f, 0.0f));
+  std::vector<VertexMove> moves = {{0, {1.0f, 0.0f, 0.0f}, {}},
+                                   {2, {2.0f, 0.0f, 0.0f}, {}},
+                                   {7, {3.0f, 0.0f, 0.0f}, {}},
+                                   {1, {4.0f, 0.0f, 0.0f}, {}}};
+  renumber_moves(moves, index);  // 0 dropped, 2 → 1, 7 out of range, 1 → 0
+  ASSERT_EQ(moves.size(), 2u);
+  EXPECT_EQ(moves[0].vertex, 1u);
+  EXPECT_EQ(moves[0].position, glm::vec3(2.0f, 0.0f, 0.0f));
+  EXPECT_EQ(moves[1].vertex, 0u);
+  EXPECT_EQ(moves[1].position, glm::vec3(4.0f, 0.0f, 0.0f));
 }
 
 TEST(Crossings, MoveThatCrossesNothingStays) {

@@ -37,10 +37,10 @@ struct VertexMove {
   glm::vec3 position{0.0f}, normal{0.0f};
 };
 
-// The moves of the vertices `index` keeps (old → new vertex index; UINT32_MAX: dropped), with
-// their new indices: a mesh builder's moves for its output mesh.
-std::vector<VertexMove> renumber_moves(std::span<const VertexMove> moves,
-                                       std::span<const std::uint32_t> index);
+// Keeps the moves of the vertices `index` keeps (old → new vertex index; UINT32_MAX: dropped),
+// in order, with their new indices: a mesh builder's moves for its output mesh (in place: they
+// can be a few megabytes).
+void renumber_moves(std::vector<VertexMove>& moves, std::span<const std::uint32_t> index);
 
 // Puts moved vertices back where they were when one of their faces crosses another face of the
 // mesh (a vertex listed more than once goes back to its first entry). Moves shorter than `min_move`
