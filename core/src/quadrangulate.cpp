@@ -337,20 +337,68 @@ class Quadrangulator {
   // Quad edge flips toward valence 4 (3 on open boundaries): the two quads on an edge form a
   // hexagon with three diagonals; the edge moves to the one that lowers Σ (valence − ideal)²
   // if both new quads are convex and not much worse than the old ones. Only edges of faces
-  // this conversion made (the input's quads are the views' regular grids).
+  // this conversion made (the input's quads are the views' regular grids). Passes in edge
+  // order; after the first, an edge is looked at again only if a flip since its last look
+  // touched one of its faces' corners (what try_flip reads: their valences, the two faces, the
+  // fans of the new diagonal's ends): the result is the full passes' (on Marschner–Lobb 512²
+  // they looked at 283 k edges each for 1 217, 56 and 5 flips).
   void flip_edges() {
     build_vertex_rings();
+    const std::size_t nf = face_he_.size();
+    std::vector<std::uint8_t> dirty(nf, 1), dirty_next(nf, 0);  // per face
     for (int pass = 0; pass < options_.flip_passes; ++pass) {
       std::size_t flipped = 0;
       for (std::uint32_t h = 0; h < to_.size(); ++h) {
         const std::uint32_t o = opp_[h];
         if (o == kNone || o < h || face_[h] == kNone || face_[h] == face_[o]) continue;
+        if (!dirty[face_[h]] && !dirty[face_[o]]) continue;
         if (!face_new_[face_[h]] && !face_new_[face_[o]]) continue;  // the input's own quads
-        if (try_flip(h)) ++flipped;
+        if (!try_flip(h)) continue;
+        ++flipped;
+        // The flipped pair holds the six corners whose valences or fans changed: their faces
+        // are looked at again, later in this pass as in the next.
+        for (std::uint32_t face : {face_[h], face_[o]}) {
+          std::uint32_t c = face_he_[face];
+          do {
+            const std::uint32_t v = from_[c];
+            const std::size_t seen =
+                for_each_face_around(v, [&](std::uint32_t g) { dirty[g] = dirty_next[g] = 1; });
+            // A vertex with more than one fan (not a manifold there): all faces, to be safe.
+            if (seen != valence_[v] - boundary_[v]) {
+              std::fill(dirty.begin(), dirty.end(), 1);
+              std::fill(dirty_next.begin(), dirty_next.end(), 1);
+            }
+            c = next_[c];
+          } while (c != face_he_[face]);
+        }
       }
       stats_.flips += flipped;
       if (flipped == 0) break;
+      dirty.swap(dirty_next);
+      std::fill(dirty_next.begin(), dirty_next.end(), 0);
     }
+  }
+
+  // f(face) for each face of v's fan through out_he_[v] (both ways from it where the fan is
+  // open); returns how many.
+  template <class F>
+  std::size_t for_each_face_around(std::uint32_t v, F&& f) const {
+    const std::uint32_t start = out_he_[v];
+    std::uint32_t h = start;
+    std::size_t count = 0;
+    do {
+      f(face_[h]), ++count;
+      const std::uint32_t p = prev(h);
+      if (opp_[p] == kNone) {
+        for (h = start; opp_[h] != kNone;) {
+          h = next_[opp_[h]];
+          f(face_[h]), ++count;
+        }
+        return count;
+      }
+      h = opp_[p];
+    } while (h != start);
+    return count;
   }
 
   // Laplacian smoothing of the faces this conversion made (tangential steps toward the mean of
