@@ -488,13 +488,17 @@ class Merger {
       refine_region(project);
       flip_all();
     }
-    std::vector<VH> centres;
+    // Each corner of the region's faces once (its valence walks its fan), in index order.
+    std::vector<std::uint8_t> seen(mesh_.n_vertices(), 0);
     for (FH f : region_faces_)
       if (!mesh_.status(f).deleted())
         for (const auto& v : mesh_.fv_range(f))
-          if (!v.is_boundary() && v.valence() == 3) centres.push_back(v);
-    std::sort(centres.begin(), centres.end());
-    centres.erase(std::unique(centres.begin(), centres.end()), centres.end());
+          seen[v.idx()] = 1;
+    std::vector<VH> centres;
+    for (std::size_t i = 0; i < seen.size(); ++i) {
+      const VH v{int(i)};
+      if (seen[i] && !mesh_.is_boundary(v) && mesh_.valence(v) == 3) centres.push_back(v);
+    }
     for (VH v : centres)
       if (!mesh_.status(v).deleted() && try_merge(v)) ++stats_.merges;
   }
