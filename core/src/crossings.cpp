@@ -37,6 +37,27 @@ struct Bounds {
   }
 };
 
+// A face around a moved vertex as the test reads it: float corners (the mesh's own) and vertex
+// ids in one cache line, half of a CrossingPolygon's two (the tests read stars at random).
+struct alignas(64) Star {
+  std::array<glm::vec3, 4> p;
+  std::array<std::uint32_t, 4> v;  // v[3] = UINT32_MAX: a triangle
+  std::size_t n() const { return v[3] == UINT32_MAX ? 3 : 4; }
+  CrossingPolygon polygon() const {
+    CrossingPolygon g;
+    g.n = n();
+    for (std::size_t k = 0; k < g.n; ++k)
+      g.p[k] = glm::dvec3(p[k]), g.v[k] = v[k];
+    return g;
+  }
+  Bounds bounds() const {
+    glm::vec3 lo = p[0], hi = p[0];
+    for (std::size_t k = 1; k < n(); ++k)
+      lo = glm::min(lo, p[k]), hi = glm::max(hi, p[k]);
+    return Bounds(glm::dvec3(lo), glm::dvec3(hi));
+  }
+};
+
 // Cells of one size over a box, numbered x fastest, at most kMaxCells of them (the size given,
 // doubled until they fit: any size finds the same pairs, a coarser one tests more). Dense
 // numbers instead of hashed keys: a cell's bit and its entries are a few instructions away.
@@ -120,13 +141,13 @@ class CellSet {
 // cell's candidates are read in one sweep instead of one cache miss each.
 class StarGrid {
  public:
-  StarGrid(const std::vector<CrossingPolygon>& stars, double cell) {
+  StarGrid(const std::vector<Star>& stars, double cell) {
     if (stars.empty()) return;
     // Each star's box in floats, rounded outward: what the entries hold, and what the grid's
     // cells are found from (the cell where a pair is tested must be one both were entered in).
     std::vector<Entry> boxes(stars.size());
     parallel_each(stars.size(), [&](std::size_t s) {
-      const Bounds b(stars[s]);
+      const Bounds b = stars[s].bounds();
       Entry& e = boxes[s];
       e.star = std::uint32_t(s);
       for (int k = 0; k < 3; ++k) {
@@ -216,17 +237,17 @@ class StarGrid {
 // point outside them is farther than `reach` (along some axis) from every star's box.
 class NearCells {
  public:
-  NearCells(const std::vector<CrossingPolygon>& stars, double reach) {
+  NearCells(const std::vector<Star>& stars, double reach) {
     if (stars.empty()) return;
     glm::dvec3 lo(std::numeric_limits<double>::infinity()), hi(-lo);
-    for (const CrossingPolygon& g : stars) {
-      const Bounds b(g);
+    for (const Star& g : stars) {
+      const Bounds b = g.bounds();
       lo = glm::min(lo, b.lo - reach), hi = glm::max(hi, b.hi + reach);
     }
     grid_ = CellGrid(lo, hi, reach);
     cells_ = CellSet(grid_.size());
     parallel_each(stars.size(), [&](std::size_t s) {
-      const Bounds b(stars[s]);
+      const Bounds b = stars[s].bounds();
       grid_.visit(Bounds(b.lo - reach, b.hi + reach), [&](std::size_t i, const glm::ivec3&) {
         cells_.insert(i);
         return false;
@@ -395,10 +416,14 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
     }
     for (std::uint32_t v : check)
       checking[v] = 0;
-    std::vector<CrossingPolygon> stars(star.size());
+    std::vector<Star> stars(star.size());
     parallel_each(star.size(), [&](std::size_t i) {
       star_index[star[i]] = std::uint32_t(i);
-      stars[i] = polygon(star[i]);
+      const auto c = corners(star[i]);
+      Star& g = stars[i];
+      g.v[3] = UINT32_MAX;
+      for (std::size_t k = 0; k < c.size(); ++k)
+        g.p[k] = mesh.positions[c[k]], g.v[k] = c[k];
     });
     const StarGrid grid(stars, cell);
     const NearCells near(stars, near_cell);
@@ -413,9 +438,9 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
     tbb::parallel_for(
         tbb::blocked_range<std::uint32_t>(0, std::uint32_t(nf), 1024), [&](const auto& r) {
           std::vector<std::uint32_t>& back = found.local();
-          auto note = [&](const CrossingPolygon& g) {
-            for (std::size_t i = 0; i < g.n; ++i)
-              if (still[g.v[i]]) back.push_back(g.v[i]);
+          auto note = [&](const auto& v, std::size_t n) {
+            for (std::size_t i = 0; i < n; ++i)
+              if (still[v[i]]) back.push_back(v[i]);
           };
           for (std::uint32_t f = r.begin(); f < r.end(); ++f) {
             const auto c = corners(f);
@@ -426,9 +451,9 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
             const std::uint32_t own = star_index[f];
             grid.for_each_overlapping(Bounds(g), [&](std::uint32_t s) {
               if (own != UINT32_MAX && own >= s) return;
-              if (polygons_cross(g, stars[s])) {
-                note(g);
-                note(stars[s]);
+              if (polygons_cross(g, stars[s].polygon())) {
+                note(g.v, g.n);
+                note(stars[s].v, stars[s].n());
               }
             });
           }
