@@ -16,6 +16,7 @@
 #include <OpenMesh/Core/Mesh/PolyMesh_ArrayKernelT.hh>
 #include <OpenMesh/Core/System/omstream.hh>
 
+#include "in_place.hpp"
 #include "ldimesh/core/crossings.hpp"
 #include "ldimesh/core/geometry.hpp"
 #include "ldimesh/core/timing.hpp"
@@ -537,18 +538,11 @@ class Merger {
         triangle_view.reserve(2 * most);
       }
     }
-    auto put = [](auto& array, std::size_t at, const auto& value) {
-      if (at < array.size()) {
-        array[at] = value;
-      } else {
-        array.push_back(value);
-      }
-    };
     std::size_t vertices = 0;
     auto emit = [&](const glm::vec3& p, const glm::vec3& n, float scalar) {
-      put(out.positions, vertices, p);
-      put(out.normals, vertices, n);
-      if (scalars) put(out.scalars, vertices, scalar);
+      put_at(out.positions, vertices, p);
+      put_at(out.normals, vertices, n);
+      if (scalars) put_at(out.scalars, vertices, scalar);
       return std::uint32_t(vertices++);
     };
     auto emit_vertex = [&](VH v) {
@@ -581,8 +575,8 @@ class Merger {
         triangle_view.push_back(view);
       } else if (faces == FaceType::quads) {
         for (std::size_t k = 0; k < 4; ++k)
-          put(out.quads, 4 * quads + k, c[k]);
-        put(out.quad_view, quads++, view);
+          put_at(out.quads, 4 * quads + k, c[k]);
+        put_at(out.quad_view, quads++, view);
       } else {
         append_quad_triangles(out.positions, c.data(), triangles);
         triangle_view.insert(triangle_view.end(), {view, view});

@@ -16,6 +16,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include "in_place.hpp"
 #include "ldimesh/core/crossings.hpp"
 #include "ldimesh/core/geometry.hpp"
 #include "ldimesh/core/timing.hpp"
@@ -504,13 +505,6 @@ class Quadrangulator {
     for (std::uint32_t f = 0; f < face_he_.size(); ++f)
       if (face_he_[f] != kNone) ++faces;  // triangles left are few: room for all as quads
     const bool scalars = !m.scalars.empty();
-    auto put = [](auto& array, std::size_t at, const auto& value) {
-      if (at < array.size()) {
-        array[at] = value;
-      } else {
-        array.push_back(value);
-      }
-    };
     std::size_t w = 0;
     for (std::uint32_t g = 0; g < index.size(); ++g) {
       if (index[g] == kNone) continue;
@@ -522,9 +516,9 @@ class Quadrangulator {
         m.normals[w] = m.normals[g];
         if (scalars) m.scalars[w] = m.scalars[g];
       } else {
-        put(m.positions, w, glm::vec3(pos_[v]));
-        put(m.normals, w, glm::vec3(nrm_[v]));
-        if (scalars) put(m.scalars, w, scalar_[v]);
+        put_at(m.positions, w, glm::vec3(pos_[v]));
+        put_at(m.normals, w, glm::vec3(nrm_[v]));
+        if (scalars) put_at(m.scalars, w, scalar_[v]);
       }
       ++w;
     }
