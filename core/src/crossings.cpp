@@ -256,7 +256,7 @@ class NearCells {
   }
   bool contains(const glm::dvec3& p) const {
     const glm::ivec3 c = grid_.cell(p);
-    return grid_.size() > 0 && grid_.inside(c) && cells_.contains(grid_.index(c));
+    return grid_.inside(c) && cells_.contains(grid_.index(c));
   }
 
  private:
@@ -362,14 +362,12 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
     return f < nt ? std::span<const std::uint32_t>(&mesh.triangles[3 * f], 3)
                   : std::span<const std::uint32_t>(&mesh.quads[4 * (f - nt)], 4);
   };
-  auto polygon = [&](std::uint32_t f) {
-    CrossingPolygon g;
+  auto star_of = [&](std::uint32_t f) {  // face f as the test reads it
+    Star g;
     const auto c = corners(f);
-    g.n = c.size();
-    for (std::size_t k = 0; k < g.n; ++k) {
-      g.v[k] = c[k];
-      g.p[k] = glm::dvec3(mesh.positions[c[k]]);
-    }
+    g.v[3] = UINT32_MAX;
+    for (std::size_t k = 0; k < c.size(); ++k)
+      g.p[k] = mesh.positions[c[k]], g.v[k] = c[k];
     return g;
   };
   // The largest box diagonal of a face (a maximum: the same for any split among threads).
@@ -377,11 +375,8 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
       tbb::blocked_range<std::uint32_t>(0, std::uint32_t(nf), 8192), 0.0,
       [&](const auto& r, double widest) {
         for (std::uint32_t f = r.begin(); f < r.end(); ++f) {
-          const auto c = corners(f);
-          glm::vec3 lo = mesh.positions[c[0]], hi = lo;
-          for (std::size_t k = 1; k < c.size(); ++k)
-            lo = glm::min(lo, mesh.positions[c[k]]), hi = glm::max(hi, mesh.positions[c[k]]);
-          widest = std::max(widest, glm::distance(glm::dvec3(lo), glm::dvec3(hi)));
+          const Bounds b = star_of(f).bounds();
+          widest = std::max(widest, glm::distance(b.lo, b.hi));
         }
         return widest;
       },
@@ -419,11 +414,7 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
     std::vector<Star> stars(star.size());
     parallel_each(star.size(), [&](std::size_t i) {
       star_index[star[i]] = std::uint32_t(i);
-      const auto c = corners(star[i]);
-      Star& g = stars[i];
-      g.v[3] = UINT32_MAX;
-      for (std::size_t k = 0; k < c.size(); ++k)
-        g.p[k] = mesh.positions[c[k]], g.v[k] = c[k];
+      stars[i] = star_of(star[i]);
     });
     const StarGrid grid(stars, cell);
     const NearCells near(stars, near_cell);
@@ -446,7 +437,7 @@ std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, d
             const auto c = corners(f);
             if (std::none_of(c.begin(), c.end(), [&](std::uint32_t v) { return is_near[v]; }))
               continue;
-            const CrossingPolygon g = polygon(f);
+            const CrossingPolygon g = star_of(f).polygon();
             // Two stars are tested once (from the one that comes first), a star not with itself.
             const std::uint32_t own = star_index[f];
             grid.for_each_overlapping(Bounds(g), [&](std::uint32_t s) {

@@ -21,6 +21,7 @@
 #include "ldimesh/core/sample_source.hpp"
 #include "ldimesh/core/surfaces.hpp"
 #include "mesh_topology.hpp"
+#include "test_helpers.hpp"
 
 namespace ldimesh {
 namespace {
@@ -312,12 +313,7 @@ TEST(Merge, RegionGivesTheWholeMeshResult) {
         EXPECT_LT(part.merging.region_faces, whole.merging.region_faces);
       }
       reruns += part.merging.region_faces == whole.merging.region_faces;
-      EXPECT_EQ(part.mesh.positions, whole.mesh.positions);
-      EXPECT_EQ(part.mesh.normals, whole.mesh.normals);
-      EXPECT_EQ(part.mesh.triangles, whole.mesh.triangles);
-      EXPECT_EQ(part.mesh.quads, whole.mesh.quads);
-      EXPECT_EQ(part.mesh.triangle_view, whole.mesh.triangle_view);
-      EXPECT_EQ(part.mesh.quad_view, whole.mesh.quad_view);
+      testing::expect_identical(part.mesh, whole.mesh);
       EXPECT_EQ(part.merging.dropped_faces, whole.merging.dropped_faces);
       EXPECT_EQ(part.merging.boundary_faces, whole.merging.boundary_faces);
       EXPECT_EQ(part.merging.patches, whole.merging.patches);
@@ -363,14 +359,7 @@ TEST(Merge, HandedOverMeshGivesTheCopysResult) {
         const Mesh copy = merge_views(views_mesh, faces, merging, copy_stats, project);
         Mesh handed = views_mesh;
         const Mesh moved = merge_views(std::move(handed), faces, merging, moved_stats, project);
-        EXPECT_EQ(moved.positions, copy.positions);
-        EXPECT_EQ(moved.normals, copy.normals);
-        EXPECT_EQ(moved.scalars, copy.scalars);
-        EXPECT_EQ(moved.triangles, copy.triangles);
-        EXPECT_EQ(moved.quads, copy.quads);
-        EXPECT_EQ(moved.triangle_view, copy.triangle_view);
-        EXPECT_EQ(moved.quad_view, copy.quad_view);
-        EXPECT_EQ(moved.view_dirs, copy.view_dirs);
+        testing::expect_identical(moved, copy);
         EXPECT_EQ(moved_stats.components, copy_stats.components);
         EXPECT_EQ(moved_stats.crossings_undone, copy_stats.crossings_undone);
         EXPECT_EQ(moved_stats.quads.crossings_undone, copy_stats.quads.crossings_undone);

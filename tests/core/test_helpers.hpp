@@ -16,6 +16,18 @@
 
 namespace ldimesh::testing {
 
+// a and b are the same mesh, array by array (positions and normals bit for bit).
+inline void expect_identical(const Mesh& a, const Mesh& b) {
+  EXPECT_EQ(a.positions, b.positions);
+  EXPECT_EQ(a.normals, b.normals);
+  EXPECT_EQ(a.scalars, b.scalars);
+  EXPECT_EQ(a.triangles, b.triangles);
+  EXPECT_EQ(a.quads, b.quads);
+  EXPECT_EQ(a.triangle_view, b.triangle_view);
+  EXPECT_EQ(a.quad_view, b.quad_view);
+  EXPECT_EQ(a.view_dirs, b.view_dirs);
+}
+
 // Möller–Trumbore: distance along the ray o + t d to the triangle (a, b, c), if it is hit.
 inline std::optional<double> ray_triangle(glm::dvec3 o, glm::dvec3 d, glm::dvec3 a, glm::dvec3 b,
                                           glm::dvec3 c) {
