@@ -59,6 +59,7 @@ struct MeshArgs {
   int threads = 0;
   bool json = false;
   int bricks = 32;
+  std::string caster = "auto";
   std::optional<double> isovalue;
   double max_cost = ldimesh::MatchOptions{}.max_cost;
   bool lossless = false;
@@ -205,7 +206,10 @@ int run_mesh(const MeshArgs& args) {
     iso = args.isovalue.value_or(input.default_isovalue);
     views = ldimesh::make_axis_views(input.subdomain.global, args.res, args.views);
     start = std::chrono::steady_clock::now();
-    caster = std::make_unique<ldimesh::RayCaster>(*input.source, iso);
+    ldimesh::RayCasterOptions caster_options;
+    caster_options.path =
+        args.caster == "embree" ? ldimesh::CastPath::embree : ldimesh::CastPath::automatic;
+    caster = std::make_unique<ldimesh::RayCaster>(*input.source, iso, caster_options);
     scene_seconds = seconds_since(start);
   });
 
@@ -284,6 +288,7 @@ int run_mesh(const MeshArgs& args) {
     j["r"] = r_used;
     j["ranks"] = ranks;
     j["threads"] = threads;
+    j["caster"] = args.caster;
     j["encoding"] = args.lossless ? "lossless" : "quantized";
     j["rays"] = rays;
     j["samples"] = result.samples;
@@ -625,6 +630,11 @@ int main(int argc, char** argv) {
   mesh->add_flag("--json", args.json, "print a machine-readable summary");
   mesh->add_option("--bricks", args.bricks, "culling bricks per axis")
       ->check(CLI::Range(1, 512))
+      ->capture_default_str();
+  mesh->add_option("--caster", args.caster,
+                   "ray caster for axis views: auto (the coherent casters of grids and elements "
+                   "where the source has one) or embree (Embree for every ray, the reference)")
+      ->check(CLI::IsMember({"auto", "embree"}))
       ->capture_default_str();
   mesh->add_option("--iso", args.isovalue,
                    "isovalue (default: the surface's; for --grid the middle of the value range)");

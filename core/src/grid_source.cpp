@@ -57,7 +57,7 @@ double converge_cubic(const double c[4], double a, double b, double fa, double f
   return t;
 }
 
-// Grid geometry and values as the intersect callback reads them.
+// Grid geometry and values as the casters read them.
 template <class T>
 struct GridView {
   const T* values;
@@ -82,14 +82,82 @@ struct Brick {
   bool nonfinite = false;
 };
 
+// ∇ of the trilinear interpolant at local point p, per unit length (size: the cell's edges).
+glm::dvec3 trilinear_gradient(const double corner[8], glm::dvec3 p, glm::dvec3 size) {
+  glm::dvec3 grad;
+  for (int axis = 0; axis < 3; ++axis) {
+    const int o1 = (axis + 1) % 3, o2 = (axis + 2) % 3;
+    double sum = 0.0;
+    for (int m = 0; m < 4; ++m) {
+      const int b1 = m & 1, b2 = m >> 1;
+      const int i0 = (b1 << o1) | (b2 << o2), i1 = i0 | (1 << axis);
+      const double w = (b1 ? p[o1] : 1.0 - p[o1]) * (b2 ? p[o2] : 1.0 - p[o2]);
+      sum += w * (corner[i1] - corner[i0]);
+    }
+    grad[axis] = sum / size[axis];
+  }
+  return grad;
+}
+
+// The unit normal for a gradient; at singular points (∇f = 0) it faces the viewer.
+glm::vec3 unit_normal(glm::dvec3 grad, glm::dvec3 dir) {
+  const double len = glm::length(grad);
+  return len > 0.0 ? glm::vec3(grad / len) : glm::vec3(-dir);
+}
+
+// The roots of one cell c on the ray segment [ta, tb], appended to `hits`: the cell's cubic
+// (Marmitt et al.). `entry_face`/`exit_face` say along which axes the segment starts/ends
+// exactly on a cell face (the local coordinate is then exactly 0 or 1, so that a face point is
+// evaluated by the same arithmetic in both cells that share it). With kSkipNonfinite, a cell
+// with a NaN or ±Inf corner produces no hits. Both casters solve cells here (the coherent one
+// where its shortcut does not decide).
+template <bool kSkipNonfinite, class T>
+void solve_cell(const GridView<T>& g, double iso, glm::dvec3 org, glm::dvec3 dir,
+                const std::array<std::int64_t, 3>& c, const std::array<int, 3>& step, double ta,
+                double tb, const std::array<bool, 3>& entry_face,
+                const std::array<bool, 3>& exit_face, std::vector<RayHit>& hits) {
+  double corner[8];
+  bool any_positive = false, any_negative = false;
+  for (int n = 0; n < 8; ++n) {
+    const double v = g.value(c[0] + (n & 1), c[1] + ((n >> 1) & 1), c[2] + ((n >> 2) & 1));
+    if constexpr (kSkipNonfinite) {
+      if (!std::isfinite(v)) return;  // no interpolant in this cell
+    }
+    corner[n] = v - iso;
+    (positive(corner[n]) ? any_positive : any_negative) = true;
+  }
+  if (!any_positive || !any_negative) return;  // the interpolant lies between its corners
+  glm::dvec3 lo, size, a, b;
+  const glm::dvec3 pa = org + ta * dir, pb = org + tb * dir;
+  for (int k = 0; k < 3; ++k) {
+    lo[k] = g.coord(k, c[k]);
+    size[k] = g.coord(k, c[k] + 1) - lo[k];
+    // Exactly 0 or 1 on the face the ray enters or leaves through.
+    a[k] = entry_face[k] ? (step[k] > 0 ? 0.0 : 1.0)
+                         : std::clamp((pa[k] - lo[k]) / size[k], 0.0, 1.0);
+    b[k] = exit_face[k] ? (step[k] > 0 ? 1.0 : 0.0)
+                        : std::clamp((pb[k] - lo[k]) / size[k], 0.0, 1.0);
+  }
+  double roots[3];
+  const int n = trilinear_segment_roots(corner, a, b, roots);
+
+  for (int r = 0; r < n; ++r) {
+    const glm::dvec3 p = a + roots[r] * (b - a);
+    // A root at the very end of the segment keeps tb exactly (the half-open rule compares it).
+    const double t = roots[r] == 1.0 ? tb : ta + roots[r] * (tb - ta);
+    hits.push_back({t, unit_normal(trilinear_gradient(corner, p, size), dir), 0.0f});
+  }
+}
+
 template <class T>
 class GridBinding final : public GeometryBinding {
  public:
   GridBinding(RTCDevice device, const GridView<T>& grid, double iso, std::vector<Brick> bricks,
-              std::uint64_t nonfinite)
+              std::array<std::int64_t, 3> last, std::uint64_t nonfinite)
       : grid_(grid),
         iso_(iso),
         bricks_(std::move(bricks)),
+        last_(last),
         nonfinite_(nonfinite),
         geometry_(device, bricks_.size(), this, &GridBinding::bounds, &GridBinding::intersect) {}
   RTCGeometry geometry() const override { return geometry_.get(); }
@@ -121,6 +189,10 @@ class GridBinding final : public GeometryBinding {
   void intersect_brick(RayQuery& q, const Brick& b) const {
     double t0 = q.t_min, t1 = q.t_max;
     if (!clip_ray_to_box(q.org, q.dir, b.box_lo, b.box_hi, t0, t1)) return;
+    // A ray in the plane of a face between two bricks belongs to the upper one (as a ray in a
+    // cell face plane belongs to the upper cell below): each ray point lies in one cell.
+    for (int a = 0; a < 3; ++a)
+      if (q.dir[a] == 0.0 && q.org[a] == b.box_hi[a] && b.hi[a] != last_[a]) return;
     const GridView<T>& g = grid_;
     std::array<std::int64_t, 3> cell;
     std::array<int, 3> step;
@@ -152,7 +224,8 @@ class GridBinding final : public GeometryBinding {
       for (int a = 0; a < 3; ++a)
         on_exit_face[a] = t_next[a] == t_exit;
       if (t_exit > t)
-        solve_cell<kSkipNonfinite>(q, cell, step, t, t_exit, on_entry_face, on_exit_face);
+        solve_cell<kSkipNonfinite>(g, iso_, q.org, q.dir, cell, step, t, t_exit, on_entry_face,
+                                   on_exit_face, *q.hits);
       t = std::max(t, t_exit);  // a face behind t (rounding at the entry) moves nothing back
       // Advance along every axis whose face the ray leaves through (several at an edge).
       bool inside = true;
@@ -169,60 +242,10 @@ class GridBinding final : public GeometryBinding {
     }
   }
 
-  template <bool kSkipNonfinite>
-  void solve_cell(RayQuery& q, const std::array<std::int64_t, 3>& c, const std::array<int, 3>& step,
-                  double ta, double tb, const std::array<bool, 3>& entry_face,
-                  const std::array<bool, 3>& exit_face) const {
-    const GridView<T>& g = grid_;
-    double corner[8];
-    bool any_positive = false, any_negative = false;
-    for (int n = 0; n < 8; ++n) {
-      const double v = g.value(c[0] + (n & 1), c[1] + ((n >> 1) & 1), c[2] + ((n >> 2) & 1));
-      if constexpr (kSkipNonfinite) {
-        if (!std::isfinite(v)) return;  // no interpolant in this cell
-      }
-      corner[n] = v - iso_;
-      (positive(corner[n]) ? any_positive : any_negative) = true;
-    }
-    if (!any_positive || !any_negative) return;  // the interpolant lies between its corners
-    glm::dvec3 lo, size, a, b;
-    const glm::dvec3 pa = q.org + ta * q.dir, pb = q.org + tb * q.dir;
-    for (int k = 0; k < 3; ++k) {
-      lo[k] = g.coord(k, c[k]);
-      size[k] = g.coord(k, c[k] + 1) - lo[k];
-      // Exactly 0 or 1 on the face the ray enters or leaves through.
-      a[k] = entry_face[k] ? (step[k] > 0 ? 0.0 : 1.0)
-                           : std::clamp((pa[k] - lo[k]) / size[k], 0.0, 1.0);
-      b[k] = exit_face[k] ? (step[k] > 0 ? 1.0 : 0.0)
-                          : std::clamp((pb[k] - lo[k]) / size[k], 0.0, 1.0);
-    }
-    double roots[3];
-    const int n = trilinear_segment_roots(corner, a, b, roots);
-    for (int r = 0; r < n; ++r) {
-      const glm::dvec3 p = a + roots[r] * (b - a);
-      // ∇ of the trilinear interpolant in local coordinates, then per unit length.
-      glm::dvec3 grad;
-      for (int axis = 0; axis < 3; ++axis) {
-        const int o1 = (axis + 1) % 3, o2 = (axis + 2) % 3;
-        double sum = 0.0;
-        for (int m = 0; m < 4; ++m) {
-          const int b1 = m & 1, b2 = m >> 1;
-          const int i0 = (b1 << o1) | (b2 << o2), i1 = i0 | (1 << axis);
-          const double w = (b1 ? p[o1] : 1.0 - p[o1]) * (b2 ? p[o2] : 1.0 - p[o2]);
-          sum += w * (corner[i1] - corner[i0]);
-        }
-        grad[axis] = sum / size[axis];
-      }
-      const double len = glm::length(grad);
-      // A root at the very end of the segment keeps tb exactly (the half-open rule compares it).
-      const double t = roots[r] == 1.0 ? tb : ta + roots[r] * (tb - ta);
-      q.hits->push_back({t, len > 0.0 ? glm::vec3(grad / len) : glm::vec3(-q.dir), 0.0f});
-    }
-  }
-
   GridView<T> grid_;
   double iso_;
   std::vector<Brick> bricks_;
+  std::array<std::int64_t, 3> last_;
   std::uint64_t nonfinite_;
   UserGeometry geometry_;  // last: its callbacks read the members above
 };
@@ -255,20 +278,28 @@ void scan_row(const GridView<T>& g, std::int64_t i0, std::int64_t i1, std::int64
   sum += sum0 + sum1;
 }
 
+// The bricks of a block, which of them may hold the isosurface, and the non-finite count.
+struct BrickCulling {
+  std::vector<Brick> bricks;          // all, x fastest
+  std::vector<std::uint8_t> active;   // per brick: its value range holds the isovalue
+  std::uint64_t nonfinite = 0;
+  std::size_t active_count = 0;
+};
+
 template <class T>
-std::unique_ptr<GeometryBinding> bind_grid(RTCDevice device, const GridView<T>& grid, double iso,
-                                           const std::array<std::int64_t, 3>& first,
-                                           const std::array<std::int64_t, 3>& last,
-                                           const std::array<std::int64_t, 3>& bricks,
-                                           int brick_cells) {
+BrickCulling cull_bricks(const GridView<T>& grid, double iso,
+                         const std::array<std::int64_t, 3>& first,
+                         const std::array<std::int64_t, 3>& last,
+                         const std::array<std::int64_t, 3>& bricks, int brick_cells) {
   const std::int64_t total = bricks[0] * bricks[1] * bricks[2];
-  std::vector<std::uint8_t> active(total);
-  std::vector<Brick> all(total);
+  BrickCulling out;
+  out.active.resize(total);
+  out.bricks.resize(total);
   std::atomic<std::uint64_t> nonfinite{0};
   tbb::parallel_for(std::int64_t(0), total, [&](std::int64_t n) {
     const std::array<std::int64_t, 3> idx{n % bricks[0], (n / bricks[0]) % bricks[1],
                                           n / (bricks[0] * bricks[1])};
-    Brick& b = all[n];
+    Brick& b = out.bricks[n];
     for (int a = 0; a < 3; ++a) {
       b.lo[a] = first[a] + idx[a] * brick_cells;
       b.hi[a] = std::min(last[a], b.lo[a] + brick_cells - 1);
@@ -307,20 +338,243 @@ std::unique_ptr<GeometryBinding> bind_grid(RTCDevice device, const GridView<T>& 
           }
       if (bad > 0) nonfinite.fetch_add(bad, std::memory_order_relaxed);
     }
-    active[n] = lo <= iso && iso <= hi;
+    out.active[n] = lo <= iso && iso <= hi;
   });
-  std::vector<Brick> kept;
-  for (std::int64_t n = 0; n < total; ++n)
-    if (active[n]) kept.push_back(all[n]);
-  return std::make_unique<GridBinding<T>>(device, grid, iso, std::move(kept), nonfinite.load());
+  out.nonfinite = nonfinite.load();
+  for (std::uint8_t f : out.active)
+    out.active_count += f;
+  return out;
 }
+
+template <class T>
+std::unique_ptr<GeometryBinding> bind_grid(RTCDevice device, const GridView<T>& grid, double iso,
+                                           const std::array<std::int64_t, 3>& first,
+                                           const std::array<std::int64_t, 3>& last,
+                                           const std::array<std::int64_t, 3>& bricks,
+                                           int brick_cells) {
+  BrickCulling culled = cull_bricks(grid, iso, first, last, bricks, brick_cells);
+  std::vector<Brick> kept;
+  kept.reserve(culled.active_count);
+  for (std::size_t n = 0; n < culled.bricks.size(); ++n)
+    if (culled.active[n]) kept.push_back(culled.bricks[n]);
+  return std::make_unique<GridBinding<T>>(device, grid, iso, std::move(kept), last,
+                                          culled.nonfinite);
+}
+
+// The coherent caster of a grid block for rays parallel to an axis. Along such a ray the
+// trilinear interpolant is linear inside each cell: its value on a cell face the ray crosses
+// is the bilinear interpolation of the face's four points, shared by the two cells, and the
+// root in a cell is one division. Each ray walks the active bricks of its column of bricks in
+// ray order (the macrocells; a row of rays reads neighbouring columns of points), and inside
+// them the cells, exactly as the Embree binding's walk does: the same cells, the same segment
+// ends, the same face values (the same products summed in the same order). Where the shortcut
+// cannot decide — a segment end inside a cell, a face value that is zero or not finite — the
+// cell is solved by the Embree binding's own solve_cell. The Embree binding solves a segment
+// along one axis as a line too (trilinear_segment_roots), so both give the same roots, to the
+// bit, at every degenerate spot as well.
+template <class T>
+class GridAxisBinding final : public AxisBinding {
+ public:
+  GridAxisBinding(const GridView<T>& grid, double iso, BrickCulling culled,
+                  std::array<std::int64_t, 3> first, std::array<std::int64_t, 3> last,
+                  std::array<std::int64_t, 3> bricks, int brick_cells)
+      : g_(grid),
+        iso_(iso),
+        first_(first),
+        last_(last),
+        bricks_(bricks),
+        brick_cells_(brick_cells),
+        nonfinite_(culled.nonfinite),
+        active_count_(culled.active_count) {
+    state_.resize(culled.bricks.size());
+    for (std::size_t n = 0; n < state_.size(); ++n)
+      state_[n] = std::uint8_t((culled.active[n] ? 1 : 0) | (culled.bricks[n].nonfinite ? 2 : 0));
+  }
+
+  std::size_t primitive_count() const override { return active_count_; }
+  std::uint64_t nonfinite_values() const override { return nonfinite_; }
+
+  void cast(const AxisRays& rays, std::vector<AxisHit>& out) const override {
+    std::vector<RayHit> hits;
+    for (std::size_t k = 0; k < rays.rays.size(); ++k) {
+      const AxisRay& ray = rays.rays[k];
+      if (!(ray.t0 <= ray.t1)) continue;
+      hits.clear();
+      cast_ray(rays.axis, rays.dir, ray, hits);
+      for (const RayHit& h : hits)
+        out.push_back({std::uint32_t(k), h});
+    }
+  }
+
+ private:
+  // The cell along transverse axis b that holds coordinate x ∈ [coord(first), coord(last + 1)]:
+  // the last cell whose lower face is at or below x (the upper cell on a shared face, as the
+  // Embree binding's walk starts).
+  std::int64_t cell_index(int b, double x) const {
+    if (g_.rectilinear) {
+      const double* c = g_.coords[b];
+      return std::int64_t(std::upper_bound(c + first_[b] + 1, c + last_[b] + 1, x) - c) - 1;
+    }
+    const double guess = std::floor((x - g_.origin[b]) / g_.spacing[b]);
+    std::int64_t i = std::clamp(std::int64_t(std::clamp(guess, -1e18, 1e18)), first_[b], last_[b]);
+    while (i < last_[b] && g_.coord(b, i + 1) <= x)
+      ++i;
+    while (i > first_[b] && g_.coord(b, i) > x)
+      --i;
+    return i;
+  }
+
+  void cast_ray(int a, glm::dvec3 dir, const AxisRay& ray, std::vector<RayHit>& hits) const {
+    const int b = a == 0 ? 1 : 0, c = a == 2 ? 1 : 2;  // the transverse axes, b < c
+    const glm::dvec3 o = ray.org;
+    if (o[b] < g_.coord(b, first_[b]) || o[b] > g_.coord(b, last_[b] + 1) ||
+        o[c] < g_.coord(c, first_[c]) || o[c] > g_.coord(c, last_[c] + 1))
+      return;
+    std::array<std::int64_t, 3> cell;
+    cell[b] = cell_index(b, o[b]);
+    cell[c] = cell_index(c, o[c]);
+    // Local coordinates across the ray, as solve_cell computes them.
+    double p[3];
+    glm::dvec3 size;
+    for (int k : {b, c}) {
+      const double lo = g_.coord(k, cell[k]);
+      size[k] = g_.coord(k, cell[k] + 1) - lo;
+      p[k] = std::clamp((o[k] - lo) / size[k], 0.0, 1.0);
+    }
+    // The four face points' weights in trilinear_value's order (b is the lower bit).
+    const double wb[2] = {1.0 - p[b], p[b]}, wc[2] = {1.0 - p[c], p[c]};
+    const double w[4] = {wb[0] * wc[0], wb[1] * wc[0], wb[0] * wc[1], wb[1] * wc[1]};
+    const std::int64_t sa = g_.strides[a], sb = g_.strides[b], sc = g_.strides[c];
+    const T* column = g_.values + cell[b] * sb + cell[c] * sc;
+    const auto face = [&](std::int64_t node) {
+      const T* q = column + node * sa;
+      return ((w[0] * (double(q[0]) - iso_) + w[1] * (double(q[sb]) - iso_)) +
+              w[2] * (double(q[sc]) - iso_)) +
+             w[3] * (double(q[sb + sc]) - iso_);
+    };
+
+    const int step = dir[a] > 0.0 ? 1 : -1;
+    const double inv = 1.0 / dir[a];
+    std::array<int, 3> steps{0, 0, 0};
+    steps[a] = step;
+    const std::int64_t bb = (cell[b] - first_[b]) / brick_cells_,
+                       bc = (cell[c] - first_[c]) / brick_cells_;
+    std::array<std::int64_t, 3> brick{0, 0, 0};
+    brick[b] = bb;
+    brick[c] = bc;
+    const std::int64_t n_a = bricks_[a];
+    // The face value last computed, by node index (consecutive cells share a face).
+    std::int64_t cached_node = -1;
+    double cached_value = 0.0;
+    for (std::int64_t m = 0; m < n_a; ++m) {
+      brick[a] = step > 0 ? m : n_a - 1 - m;
+      const std::uint8_t state = state_[brick[0] + bricks_[0] * (brick[1] + bricks_[1] * brick[2])];
+      if (!(state & 1)) continue;
+      const bool nonfinite = state & 2;
+      const std::int64_t lo = first_[a] + brick[a] * brick_cells_;
+      const std::int64_t hi = std::min(last_[a], lo + brick_cells_ - 1);
+      // The brick's stretch of the ray, as clip_ray_to_box gives it.
+      double ta = (g_.coord(a, lo) - o[a]) * inv, tb = (g_.coord(a, hi + 1) - o[a]) * inv;
+      if (ta > tb) std::swap(ta, tb);
+      const double t0 = std::max(ray.t0, ta), t1 = std::min(ray.t1, tb);
+      if (!(t0 < t1)) continue;
+      // The first cell, as the Embree binding's walk finds it.
+      const double entry = o[a] + t0 * dir[a];
+      std::int64_t i = lo;
+      if (g_.coord(a, hi) <= entry) {
+        i = hi;
+      } else {
+        while (i < hi && g_.coord(a, i + 1) <= entry)
+          ++i;
+      }
+      if (step < 0 && i > lo && g_.coord(a, i) == entry) --i;
+      double t_next = (g_.coord(a, step > 0 ? i + 1 : i) - o[a]) * inv;
+      bool on_entry = (g_.coord(a, step > 0 ? i : i + 1) - o[a]) * inv == t0;
+      double t = t0;
+      while (t < t1) {
+        const double t_exit = std::min(t_next, t1);
+        const bool on_exit = t_next == t_exit;
+        if (t_exit > t) {
+          cell[a] = i;
+          const std::int64_t entry_node = step > 0 ? i : i + 1, exit_node = step > 0 ? i + 1 : i;
+          bool decided = false;
+          if (on_entry && on_exit) {
+            const double fa = entry_node == cached_node ? cached_value : face(entry_node);
+            const double fb = face(exit_node);
+            cached_node = exit_node;
+            cached_value = fb;
+            if (std::isfinite(fa) && std::isfinite(fb) && fa != 0.0 && fb != 0.0) {
+              decided = true;
+              if (positive(fa) != positive(fb)) {
+                // The one root of the linear function between the faces (as
+                // trilinear_segment_roots computes it for a segment along one axis).
+                const double s = fa / (fa - fb);
+                double corner[8];
+                for (int n = 0; n < 8; ++n)
+                  corner[n] = g_.value(cell[0] + (n & 1), cell[1] + ((n >> 1) & 1),
+                                       cell[2] + ((n >> 2) & 1)) -
+                              iso_;
+                glm::dvec3 local, cell_size = size;
+                local[b] = p[b];
+                local[c] = p[c];
+                local[a] = step > 0 ? s : 1.0 - s;
+                cell_size[a] = g_.coord(a, i + 1) - g_.coord(a, i);
+                hits.push_back({s == 1.0 ? t_exit : t + s * (t_exit - t),
+                                unit_normal(trilinear_gradient(corner, local, cell_size), dir),
+                                0.0f});
+              }
+            }
+          }
+          if (!decided) {
+            std::array<bool, 3> entry_face{false, false, false}, exit_face{false, false, false};
+            entry_face[a] = on_entry;
+            exit_face[a] = on_exit;
+            if (nonfinite)
+              solve_cell<true>(g_, iso_, o, dir, cell, steps, t, t_exit, entry_face, exit_face,
+                               hits);
+            else
+              solve_cell<false>(g_, iso_, o, dir, cell, steps, t, t_exit, entry_face, exit_face,
+                                hits);
+          }
+        }
+        t = std::max(t, t_exit);
+        on_entry = on_exit;
+        if (!on_exit) break;
+        i += step;
+        if (i < lo || i > hi) break;
+        t_next = (g_.coord(a, step > 0 ? i + 1 : i) - o[a]) * inv;
+      }
+    }
+  }
+
+  GridView<T> g_;
+  double iso_;
+  std::array<std::int64_t, 3> first_, last_, bricks_;
+  int brick_cells_;
+  std::uint64_t nonfinite_;
+  std::size_t active_count_;
+  std::vector<std::uint8_t> state_;  // per brick: bit 0 active, bit 1 has non-finite points
+};
 
 }  // namespace
 
 int trilinear_segment_roots(const double corner[8], glm::dvec3 a, glm::dvec3 b, double roots[3]) {
+  const glm::dvec3 d = b - a;
+  if (int(d.x != 0.0) + int(d.y != 0.0) + int(d.z != 0.0) == 1) {
+    // Along one axis the interpolant is linear: its root from the end values, evaluated as on a
+    // face (see trilinear_value), with no rounding of cubic coefficients in between. This is
+    // what the coherent caster of axis rays computes, to the bit.
+    const double fa = trilinear_value(corner, a), fb = trilinear_value(corner, b);
+    if (fa == 0.0) {
+      roots[0] = 0.0;  // a root exactly at the start belongs to this segment (see below)
+      return 1;
+    }
+    if (positive(fa) == positive(fb)) return 0;
+    roots[0] = fa / (fa - fb);
+    return 1;
+  }
   // Each local coordinate is linear in s: x(s) = a + (b − a)s, and 1 − x(s) likewise; the
   // interpolant Σ corner · X·Y·Z is their product, a cubic in s (power basis, c[k] of s^k).
-  const glm::dvec3 d = b - a;
   const double L[3][2][2] = {{{1.0 - a.x, -d.x}, {a.x, d.x}},
                              {{1.0 - a.y, -d.y}, {a.y, d.y}},
                              {{1.0 - a.z, -d.z}, {a.z, d.z}}};
@@ -473,6 +727,20 @@ Box GridSource::bounds() const {
 
 std::size_t GridSource::brick_count() const {
   return std::size_t(bricks_[0] * bricks_[1] * bricks_[2]);
+}
+
+std::unique_ptr<AxisBinding> GridSource::bind_axis(double isovalue) const {
+  auto bind_typed = [&](const auto* values) -> std::unique_ptr<AxisBinding> {
+    using T = std::remove_cv_t<std::remove_pointer_t<decltype(values)>>;
+    const GridView<T> g{values,         block_.strides, block_.origin,
+                        block_.spacing, block_.coords,  block_.coords[0] != nullptr};
+    return std::make_unique<GridAxisBinding<T>>(
+        g, isovalue, cull_bricks(g, isovalue, first_cell_, last_cell_, bricks_, brick_cells_),
+        first_cell_, last_cell_, bricks_, brick_cells_);
+  };
+  if (block_.type == ScalarType::float32)
+    return bind_typed(static_cast<const float*>(block_.values));
+  return bind_typed(static_cast<const double*>(block_.values));
 }
 
 std::unique_ptr<GeometryBinding> GridSource::bind(RTCDevice device, double isovalue) const {

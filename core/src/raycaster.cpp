@@ -15,65 +15,131 @@ namespace ldimesh {
 namespace {
 
 // Sorts one ray's hits by depth and merges hits closer than `tolerance` (a root found by both
-// primitives that share a face). Ties in depth are broken by the normal so that the result
-// does not depend on the order in which Embree visited the primitives.
-void sort_and_merge(std::vector<RayHit>& hits, double tolerance) {
-  std::sort(hits.begin(), hits.end(), [](const RayHit& a, const RayHit& b) {
+// primitives that share a face, or two roots closer than rounding can tell apart): each run of
+// hits within `tolerance` of its first becomes one hit, the one whose normal faces the viewer
+// most (smallest normal · dir; then the smaller normal, component by component). Where a
+// gradient jumps at a cell face, the duplicates' normals differ in their component along the
+// ray, so the choice does not hang on rounding, and the result does not depend on the order in
+// which the primitives were visited.
+void sort_and_merge(std::vector<RayHit>& hits, double tolerance, glm::dvec3 dir) {
+  const auto normal_less = [](const glm::vec3& a, const glm::vec3& b) {
+    if (a.x != b.x) return a.x < b.x;
+    if (a.y != b.y) return a.y < b.y;
+    return a.z < b.z;
+  };
+  std::sort(hits.begin(), hits.end(), [&](const RayHit& a, const RayHit& b) {
     if (a.t != b.t) return a.t < b.t;
-    if (a.normal.x != b.normal.x) return a.normal.x < b.normal.x;
-    if (a.normal.y != b.normal.y) return a.normal.y < b.normal.y;
-    return a.normal.z < b.normal.z;
+    return normal_less(a.normal, b.normal);
   });
+  const glm::vec3 d(dir);
   std::size_t kept = 0;
-  for (std::size_t k = 0; k < hits.size(); ++k)
-    if (kept == 0 || hits[k].t - hits[kept - 1].t > tolerance) hits[kept++] = hits[k];
+  for (std::size_t k = 0; k < hits.size();) {
+    const double first = hits[k].t;
+    std::size_t best = k;
+    float best_dot = glm::dot(hits[k].normal, d);
+    for (++k; k < hits.size() && hits[k].t - first <= tolerance; ++k) {
+      const float dot = glm::dot(hits[k].normal, d);
+      if (dot < best_dot || (dot == best_dot && normal_less(hits[k].normal, hits[best].normal))) {
+        best = k;
+        best_dot = dot;
+      }
+    }
+    hits[kept++] = hits[best];
+  }
   hits.resize(kept);
+}
+
+// Rows per task of an axis view's cast: about 4096 rays, so that sources that loop over their
+// primitives' pixels (elements) see each primitive in few tasks.
+int rows_per_task(const View& view) {
+  return std::clamp(4096 / std::max(view.width, 1), 1, std::max(view.height, 1));
 }
 
 }  // namespace
 
-RayCaster::RayCaster(const FieldSource& source, double isovalue)
-    : RayCaster(std::span<const FieldSource* const>(std::array{&source}), isovalue) {}
+RayCaster::RayCaster(const FieldSource& source, double isovalue, RayCasterOptions options)
+    : RayCaster(std::span<const FieldSource* const>(std::array{&source}), isovalue, options) {}
 
-RayCaster::RayCaster(std::span<const FieldSource* const> sources, double isovalue) {
+RayCaster::RayCaster(std::span<const FieldSource* const> sources, double isovalue,
+                     RayCasterOptions options)
+    : sources_(sources.begin(), sources.end()), isovalue_(isovalue) {
   if (sources.empty()) throw std::invalid_argument("ray caster needs at least one field source");
   const auto start = std::chrono::steady_clock::now();
-  device_ = rtcNewDevice(nullptr);
-  if (!device_) throw std::runtime_error("Embree: cannot create a device");
-  scene_ = rtcNewScene(device_);
-  if (!scene_) {
-    rtcReleaseDevice(device_);
-    throw std::runtime_error("Embree: cannot create a scene");
-  }
-  rtcSetSceneBuildQuality(scene_, RTC_BUILD_QUALITY_HIGH);
-  try {
-    for (const FieldSource* source : sources) {
-      bindings_.push_back(source->bind(device_, isovalue));
-      rtcAttachGeometry(scene_, bindings_.back()->geometry());
-      has_scalar_ = has_scalar_ || bindings_.back()->has_scalar();
-      duplicate_tolerance_ = std::max(duplicate_tolerance_, source->duplicate_tolerance());
+  for (const FieldSource* source : sources_)
+    duplicate_tolerance_ = std::max(duplicate_tolerance_, source->duplicate_tolerance());
+  if (options.path == CastPath::automatic) {
+    for (const FieldSource* source : sources_) {
+      std::unique_ptr<AxisBinding> binding = source->bind_axis(isovalue);
+      if (!binding) {  // one source without: Embree for all, so that roots merge alike
+        axis_bindings_.clear();
+        break;
+      }
+      has_scalar_ = has_scalar_ || binding->has_scalar();
+      axis_bindings_.push_back(std::move(binding));
     }
-    rtcCommitScene(scene_);
-    if (const RTCError error = rtcGetDeviceError(device_); error != RTC_ERROR_NONE)
-      throw std::runtime_error("Embree: scene build failed (RTCError " +
-                               std::to_string(int(error)) + ")");
-  } catch (...) {
-    rtcReleaseScene(scene_);
-    bindings_.clear();
-    rtcReleaseDevice(device_);
-    throw;
   }
-  build_seconds_ = seconds_since(start);
+  axis_seconds_ = seconds_since(start);
+  if (axis_bindings_.empty()) ensure_scene();
+}
+
+void RayCaster::ensure_scene() const {
+  std::call_once(scene_once_, [this] {
+    const auto start = std::chrono::steady_clock::now();
+    device_ = rtcNewDevice(nullptr);
+    if (!device_) throw std::runtime_error("Embree: cannot create a device");
+    scene_ = rtcNewScene(device_);
+    if (!scene_) {
+      rtcReleaseDevice(device_);
+      device_ = nullptr;
+      throw std::runtime_error("Embree: cannot create a scene");
+    }
+    rtcSetSceneBuildQuality(scene_, RTC_BUILD_QUALITY_HIGH);
+    try {
+      bool scalar = false;
+      for (const FieldSource* source : sources_) {
+        bindings_.push_back(source->bind(device_, isovalue_));
+        rtcAttachGeometry(scene_, bindings_.back()->geometry());
+        scalar = scalar || bindings_.back()->has_scalar();
+      }
+      if (axis_bindings_.empty()) const_cast<RayCaster*>(this)->has_scalar_ = scalar;
+      rtcCommitScene(scene_);
+      if (const RTCError error = rtcGetDeviceError(device_); error != RTC_ERROR_NONE)
+        throw std::runtime_error("Embree: scene build failed (RTCError " +
+                                 std::to_string(int(error)) + ")");
+    } catch (...) {
+      rtcReleaseScene(scene_);
+      bindings_.clear();
+      rtcReleaseDevice(device_);
+      scene_ = nullptr;
+      device_ = nullptr;
+      throw;
+    }
+    scene_seconds_ = seconds_since(start);
+  });
 }
 
 RayCaster::~RayCaster() {
-  rtcReleaseScene(scene_);
+  if (scene_) rtcReleaseScene(scene_);
   bindings_.clear();
-  rtcReleaseDevice(device_);
+  if (device_) rtcReleaseDevice(device_);
+}
+
+double RayCaster::build_seconds() const {
+  return axis_seconds_ + scene_seconds_;
+}
+
+bool RayCaster::uses_axis_casters(const View& view) const {
+  return !axis_bindings_.empty() && exact_axis(view.dir) >= 0 && exact_axis(view.u) >= 0 &&
+         exact_axis(view.v) >= 0;
 }
 
 std::size_t RayCaster::primitive_count() const {
   std::size_t n = 0;
+  if (!axis_bindings_.empty()) {
+    for (const auto& b : axis_bindings_)
+      n += b->primitive_count();
+    return n;
+  }
   for (const auto& b : bindings_)
     n += b->primitive_count();
   return n;
@@ -81,6 +147,11 @@ std::size_t RayCaster::primitive_count() const {
 
 std::uint64_t RayCaster::nonfinite_values() const {
   std::uint64_t n = 0;
+  if (!axis_bindings_.empty()) {
+    for (const auto& b : axis_bindings_)
+      n += b->nonfinite_values();
+    return n;
+  }
   for (const auto& b : bindings_)
     n += b->nonfinite_values();
   return n;
@@ -116,6 +187,7 @@ bool subdomain_segment(const Subdomain& sub, glm::dvec3 o, glm::dvec3 d, RaySegm
 void RayCaster::trace(const View& view, glm::dvec2 image_position, const RaySegment& segment,
                       std::vector<RayHit>& hits) const {
   hits.clear();
+  ensure_scene();
   RayQuery q;
   rtcInitIntersectContext(&q.context);
   q.context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
@@ -140,7 +212,12 @@ void RayCaster::trace(const View& view, glm::dvec2 image_position, const RaySegm
   rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
   rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
   rtcIntersect1(scene_, &q.context, &rh);
-  sort_and_merge(hits, duplicate_tolerance_);
+  finish_ray(segment, view.dir, hits);
+}
+
+void RayCaster::finish_ray(const RaySegment& segment, glm::dvec3 dir,
+                           std::vector<RayHit>& hits) const {
+  sort_and_merge(hits, duplicate_tolerance_, dir);
   // Sources report roots on the closed segment; the half-open rule keeps a root on the face
   // two subdomains share in exactly one of them.
   std::erase_if(hits, [&](const RayHit& h) {
@@ -148,8 +225,71 @@ void RayCaster::trace(const View& view, glm::dvec2 image_position, const RaySegm
   });
 }
 
+void RayCaster::cast_axis_rays(const AxisRays& rays, std::span<const RaySegment> segments,
+                               std::vector<AxisHit>& scratch, std::vector<RayHit>& hits,
+                               HitRun& run) const {
+  scratch.clear();
+  for (const auto& binding : axis_bindings_)
+    binding->cast(rays, scratch);
+  // Hits by ray (counting sort); each ray's are then sorted by depth, so the order in which the
+  // sources reported them does not matter.
+  const std::size_t n = rays.rays.size();
+  std::vector<std::uint32_t> first(n + 1, 0);
+  for (const AxisHit& h : scratch)
+    ++first[h.ray + 1];
+  for (std::size_t k = 0; k < n; ++k)
+    first[k + 1] += first[k];
+  std::vector<RayHit> by_ray(scratch.size());
+  {
+    std::vector<std::uint32_t> next(first.begin(), first.end() - 1);
+    for (const AxisHit& h : scratch)
+      by_ray[next[h.ray]++] = h.hit;
+  }
+  for (std::size_t k = 0; k < n; ++k) {
+    hits.assign(by_ray.begin() + first[k], by_ray.begin() + first[k + 1]);
+    if (!hits.empty()) finish_ray(segments[k], rays.dir, hits);
+    run.append(hits, has_scalar_);
+  }
+}
+
 template <class Segment>
 std::vector<RayCaster::HitRun> RayCaster::cast_rows(const View& view, Segment segment_of) const {
+  if (uses_axis_casters(view)) {
+    // Tasks of several rows, each cast by the axis casters as one lattice of pixel rays.
+    const int rows = rows_per_task(view);
+    const int tasks = (view.height + rows - 1) / rows;
+    std::vector<RayCaster::HitRun> runs(tasks);
+    tbb::parallel_for(0, tasks, [&](int task) {
+      const int j0 = task * rows, j1 = std::min(view.height, j0 + rows);
+      const std::size_t n = std::size_t(j1 - j0) * view.width;
+      std::vector<AxisRay> rays(n);
+      std::vector<RaySegment> segments(n);
+      for (int j = j0; j < j1; ++j)
+        for (int i = 0; i < view.width; ++i) {
+          const std::size_t k = std::size_t(j - j0) * view.width + i;
+          const glm::dvec2 position{i + 0.5, j + 0.5};
+          AxisRay& ray = rays[k];
+          ray.org = view.point(position.x, position.y, 0.0);
+          if (segment_of(position, segments[k])) {
+            ray.t0 = segments[k].t0;
+            ray.t1 = segments[k].t1;
+          } else {
+            segments[k] = {0.0, -1.0, false};
+          }
+        }
+      AxisRays query;
+      query.axis = exact_axis(view.dir);
+      query.dir = view.dir;
+      query.rays = rays;
+      query.lattice = &view;
+      query.row_begin = j0;
+      std::vector<AxisHit> scratch;
+      std::vector<RayHit> hits;
+      cast_axis_rays(query, segments, scratch, hits, runs[task]);
+    });
+    return runs;
+  }
+  ensure_scene();
   std::vector<RayCaster::HitRun> rows(view.height);
   tbb::parallel_for(tbb::blocked_range<int>(0, view.height),
                     [&](const tbb::blocked_range<int>& range) {
@@ -170,29 +310,30 @@ std::vector<RayCaster::HitRun> RayCaster::cast_rows(const View& view, Segment se
 }
 
 Ldi RayCaster::cast(const View& view) const {
-  const std::vector<RayCaster::HitRun> rows = cast_rows(view, [&](glm::dvec2, RaySegment& segment) {
+  const std::vector<RayCaster::HitRun> runs = cast_rows(view, [&](glm::dvec2, RaySegment& segment) {
     segment = {0.0, view.depth_extent, true};
     return true;
   });
-  // Concatenate rows in order: the LDI is the same whatever the thread count.
+  // Concatenate the runs (consecutive rows) in order: the LDI is the same whatever the thread
+  // count.
   Ldi ldi = make_empty_ldi(view);
   std::size_t total = 0;
-  for (const RayCaster::HitRun& row : rows)
-    total += row.depth.size();
+  for (const RayCaster::HitRun& run : runs)
+    total += run.depth.size();
   if (total > UINT32_MAX) throw std::runtime_error("LDI has more than 2^32 samples");
   ldi.depth.reserve(total);
   ldi.normal.reserve(total);
   if (has_scalar_) ldi.scalar.reserve(total);
   std::uint32_t offset = 0;
-  for (int j = 0; j < view.height; ++j) {
-    const RayCaster::HitRun& row = rows[j];
-    for (int i = 0; i < view.width; ++i) {
-      ldi.offsets[std::size_t(j) * view.width + i] = offset;
-      offset += row.counts[i];
+  std::size_t pixel = 0;
+  for (const RayCaster::HitRun& run : runs) {
+    for (std::uint32_t c : run.counts) {
+      ldi.offsets[pixel++] = offset;
+      offset += c;
     }
-    ldi.depth.insert(ldi.depth.end(), row.depth.begin(), row.depth.end());
-    ldi.normal.insert(ldi.normal.end(), row.normal.begin(), row.normal.end());
-    ldi.scalar.insert(ldi.scalar.end(), row.scalar.begin(), row.scalar.end());
+    ldi.depth.insert(ldi.depth.end(), run.depth.begin(), run.depth.end());
+    ldi.normal.insert(ldi.normal.end(), run.normal.begin(), run.normal.end());
+    ldi.scalar.insert(ldi.scalar.end(), run.scalar.begin(), run.scalar.end());
   }
   ldi.offsets[view.pixel_count()] = offset;
   return ldi;
@@ -200,21 +341,23 @@ Ldi RayCaster::cast(const View& view) const {
 
 LdiFragment RayCaster::cast_fragment(const View& view, std::uint32_t view_index,
                                      const Subdomain& sub) const {
-  const std::vector<RayCaster::HitRun> rows =
+  const std::vector<RayCaster::HitRun> runs =
       cast_rows(view, [&](glm::dvec2 position, RaySegment& segment) {
         return subdomain_segment(sub, view.point(position.x, position.y, 0.0), view.dir, segment);
       });
   LdiFragment fragment = make_empty_fragment(view, view_index);
-  for (int j = 0; j < view.height; ++j) {
-    const RayCaster::HitRun& row = rows[j];
-    for (int i = 0; i < view.width; ++i)
-      if (row.counts[i] > 0) {
-        fragment.pixels.push_back(std::uint32_t(std::size_t(j) * view.width + i));
-        fragment.counts.push_back(row.counts[i]);
+  std::uint32_t pixel = 0;
+  for (const RayCaster::HitRun& run : runs) {
+    for (std::uint32_t c : run.counts) {
+      if (c > 0) {
+        fragment.pixels.push_back(pixel);
+        fragment.counts.push_back(c);
       }
-    fragment.depth.insert(fragment.depth.end(), row.depth.begin(), row.depth.end());
-    fragment.normal.insert(fragment.normal.end(), row.normal.begin(), row.normal.end());
-    fragment.scalar.insert(fragment.scalar.end(), row.scalar.begin(), row.scalar.end());
+      ++pixel;
+    }
+    fragment.depth.insert(fragment.depth.end(), run.depth.begin(), run.depth.end());
+    fragment.normal.insert(fragment.normal.end(), run.normal.begin(), run.normal.end());
+    fragment.scalar.insert(fragment.scalar.end(), run.scalar.begin(), run.scalar.end());
   }
   return fragment;
 }
@@ -225,25 +368,54 @@ RayHitList RayCaster::cast_points(const View& view, std::span<const glm::dvec2> 
   const std::size_t n = image_positions.size();
   if (!depth_ranges.empty() && depth_ranges.size() != n)
     throw std::invalid_argument("cast_points: one depth range per ray, or none");
+  // The segment of ray k; false if it has none.
+  const auto segment_of = [&](std::size_t k, RaySegment& segment) {
+    const glm::dvec2 position = image_positions[k];
+    segment = {0.0, view.depth_extent, true};
+    bool crosses = !sub || subdomain_segment(*sub, view.point(position.x, position.y, 0.0),
+                                             view.dir, segment);
+    if (crosses && !depth_ranges.empty()) {
+      // The range is closed at both ends. Where it ends before the segment, the end is
+      // closed; otherwise the segment's own rule (half-open at a shared face) stays.
+      const glm::dvec2 range = depth_ranges[k];
+      if (range.y < segment.t1) segment = {segment.t0, range.y, true};
+      segment.t0 = std::max(segment.t0, range.x);
+      crosses = segment.t0 < segment.t1 || (segment.closed_end && segment.t0 == segment.t1);
+    }
+    return crosses;
+  };
+  const bool axis = uses_axis_casters(view);
+  if (!axis && n > 0) ensure_scene();
   constexpr std::size_t kChunk = 256;
   std::vector<RayCaster::HitRun> chunks((n + kChunk - 1) / kChunk);
   tbb::parallel_for(std::size_t(0), chunks.size(), [&](std::size_t c) {
     std::vector<RayHit> hits;
-    for (std::size_t k = c * kChunk; k < std::min(n, (c + 1) * kChunk); ++k) {
-      const glm::dvec2 position = image_positions[k];
-      RaySegment segment{0.0, view.depth_extent, true};
-      bool crosses = !sub || subdomain_segment(*sub, view.point(position.x, position.y, 0.0),
-                                               view.dir, segment);
-      if (crosses && !depth_ranges.empty()) {
-        // The range is closed at both ends. Where it ends before the segment, the end is
-        // closed; otherwise the segment's own rule (half-open at a shared face) stays.
-        const glm::dvec2 range = depth_ranges[k];
-        if (range.y < segment.t1) segment = {segment.t0, range.y, true};
-        segment.t0 = std::max(segment.t0, range.x);
-        crosses = segment.t0 < segment.t1 || (segment.closed_end && segment.t0 == segment.t1);
+    const std::size_t k0 = c * kChunk, k1 = std::min(n, (c + 1) * kChunk);
+    if (axis) {
+      std::vector<AxisRay> rays(k1 - k0);
+      std::vector<RaySegment> segments(k1 - k0);
+      for (std::size_t k = k0; k < k1; ++k) {
+        AxisRay& ray = rays[k - k0];
+        ray.org = view.point(image_positions[k].x, image_positions[k].y, 0.0);
+        if (segment_of(k, segments[k - k0])) {
+          ray.t0 = segments[k - k0].t0;
+          ray.t1 = segments[k - k0].t1;
+        } else {
+          segments[k - k0] = {0.0, -1.0, false};
+        }
       }
-      if (crosses) {
-        trace(view, position, segment, hits);
+      AxisRays query;
+      query.axis = exact_axis(view.dir);
+      query.dir = view.dir;
+      query.rays = rays;
+      std::vector<AxisHit> scratch;
+      cast_axis_rays(query, segments, scratch, hits, chunks[c]);
+      return;
+    }
+    for (std::size_t k = k0; k < k1; ++k) {
+      RaySegment segment;
+      if (segment_of(k, segment)) {
+        trace(view, image_positions[k], segment, hits);
       } else {
         hits.clear();
       }

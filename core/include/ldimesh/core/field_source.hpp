@@ -1,8 +1,9 @@
-// What the ray caster intersects: a field whose isosurface is found exactly, through Embree user
-// geometry. Each kind of source (analytic functions here; grid blocks and high-order elements
-// later) splits its domain into primitives with bounds and value ranges, puts the primitives
-// whose range may contain the isovalue into an Embree scene, and finds *all* roots of one ray
-// inside one primitive in its intersect callback.
+// What the ray caster intersects: a field whose isosurface is found exactly. Each kind of source
+// (analytic functions, grid blocks, high-order elements) splits its domain into primitives with
+// bounds and value ranges, puts the primitives whose range may contain the isovalue into an
+// Embree scene, and finds *all* roots of one ray inside one primitive in its intersect callback.
+// Sources may also offer a coherent caster for rays parallel to an axis (bind_axis), which the
+// ray caster prefers for such rays.
 #pragma once
 
 #include <algorithm>
@@ -16,16 +17,10 @@
 #include <embree3/rtcore.h>
 #include <glm/glm.hpp>
 
+#include "ldimesh/core/axis_binding.hpp"
 #include "ldimesh/core/geometry.hpp"
 
 namespace ldimesh {
-
-// One root of the field along a ray.
-struct RayHit {
-  double t = 0.0;       // distance from the ray origin (the view's depth)
-  glm::vec3 normal{};   // unit gradient direction at the hit
-  float scalar = 0.0f;  // optional attribute (only meaningful when the source has one)
-};
 
 // Per-ray state handed to intersect callbacks through Embree's intersect context (the context
 // is the first member, so callbacks cast RTCIntersectContext* back to RayQuery*). Callbacks
@@ -123,6 +118,10 @@ class FieldSource {
   // A committed Embree user geometry on `device` with the primitives whose value range may
   // contain `isovalue` (possibly none). Thread-safe: a source can be bound several times.
   virtual std::unique_ptr<GeometryBinding> bind(RTCDevice device, double isovalue) const = 0;
+  // The source bound to `isovalue` for rays parallel to an axis (axis_binding.hpp), with the
+  // same primitives and the same roots as bind(); null if the source has no such caster (the
+  // ray caster then uses bind() for every ray). Thread-safe.
+  virtual std::unique_ptr<AxisBinding> bind_axis(double /*isovalue*/) const { return nullptr; }
   // A length below which two hits on one ray count as the same root (hits found twice where
   // primitives touch). Sources with a natural length scale may override.
   virtual double duplicate_tolerance() const { return 1e-9 * bounds().diagonal(); }

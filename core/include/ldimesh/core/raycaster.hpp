@@ -3,6 +3,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <span>
 #include <vector>
 
@@ -44,16 +45,31 @@ struct RaySegment {
 };
 bool subdomain_segment(const Subdomain& sub, glm::dvec3 o, glm::dvec3 d, RaySegment& segment);
 
-// An Embree scene of one field source at one isovalue. Building it is the only costly part of
-// construction; casting is thread-safe and runs on all cores of the current TBB arena (limit
-// them with tbb::global_control). Results are identical for any number of threads.
+// Which caster the RayCaster uses for rays parallel to an axis.
+enum class CastPath {
+  automatic,  // the sources' coherent axis casters (bind_axis) when every source has one
+  embree,     // Embree for every ray (the reference the coherent casters are tested against)
+};
+
+struct RayCasterOptions {
+  CastPath path = CastPath::automatic;
+};
+
+// The roots of one isovalue of a set of field sources along rays. Two casters behind one
+// interface: rays parallel to a coordinate axis (all pixel rays of axis views, and the extra
+// samples along them) go to the sources' coherent axis casters when every source has one; every
+// other ray goes through an Embree scene of the sources, built on the first such ray. Both give
+// the same roots (docs/method.md). Casting is thread-safe and runs on all cores of the current
+// TBB arena (limit them with tbb::global_control); results are identical for any number of
+// threads. The sources, and the values they read, must stay unchanged while the caster lives.
 class RayCaster {
  public:
   // Throws std::runtime_error when Embree cannot create a device or scene.
-  RayCaster(const FieldSource& source, double isovalue);
-  // One scene of several sources (e.g. the blocks of one rank); a root that two sources both
+  RayCaster(const FieldSource& source, double isovalue, RayCasterOptions options = {});
+  // One caster of several sources (e.g. the blocks of one rank); a root that two sources both
   // report (on a face they share) counts once. `sources` must not be empty.
-  RayCaster(std::span<const FieldSource* const> sources, double isovalue);
+  RayCaster(std::span<const FieldSource* const> sources, double isovalue,
+            RayCasterOptions options = {});
   ~RayCaster();
   RayCaster(const RayCaster&) = delete;
   RayCaster& operator=(const RayCaster&) = delete;
@@ -84,8 +100,10 @@ class RayCaster {
   // counts once for each. The parts of the field that depend on them produce no hits. 0 for a
   // finite field.
   std::uint64_t nonfinite_values() const;
-  // Seconds spent building the scene.
-  double build_seconds() const { return build_seconds_; }
+  // Seconds spent binding the sources: the axis casters, and the Embree scene once it is built.
+  double build_seconds() const;
+  // Whether rays along `view` go to the coherent axis casters.
+  bool uses_axis_casters(const View& view) const;
 
  private:
   // Hits of a run of consecutive rays, appended in ray order.
@@ -108,16 +126,30 @@ class RayCaster {
   // false), in parallel over rows; one run per row.
   template <class Segment>
   std::vector<HitRun> cast_rows(const View& view, Segment segment_of) const;
-  // Hits along the ray through `image_position` on its segment `segment`.
+  // Hits along the ray through `image_position` on its segment `segment`, through Embree.
   void trace(const View& view, glm::dvec2 image_position, const RaySegment& segment,
              std::vector<RayHit>& hits) const;
+  // The hits of `rays` (axis-parallel) from the axis casters, one run entry per ray, in order.
+  void cast_axis_rays(const AxisRays& rays, std::span<const RaySegment> segments,
+                      std::vector<AxisHit>& scratch, std::vector<RayHit>& hits,
+                      HitRun& run) const;
+  // Sorts a ray's hits, merges duplicates and keeps those its segment owns.
+  void finish_ray(const RaySegment& segment, glm::dvec3 dir, std::vector<RayHit>& hits) const;
+  // Builds the Embree scene on first use (thread-safe).
+  void ensure_scene() const;
 
-  RTCDevice device_ = nullptr;
-  RTCScene scene_ = nullptr;
-  std::vector<std::unique_ptr<GeometryBinding>> bindings_;
+  std::vector<const FieldSource*> sources_;
+  double isovalue_ = 0.0;
+  std::vector<std::unique_ptr<AxisBinding>> axis_bindings_;  // empty: Embree for every ray
   bool has_scalar_ = false;
   double duplicate_tolerance_ = 0.0;
-  double build_seconds_ = 0.0;
+  double axis_seconds_ = 0.0;
+
+  mutable std::once_flag scene_once_;
+  mutable RTCDevice device_ = nullptr;
+  mutable RTCScene scene_ = nullptr;
+  mutable std::vector<std::unique_ptr<GeometryBinding>> bindings_;
+  mutable double scene_seconds_ = 0.0;
 };
 
 }  // namespace ldimesh

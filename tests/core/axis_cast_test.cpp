@@ -1,0 +1,312 @@
+// The coherent axis casters against the Embree path, the reference: the same hits (count
+// equal, depth within 1e-6 of the domain size, normals within 1e-5) on random blocks and
+// elements, at degenerate spots (isovalues at node values, rays exactly on grid lines and
+// element faces), for whole views, subdomain fragments and single rays with depth ranges.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <random>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <tbb/global_control.h>
+
+#include "ldimesh/core/decomposition.hpp"
+#include "ldimesh/core/grid_source.hpp"
+#include "ldimesh/core/hex_source.hpp"
+#include "ldimesh/core/raycaster.hpp"
+
+namespace ldimesh {
+namespace {
+
+constexpr RayCasterOptions kEmbree{CastPath::embree};
+
+// The six axis views of `box`; with `pixel` > 0, pixels of that size instead of `resolution`
+// along the longer side (a dyadic size makes the rays through dyadic coordinates exact).
+std::vector<View> signed_axis_views(const Box& box, int resolution, double pixel = 0.0) {
+  std::vector<View> views;
+  for (int a = 0; a < 3; ++a)
+    for (double sign : {1.0, -1.0}) {
+      glm::dvec3 dir(0.0);
+      dir[a] = sign;
+      View view = make_view(box, dir, resolution);
+      if (pixel > 0.0) {
+        const double eu = view.width * view.spacing, ev = view.height * view.spacing;
+        view.spacing = pixel;
+        view.width = int(std::ceil(eu / pixel - 1e-9));
+        view.height = int(std::ceil(ev / pixel - 1e-9));
+      }
+      views.push_back(view);
+    }
+  return views;
+}
+
+// Hit lists of two casts, ray by ray: the same number of hits on every ray, depths within
+// `depth_tolerance`, normals within 1e-5. Returns the number of hits compared.
+std::size_t expect_same_hits(std::span<const std::uint32_t> offsets_a,
+                             std::span<const float> depth_a, std::span<const glm::vec3> normal_a,
+                             std::span<const std::uint32_t> offsets_b,
+                             std::span<const float> depth_b, std::span<const glm::vec3> normal_b,
+                             double depth_tolerance, const std::string& what) {
+  EXPECT_EQ(offsets_a.size(), offsets_b.size()) << what;
+  if (offsets_a.size() != offsets_b.size()) return 0;
+  for (std::size_t k = 0; k + 1 < offsets_a.size(); ++k) {
+    const std::uint32_t na = offsets_a[k + 1] - offsets_a[k], nb = offsets_b[k + 1] - offsets_b[k];
+    if (na != nb) {
+      ADD_FAILURE() << what << ": ray " << k << " has " << na << " hits, the reference " << nb;
+      return 0;
+    }
+    for (std::uint32_t h = 0; h < na; ++h) {
+      const std::uint32_t ia = offsets_a[k] + h, ib = offsets_b[k] + h;
+      if (std::abs(depth_a[ia] - depth_b[ib]) > depth_tolerance ||
+          glm::length(normal_a[ia] - normal_b[ib]) > 1e-5f) {
+        std::string all;
+        for (std::uint32_t m = 0; m < na; ++m) {
+          const glm::vec3 x = normal_a[offsets_a[k] + m], y = normal_b[offsets_b[k] + m];
+          all += "\n  " + std::to_string(depth_a[offsets_a[k] + m]) + " (" + std::to_string(x.x) +
+                 ", " + std::to_string(x.y) + ", " + std::to_string(x.z) + ") vs " +
+                 std::to_string(depth_b[offsets_b[k] + m]) + " (" + std::to_string(y.x) + ", " +
+                 std::to_string(y.y) + ", " + std::to_string(y.z) + ")";
+        }
+        ADD_FAILURE() << what << ": ray " << k << " hit " << h << " differs:" << all;
+        return 0;
+      }
+    }
+  }
+  return depth_a.size();
+}
+
+std::size_t expect_same_ldi(const Ldi& a, const Ldi& b, double tol, const std::string& what) {
+  return expect_same_hits(a.offsets, a.depth, a.normal, b.offsets, b.depth, b.normal, tol, what);
+}
+
+std::size_t expect_same_list(const RayHitList& a, const RayHitList& b, double tol,
+                             const std::string& what) {
+  return expect_same_hits(a.offsets, a.depth, a.normal, b.offsets, b.depth, b.normal, tol, what);
+}
+
+// Casts the six axis views (pixels of size `pixel`: 1/8 makes the rays through grid lines at
+// multiples of 1/4 exact) with both casters: whole LDIs, the fragments of `parts`
+// subdomains, and single rays — random image positions with random depth ranges, and image
+// positions exactly on the lines x = `lines[i]` of the view's image axes (when given).
+// Returns the number of hits compared.
+std::size_t compare_casters(const FieldSource& source, double iso, double pixel,
+                            const std::vector<double>& lines, std::mt19937& rng,
+                            const std::string& what) {
+  const RayCaster fast(source, iso), reference(source, iso, kEmbree);
+  const Box box = source.bounds();
+  const double tol = 1e-6 * box.diagonal();
+  std::size_t compared = 0;
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  for (const View& view : signed_axis_views(box, 1, pixel)) {
+    EXPECT_TRUE(fast.uses_axis_casters(view));
+    EXPECT_FALSE(reference.uses_axis_casters(view));
+    const std::string name = what + " view (" + std::to_string(view.dir.x) + ", " +
+                             std::to_string(view.dir.y) + ", " + std::to_string(view.dir.z) + ")";
+    compared += expect_same_ldi(fast.cast(view), reference.cast(view), tol, name);
+
+    const Box global = box;
+    for (const Box& part : decompose_box(global, 3)) {
+      const Subdomain sub{part, global};
+      const LdiFragment a = fast.cast_fragment(view, 0, sub), b = reference.cast_fragment(view, 0, sub);
+      EXPECT_EQ(a.pixels, b.pixels) << name << " fragment";
+      EXPECT_EQ(a.counts, b.counts) << name << " fragment";
+      EXPECT_EQ(a.depth.size(), b.depth.size()) << name << " fragment";
+      if (a.depth.size() == b.depth.size()) {
+        std::size_t far = 0;
+        for (std::size_t s = 0; s < a.depth.size(); ++s)
+          far += std::abs(a.depth[s] - b.depth[s]) > tol;
+        EXPECT_EQ(far, 0u) << name << " fragment";
+      }
+      compared += a.depth.size();
+    }
+
+    std::vector<glm::dvec2> points, ranges;
+    for (int k = 0; k < 400; ++k) {
+      points.push_back({unit(rng) * view.width, unit(rng) * view.height});
+      const double d0 = unit(rng) * view.depth_extent, d1 = unit(rng) * view.depth_extent;
+      ranges.push_back({std::min(d0, d1), std::max(d0, d1)});
+    }
+    // Image positions on the grid lines / element faces: x = (X − origin) / spacing, exact for
+    // the dyadic coordinates and pixel sizes the callers use (checked).
+    const int ua = exact_axis(view.u), va = exact_axis(view.v);
+    for (double X : lines)
+      for (double Y : lines) {
+        const double x = (X - view.origin[ua]) / (view.spacing * view.u[ua]);
+        const double y = (Y - view.origin[va]) / (view.spacing * view.v[va]);
+        EXPECT_EQ(view.point(x, y, 0.0)[ua], X);
+        EXPECT_EQ(view.point(x, y, 0.0)[va], Y);
+        points.push_back({x, y});
+        ranges.push_back({0.0, view.depth_extent});
+        points.push_back({x, unit(rng) * view.height});
+        ranges.push_back({0.0, view.depth_extent});
+      }
+    compared += expect_same_list(fast.cast_points(view, points), reference.cast_points(view, points),
+                                 tol, name + " points");
+    compared += expect_same_list(fast.cast_points(view, points, nullptr, ranges),
+                                 reference.cast_points(view, points, nullptr, ranges), tol,
+                                 name + " points with depth ranges");
+    const Subdomain sub{decompose_box(global, 2)[1], global};
+    compared += expect_same_list(fast.cast_points(view, points, &sub, ranges),
+                                 reference.cast_points(view, points, &sub, ranges), tol,
+                                 name + " points in a subdomain");
+  }
+  return compared;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Grid blocks
+
+struct RandomGrid {
+  std::vector<double> storage64;
+  std::vector<float> storage32;
+  std::vector<double> coords[3];
+  GridBlock block;
+  std::vector<double> lines;  // coordinates of some grid lines (dyadic: exact in image space)
+};
+
+// A random block: dims 5…12 per axis, ghost layers 0…2, values from `value` (NaN where it says
+// so), float or double, contiguous or strided (inside a larger array), uniform or rectilinear.
+template <class Value>
+RandomGrid random_grid(std::mt19937& rng, bool float32, bool strided, bool rectilinear,
+                       Value value) {
+  RandomGrid g;
+  std::uniform_int_distribution<int> dim(5, 12), ghost(0, 2);
+  GridBlock& b = g.block;
+  for (int a = 0; a < 3; ++a) {
+    b.dims[a] = dim(rng);
+    b.ghost_lo[a] = ghost(rng) % 2;
+    b.ghost_hi[a] = ghost(rng);
+  }
+  const std::int64_t pad = strided ? 3 : 0;
+  const std::array<std::int64_t, 3> alloc{b.dims[0] + pad, b.dims[1] + 1, b.dims[2]};
+  b.strides = strided ? std::array<std::int64_t, 3>{1, alloc[0], alloc[0] * alloc[1]}
+                      : std::array<std::int64_t, 3>{0, 0, 0};
+  const std::size_t size = std::size_t(alloc[0] * alloc[1] * alloc[2]);
+  g.storage64.assign(size, 0.0);
+  g.storage32.assign(size, 0.0f);
+  const std::array<std::int64_t, 3> s =
+      strided ? b.strides : std::array<std::int64_t, 3>{1, b.dims[0], b.dims[0] * b.dims[1]};
+  for (std::int64_t k = 0; k < b.dims[2]; ++k)
+    for (std::int64_t j = 0; j < b.dims[1]; ++j)
+      for (std::int64_t i = 0; i < b.dims[0]; ++i) {
+        const double v = value(rng);
+        g.storage64[i * s[0] + j * s[1] + k * s[2]] = v;
+        g.storage32[i * s[0] + j * s[1] + k * s[2]] = float(v);
+      }
+  b.type = float32 ? ScalarType::float32 : ScalarType::float64;
+  b.values = float32 ? static_cast<const void*>(g.storage32.data())
+                     : static_cast<const void*>(g.storage64.data());
+  // Coordinates: multiples of 1/4 (uniform spacing 0.5, or rectilinear steps of 1/4 … 1).
+  b.origin = {-1.0, -0.5, 0.25};
+  b.spacing = glm::dvec3(0.5);
+  std::uniform_int_distribution<int> quarter(1, 4);
+  for (int a = 0; a < 3; ++a) {
+    double x = b.origin[a];
+    for (std::int64_t i = 0; i < b.dims[a]; ++i) {
+      g.coords[a].push_back(rectilinear ? x : b.origin[a] + 0.5 * double(i));
+      x += 0.25 * quarter(rng);
+    }
+    if (rectilinear) b.coords[a] = g.coords[a].data();
+  }
+  for (int a = 0; a < 3; ++a)
+    for (std::size_t i = 0; i < g.coords[a].size(); i += 2)
+      g.lines.push_back(g.coords[a][i]);
+  std::sort(g.lines.begin(), g.lines.end());
+  g.lines.erase(std::unique(g.lines.begin(), g.lines.end()), g.lines.end());
+  if (g.lines.size() > 6) g.lines.resize(6);
+  return g;
+}
+
+TEST(AxisCast, GridBlocksGiveTheEmbreeHits) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+  std::size_t compared = 0;
+  for (int trial = 0; trial < 16; ++trial) {
+    const bool float32 = trial & 1, strided = trial & 2, rectilinear = trial & 4;
+    const bool with_nan = trial & 8;
+    RandomGrid g = random_grid(rng, float32, strided, rectilinear, [&](std::mt19937& r) {
+      const double v = uniform(r);
+      return with_nan && v > 0.93 ? std::numeric_limits<double>::quiet_NaN() : v;
+    });
+    const GridSource source(g.block, 1 + trial % 4);
+    const std::string what = "grid trial " + std::to_string(trial);
+    compared += compare_casters(source, 0.1 * (trial % 5) - 0.2, 0.125, g.lines,
+                                rng, what);
+  }
+  EXPECT_GT(compared, 50000u);
+}
+
+TEST(AxisCast, GridIsovaluesAtNodeValuesAndRaysOnGridLines) {
+  // Values of a few integer levels and the isovalue at one of them: zeros at nodes, whole faces
+  // and cells at the isovalue, rays on grid lines through them — every degenerate spot.
+  std::mt19937 rng(17);
+  std::uniform_int_distribution<int> level(-2, 2);
+  std::size_t compared = 0;
+  for (int trial = 0; trial < 8; ++trial) {
+    RandomGrid g = random_grid(rng, trial & 1, trial & 2, trial & 4,
+                               [&](std::mt19937& r) { return double(level(r)); });
+    const GridSource source(g.block, 2 + trial % 3);
+    for (double iso : {0.0, 1.0, 0.5}) {
+      const std::string what = "levels trial " + std::to_string(trial) + " iso " + std::to_string(iso);
+      compared += compare_casters(source, iso, 0.125, g.lines, rng, what);
+    }
+  }
+  EXPECT_GT(compared, 20000u);
+}
+
+TEST(AxisCast, GridLdiIsTheSameForOneAndTwoThreads) {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+  RandomGrid g = random_grid(rng, false, false, false, [&](std::mt19937& r) { return uniform(r); });
+  const GridSource source(g.block, 3);
+  const RayCaster caster(source, 0.0);
+  for (const View& view : signed_axis_views(source.bounds(), 64)) {
+    Ldi one, two;
+    {
+      tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
+      one = caster.cast(view);
+    }
+    {
+      tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 2);
+      two = caster.cast(view);
+    }
+    EXPECT_EQ(one.offsets, two.offsets);
+    EXPECT_EQ(one.depth, two.depth);
+    EXPECT_EQ(one.normal, two.normal);
+    EXPECT_GT(one.sample_count(), 100u);
+  }
+}
+
+TEST(AxisCast, GridPrimitiveAndNonFiniteCountsMatchTheEmbreeBinding) {
+  std::mt19937 rng(8);
+  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+  RandomGrid g = random_grid(rng, true, true, false, [&](std::mt19937& r) {
+    const double v = uniform(r);
+    return v > 0.9 ? std::numeric_limits<double>::infinity() : v;
+  });
+  const GridSource source(g.block, 2);
+  const RayCaster fast(source, 0.3), reference(source, 0.3, kEmbree);
+  EXPECT_GT(fast.nonfinite_values(), 0u);
+  EXPECT_EQ(fast.nonfinite_values(), reference.nonfinite_values());
+  EXPECT_GT(fast.primitive_count(), 0u);
+  EXPECT_EQ(fast.primitive_count(), reference.primitive_count());
+}
+
+TEST(AxisCast, ObliqueViewsStillUseEmbree) {
+  std::mt19937 rng(4);
+  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+  RandomGrid g = random_grid(rng, false, false, false, [&](std::mt19937& r) { return uniform(r); });
+  const GridSource source(g.block, 3);
+  const RayCaster caster(source, 0.0), reference(source, 0.0, kEmbree);
+  const View oblique = make_view(source.bounds(), {1.0, 0.3, -0.2}, 32);
+  EXPECT_FALSE(caster.uses_axis_casters(oblique));
+  const Ldi a = caster.cast(oblique), b = reference.cast(oblique);
+  EXPECT_EQ(a.offsets, b.offsets);
+  EXPECT_EQ(a.depth, b.depth);
+  EXPECT_GT(a.sample_count(), 50u);
+}
+
+}  // namespace
+}  // namespace ldimesh
+
