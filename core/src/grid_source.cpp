@@ -2,6 +2,9 @@
 
 #include <algorithm>
 #include <atomic>
+#include <bit>
+#include <cstring>
+#include <mutex>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -364,49 +367,213 @@ std::unique_ptr<GeometryBinding> bind_grid(RTCDevice device, const GridView<T>& 
 // The coherent caster of a grid block for rays parallel to an axis. Along such a ray the
 // trilinear interpolant is linear inside each cell: its value on a cell face the ray crosses
 // is the bilinear interpolation of the face's four points, shared by the two cells, and the
-// root in a cell is one division. Each ray walks the active bricks of its column of bricks in
-// ray order (the macrocells; a row of rays reads neighbouring columns of points), and inside
-// them the cells, exactly as the Embree binding's walk does: the same cells, the same segment
-// ends, the same face values (the same products summed in the same order). Where the shortcut
-// cannot decide — a segment end inside a cell, a face value that is zero or not finite — the
-// cell is solved by the Embree binding's own solve_cell. The Embree binding solves a segment
-// along one axis as a line too (trilinear_segment_roots), so both give the same roots, to the
-// bit, at every degenerate spot as well.
+// root in a cell is one division.
+//
+// Empty space is skipped with bits instead of a walk: at bind time one pass over the points
+// gives each point's sign (v − iso ≥ 0, as solve_cell tests it) and each cell a bit "its
+// corners have both signs" — only such cells can hold a root in either caster (solve_cell
+// returns at once for the others). Per axis, each column of cells gets one bit per 4 cells
+// along the axis (any such cell among them). A ray reads its column's words, and visits only
+// the cells whose bit is set, in ray order. Each of them is solved exactly as the Embree
+// binding's walk would solve it: the same segment ends and face flags (derived from the same
+// brick clipping), the same face values (the same products summed in the same order), and
+// solve_cell itself where the shortcut does not decide (a segment end inside a cell, a face
+// value that is zero or not finite). The Embree binding solves a segment along one axis as a
+// line too (trilinear_segment_roots), so both give the same roots, to the bit, at every
+// degenerate spot as well.
 template <class T>
 class GridAxisBinding final : public AxisBinding {
  public:
-  GridAxisBinding(const GridView<T>& grid, double iso, BrickCulling culled,
-                  std::array<std::int64_t, 3> first, std::array<std::int64_t, 3> last,
-                  std::array<std::int64_t, 3> bricks, int brick_cells)
+  GridAxisBinding(const GridView<T>& grid, double iso, std::array<std::int64_t, 3> first,
+                  std::array<std::int64_t, 3> last, std::array<std::int64_t, 3> bricks,
+                  int brick_cells)
       : g_(grid),
         iso_(iso),
         first_(first),
         last_(last),
         bricks_(bricks),
-        brick_cells_(brick_cells),
-        nonfinite_(culled.nonfinite),
-        active_count_(culled.active_count) {
-    state_.resize(culled.bricks.size());
-    for (std::size_t n = 0; n < state_.size(); ++n)
-      state_[n] = std::uint8_t((culled.active[n] ? 1 : 0) | (culled.bricks[n].nonfinite ? 2 : 0));
+        brick_cells_(brick_cells) {
+    for (int a = 0; a < 3; ++a)
+      cells_[a] = last_[a] - first_[a] + 1;
+    classify();
   }
 
-  std::size_t primitive_count() const override { return active_count_; }
+  std::size_t primitive_count() const override {
+    // The Embree binding's figure (its bricks after culling), computed when asked.
+    std::call_once(count_once_, [this] {
+      active_bricks_ =
+          cull_bricks(g_, iso_, first_, last_, bricks_, brick_cells_).active_count;
+    });
+    return active_bricks_;
+  }
   std::uint64_t nonfinite_values() const override { return nonfinite_; }
 
   void cast(const AxisRays& rays, std::vector<AxisHit>& out) const override {
+    const int a = rays.axis;
+    std::call_once(column_once_[a], [this, a] { build_columns(a); });
     std::vector<RayHit> hits;
-    for (std::size_t k = 0; k < rays.rays.size(); ++k) {
+    const auto cast_one = [&](std::size_t k) {
       const AxisRay& ray = rays.rays[k];
-      if (!(ray.t0 <= ray.t1)) continue;
+      if (!(ray.t0 <= ray.t1)) return;
       hits.clear();
-      cast_ray(rays.axis, rays.dir, ray, hits);
+      cast_ray(a, rays.dir, ray, hits);
       for (const RayHit& h : hits)
         out.push_back({std::uint32_t(k), h});
+    };
+    // Rays in the order that keeps the points they read in cache: along the image axis whose
+    // world axis is the block's faster one in memory (neighbouring rays then read the same
+    // cache lines).
+    const View* view = rays.lattice;
+    if (view && std::abs(g_.strides[exact_axis(view->v)]) <
+                    std::abs(g_.strides[exact_axis(view->u)])) {
+      const std::size_t width = std::size_t(view->width), rows = rays.rays.size() / width;
+      for (std::size_t i = 0; i < width; ++i)
+        for (std::size_t j = 0; j < rows; ++j)
+          cast_one(j * width + i);
+      return;
     }
+    for (std::size_t k = 0; k < rays.rays.size(); ++k)
+      cast_one(k);
   }
 
  private:
+  static constexpr int kColumnBlock = 4;  // cells per bit of a column word
+
+  // A brick's cells along the ray axis (lo … hi), the t of its entry face, and its stretch of
+  // the ray [t0, t1] as clip_ray_to_box clips it.
+  struct Stretch {
+    std::int64_t lo, hi;
+    double face_in, t0, t1;
+  };
+
+  std::size_t row_words() const { return std::size_t((cells_[0] + 63) / 64); }
+  // Cell (x, y, z), relative to the first owned cell: whether its corners have both signs.
+  bool straddles(std::int64_t x, std::int64_t y, std::int64_t z) const {
+    const std::uint64_t w = straddle_[std::size_t(y + cells_[1] * z) * row_words() + x / 64];
+    return (w >> (x % 64)) & 1u;
+  }
+
+  // The sign bits of the points and the cells' straddle bits, and the non-finite count.
+  void classify() {
+    const std::int64_t px = cells_[0] + 1, py = cells_[1] + 1, pz = cells_[2] + 1;
+    const std::size_t pw = std::size_t((px + 63) / 64);
+    std::vector<std::uint64_t> sign(pw * std::size_t(py * pz), 0);
+    std::atomic<std::uint64_t> nonfinite{0};
+    // The sign test in T: for a float v, v − iso ≥ 0 in double iff v ≥ the least float whose
+    // double is ≥ iso (NaN fails both), so the rows compare in their own type, in bulk.
+    T threshold = T(iso_);
+    if (double(threshold) < iso_) threshold = std::nextafter(threshold, T(INFINITY));
+    tbb::parallel_for(std::int64_t(0), pz, [&](std::int64_t z) {
+      std::uint64_t bad = 0;
+      T line[64];
+      std::uint8_t flags[64];
+      for (std::int64_t y = 0; y < py; ++y) {
+        std::uint64_t* row = &sign[std::size_t(y + py * z) * pw];
+        const T* v = g_.values + (first_[0]) * g_.strides[0] + (first_[1] + y) * g_.strides[1] +
+                     (first_[2] + z) * g_.strides[2];
+        const std::int64_t sx = g_.strides[0];
+        for (std::int64_t x0 = 0; x0 < px; x0 += 64) {
+          const int n = int(std::min<std::int64_t>(64, px - x0));
+          const T* src = v + x0 * sx;
+          if (sx == 1) {
+            std::copy_n(src, n, line);
+          } else {
+            for (int i = 0; i < n; ++i)
+              line[i] = src[i * sx];
+          }
+          std::fill(line + n, line + 64, T(-INFINITY));  // padding: clear, and not counted
+          std::uint32_t count = 0;
+          for (int i = 0; i < 64; ++i) {
+            flags[i] = line[i] >= threshold;
+            count += !(std::abs(line[i]) <= std::numeric_limits<T>::max());  // NaN or ±Inf
+          }
+          bad += count - std::uint32_t(64 - n);
+          std::uint64_t word = 0;
+          for (int i = 0; i < 64; i += 8) {  // eight 0/1 bytes into eight bits
+            std::uint64_t bytes;
+            std::memcpy(&bytes, flags + i, 8);
+            word |= ((bytes * 0x0102040810204080ull) >> 56) << i;
+          }
+          row[x0 / 64] = word;
+        }
+      }
+      if (bad > 0) nonfinite.fetch_add(bad, std::memory_order_relaxed);
+    });
+    nonfinite_ = nonfinite.load();
+    // A cell straddles iff its 8 corner bits are neither all set nor all clear.
+    const std::size_t cw = row_words();
+    straddle_.assign(cw * std::size_t(cells_[1] * cells_[2]), 0);
+    tbb::parallel_for(std::int64_t(0), cells_[2], [&](std::int64_t z) {
+      for (std::int64_t y = 0; y < cells_[1]; ++y) {
+        const std::uint64_t* r[4] = {&sign[std::size_t(y + py * z) * pw],
+                                     &sign[std::size_t(y + 1 + py * z) * pw],
+                                     &sign[std::size_t(y + py * (z + 1)) * pw],
+                                     &sign[std::size_t(y + 1 + py * (z + 1)) * pw]};
+        std::uint64_t* out = &straddle_[std::size_t(y + cells_[1] * z) * cw];
+        for (std::size_t w = 0; w < cw; ++w) {
+          std::uint64_t any = 0, all = ~std::uint64_t(0);
+          for (const std::uint64_t* row : r) {
+            const std::uint64_t here = row[w];
+            const std::uint64_t next = (here >> 1) | (w + 1 < pw ? row[w + 1] << 63 : 0);
+            any |= here | next;
+            all &= here & next;
+          }
+          std::uint64_t bits = any & ~all;
+          const std::int64_t valid = cells_[0] - std::int64_t(w) * 64;
+          if (valid < 64) bits &= (std::uint64_t(1) << valid) - 1;
+          out[w] = bits;
+        }
+      }
+    });
+  }
+
+  // Axis a's column words: bit q of column (b, c) (the transverse cell indices, relative) is set
+  // iff one of its cells 4q … 4q + 3 along a straddles.
+  std::size_t column_words(int a) const {
+    return std::size_t(((cells_[a] + kColumnBlock - 1) / kColumnBlock + 63) / 64);
+  }
+  void build_columns(int a) const {
+    const int b = a == 0 ? 1 : 0, c = a == 2 ? 1 : 2;
+    const std::size_t wpc = column_words(a);
+    std::vector<std::uint64_t>& col = columns_[a];
+    col.assign(wpc * std::size_t(cells_[b] * cells_[c]), 0);
+    const std::size_t cw = row_words();
+    const auto set = [&](std::int64_t cb, std::int64_t cc, std::int64_t q) {
+      col[std::size_t(cb + cells_[b] * cc) * wpc + std::size_t(q / 64)] |= std::uint64_t(1)
+                                                                          << (q % 64);
+    };
+    if (a == 0) {
+      tbb::parallel_for(std::int64_t(0), cells_[2], [&](std::int64_t z) {
+        for (std::int64_t y = 0; y < cells_[1]; ++y) {
+          const std::uint64_t* row = &straddle_[std::size_t(y + cells_[1] * z) * cw];
+          for (std::size_t w = 0; w < cw; ++w)
+            for (std::uint64_t bits = row[w]; bits; bits &= bits - 1)
+              set(y, z, (std::int64_t(w) * 64 + std::countr_zero(bits)) / kColumnBlock);
+        }
+      });
+      return;
+    }
+    // a = y: columns (x, z); a = z: columns (x, y). OR the rows of each block along a, then
+    // set the bit of every x whose cells straddle.
+    const std::int64_t outer = a == 1 ? cells_[2] : cells_[1];
+    tbb::parallel_for(std::int64_t(0), outer, [&](std::int64_t o) {
+      std::vector<std::uint64_t> merged(cw);
+      for (std::int64_t q = 0; q * kColumnBlock < cells_[a]; ++q) {
+        std::fill(merged.begin(), merged.end(), 0);
+        for (std::int64_t k = q * kColumnBlock; k < std::min(cells_[a], (q + 1) * kColumnBlock);
+             ++k) {
+          const std::int64_t y = a == 1 ? k : o, z = a == 1 ? o : k;
+          const std::uint64_t* row = &straddle_[std::size_t(y + cells_[1] * z) * cw];
+          for (std::size_t w = 0; w < cw; ++w)
+            merged[w] |= row[w];
+        }
+        for (std::size_t w = 0; w < cw; ++w)
+          for (std::uint64_t bits = merged[w]; bits; bits &= bits - 1)
+            set(std::int64_t(w) * 64 + std::countr_zero(bits), o, q);
+      }
+    });
+  }
+
   // The cell along transverse axis b that holds coordinate x ∈ [coord(first), coord(last + 1)]:
   // the last cell whose lower face is at or below x (the upper cell on a shared face, as the
   // Embree binding's walk starts).
@@ -416,7 +583,8 @@ class GridAxisBinding final : public AxisBinding {
       return std::int64_t(std::upper_bound(c + first_[b] + 1, c + last_[b] + 1, x) - c) - 1;
     }
     const double guess = std::floor((x - g_.origin[b]) / g_.spacing[b]);
-    std::int64_t i = std::clamp(std::int64_t(std::clamp(guess, -1e18, 1e18)), first_[b], last_[b]);
+    std::int64_t i =
+        std::clamp(std::int64_t(std::clamp(guess, -1e18, 1e18)), first_[b], last_[b]);
     while (i < last_[b] && g_.coord(b, i + 1) <= x)
       ++i;
     while (i > first_[b] && g_.coord(b, i) > x)
@@ -433,6 +601,9 @@ class GridAxisBinding final : public AxisBinding {
     std::array<std::int64_t, 3> cell;
     cell[b] = cell_index(b, o[b]);
     cell[c] = cell_index(c, o[c]);
+    const std::uint64_t* column =
+        &columns_[a][std::size_t(cell[b] - first_[b] + cells_[b] * (cell[c] - first_[c])) *
+                     column_words(a)];
     // Local coordinates across the ray, as solve_cell computes them.
     double p[3];
     glm::dvec3 size;
@@ -445,115 +616,172 @@ class GridAxisBinding final : public AxisBinding {
     const double wb[2] = {1.0 - p[b], p[b]}, wc[2] = {1.0 - p[c], p[c]};
     const double w[4] = {wb[0] * wc[0], wb[1] * wc[0], wb[0] * wc[1], wb[1] * wc[1]};
     const std::int64_t sa = g_.strides[a], sb = g_.strides[b], sc = g_.strides[c];
-    const T* column = g_.values + cell[b] * sb + cell[c] * sc;
+    const T* points = g_.values + cell[b] * sb + cell[c] * sc;
     const auto face = [&](std::int64_t node) {
-      const T* q = column + node * sa;
+      const T* q = points + node * sa;
       return ((w[0] * (double(q[0]) - iso_) + w[1] * (double(q[sb]) - iso_)) +
               w[2] * (double(q[sc]) - iso_)) +
              w[3] * (double(q[sb + sc]) - iso_);
     };
-
     const int step = dir[a] > 0.0 ? 1 : -1;
     const double inv = 1.0 / dir[a];
     std::array<int, 3> steps{0, 0, 0};
     steps[a] = step;
-    const std::int64_t bb = (cell[b] - first_[b]) / brick_cells_,
-                       bc = (cell[c] - first_[c]) / brick_cells_;
-    std::array<std::int64_t, 3> brick{0, 0, 0};
-    brick[b] = bb;
-    brick[c] = bc;
-    const std::int64_t n_a = bricks_[a];
+    const auto t_at = [&](std::int64_t node) { return (g_.coord(a, node) - o[a]) * inv; };
+
     // The face value last computed, by node index (consecutive cells share a face).
     std::int64_t cached_node = -1;
     double cached_value = 0.0;
-    for (std::int64_t m = 0; m < n_a; ++m) {
-      brick[a] = step > 0 ? m : n_a - 1 - m;
-      const std::uint8_t state = state_[brick[0] + bricks_[0] * (brick[1] + bricks_[1] * brick[2])];
-      if (!(state & 1)) continue;
-      const bool nonfinite = state & 2;
-      const std::int64_t lo = first_[a] + brick[a] * brick_cells_;
-      const std::int64_t hi = std::min(last_[a], lo + brick_cells_ - 1);
-      // The brick's stretch of the ray, as clip_ray_to_box gives it.
-      double ta = (g_.coord(a, lo) - o[a]) * inv, tb = (g_.coord(a, hi + 1) - o[a]) * inv;
-      if (ta > tb) std::swap(ta, tb);
-      const double t0 = std::max(ray.t0, ta), t1 = std::min(ray.t1, tb);
-      if (!(t0 < t1)) continue;
-      // The first cell, as the Embree binding's walk finds it.
-      const double entry = o[a] + t0 * dir[a];
-      std::int64_t i = lo;
-      if (g_.coord(a, hi) <= entry) {
-        i = hi;
-      } else {
-        while (i < hi && g_.coord(a, i + 1) <= entry)
-          ++i;
+    const auto face_cached = [&](std::int64_t node) {
+      if (node != cached_node) {
+        cached_value = face(node);
+        cached_node = node;
       }
-      if (step < 0 && i > lo && g_.coord(a, i) == entry) --i;
-      double t_next = (g_.coord(a, step > 0 ? i + 1 : i) - o[a]) * inv;
-      bool on_entry = (g_.coord(a, step > 0 ? i : i + 1) - o[a]) * inv == t0;
-      double t = t0;
-      while (t < t1) {
-        const double t_exit = std::min(t_next, t1);
-        const bool on_exit = t_next == t_exit;
-        if (t_exit > t) {
-          cell[a] = i;
-          const std::int64_t entry_node = step > 0 ? i : i + 1, exit_node = step > 0 ? i + 1 : i;
-          bool decided = false;
-          if (on_entry && on_exit) {
-            const double fa = entry_node == cached_node ? cached_value : face(entry_node);
-            const double fb = face(exit_node);
-            cached_node = exit_node;
-            cached_value = fb;
-            if (std::isfinite(fa) && std::isfinite(fb) && fa != 0.0 && fb != 0.0) {
-              decided = true;
-              if (positive(fa) != positive(fb)) {
-                // The one root of the linear function between the faces (as
-                // trilinear_segment_roots computes it for a segment along one axis).
-                const double s = fa / (fa - fb);
-                double corner[8];
-                for (int n = 0; n < 8; ++n)
-                  corner[n] = g_.value(cell[0] + (n & 1), cell[1] + ((n >> 1) & 1),
-                                       cell[2] + ((n >> 2) & 1)) -
-                              iso_;
-                glm::dvec3 local, cell_size = size;
-                local[b] = p[b];
-                local[c] = p[c];
-                local[a] = step > 0 ? s : 1.0 - s;
-                cell_size[a] = g_.coord(a, i + 1) - g_.coord(a, i);
-                hits.push_back({s == 1.0 ? t_exit : t + s * (t_exit - t),
-                                unit_normal(trilinear_gradient(corner, local, cell_size), dir),
-                                0.0f});
-              }
-            }
-          }
-          if (!decided) {
-            std::array<bool, 3> entry_face{false, false, false}, exit_face{false, false, false};
-            entry_face[a] = on_entry;
-            exit_face[a] = on_exit;
-            if (nonfinite)
-              solve_cell<true>(g_, iso_, o, dir, cell, steps, t, t_exit, entry_face, exit_face,
-                               hits);
-            else
-              solve_cell<false>(g_, iso_, o, dir, cell, steps, t, t_exit, entry_face, exit_face,
-                                hits);
+      return cached_value;
+    };
+    // Cell i on [ta, tb], entered / left exactly on its faces or not: the shortcut where it
+    // decides, solve_cell (the Embree binding's) where it does not.
+    const auto solve = [&](std::int64_t i, double ta, double tb, bool on_entry, bool on_exit) {
+      cell[a] = i;
+      if (on_entry && on_exit) {
+        const double fa = face_cached(step > 0 ? i : i + 1);
+        const double fb = face_cached(step > 0 ? i + 1 : i);
+        if (std::isfinite(fa) && std::isfinite(fb) && fa != 0.0 && fb != 0.0) {
+          if (positive(fa) == positive(fb)) return;
+          // The one root of the linear function between the faces (as trilinear_segment_roots
+          // computes it for a segment along one axis), and the gradient there, as solve_cell.
+          const double s = fa / (fa - fb);
+          double corner[8];
+          const T* lower = points + i * sa;
+          for (int n = 0; n < 8; ++n)
+            corner[n] = double(lower[((n >> a) & 1) * sa + ((n >> b) & 1) * sb +
+                                     ((n >> c) & 1) * sc]) -
+                        iso_;
+          glm::dvec3 local, cell_size = size;
+          local[b] = p[b];
+          local[c] = p[c];
+          local[a] = step > 0 ? s : 1.0 - s;
+          cell_size[a] = g_.coord(a, i + 1) - g_.coord(a, i);
+          hits.push_back({s == 1.0 ? tb : ta + s * (tb - ta),
+                          unit_normal(trilinear_gradient(corner, local, cell_size), dir), 0.0f});
+          return;
+        }
+      }
+      std::array<bool, 3> entry_face{false, false, false}, exit_face{false, false, false};
+      entry_face[a] = on_entry;
+      exit_face[a] = on_exit;
+      // Checking corners for NaN and ±Inf changes nothing for a cell without them.
+      solve_cell<true>(g_, iso_, o, dir, cell, steps, ta, tb, entry_face, exit_face, hits);
+    };
+
+    // The brick (the Embree binding's primitive) of cell i along a, and its stretch of the ray
+    // clipped as clip_ray_to_box clips it.
+    const auto stretch_of = [&](std::int64_t i) {
+      Stretch st;
+      st.lo = first_[a] + (i - first_[a]) / brick_cells_ * brick_cells_;
+      st.hi = std::min(last_[a], st.lo + brick_cells_ - 1);
+      double ta = t_at(st.lo), tb = t_at(st.hi + 1);
+      if (ta > tb) std::swap(ta, tb);
+      st.face_in = ta;
+      st.t0 = std::max(ray.t0, ta);
+      st.t1 = std::min(ray.t1, tb);
+      return st;
+    };
+
+    // The brick the ray's segment starts inside (not on its face): the Embree binding walks it
+    // from the segment's start point; so does this caster, cell by cell.
+    std::int64_t start_lo = -1, start_hi = -2;
+    {
+      const double t_first = std::min(t_at(first_[a]), t_at(last_[a] + 1));
+      if (ray.t0 > t_first) {
+        const double e = o[a] + ray.t0 * dir[a];
+        std::int64_t guess = first_[a];
+        if (e >= g_.coord(a, last_[a] + 1)) {
+          guess = last_[a];
+        } else if (e > g_.coord(a, first_[a])) {
+          guess = cell_index(a, e);
+        }
+        for (std::int64_t i : {guess, guess - step, guess + step}) {
+          if (i < first_[a] || i > last_[a]) continue;
+          const Stretch st = stretch_of(i);
+          if (st.t0 > st.face_in && st.t0 < st.t1) {
+            start_lo = st.lo;
+            start_hi = st.hi;
+            walk(a, st, o, dir, step, inv, solve);
+            break;
           }
         }
-        t = std::max(t, t_exit);
-        on_entry = on_exit;
-        if (!on_exit) break;
-        i += step;
-        if (i < lo || i > hi) break;
-        t_next = (g_.coord(a, step > 0 ? i + 1 : i) - o[a]) * inv;
       }
+    }
+
+    // The straddling cells in ray order.
+    const std::int64_t n_blocks = (cells_[a] + kColumnBlock - 1) / kColumnBlock;
+    const std::size_t wpc = column_words(a);
+    for (std::size_t wi = 0; wi < wpc; ++wi) {
+      const std::size_t w = step > 0 ? wi : wpc - 1 - wi;
+      std::uint64_t bits = column[w];
+      while (bits) {
+        const int bit = step > 0 ? std::countr_zero(bits) : 63 - std::countl_zero(bits);
+        bits &= ~(std::uint64_t(1) << bit);
+        const std::int64_t q = std::int64_t(w) * 64 + bit;
+        if (q >= n_blocks) continue;
+        const std::int64_t k0 = first_[a] + q * kColumnBlock;
+        const std::int64_t k1 = std::min(last_[a], k0 + kColumnBlock - 1);
+        for (std::int64_t m = 0; m <= k1 - k0; ++m) {
+          const std::int64_t i = step > 0 ? k0 + m : k1 - m;
+          if (i >= start_lo && i <= start_hi) continue;  // walked above
+          cell[a] = i;
+          if (!straddles(cell[0] - first_[0], cell[1] - first_[1], cell[2] - first_[2])) continue;
+          const Stretch st = stretch_of(i);
+          if (!(st.t0 < st.t1)) continue;  // the Embree binding skips the brick
+          const double t_in = t_at(step > 0 ? i : i + 1), t_out = t_at(step > 0 ? i + 1 : i);
+          const double ta = std::max(st.t0, t_in), tb = std::min(st.t1, t_out);
+          if (tb > ta) solve(i, ta, tb, t_in == ta, t_out <= st.t1);
+        }
+      }
+    }
+  }
+
+  // The Embree binding's walk through the cells of one brick's stretch of the ray, step by
+  // step (GridBinding::intersect_brick, here along axis a only).
+  template <class Solve>
+  void walk(int a, const Stretch& st, glm::dvec3 o, glm::dvec3 dir, int step, double inv,
+            const Solve& solve) const {
+    const double entry = o[a] + st.t0 * dir[a];
+    std::int64_t i = st.lo;
+    if (g_.coord(a, st.hi) <= entry) {
+      i = st.hi;
+    } else {
+      while (i < st.hi && g_.coord(a, i + 1) <= entry)
+        ++i;
+    }
+    if (step < 0 && i > st.lo && g_.coord(a, i) == entry) --i;
+    double t_next = (g_.coord(a, step > 0 ? i + 1 : i) - o[a]) * inv;
+    bool on_entry = (g_.coord(a, step > 0 ? i : i + 1) - o[a]) * inv == st.t0;
+    double t = st.t0;
+    while (t < st.t1) {
+      const double t_exit = std::min(t_next, st.t1);
+      const bool on_exit = t_next == t_exit;
+      if (t_exit > t) solve(i, t, t_exit, on_entry, on_exit);
+      t = std::max(t, t_exit);
+      on_entry = on_exit;
+      if (!on_exit) break;
+      i += step;
+      if (i < st.lo || i > st.hi) break;
+      t_next = (g_.coord(a, step > 0 ? i + 1 : i) - o[a]) * inv;
     }
   }
 
   GridView<T> g_;
   double iso_;
-  std::array<std::int64_t, 3> first_, last_, bricks_;
+  std::array<std::int64_t, 3> first_, last_, bricks_, cells_;
   int brick_cells_;
-  std::uint64_t nonfinite_;
-  std::size_t active_count_;
-  std::vector<std::uint8_t> state_;  // per brick: bit 0 active, bit 1 has non-finite points
+  std::uint64_t nonfinite_ = 0;
+  std::vector<std::uint64_t> straddle_;  // per cell row along x, 64 cells per word
+  mutable std::array<std::vector<std::uint64_t>, 3> columns_;
+  mutable std::array<std::once_flag, 3> column_once_;
+  mutable std::once_flag count_once_;
+  mutable std::size_t active_bricks_ = 0;
 };
 
 }  // namespace
@@ -734,9 +962,8 @@ std::unique_ptr<AxisBinding> GridSource::bind_axis(double isovalue) const {
     using T = std::remove_cv_t<std::remove_pointer_t<decltype(values)>>;
     const GridView<T> g{values,         block_.strides, block_.origin,
                         block_.spacing, block_.coords,  block_.coords[0] != nullptr};
-    return std::make_unique<GridAxisBinding<T>>(
-        g, isovalue, cull_bricks(g, isovalue, first_cell_, last_cell_, bricks_, brick_cells_),
-        first_cell_, last_cell_, bricks_, brick_cells_);
+    return std::make_unique<GridAxisBinding<T>>(g, isovalue, first_cell_, last_cell_, bricks_,
+                                                brick_cells_);
   };
   if (block_.type == ScalarType::float32)
     return bind_typed(static_cast<const float*>(block_.values));
