@@ -447,12 +447,6 @@ class GridAxisBinding final : public AxisBinding {
   };
 
   std::size_t row_words() const { return std::size_t((cells_[0] + 63) / 64); }
-  // Cell (x, y, z), relative to the first owned cell: whether its corners have both signs.
-  bool straddles(std::int64_t x, std::int64_t y, std::int64_t z) const {
-    const std::uint64_t w = straddle_[std::size_t(y + cells_[1] * z) * row_words() + x / 64];
-    return (w >> (x % 64)) & 1u;
-  }
-
   // The sign bits of the points and the cells' straddle bits, and the non-finite count.
   void classify() {
     const std::int64_t px = cells_[0] + 1, py = cells_[1] + 1, pz = cells_[2] + 1;
@@ -623,6 +617,11 @@ class GridAxisBinding final : public AxisBinding {
               w[2] * (double(q[sc]) - iso_)) +
              w[3] * (double(q[sb + sc]) - iso_);
     };
+    // Where corner n of a cell (index x + 2y + 4z, as solve_cell has them) lies from the cell's
+    // lowest point.
+    std::int64_t offsets[8];
+    for (int n = 0; n < 8; ++n)
+      offsets[n] = ((n >> a) & 1) * sa + ((n >> b) & 1) * sb + ((n >> c) & 1) * sc;
     const int step = dir[a] > 0.0 ? 1 : -1;
     const double inv = 1.0 / dir[a];
     std::array<int, 3> steps{0, 0, 0};
@@ -654,9 +653,7 @@ class GridAxisBinding final : public AxisBinding {
           double corner[8];
           const T* lower = points + i * sa;
           for (int n = 0; n < 8; ++n)
-            corner[n] = double(lower[((n >> a) & 1) * sa + ((n >> b) & 1) * sb +
-                                     ((n >> c) & 1) * sc]) -
-                        iso_;
+            corner[n] = double(lower[offsets[n]]) - iso_;
           glm::dvec3 local, cell_size = size;
           local[b] = p[b];
           local[c] = p[c];
@@ -714,7 +711,29 @@ class GridAxisBinding final : public AxisBinding {
       }
     }
 
-    // The straddling cells in ray order.
+    // Whether the segment covers the block's whole stretch along a: then every brick is entered
+    // and left on its faces, and so is every cell (no clipping to compute).
+    const bool whole = ray.t0 <= std::min(t_at(first_[a]), t_at(last_[a] + 1)) &&
+                       ray.t1 >= std::max(t_at(first_[a]), t_at(last_[a] + 1));
+    // The column's straddle bits: word and bit of its cell at relative index k along a.
+    const std::size_t cw = row_words();
+    const std::int64_t rb = cell[b] - first_[b], rc = cell[c] - first_[c];
+    std::size_t base = 0, along = 0;  // word of cell 0 along a, words between cells along a
+    unsigned bit0 = 0;
+    if (a == 0) {
+      base = std::size_t(rb + cells_[1] * rc) * cw;
+    } else {
+      base = (a == 1 ? std::size_t(cells_[1]) * std::size_t(rc) : std::size_t(rc)) * cw +
+             std::size_t(rb) / 64;
+      along = a == 1 ? cw : std::size_t(cells_[1]) * cw;
+      bit0 = unsigned(rb % 64);
+    }
+    const auto straddling = [&](std::int64_t k) {
+      if (a == 0) return bool((straddle_[base + std::size_t(k) / 64] >> (k % 64)) & 1u);
+      return bool((straddle_[base + std::size_t(k) * along] >> bit0) & 1u);
+    };
+
+    // The straddling cells, in ray order.
     const std::int64_t n_blocks = (cells_[a] + kColumnBlock - 1) / kColumnBlock;
     const std::size_t wpc = column_words(a);
     for (std::size_t wi = 0; wi < wpc; ++wi) {
@@ -730,11 +749,14 @@ class GridAxisBinding final : public AxisBinding {
         for (std::int64_t m = 0; m <= k1 - k0; ++m) {
           const std::int64_t i = step > 0 ? k0 + m : k1 - m;
           if (i >= start_lo && i <= start_hi) continue;  // walked above
-          cell[a] = i;
-          if (!straddles(cell[0] - first_[0], cell[1] - first_[1], cell[2] - first_[2])) continue;
+          if (!straddling(i - first_[a])) continue;
+          const double t_in = t_at(step > 0 ? i : i + 1), t_out = t_at(step > 0 ? i + 1 : i);
+          if (whole) {
+            if (t_out > t_in) solve(i, t_in, t_out, true, true);
+            continue;
+          }
           const Stretch st = stretch_of(i);
           if (!(st.t0 < st.t1)) continue;  // the Embree binding skips the brick
-          const double t_in = t_at(step > 0 ? i : i + 1), t_out = t_at(step > 0 ? i + 1 : i);
           const double ta = std::max(st.t0, t_in), tb = std::min(st.t1, t_out);
           if (tb > ta) solve(i, ta, tb, t_in == ta, t_out <= st.t1);
         }

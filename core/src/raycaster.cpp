@@ -21,16 +21,23 @@ namespace {
 // gradient jumps at a cell face, the duplicates' normals differ in their component along the
 // ray, so the choice does not hang on rounding, and the result does not depend on the order in
 // which the primitives were visited.
-void sort_and_merge(std::vector<RayHit>& hits, double tolerance, glm::dvec3 dir) {
+std::size_t sort_and_merge(std::span<RayHit> hits, double tolerance, glm::dvec3 dir) {
   const auto normal_less = [](const glm::vec3& a, const glm::vec3& b) {
     if (a.x != b.x) return a.x < b.x;
     if (a.y != b.y) return a.y < b.y;
     return a.z < b.z;
   };
-  std::sort(hits.begin(), hits.end(), [&](const RayHit& a, const RayHit& b) {
+  const auto less = [&](const RayHit& a, const RayHit& b) {
     if (a.t != b.t) return a.t < b.t;
     return normal_less(a.normal, b.normal);
-  });
+  };
+  if (hits.size() <= 16) {  // a ray's few hits, often in order already
+    for (std::size_t k = 1; k < hits.size(); ++k)
+      for (std::size_t m = k; m > 0 && less(hits[m], hits[m - 1]); --m)
+        std::swap(hits[m], hits[m - 1]);
+  } else {
+    std::sort(hits.begin(), hits.end(), less);
+  }
   const glm::vec3 d(dir);
   std::size_t kept = 0;
   for (std::size_t k = 0; k < hits.size();) {
@@ -46,7 +53,21 @@ void sort_and_merge(std::vector<RayHit>& hits, double tolerance, glm::dvec3 dir)
     }
     hits[kept++] = hits[best];
   }
-  hits.resize(kept);
+  return kept;
+}
+
+// Per-thread buffers of the axis casts, kept between tasks: a task's arrays are large enough
+// that allocating them afresh each time costs page faults.
+struct AxisScratch {
+  std::vector<AxisRay> rays;
+  std::vector<RaySegment> segments;
+  std::vector<AxisHit> hits;
+  std::vector<RayHit> by_ray, ray_hits;
+  std::vector<std::uint32_t> first, next;
+};
+AxisScratch& axis_scratch() {
+  thread_local AxisScratch scratch;
+  return scratch;
 }
 
 // Rows per task of an axis view's cast: about 4096 rays, so that sources that loop over their
@@ -212,43 +233,64 @@ void RayCaster::trace(const View& view, glm::dvec2 image_position, const RaySegm
   rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
   rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
   rtcIntersect1(scene_, &q.context, &rh);
-  finish_ray(segment, view.dir, hits);
+  hits.resize(finish_ray(segment, view.dir, hits));
 }
 
-void RayCaster::finish_ray(const RaySegment& segment, glm::dvec3 dir,
-                           std::vector<RayHit>& hits) const {
-  sort_and_merge(hits, duplicate_tolerance_, dir);
+std::size_t RayCaster::finish_ray(const RaySegment& segment, glm::dvec3 dir,
+                                  std::span<RayHit> hits) const {
+  const std::size_t n = sort_and_merge(hits, duplicate_tolerance_, dir);
   // Sources report roots on the closed segment; the half-open rule keeps a root on the face
   // two subdomains share in exactly one of them.
-  std::erase_if(hits, [&](const RayHit& h) {
-    return h.t < segment.t0 || h.t > segment.t1 || (h.t == segment.t1 && !segment.closed_end);
-  });
+  std::size_t kept = 0;
+  for (std::size_t k = 0; k < n; ++k) {
+    const RayHit& h = hits[k];
+    if (h.t < segment.t0 || h.t > segment.t1 || (h.t == segment.t1 && !segment.closed_end))
+      continue;
+    hits[kept++] = h;
+  }
+  return kept;
 }
 
 void RayCaster::cast_axis_rays(const AxisRays& rays, std::span<const RaySegment> segments,
-                               std::vector<AxisHit>& scratch, std::vector<RayHit>& hits,
                                HitRun& run) const {
-  scratch.clear();
+  AxisScratch& x = axis_scratch();
+  x.hits.clear();
   for (const auto& binding : axis_bindings_)
-    binding->cast(rays, scratch);
-  // Hits by ray (counting sort); each ray's are then sorted by depth, so the order in which the
-  // sources reported them does not matter.
+    binding->cast(rays, x.hits);
   const std::size_t n = rays.rays.size();
-  std::vector<std::uint32_t> first(n + 1, 0);
-  for (const AxisHit& h : scratch)
-    ++first[h.ray + 1];
-  for (std::size_t k = 0; k < n; ++k)
-    first[k + 1] += first[k];
-  std::vector<RayHit> by_ray(scratch.size());
-  {
-    std::vector<std::uint32_t> next(first.begin(), first.end() - 1);
-    for (const AxisHit& h : scratch)
-      by_ray[next[h.ray]++] = h.hit;
+  run.counts.reserve(run.counts.size() + n);
+  run.depth.reserve(run.depth.size() + x.hits.size());
+  run.normal.reserve(run.normal.size() + x.hits.size());
+  if (has_scalar_) run.scalar.reserve(run.scalar.size() + x.hits.size());
+  // Each ray's hits are sorted by depth below, so the order in which the sources reported them
+  // does not matter; grouped by ray first (counting sort) unless they came so.
+  const bool grouped = std::is_sorted(x.hits.begin(), x.hits.end(),
+                                      [](const AxisHit& a, const AxisHit& b) { return a.ray < b.ray; });
+  if (!grouped) {
+    x.first.assign(n + 1, 0);
+    for (const AxisHit& h : x.hits)
+      ++x.first[h.ray + 1];
+    for (std::size_t k = 0; k < n; ++k)
+      x.first[k + 1] += x.first[k];
+    x.by_ray.resize(x.hits.size());
+    x.next.assign(x.first.begin(), x.first.end() - 1);
+    for (const AxisHit& h : x.hits)
+      x.by_ray[x.next[h.ray]++] = h.hit;
+    for (std::size_t k = 0; k < n; ++k) {
+      const std::span<RayHit> hits(x.by_ray.data() + x.first[k], x.first[k + 1] - x.first[k]);
+      run.append(hits.first(hits.empty() ? 0 : finish_ray(segments[k], rays.dir, hits)),
+                 has_scalar_);
+    }
+    return;
   }
+  std::size_t h = 0;
   for (std::size_t k = 0; k < n; ++k) {
-    hits.assign(by_ray.begin() + first[k], by_ray.begin() + first[k + 1]);
-    if (!hits.empty()) finish_ray(segments[k], rays.dir, hits);
-    run.append(hits, has_scalar_);
+    x.ray_hits.clear();
+    for (; h < x.hits.size() && x.hits[h].ray == k; ++h)
+      x.ray_hits.push_back(x.hits[h].hit);
+    const std::span<RayHit> hits(x.ray_hits);
+    run.append(hits.first(hits.empty() ? 0 : finish_ray(segments[k], rays.dir, hits)),
+               has_scalar_);
   }
 }
 
@@ -262,8 +304,11 @@ std::vector<RayCaster::HitRun> RayCaster::cast_rows(const View& view, Segment se
     tbb::parallel_for(0, tasks, [&](int task) {
       const int j0 = task * rows, j1 = std::min(view.height, j0 + rows);
       const std::size_t n = std::size_t(j1 - j0) * view.width;
-      std::vector<AxisRay> rays(n);
-      std::vector<RaySegment> segments(n);
+      AxisScratch& x = axis_scratch();
+      std::vector<AxisRay>& rays = x.rays;
+      std::vector<RaySegment>& segments = x.segments;
+      rays.assign(n, AxisRay{});
+      segments.resize(n);
       for (int j = j0; j < j1; ++j)
         for (int i = 0; i < view.width; ++i) {
           const std::size_t k = std::size_t(j - j0) * view.width + i;
@@ -283,9 +328,7 @@ std::vector<RayCaster::HitRun> RayCaster::cast_rows(const View& view, Segment se
       query.rays = rays;
       query.lattice = &view;
       query.row_begin = j0;
-      std::vector<AxisHit> scratch;
-      std::vector<RayHit> hits;
-      cast_axis_rays(query, segments, scratch, hits, runs[task]);
+      cast_axis_rays(query, segments, runs[task]);
     });
     return runs;
   }
@@ -392,8 +435,11 @@ RayHitList RayCaster::cast_points(const View& view, std::span<const glm::dvec2> 
     std::vector<RayHit> hits;
     const std::size_t k0 = c * kChunk, k1 = std::min(n, (c + 1) * kChunk);
     if (axis) {
-      std::vector<AxisRay> rays(k1 - k0);
-      std::vector<RaySegment> segments(k1 - k0);
+      AxisScratch& x = axis_scratch();
+      std::vector<AxisRay>& rays = x.rays;
+      std::vector<RaySegment>& segments = x.segments;
+      rays.assign(k1 - k0, AxisRay{});
+      segments.resize(k1 - k0);
       for (std::size_t k = k0; k < k1; ++k) {
         AxisRay& ray = rays[k - k0];
         ray.org = view.point(image_positions[k].x, image_positions[k].y, 0.0);
@@ -408,8 +454,7 @@ RayHitList RayCaster::cast_points(const View& view, std::span<const glm::dvec2> 
       query.axis = exact_axis(view.dir);
       query.dir = view.dir;
       query.rays = rays;
-      std::vector<AxisHit> scratch;
-      cast_axis_rays(query, segments, scratch, hits, chunks[c]);
+      cast_axis_rays(query, segments, chunks[c]);
       return;
     }
     for (std::size_t k = k0; k < k1; ++k) {

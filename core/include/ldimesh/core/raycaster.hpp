@@ -112,7 +112,7 @@ class RayCaster {
     std::vector<float> depth;
     std::vector<glm::vec3> normal;
     std::vector<float> scalar;
-    void append(const std::vector<RayHit>& hits, bool with_scalar) {
+    void append(std::span<const RayHit> hits, bool with_scalar) {
       counts.push_back(std::uint32_t(hits.size()));
       for (const RayHit& h : hits) {
         depth.push_back(float(h.t));
@@ -131,10 +131,10 @@ class RayCaster {
              std::vector<RayHit>& hits) const;
   // The hits of `rays` (axis-parallel) from the axis casters, one run entry per ray, in order.
   void cast_axis_rays(const AxisRays& rays, std::span<const RaySegment> segments,
-                      std::vector<AxisHit>& scratch, std::vector<RayHit>& hits,
                       HitRun& run) const;
-  // Sorts a ray's hits, merges duplicates and keeps those its segment owns.
-  void finish_ray(const RaySegment& segment, glm::dvec3 dir, std::vector<RayHit>& hits) const;
+  // Sorts a ray's hits, merges duplicates and moves those its segment owns to the front;
+  // returns how many.
+  std::size_t finish_ray(const RaySegment& segment, glm::dvec3 dir, std::span<RayHit> hits) const;
   // Builds the Embree scene on first use (thread-safe).
   void ensure_scene() const;
 
