@@ -9,6 +9,7 @@
 #include <numbers>
 #include <stdexcept>
 #include <string>
+#include <mutex>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -324,32 +325,83 @@ int basis_along_segment(int p, double xa, double xb, double (*basis)[kMaxNodes])
   return p;
 }
 
+// The restriction to a segment in stages, one reference axis after the other (ξ, then η, then
+// ζ): each stage contracts the coefficients with the basis of one axis along the segment. A
+// stage's result depends only on the segment's coordinates along the axes contracted so far,
+// so the coherent caster keeps it while those do not change (along a row of pixels).
+
+// The basis of one axis along a segment from xa (s = 0) to xb (s = 1): scaled coefficients in
+// s of B_i^p(x(s)), degree p, or degree 0 where xa == xb.
+struct AxisBasis {
+  int degree = 0;
+  double b[kMaxNodes][kMaxNodes];
+};
+void segment_basis(int p, double xa, double xb, AxisBasis& out) {
+  out.degree = basis_along_segment(p, xa, xb, out.b);
+}
+// dB_i^p/dx at x, as a degree-0 basis (a derivative across the segment).
+void derivative_basis(int p, double x, AxisBasis& out) {
+  double value[kMaxNodes], derivative[kMaxNodes];
+  bernstein_basis(p, x, value, derivative);
+  out.degree = 0;
+  for (int i = 0; i <= p; ++i)
+    out.b[i][0] = derivative[i];
+}
+
+// After the ξ stage: g[k][j][l] = Σ_i c_ijk · bx_i[l], l ≤ bx.degree.
+struct StageX {
+  double g[kMaxNodes][kMaxNodes][kMaxNodes];
+};
+void contract_x(int p, const double* c, const AxisBasis& bx, StageX& out) {
+  const int n = p + 1, dx = bx.degree;
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j) {
+      double* g = out.g[k][j];
+      std::fill(g, g + dx + 1, 0.0);
+      const double* row = c + n * (j + n * k);
+      for (int i = 0; i < n; ++i)
+        for (int l = 0; l <= dx; ++l)
+          g[l] += row[i] * bx.b[i][l];
+    }
+}
+// After the η stage: h[k][l] = Σ_j g[k][j] ⊛ by_j, degree dx + by.degree.
+struct StageY {
+  double h[kMaxNodes][2 * kMaxHexOrder + 1];
+};
+void contract_y(int p, const StageX& x, int dx, const AxisBasis& by, StageY& out) {
+  const int n = p + 1;
+  for (int k = 0; k < n; ++k) {
+    double* h = out.h[k];
+    std::fill(h, h + dx + by.degree + 1, 0.0);
+    for (int j = 0; j < n; ++j)
+      convolve_add(x.g[k][j], dx, by.b[j], by.degree, h);
+  }
+}
+// The ζ stage: the standard Bernstein coefficients f[0..degree] along the segment; returns the
+// degree dxy + bz.degree.
+int contract_z(int p, const StageY& y, int dxy, const AxisBasis& bz, double* f) {
+  const int n = p + 1, degree = dxy + bz.degree;
+  std::fill(f, f + degree + 1, 0.0);
+  for (int k = 0; k < n; ++k)
+    convolve_add(y.h[k], dxy, bz.b[k], bz.degree, f);
+  for (int l = 0; l <= degree; ++l)
+    f[l] /= kBinomial[degree][l];
+  return degree;
+}
+
 // Standard Bernstein coefficients f[0..n] on s ∈ [0, 1] of the tensor polynomial with
 // coefficients `c` along the straight segment from reference point a (s = 0) to b (s = 1);
 // returns the degree n ≤ 3p (p per reference axis the segment moves along).
 int restrict_to_segment(int p, const double* c, glm::dvec3 a, glm::dvec3 b, double* f) {
-  const int n = p + 1;
-  double bx[kMaxNodes][kMaxNodes], by[kMaxNodes][kMaxNodes], bz[kMaxNodes][kMaxNodes];
-  const int dx = basis_along_segment(p, a.x, b.x, bx);
-  const int dy = basis_along_segment(p, a.y, b.y, by);
-  const int dz = basis_along_segment(p, a.z, b.z, bz);
-  const int degree = dx + dy + dz;
-  std::fill(f, f + degree + 1, 0.0);
-  for (int k = 0; k < n; ++k) {
-    double h[2 * kMaxHexOrder + 1] = {};  // H_k = Σ_j G_jk · By_j, degree dx + dy
-    for (int j = 0; j < n; ++j) {
-      double g[kMaxNodes] = {};  // G_jk = Σ_i c_ijk Bx_i, degree dx
-      const double* row = c + n * (j + n * k);
-      for (int i = 0; i < n; ++i)
-        for (int l = 0; l <= dx; ++l)
-          g[l] += row[i] * bx[i][l];
-      convolve_add(g, dx, by[j], dy, h);
-    }
-    convolve_add(h, dx + dy, bz[k], dz, f);
-  }
-  for (int l = 0; l <= degree; ++l)
-    f[l] /= kBinomial[degree][l];
-  return degree;
+  AxisBasis bx, by, bz;
+  segment_basis(p, a.x, b.x, bx);
+  segment_basis(p, a.y, b.y, by);
+  segment_basis(p, a.z, b.z, bz);
+  StageX x;
+  StageY y;
+  contract_x(p, c, bx, x);
+  contract_y(p, x, bx.degree, by, y);
+  return contract_z(p, y, bx.degree + by.degree, bz, f);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -395,10 +447,17 @@ double converge(const double* c, int n, double tol) {
   double a = 0.0, b = 1.0, ga = c[0];
   double u = c[0] / (c[0] - c[n]);
   if (!(u > a && u < b)) u = 0.5;
+  // A value within de Casteljau's rounding error (n steps, each within 2 ulp of the
+  // coefficients' magnitude) is a root as far as the coefficients can tell: further steps would
+  // chase rounding noise (slowly, near a double root).
+  double magnitude = 0.0;
+  for (int i = 0; i <= n; ++i)
+    magnitude = std::max(magnitude, std::abs(c[i]));
+  const double noise = 4.0 * (n + 1) * std::numeric_limits<double>::epsilon() * magnitude;
   for (int iter = 0; iter < 64 && b - a > tol; ++iter) {
     double g, dg;
     de_casteljau(c, n, u, g, dg);
-    if (g == 0.0) return u;
+    if (g == 0.0 || std::abs(g) <= noise) return u;
     if (positive(g) == positive(ga)) {
       a = u;
       ga = g;
@@ -462,34 +521,68 @@ void bernstein_roots(const double* c, int n, Found found) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// The Embree binding
+// The active elements of a bind: those whose coefficient range holds the isovalue.
 
-// What the intersect callback needs of one active element.
+// What the casters need of one active element.
 struct ActiveElement {
   glm::dvec3 origin;        // corner 0
   glm::dmat3 to_reference;  // inverse of the affine frame's axes
   glm::dvec3 lo, hi;        // axis-aligned bounds
 };
 
+struct Activation {
+  int order = 1;
+  std::size_t values_per_element = 0;
+  std::vector<ActiveElement> elements;
+  std::vector<double> coefficients;  // iso subtracted, values_per_element per active element
+  std::uint64_t nonfinite = 0;
+  const double* coefficients_of(std::size_t k) const {
+    return &coefficients[k * values_per_element];
+  }
+};
+
+// Every root in [t_min, t_max] of the ray o + t·d in element e (coefficients c), appended to
+// `hits` with its normal: the ray in reference coordinates, clipped to the unit cube, the
+// polynomial along the clipped segment, its roots by Bernstein subdivision. Both casters call
+// this for a ray through an element (the coherent one where it has no shortcut).
+void intersect_element(int p, const ActiveElement& e, const double* c, glm::dvec3 org,
+                       glm::dvec3 dir, double t_min, double t_max, std::vector<RayHit>& hits) {
+  const glm::dvec3 ro = e.to_reference * (org - e.origin), rd = e.to_reference * dir;
+  double t0 = t_min, t1 = t_max;
+  if (!clip_ray_to_box(ro, rd, glm::dvec3(0.0), glm::dvec3(1.0), t0, t1)) return;
+  const glm::dvec3 a = glm::clamp(ro + t0 * rd, 0.0, 1.0), b = glm::clamp(ro + t1 * rd, 0.0, 1.0);
+
+  double f[kMaxRayDegree + 1];
+  const int degree = restrict_to_segment(p, c, a, b, f);
+  const glm::dmat3 to_world_gradient = glm::transpose(e.to_reference);  // ∇x f = A⁻ᵀ ∇ξ f
+  if (degree == 0) return;  // constant along the ray: no crossing
+  bernstein_roots(f, degree, [&](double s) {
+    const glm::dvec3 g = to_world_gradient * evaluate_tensor(p, c, a + s * (b - a)).gradient;
+    const double len = glm::length(g);
+    // At singular points (∇f = 0) the normal faces the viewer, as for analytic sources.
+    const glm::vec3 normal = len > 0.0 ? glm::vec3(g / len) : glm::vec3(-dir);
+    hits.push_back({s == 1.0 ? t1 : t0 + s * (t1 - t0), normal, 0.0f});
+  });
+}
+
+// ---------------------------------------------------------------------------------------------
+// The Embree binding
+
 class HexBinding final : public GeometryBinding {
  public:
-  HexBinding(RTCDevice device, int order, std::vector<ActiveElement> elements,
-             std::vector<double> coefficients, std::uint64_t nonfinite)
-      : order_(order),
-        values_per_element_(nodes_per_element(order)),
-        elements_(std::move(elements)),
-        coefficients_(std::move(coefficients)),
-        nonfinite_(nonfinite),
-        geometry_(device, elements_.size(), this, &HexBinding::bounds, &HexBinding::intersect) {}
+  HexBinding(RTCDevice device, Activation active)
+      : active_(std::move(active)),
+        geometry_(device, active_.elements.size(), this, &HexBinding::bounds,
+                  &HexBinding::intersect) {}
 
   RTCGeometry geometry() const override { return geometry_.get(); }
-  std::size_t primitive_count() const override { return elements_.size(); }
-  std::uint64_t nonfinite_values() const override { return nonfinite_; }
+  std::size_t primitive_count() const override { return active_.elements.size(); }
+  std::uint64_t nonfinite_values() const override { return active_.nonfinite; }
 
  private:
   static void bounds(const RTCBoundsFunctionArguments* args) {
     const auto* self = static_cast<const HexBinding*>(args->geometryUserPtr);
-    const ActiveElement& e = self->elements_[args->primID];
+    const ActiveElement& e = self->active_.elements[args->primID];
     write_padded_bounds(e.lo, e.hi, args->bounds_o);
   }
 
@@ -497,35 +590,305 @@ class HexBinding final : public GeometryBinding {
     if (!args->valid[0]) return;
     const auto* self = static_cast<const HexBinding*>(args->geometryUserPtr);
     auto* q = reinterpret_cast<RayQuery*>(args->context);
-    const ActiveElement& e = self->elements_[args->primID];
-    const double* c = &self->coefficients_[std::size_t(args->primID) * self->values_per_element_];
-    const int p = self->order_;
-
-    // The ray in reference coordinates, clipped to the unit cube in double.
-    const glm::dvec3 ro = e.to_reference * (q->org - e.origin), rd = e.to_reference * q->dir;
-    double t0 = q->t_min, t1 = q->t_max;
-    if (!clip_ray_to_box(ro, rd, glm::dvec3(0.0), glm::dvec3(1.0), t0, t1)) return;
-    const glm::dvec3 a = glm::clamp(ro + t0 * rd, 0.0, 1.0), b = glm::clamp(ro + t1 * rd, 0.0, 1.0);
-
-    double f[kMaxRayDegree + 1];
-    const int degree = restrict_to_segment(p, c, a, b, f);
-    const glm::dmat3 to_world_gradient = glm::transpose(e.to_reference);  // ∇x f = A⁻ᵀ ∇ξ f
-    if (degree == 0) return;  // constant along the ray: no crossing
-    bernstein_roots(f, degree, [&](double s) {
-      const glm::dvec3 g = to_world_gradient * evaluate_tensor(p, c, a + s * (b - a)).gradient;
-      const double len = glm::length(g);
-      // At singular points (∇f = 0) the normal faces the viewer, as for analytic sources.
-      const glm::vec3 normal = len > 0.0 ? glm::vec3(g / len) : glm::vec3(-q->dir);
-      q->hits->push_back({s == 1.0 ? t1 : t0 + s * (t1 - t0), normal, 0.0f});
-    });
+    const Activation& act = self->active_;
+    intersect_element(act.order, act.elements[args->primID], act.coefficients_of(args->primID),
+                      q->org, q->dir, q->t_min, q->t_max, *q->hits);
   }
 
-  int order_;
-  std::size_t values_per_element_;
-  std::vector<ActiveElement> elements_;
-  std::vector<double> coefficients_;  // iso subtracted, values_per_element_ per active element
-  std::uint64_t nonfinite_;
+  Activation active_;
   UserGeometry geometry_;  // last: its callbacks read the members above
+};
+
+// ---------------------------------------------------------------------------------------------
+// The coherent caster of axis-parallel rays
+
+// The active elements binned by their boxes across one ray axis: a uniform grid over the two
+// other world axes (b < c), about one element wide, each element listed in every bin its box
+// touches.
+struct ElementBins {
+  int b = 0, c = 1;
+  double lo_b = 0.0, lo_c = 0.0, size_b = 1.0, size_c = 1.0;
+  int nb = 1, nc = 1;
+  std::vector<std::uint32_t> first;  // CSR over bins (b fastest)
+  std::vector<std::uint32_t> elements;
+
+  int bin_b(double x) const { return std::clamp(int(std::floor((x - lo_b) / size_b)), 0, nb - 1); }
+  int bin_c(double x) const { return std::clamp(int(std::floor((x - lo_c) / size_c)), 0, nc - 1); }
+};
+
+ElementBins bin_elements(const std::vector<ActiveElement>& elements, int axis) {
+  ElementBins bins;
+  bins.b = axis == 0 ? 1 : 0;
+  bins.c = axis == 2 ? 1 : 2;
+  const std::size_t n = elements.size();
+  if (n == 0) {
+    bins.first.assign(2, 0);
+    return bins;
+  }
+  double lo_b = INFINITY, hi_b = -INFINITY, lo_c = INFINITY, hi_c = -INFINITY;
+  std::vector<double> eb(n), ec(n);
+  for (std::size_t e = 0; e < n; ++e) {
+    const ActiveElement& el = elements[e];
+    lo_b = std::min(lo_b, el.lo[bins.b]), hi_b = std::max(hi_b, el.hi[bins.b]);
+    lo_c = std::min(lo_c, el.lo[bins.c]), hi_c = std::max(hi_c, el.hi[bins.c]);
+    eb[e] = el.hi[bins.b] - el.lo[bins.b];
+    ec[e] = el.hi[bins.c] - el.lo[bins.c];
+  }
+  // Bins as wide as the median element, at most 2048 per axis.
+  std::nth_element(eb.begin(), eb.begin() + n / 2, eb.end());
+  std::nth_element(ec.begin(), ec.begin() + n / 2, ec.end());
+  const auto layout = [](double lo, double hi, double median, double& size, int& count) {
+    const double extent = std::max(hi - lo, 1e-300);
+    count = int(std::clamp(std::ceil(extent / std::max(median, extent / 2048.0)), 1.0, 2048.0));
+    size = extent / count;
+  };
+  bins.lo_b = lo_b, bins.lo_c = lo_c;
+  layout(lo_b, hi_b, eb[n / 2], bins.size_b, bins.nb);
+  layout(lo_c, hi_c, ec[n / 2], bins.size_c, bins.nc);
+  const std::size_t cells = std::size_t(bins.nb) * std::size_t(bins.nc);
+  bins.first.assign(cells + 1, 0);
+  for (int pass = 0; pass < 2; ++pass) {
+    std::vector<std::uint32_t> next;
+    if (pass == 1) {
+      for (std::size_t k = 0; k < cells; ++k)
+        bins.first[k + 1] += bins.first[k];
+      bins.elements.resize(bins.first[cells]);
+      next.assign(bins.first.begin(), bins.first.end() - 1);
+    }
+    for (std::size_t e = 0; e < n; ++e) {
+      const ActiveElement& el = elements[e];
+      const int b0 = bins.bin_b(el.lo[bins.b]), b1 = bins.bin_b(el.hi[bins.b]);
+      const int c0 = bins.bin_c(el.lo[bins.c]), c1 = bins.bin_c(el.hi[bins.c]);
+      for (int cc = c0; cc <= c1; ++cc)
+        for (int bb = b0; bb <= b1; ++bb) {
+          const std::size_t k = std::size_t(bb) + std::size_t(bins.nb) * std::size_t(cc);
+          if (pass == 0)
+            ++bins.first[k + 1];
+          else
+            bins.elements[next[k]++] = std::uint32_t(e);
+        }
+    }
+  }
+  return bins;
+}
+
+// The polynomial along axis rays through one element, stage by stage (contract_x, _y, _z),
+// each stage kept while the segment's coordinates it depends on do not change: over a row of
+// pixels only the last stage is redone. The same arithmetic as restrict_to_segment, so the
+// same coefficients, to the bit. With exactly one reference axis moving along the ray, the
+// normal at a root comes from the same stages with the derivative basis across the ray
+// instead of a full evaluation of the tensor polynomial.
+class StagedRestriction {
+ public:
+  StagedRestriction(int p, const double* c) : p_(p), c_(c) {}
+
+  // Standard Bernstein coefficients along the segment a → b; returns the degree.
+  int restrict(glm::dvec3 a, glm::dvec3 b, double* f) {
+    if (!x_valid_ || a.x != ax_ || b.x != bx_) {
+      segment_basis(p_, a.x, b.x, basis_x_);  // (x_ depends on nothing else)
+      contract_x(p_, c_, basis_x_, x_);
+      ax_ = a.x, bx_ = b.x;
+      x_valid_ = true;
+      y_valid_ = dx_valid_ = dxy_valid_ = false;
+    }
+    if (!y_valid_ || a.y != ay_ || b.y != by_) {
+      segment_basis(p_, a.y, b.y, basis_y_);
+      contract_y(p_, x_, basis_x_.degree, basis_y_, y_);
+      ay_ = a.y, by_ = b.y;
+      y_valid_ = true;
+      dxy_valid_ = false;
+    }
+    if (!z_valid_ || a.z != az_ || b.z != bz_) {
+      segment_basis(p_, a.z, b.z, basis_z_);
+      az_ = a.z, bz_ = b.z;
+      z_valid_ = true;
+    }
+    a_ = a, b_ = b;
+    return contract_z(p_, y_, basis_x_.degree + basis_y_.degree, basis_z_, f);
+  }
+
+  // ∇ξ at parameter s of the last restrict()'s segment, whose coefficients are f[0..degree];
+  // false unless exactly one reference axis moves along it.
+  bool gradient(const double* f, int degree, double s, glm::dvec3& g) {
+    int moving = -1, count = 0;
+    for (int k = 0; k < 3; ++k)
+      if (a_[k] != b_[k]) moving = k, ++count;
+    if (count != 1) return false;
+    double value, derivative;
+    de_casteljau(f, degree, s, value, derivative);
+    g[moving] = derivative / (b_[moving] - a_[moving]);
+    double fd[kMaxRayDegree + 1];
+    AxisBasis d;
+    if (moving != 0) {  // ∂/∂ξ: the ξ stage with dB(ξ), then η and ζ as they are
+      if (!dx_valid_) {
+        derivative_basis(p_, a_.x, d);
+        contract_x(p_, c_, d, dx_);
+        dx_valid_ = true;
+      }
+      if (!dxy_valid_) {
+        contract_y(p_, dx_, 0, basis_y_, dxy_);
+        dxy_valid_ = true;
+      }
+      const int n = contract_z(p_, dxy_, basis_y_.degree, basis_z_, fd);
+      de_casteljau(fd, n, s, g.x, derivative);
+    }
+    if (moving != 1) {  // ∂/∂η
+      StageY y;
+      derivative_basis(p_, a_.y, d);
+      contract_y(p_, x_, basis_x_.degree, d, y);
+      const int n = contract_z(p_, y, basis_x_.degree, basis_z_, fd);
+      de_casteljau(fd, n, s, g.y, derivative);
+    }
+    if (moving != 2) {  // ∂/∂ζ
+      derivative_basis(p_, a_.z, d);
+      const int n = contract_z(p_, y_, basis_x_.degree + basis_y_.degree, d, fd);
+      de_casteljau(fd, n, s, g.z, derivative);
+    }
+    return true;
+  }
+
+ private:
+  int p_;
+  const double* c_;
+  AxisBasis basis_x_, basis_y_, basis_z_;
+  StageX x_, dx_;
+  StageY y_, dxy_;
+  double ax_ = 0, bx_ = 0, ay_ = 0, by_ = 0, az_ = 0, bz_ = 0;
+  bool x_valid_ = false, y_valid_ = false, z_valid_ = false, dx_valid_ = false,
+       dxy_valid_ = false;
+  glm::dvec3 a_{0.0}, b_{0.0};
+};
+
+// Object order for the pixel rays of axis views: each active element loops over the pixels its
+// box covers, each pixel's ray clipped to the element exactly as intersect_element clips it,
+// the polynomial along it from the staged restriction (rows of pixels share its first stages),
+// the roots by the same subdivision. Rays of other queries (single points) find their elements
+// through the bins. Both give the roots of the Embree binding, to the bit.
+class HexAxisBinding final : public AxisBinding {
+ public:
+  explicit HexAxisBinding(Activation active) : active_(std::move(active)) {}
+
+  std::size_t primitive_count() const override { return active_.elements.size(); }
+  std::uint64_t nonfinite_values() const override { return active_.nonfinite; }
+
+  void cast(const AxisRays& rays, std::vector<AxisHit>& out) const override {
+    if (active_.elements.empty() || rays.rays.empty()) return;
+    const int axis = rays.axis;
+    std::call_once(bins_once_[axis], [&] { bins_[axis] = bin_elements(active_.elements, axis); });
+    const ElementBins& bins = bins_[axis];
+    std::vector<RayHit> hits;
+    if (!rays.lattice) {
+      for (std::size_t k = 0; k < rays.rays.size(); ++k) {
+        const AxisRay& ray = rays.rays[k];
+        if (!(ray.t0 <= ray.t1)) continue;
+        const std::size_t bin = std::size_t(bins.bin_b(ray.org[bins.b])) +
+                                std::size_t(bins.nb) * std::size_t(bins.bin_c(ray.org[bins.c]));
+        hits.clear();
+        for (std::uint32_t m = bins.first[bin]; m < bins.first[bin + 1]; ++m) {
+          const std::uint32_t e = bins.elements[m];
+          intersect_element(active_.order, active_.elements[e], active_.coefficients_of(e),
+                            ray.org, rays.dir, ray.t0, ray.t1, hits);
+        }
+        for (const RayHit& h : hits)
+          out.push_back({std::uint32_t(k), h});
+      }
+      return;
+    }
+    // The rectangle the rays cover, in bins; each element once, from the first of its bins in
+    // the rectangle.
+    double lo_b = INFINITY, hi_b = -INFINITY, lo_c = INFINITY, hi_c = -INFINITY;
+    for (const AxisRay& ray : rays.rays) {
+      lo_b = std::min(lo_b, ray.org[bins.b]), hi_b = std::max(hi_b, ray.org[bins.b]);
+      lo_c = std::min(lo_c, ray.org[bins.c]), hi_c = std::max(hi_c, ray.org[bins.c]);
+    }
+    const int qb0 = bins.bin_b(lo_b), qb1 = bins.bin_b(hi_b);
+    const int qc0 = bins.bin_c(lo_c), qc1 = bins.bin_c(hi_c);
+    for (int cc = qc0; cc <= qc1; ++cc)
+      for (int bb = qb0; bb <= qb1; ++bb) {
+        const std::size_t bin = std::size_t(bb) + std::size_t(bins.nb) * std::size_t(cc);
+        for (std::uint32_t m = bins.first[bin]; m < bins.first[bin + 1]; ++m) {
+          const std::uint32_t e = bins.elements[m];
+          const ActiveElement& el = active_.elements[e];
+          if (std::max(bins.bin_b(el.lo[bins.b]), qb0) != bb ||
+              std::max(bins.bin_c(el.lo[bins.c]), qc0) != cc)
+            continue;
+          cast_element(e, rays, out);
+        }
+      }
+  }
+
+ private:
+  // The pixels of the lattice query `rays` that element e's box covers (a pixel of margin),
+  // in the order that keeps the staged restriction's first stages: rows of the image axis
+  // whose world axis maps to the lower of the two reference axes across the ray.
+  void cast_element(std::uint32_t e, const AxisRays& rays, std::vector<AxisHit>& out) const {
+    const View& view = *rays.lattice;
+    const ActiveElement& el = active_.elements[e];
+    const int ua = exact_axis(view.u), va = exact_axis(view.v);
+    const int rows = int(rays.rays.size() / std::size_t(view.width));
+    // Pixels whose centres lie in the box (an affine element lies in its box), with a margin
+    // far above rounding: the exact test is the clip below.
+    const auto pixel_range = [&](int axis, double sign, int count, int& first, int& last) {
+      const double x0 = (el.lo[axis] - view.origin[axis]) / (view.spacing * sign),
+                   x1 = (el.hi[axis] - view.origin[axis]) / (view.spacing * sign);
+      first = int(std::max(0.0, std::ceil(std::min(x0, x1) - 0.5 - 1e-6)));
+      last = int(std::min(double(count - 1), std::floor(std::max(x0, x1) - 0.5 + 1e-6)));
+    };
+    int i0, i1, j0, j1;
+    pixel_range(ua, view.u[ua], view.width, i0, i1);
+    pixel_range(va, view.v[va], view.height, j0, j1);
+    j0 = std::max(j0, rays.row_begin);
+    j1 = std::min(j1, rays.row_begin + rows - 1);
+    if (i0 > i1 || j0 > j1) return;
+
+    // The reference axis that moves along the ray, and which image axis holds the lower of the
+    // other two (keep it fixed in the outer loop).
+    const glm::dmat3& m = el.to_reference;
+    const auto reference_of = [&](int world) {  // the one reference axis a world axis maps to
+      int r = -1;
+      for (int k = 0; k < 3; ++k)
+        if (m[world][k] != 0.0) r = r < 0 ? k : 3;
+      return r;
+    };
+    const int ru = reference_of(ua), rv = reference_of(va);
+    const bool columns_outer = ru >= 0 && ru < 3 && rv >= 0 && rv < 3 && ru < rv;
+
+    const int p = active_.order;
+    const double* c = active_.coefficients_of(e);
+    const glm::dvec3 rd = el.to_reference * rays.dir;
+    const glm::dmat3 to_world_gradient = glm::transpose(el.to_reference);
+    StagedRestriction staged(p, c);
+    double f[kMaxRayDegree + 1];
+    const int outer0 = columns_outer ? i0 : j0, outer1 = columns_outer ? i1 : j1;
+    const int inner0 = columns_outer ? j0 : i0, inner1 = columns_outer ? j1 : i1;
+    for (int outer = outer0; outer <= outer1; ++outer)
+      for (int inner = inner0; inner <= inner1; ++inner) {
+        const int i = columns_outer ? outer : inner, j = columns_outer ? inner : outer;
+        const std::size_t k = std::size_t(j - rays.row_begin) * std::size_t(view.width) + i;
+        const AxisRay& ray = rays.rays[k];
+        if (!(ray.t0 <= ray.t1)) continue;
+        // As intersect_element does it.
+        const glm::dvec3 ro = el.to_reference * (ray.org - el.origin);
+        double t0 = ray.t0, t1 = ray.t1;
+        if (!clip_ray_to_box(ro, rd, glm::dvec3(0.0), glm::dvec3(1.0), t0, t1)) continue;
+        const glm::dvec3 a = glm::clamp(ro + t0 * rd, 0.0, 1.0),
+                         b = glm::clamp(ro + t1 * rd, 0.0, 1.0);
+        const int degree = staged.restrict(a, b, f);
+        if (degree == 0) continue;
+        bernstein_roots(f, degree, [&](double s) {
+          glm::dvec3 g;
+          if (!staged.gradient(f, degree, s, g)) g = evaluate_tensor(p, c, a + s * (b - a)).gradient;
+          g = to_world_gradient * g;
+          const double len = glm::length(g);
+          const glm::vec3 normal = len > 0.0 ? glm::vec3(g / len) : glm::vec3(-rays.dir);
+          out.push_back({std::uint32_t(k), {s == 1.0 ? t1 : t0 + s * (t1 - t0), normal, 0.0f}});
+        });
+      }
+  }
+
+  Activation active_;
+  mutable std::array<ElementBins, 3> bins_;
+  mutable std::array<std::once_flag, 3> bins_once_;
 };
 
 }  // namespace
@@ -619,23 +982,28 @@ void HexElementSource::element_bernstein(std::size_t element, std::span<double> 
   convert_element(p, conversion_matrix(p, block_.nodes), nodal, out.data());
 }
 
-std::unique_ptr<GeometryBinding> HexElementSource::bind(RTCDevice device, double isovalue) const {
-  const int p = block_.order;
+namespace {
+
+// The elements of `source` whose Bernstein coefficient range holds `isovalue`, with their
+// coefficients (iso subtracted) and frames, in element order (the same for any thread count).
+Activation activate(const HexElementSource& source, double isovalue) {
+  const HexBlock& block = source.block();
+  const int p = block.order;
   const std::size_t n = nodes_per_element(p);
-  const std::size_t count = block_.element_count;
+  const std::size_t count = block.element_count;
 
   // Pass 1: which elements may hold the isosurface (convex hull of the Bernstein coefficients).
   // Flags only, so memory does not grow with the block. An element with a non-finite nodal
   // value has no polynomial to intersect: it is left out.
   std::vector<std::uint8_t> active(count);
   std::atomic<std::uint64_t> nonfinite{0};
-  const ConversionMatrix& matrix = conversion_matrix(p, block_.nodes);
+  const ConversionMatrix& matrix = conversion_matrix(p, block.nodes);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 64),
                     [&](const tbb::blocked_range<std::size_t>& range) {
                       double nodal[kMaxElementValues], b[kMaxElementValues];
                       std::uint64_t bad = 0;
                       for (std::size_t e = range.begin(); e != range.end(); ++e) {
-                        if (const std::size_t k = read_nodal(block_, e, n, nodal); k > 0) {
+                        if (const std::size_t k = read_nodal(block, e, n, nodal); k > 0) {
                           bad += k;
                           active[e] = 0;
                           continue;
@@ -650,26 +1018,38 @@ std::unique_ptr<GeometryBinding> HexElementSource::bind(RTCDevice device, double
   for (std::size_t e = 0; e < count; ++e)
     if (active[e]) kept.push_back(e);
 
-  // Pass 2: the kept elements' coefficients (converted again: usually few are kept) and frames,
-  // in element order, so the binding is the same for any thread count.
-  std::vector<ActiveElement> elements(kept.size());
-  std::vector<double> coefficients(kept.size() * n);
+  // Pass 2: the kept elements' coefficients (converted again: usually few are kept) and frames.
+  Activation out;
+  out.order = p;
+  out.values_per_element = n;
+  out.nonfinite = nonfinite.load();
+  out.elements.resize(kept.size());
+  out.coefficients.resize(kept.size() * n);
   tbb::parallel_for(std::size_t(0), kept.size(), [&](std::size_t k) {
     const std::size_t e = kept[k];
-    const std::span<double> b(&coefficients[k * n], n);
-    element_bernstein(e, b);
+    const std::span<double> b(&out.coefficients[k * n], n);
+    source.element_bernstein(e, b);
     for (double& v : b)
       v -= isovalue;
-    const AffineFrame f = frame_of(block_.corners + 24 * e);
-    ActiveElement& out = elements[k];
-    out.origin = f.origin;
-    out.to_reference = glm::inverse(f.axes);
+    const AffineFrame f = frame_of(block.corners + 24 * e);
+    ActiveElement& el = out.elements[k];
+    el.origin = f.origin;
+    el.to_reference = glm::inverse(f.axes);
     const Box box = bounding_box(f);
-    out.lo = box.lo;
-    out.hi = box.hi;
+    el.lo = box.lo;
+    el.hi = box.hi;
   });
-  return std::make_unique<HexBinding>(device, p, std::move(elements), std::move(coefficients),
-                                      nonfinite.load());
+  return out;
+}
+
+}  // namespace
+
+std::unique_ptr<GeometryBinding> HexElementSource::bind(RTCDevice device, double isovalue) const {
+  return std::make_unique<HexBinding>(device, activate(*this, isovalue));
+}
+
+std::unique_ptr<AxisBinding> HexElementSource::bind_axis(double isovalue) const {
+  return std::make_unique<HexAxisBinding>(activate(*this, isovalue));
 }
 
 }  // namespace ldimesh

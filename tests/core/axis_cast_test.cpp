@@ -307,6 +307,142 @@ TEST(AxisCast, ObliqueViewsStillUseEmbree) {
   EXPECT_GT(a.sample_count(), 50u);
 }
 
+// ---------------------------------------------------------------------------------------------
+// High-order elements
+
+struct RandomElements {
+  std::vector<double> corners, values;
+  HexBlock block;
+  std::vector<double> lines;  // element face coordinates (dyadic: exact in image space)
+};
+
+// nx × ny × nz unit elements from (−1, −0.5, 0); `frame` picks each element's reference axes:
+// 0 axis-aligned, 1 permuted (ξ along y, η along z, ζ along x), 2 sheared (a parallelepiped
+// leaning along x). Nodal values from `value(x, y, z, rng)` at the nodes of order p.
+template <class Value>
+RandomElements random_elements(std::mt19937& rng, int p, NodeSet nodes, int nx, int ny, int nz,
+                               int frame, Value value) {
+  RandomElements r;
+  const std::vector<double> x = node_positions(p, nodes);
+  const int n = p + 1;
+  for (int ez = 0; ez < nz; ++ez)
+    for (int ey = 0; ey < ny; ++ey)
+      for (int ex = 0; ex < nx; ++ex) {
+        const glm::dvec3 o(-1.0 + ex, -0.5 + ey, 0.0 + ez);
+        glm::dvec3 e1(1, 0, 0), e2(0, 1, 0), e3(0, 0, 1);
+        if (frame == 1) e1 = {0, 1, 0}, e2 = {0, 0, 1}, e3 = {1, 0, 0};
+        if (frame == 2) e3 = {0.25, 0, 1};
+        const glm::dvec3 base = frame == 2 ? o + double(ez) * glm::dvec3(0.25, 0, 0) - double(ez) * glm::dvec3(1, 0, 0) * 0.0 : o;
+        for (int c = 0; c < 8; ++c) {
+          const glm::dvec3 q = base + double(c & 1) * e1 + double((c >> 1) & 1) * e2 + double((c >> 2) & 1) * e3;
+          r.corners.insert(r.corners.end(), {q.x, q.y, q.z});
+        }
+        for (int k = 0; k < n; ++k)
+          for (int j = 0; j < n; ++j)
+            for (int i = 0; i < n; ++i) {
+              const glm::dvec3 q = base + x[i] * e1 + x[j] * e2 + x[k] * e3;
+              r.values.push_back(value(q.x, q.y, q.z, rng));
+            }
+      }
+  r.block.order = p;
+  r.block.nodes = nodes;
+  r.block.element_count = std::size_t(nx) * ny * nz;
+  r.block.corners = r.corners.data();
+  r.block.values = r.values.data();
+  for (int i = 0; i <= std::max({nx, ny, nz}); ++i)
+    for (double o : {-1.0, -0.5, 0.0})
+      r.lines.push_back(o + i);
+  std::sort(r.lines.begin(), r.lines.end());
+  r.lines.erase(std::unique(r.lines.begin(), r.lines.end()), r.lines.end());
+  return r;
+}
+
+TEST(AxisCast, ElementsOfEveryOrderAndNodeSetGiveTheEmbreeHits) {
+  std::mt19937 rng(21);
+  std::uniform_real_distribution<double> noise(-0.3, 0.3);
+  std::size_t compared = 0;
+  for (int p = 1; p <= kMaxHexOrder; ++p)
+    for (NodeSet nodes :
+         {NodeSet::gauss_lobatto_legendre, NodeSet::gauss_legendre, NodeSet::equispaced}) {
+      const int frame = (p + int(nodes)) % 3;
+      // A smooth field (continuous across faces for GLL and equispaced nodes) with noise: several
+      // roots per ray, touching roots now and then.
+      RandomElements r = random_elements(
+          rng, p, nodes, 3, 2, 2, frame, [&](double x, double y, double z, std::mt19937& g) {
+            return std::sin(2.1 * x + 0.3) * std::cos(1.7 * y) + 0.5 * std::sin(2.3 * z + x) +
+                   (p > 2 ? noise(g) : 0.0);
+          });
+      const HexElementSource source(r.block);
+      const std::string what = "p " + std::to_string(p) + " nodes " + std::to_string(int(nodes)) +
+                               " frame " + std::to_string(frame);
+      compared += compare_casters(source, 0.05, 0.125, r.lines, rng, what);
+    }
+  EXPECT_GT(compared, 100000u);
+}
+
+TEST(AxisCast, ElementIsovaluesAtNodeValuesAndRaysOnElementFaces) {
+  // Integer nodal levels and the isovalue at one of them; rays on element faces and edges.
+  std::mt19937 rng(23);
+  std::uniform_int_distribution<int> level(-2, 2);
+  std::size_t compared = 0;
+  for (int p : {1, 2, 3, 5})
+    for (int frame = 0; frame < 3; ++frame) {
+      RandomElements r =
+          random_elements(rng, p, NodeSet::equispaced, 2, 2, 2, frame,
+                          [&](double, double, double, std::mt19937& g) { return double(level(g)); });
+      const HexElementSource source(r.block);
+      for (double iso : {0.0, 1.0}) {
+        const std::string what = "levels p " + std::to_string(p) + " frame " +
+                                 std::to_string(frame) + " iso " + std::to_string(iso);
+        compared += compare_casters(source, iso, 0.125, r.lines, rng, what);
+      }
+    }
+  EXPECT_GT(compared, 5000u);
+}
+
+TEST(AxisCast, ElementsWithNonFiniteValuesCountAndHitAlike) {
+  std::mt19937 rng(29);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  RandomElements r = random_elements(rng, 3, NodeSet::gauss_legendre, 3, 2, 2, 0,
+                                     [&](double x, double y, double z, std::mt19937& g) {
+                                       const double v = x * x + y * y + z * z - 1.2;
+                                       return unit(g) > 0.995
+                                                  ? std::numeric_limits<double>::quiet_NaN()
+                                                  : v;
+                                     });
+  const HexElementSource source(r.block);
+  const RayCaster fast(source, 0.0), reference(source, 0.0, kEmbree);
+  EXPECT_GT(fast.nonfinite_values(), 0u);
+  EXPECT_EQ(fast.nonfinite_values(), reference.nonfinite_values());
+  EXPECT_EQ(fast.primitive_count(), reference.primitive_count());
+  EXPECT_GT(compare_casters(source, 0.0, 0.125, r.lines, rng, "nonfinite elements"), 1000u);
+}
+
+TEST(AxisCast, ElementLdiIsTheSameForOneAndTwoThreads) {
+  std::mt19937 rng(31);
+  RandomElements r = random_elements(rng, 4, NodeSet::gauss_lobatto_legendre, 4, 3, 2, 0,
+                                     [](double x, double y, double z, std::mt19937&) {
+                                       return std::sin(3 * x) + std::cos(2 * y) * z;
+                                     });
+  const HexElementSource source(r.block);
+  const RayCaster caster(source, 0.2);
+  for (const View& view : signed_axis_views(source.bounds(), 96)) {
+    Ldi one, two;
+    {
+      tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
+      one = caster.cast(view);
+    }
+    {
+      tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 2);
+      two = caster.cast(view);
+    }
+    EXPECT_EQ(one.offsets, two.offsets);
+    EXPECT_EQ(one.depth, two.depth);
+    EXPECT_EQ(one.normal, two.normal);
+    EXPECT_GT(one.sample_count(), 100u);
+  }
+}
+
 }  // namespace
 }  // namespace ldimesh
 

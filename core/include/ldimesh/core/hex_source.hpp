@@ -95,6 +95,9 @@ class HexElementSource final : public FieldSource {
   // nonfinite_values() is the number of non-finite nodal values over all elements (the
   // (p + 1)³ values of each; padding up to element_stride is not read).
   std::unique_ptr<GeometryBinding> bind(RTCDevice device, double isovalue) const override;
+  // The same active elements for rays parallel to an axis: object order over the pixels each
+  // element covers (the same roots as bind()).
+  std::unique_ptr<AxisBinding> bind_axis(double isovalue) const override;
 
   // The block as given, with element_stride 0 replaced by (p + 1)³.
   const HexBlock& block() const { return block_; }
