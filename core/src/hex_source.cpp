@@ -682,22 +682,32 @@ class StagedRestriction {
  public:
   StagedRestriction(int p, const double* c) : p_(p), c_(c) {}
 
-  // Standard Bernstein coefficients along the segment a → b; returns the degree.
+  // Standard Bernstein coefficients along the segment a → b; returns the degree, or −1 when
+  // a stage's values all have one strict sign: the bases that follow are nonnegative and sum to
+  // one, so every coefficient of the polynomial has that sign, and it has no root (nor any
+  // coefficient that is exactly zero: the values are far above underflow).
   int restrict(glm::dvec3 a, glm::dvec3 b, double* f) {
     if (!x_valid_ || a.x != ax_ || b.x != bx_) {
-      segment_basis(p_, a.x, b.x, basis_x_);  // (x_ depends on nothing else)
+      segment_basis(p_, a.x, b.x, basis_x_);
       contract_x(p_, c_, basis_x_, x_);
       ax_ = a.x, bx_ = b.x;
       x_valid_ = true;
       y_valid_ = dx_valid_ = dxy_valid_ = false;
+      const int n = p_ + 1;
+      x_uniform_ = one_sign(&x_.g[0][0][0], n, n, kMaxNodes * kMaxNodes, kMaxNodes,
+                            basis_x_.degree + 1);
     }
+    if (x_uniform_) return -1;
     if (!y_valid_ || a.y != ay_ || b.y != by_) {
       segment_basis(p_, a.y, b.y, basis_y_);
       contract_y(p_, x_, basis_x_.degree, basis_y_, y_);
       ay_ = a.y, by_ = b.y;
       y_valid_ = true;
       dxy_valid_ = false;
+      y_uniform_ = one_sign(&y_.h[0][0], p_ + 1, 1, 2 * kMaxHexOrder + 1, 0,
+                            basis_x_.degree + basis_y_.degree + 1);
     }
+    if (y_uniform_) return -1;
     if (!z_valid_ || a.z != az_ || b.z != bz_) {
       segment_basis(p_, a.z, b.z, basis_z_);
       az_ = a.z, bz_ = b.z;
@@ -748,8 +758,24 @@ class StagedRestriction {
   }
 
  private:
+  // Whether values v[i·si + j·sj + l] (i < ni, j < nj, l < nl) all have one strict sign, none
+  // near underflow.
+  static bool one_sign(const double* v, int ni, int nj, int si, int sj, int nl) {
+    constexpr double kTiny = 1e-250;
+    bool all_positive = true, all_negative = true;
+    for (int i = 0; i < ni; ++i)
+      for (int j = 0; j < nj; ++j)
+        for (int l = 0; l < nl; ++l) {
+          const double x = v[i * si + j * sj + l];
+          all_positive = all_positive && x > kTiny;
+          all_negative = all_negative && x < -kTiny;
+        }
+    return all_positive || all_negative;
+  }
+
   int p_;
   const double* c_;
+  bool x_uniform_ = false, y_uniform_ = false;
   AxisBasis basis_x_, basis_y_, basis_z_;
   StageX x_, dx_;
   StageY y_, dxy_;
@@ -874,7 +900,7 @@ class HexAxisBinding final : public AxisBinding {
         const glm::dvec3 a = glm::clamp(ro + t0 * rd, 0.0, 1.0),
                          b = glm::clamp(ro + t1 * rd, 0.0, 1.0);
         const int degree = staged.restrict(a, b, f);
-        if (degree == 0) continue;
+        if (degree <= 0) continue;  // constant along the ray, or no root possible
         bernstein_roots(f, degree, [&](double s) {
           glm::dvec3 g;
           if (!staged.gradient(f, degree, s, g)) g = evaluate_tensor(p, c, a + s * (b - a)).gradient;
