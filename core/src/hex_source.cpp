@@ -379,13 +379,21 @@ void contract_y(int p, const StageX& x, int dx, const AxisBasis& by, StageY& out
 }
 // The ζ stage: the standard Bernstein coefficients f[0..degree] along the segment; returns the
 // degree dxy + bz.degree.
-int contract_z(int p, const StageY& y, int dxy, const AxisBasis& bz, double* f) {
+// The ζ stage in the scaled basis (before the division by the binomials).
+int contract_z_scaled(int p, const StageY& y, int dxy, const AxisBasis& bz, double* f) {
   const int n = p + 1, degree = dxy + bz.degree;
   std::fill(f, f + degree + 1, 0.0);
   for (int k = 0; k < n; ++k)
     convolve_add(y.h[k], dxy, bz.b[k], bz.degree, f);
+  return degree;
+}
+void scaled_to_standard(int degree, double* f) {
   for (int l = 0; l <= degree; ++l)
     f[l] /= kBinomial[degree][l];
+}
+int contract_z(int p, const StageY& y, int dxy, const AxisBasis& bz, double* f) {
+  const int degree = contract_z_scaled(p, y, dxy, bz, f);
+  scaled_to_standard(degree, f);
   return degree;
 }
 
@@ -714,7 +722,12 @@ class StagedRestriction {
       z_valid_ = true;
     }
     a_ = a, b_ = b;
-    return contract_z(p_, y_, basis_x_.degree + basis_y_.degree, basis_z_, f);
+    const int degree = contract_z_scaled(p_, y_, basis_x_.degree + basis_y_.degree, basis_z_, f);
+    // Scaled and standard coefficients differ by positive factors: one strict sign in the
+    // scaled ones (far above underflow) means no root, and the divisions can wait.
+    if (degree > 0 && one_sign(f, 1, 1, 0, 0, degree + 1)) return -1;
+    scaled_to_standard(degree, f);
+    return degree;
   }
 
   // ∇ξ at parameter s of the last restrict()'s segment, whose coefficients are f[0..degree];

@@ -318,6 +318,30 @@ TEST(FragmentCodec, LossyRoundTripOfRayCastSurfacesWithinBounds) {
   EXPECT_LT(depth_error_bound({}, 0.0, 3.0), 1e-3 * 3.0 / 128);
 }
 
+TEST(FragmentCodec, QuantizingInPlaceGivesTheRoundTripsFragment) {
+  std::vector<LdiFragment> fragments = torus_fragments();
+  const std::vector<LdiFragment> barth = cast_fragments("barth", 96);
+  fragments.insert(fragments.end(), barth.begin(), barth.end());
+  fragments.push_back(edge_case_fragment(false));
+  fragments.push_back(edge_case_fragment(true));
+  for (const FragmentEncoding& e :
+       {FragmentEncoding{}, FragmentEncoding{.depth_bits = 1, .normal_bits = 2},
+        FragmentEncoding{.depth_bits = 24, .normal_bits = 16},
+        FragmentEncoding{.lossless = true}}) {
+    for (const LdiFragment& f : fragments) {
+      LdiFragment q = f;
+      quantize_fragment(q, e);
+      expect_exact(decoded(encode_fragment(f, e)), q);
+      if (!e.lossless && f.sample_count() > 1000) {
+        EXPECT_FALSE(same_bits(q.depth, f.depth));
+      }
+    }
+  }
+  LdiFragment bad = edge_case_fragment(false);
+  bad.normal[0] = glm::vec3(0.0f);
+  EXPECT_THROW(quantize_fragment(bad), std::invalid_argument);
+}
+
 TEST(FragmentCodec, LossyRoundTripOfEdgeCasesWithinBounds) {
   for (bool with_scalar : {false, true})
     for (const FragmentEncoding& e :

@@ -521,9 +521,8 @@ Status decode(std::span<const std::uint8_t> bytes, LdiFragment& out) {
   return Status::ok();
 }
 
-}  // namespace
-
-std::vector<std::uint8_t> encode_fragment(const LdiFragment& f, const FragmentEncoding& e) {
+// What encode_fragment requires of a fragment; throws std::invalid_argument otherwise.
+void check_encodable(const LdiFragment& f, const FragmentEncoding& e) {
   check_encoding(e);
   if (Status s = validate_fragment(f); !s)
     throw std::invalid_argument("encode_fragment: " + s.message());
@@ -538,6 +537,28 @@ std::vector<std::uint8_t> encode_fragment(const LdiFragment& f, const FragmentEn
     if (!std::isfinite(n.x) || !std::isfinite(n.y) || !std::isfinite(n.z) ||
         (n.x == 0.0f && n.y == 0.0f && n.z == 0.0f))
       throw std::invalid_argument("encode_fragment: a normal is zero or not finite");
+}
+
+}  // namespace
+
+void quantize_fragment(LdiFragment& f, const FragmentEncoding& e) {
+  check_encodable(f, e);
+  if (e.lossless) return;
+  // The encoder's quantizers and the decoder's reconstruction; prediction and zstd are
+  // lossless, so this is decode_fragment(encode_fragment(f)).
+  const DepthQuantizer dq(effective_depth_bits(e.depth_bits, f.depth_lo, f.depth_hi), f.depth_lo,
+                          f.depth_hi);
+  const NormalQuantizer nq(e.normal_bits);
+  for (std::size_t s = 0; s < f.depth.size(); ++s) {
+    f.depth[s] = dq.dequantize(dq.quantize(f.depth[s]));
+    std::uint32_t u = 0, v = 0;
+    nq.quantize(f.normal[s], u, v);
+    f.normal[s] = nq.dequantize(u, v);
+  }
+}
+
+std::vector<std::uint8_t> encode_fragment(const LdiFragment& f, const FragmentEncoding& e) {
+  check_encodable(f, e);
 
   Header h;
   h.flags =

@@ -6,6 +6,8 @@
 #include <stdexcept>
 #include <string>
 
+#include <tbb/parallel_for.h>
+
 #include "ldimesh/core/timing.hpp"
 
 namespace ldimesh {
@@ -48,8 +50,10 @@ std::vector<std::uint8_t> pack(const std::vector<LdiFragment>& fragments,
   put_u32(out, kEnvelopeMagic);
   put_u32(out, upstream_error ? kUpstreamError : 0);
   put_u32(out, std::uint32_t(fragments.size()));
-  for (const LdiFragment& f : fragments) {
-    const std::vector<std::uint8_t> bytes = encode_fragment(f, encoding);
+  std::vector<std::vector<std::uint8_t>> encoded(fragments.size());
+  tbb::parallel_for(std::size_t(0), fragments.size(),
+                    [&](std::size_t v) { encoded[v] = encode_fragment(fragments[v], encoding); });
+  for (const std::vector<std::uint8_t>& bytes : encoded) {
     put_u64(out, bytes.size());
     out.insert(out.end(), bytes.begin(), bytes.end());
   }
@@ -96,21 +100,24 @@ Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragm
   // the result does not depend on which rank a sample came from (nor on the number of ranks).
   {
     const auto t = std::chrono::steady_clock::now();
-    for (LdiFragment& f : fragments) {
+    std::vector<std::string> errors(fragments.size());
+    tbb::parallel_for(std::size_t(0), fragments.size(), [&](std::size_t v) {
+      LdiFragment& f = fragments[v];
       try {
-        const std::vector<std::uint8_t> bytes = encode_fragment(f, encoding);
-        if (Status s = decode_fragment(bytes, f); !s) status = s;
+        quantize_fragment(f, encoding);
       } catch (const std::exception& e) {
         // Never leave the collective: go on with the fragment emptied (its view kept), and
         // report the failure up the tree.
-        status = Status::error(std::string("reduction: ") + e.what());
+        errors[v] = std::string("reduction: ") + e.what();
         f.pixels.clear();
         f.counts.clear();
         f.depth.clear();
         f.normal.clear();
         f.scalar.clear();
       }
-    }
+    });
+    for (const std::string& error : errors)
+      if (!error.empty()) status = Status::error(error);
     stats.encode_seconds += seconds_since(t);
   }
 

@@ -53,6 +53,12 @@ struct FragmentEncoding {
 std::vector<std::uint8_t> encode_fragment(const LdiFragment& fragment,
                                           const FragmentEncoding& encoding = {});
 
+// `fragment` as decode_fragment(encode_fragment(fragment, encoding)) gives it back, without the
+// encoding: the depths and normals quantized and reconstructed in place. Same requirements and
+// exceptions as encode_fragment. A rank's own samples take this path (they need the values the
+// other ranks' samples arrive with, not the bytes).
+void quantize_fragment(LdiFragment& fragment, const FragmentEncoding& encoding = {});
+
 // Decodes `bytes` into `out`. Validates the header, every size and count, the checksum and the
 // decoded fragment's invariants before use: truncated, corrupted or hostile input returns an
 // error Status ("fragment: ...") and never reads out of bounds, never throws, and allocates
