@@ -246,7 +246,7 @@ Box bounding_box(const AffineFrame& f) {
 
 // B_i^p(x) and dB_i^p/dx for i = 0..p, from the triangle B_i^r = (1 − x) B_i^{r−1} + x
 // B_{i−1}^{r−1} and dB_i^p/dx = p (B_{i−1}^{p−1} − B_i^{p−1}).
-void bernstein_basis(int p, double x, double* value, double* derivative) {
+[[gnu::always_inline]] inline void bernstein_basis(int p, double x, double* value, double* derivative) {
   double b[kMaxNodes] = {1.0};
   for (int r = 1; r < p; ++r) {
     b[r] = x * b[r - 1];
@@ -290,7 +290,7 @@ PolynomialSample evaluate_tensor(int p, const double* coefficients, glm::dvec3 r
 // by C(n, i) (Farouki & Rajan 1988, "Algorithms for polynomials in Bernstein form").
 
 // out[0..m+n] = a[0..m] ⊛ b[0..n], accumulated.
-void convolve_add(const double* a, int m, const double* b, int n, double* out) {
+[[gnu::always_inline]] inline void convolve_add(const double* a, int m, const double* b, int n, double* out) {
   for (int i = 0; i <= m; ++i)
     for (int j = 0; j <= n; ++j)
       out[i + j] += a[i] * b[j];
@@ -299,7 +299,7 @@ void convolve_add(const double* a, int m, const double* b, int n, double* out) {
 // Scaled coefficients in s of B_i^p(x(s)), i = 0..p, for x(s) = xa (1 − s) + xb s. Returns their
 // degree in s: p, or 0 where the segment does not move along this axis (xa == xb, as for an
 // axis-aligned ray through an axis-aligned element), which keeps the degree along the ray low.
-int basis_along_segment(int p, double xa, double xb, double (*basis)[kMaxNodes]) {
+[[gnu::always_inline]] inline int basis_along_segment(int p, double xa, double xb, double (*basis)[kMaxNodes]) {
   if (xa == xb) {
     double value[kMaxNodes], derivative[kMaxNodes];
     bernstein_basis(p, xa, value, derivative);
@@ -336,11 +336,11 @@ struct AxisBasis {
   int degree = 0;
   double b[kMaxNodes][kMaxNodes];
 };
-void segment_basis(int p, double xa, double xb, AxisBasis& out) {
+[[gnu::always_inline]] inline void segment_basis(int p, double xa, double xb, AxisBasis& out) {
   out.degree = basis_along_segment(p, xa, xb, out.b);
 }
 // dB_i^p/dx at x, as a degree-0 basis (a derivative across the segment).
-void derivative_basis(int p, double x, AxisBasis& out) {
+[[gnu::always_inline]] inline void derivative_basis(int p, double x, AxisBasis& out) {
   double value[kMaxNodes], derivative[kMaxNodes];
   bernstein_basis(p, x, value, derivative);
   out.degree = 0;
@@ -352,7 +352,7 @@ void derivative_basis(int p, double x, AxisBasis& out) {
 struct StageX {
   double g[kMaxNodes][kMaxNodes][kMaxNodes];
 };
-void contract_x(int p, const double* c, const AxisBasis& bx, StageX& out) {
+[[gnu::always_inline]] inline void contract_x(int p, const double* c, const AxisBasis& bx, StageX& out) {
   const int n = p + 1, dx = bx.degree;
   for (int k = 0; k < n; ++k)
     for (int j = 0; j < n; ++j) {
@@ -368,7 +368,7 @@ void contract_x(int p, const double* c, const AxisBasis& bx, StageX& out) {
 struct StageY {
   double h[kMaxNodes][2 * kMaxHexOrder + 1];
 };
-void contract_y(int p, const StageX& x, int dx, const AxisBasis& by, StageY& out) {
+[[gnu::always_inline]] inline void contract_y(int p, const StageX& x, int dx, const AxisBasis& by, StageY& out) {
   const int n = p + 1;
   for (int k = 0; k < n; ++k) {
     double* h = out.h[k];
@@ -380,14 +380,14 @@ void contract_y(int p, const StageX& x, int dx, const AxisBasis& by, StageY& out
 // The ζ stage: the standard Bernstein coefficients f[0..degree] along the segment; returns the
 // degree dxy + bz.degree.
 // The ζ stage in the scaled basis (before the division by the binomials).
-int contract_z_scaled(int p, const StageY& y, int dxy, const AxisBasis& bz, double* f) {
+[[gnu::always_inline]] inline int contract_z_scaled(int p, const StageY& y, int dxy, const AxisBasis& bz, double* f) {
   const int n = p + 1, degree = dxy + bz.degree;
   std::fill(f, f + degree + 1, 0.0);
   for (int k = 0; k < n; ++k)
     convolve_add(y.h[k], dxy, bz.b[k], bz.degree, f);
   return degree;
 }
-void scaled_to_standard(int degree, double* f) {
+[[gnu::always_inline]] inline void scaled_to_standard(int degree, double* f) {
   for (int l = 0; l <= degree; ++l)
     f[l] /= kBinomial[degree][l];
 }
@@ -416,7 +416,7 @@ int restrict_to_segment(int p, const double* c, glm::dvec3 a, glm::dvec3 b, doub
 // Roots of a univariate Bernstein polynomial on [0, 1]
 
 // Value and derivative at u of the Bernstein polynomial c[0..n] on [0, 1] (de Casteljau).
-void de_casteljau(const double* c, int n, double u, double& value, double& derivative) {
+[[gnu::always_inline]] inline void de_casteljau(const double* c, int n, double u, double& value, double& derivative) {
   double w[kMaxRayDegree + 1];
   std::copy(c, c + n + 1, w);
   for (int r = n; r > 1; --r)
@@ -428,7 +428,7 @@ void de_casteljau(const double* c, int n, double u, double& value, double& deriv
 
 // Splits c[0..n] at 1/2 into the coefficients of the left and right halves (de Casteljau). The
 // halves share their middle coefficient exactly, so sign tests at the split agree.
-void split_in_half(const double* c, int n, double* left, double* right) {
+[[gnu::always_inline]] inline void split_in_half(const double* c, int n, double* left, double* right) {
   double w[kMaxRayDegree + 1];
   std::copy(c, c + n + 1, w);
   left[0] = w[0];
@@ -441,7 +441,7 @@ void split_in_half(const double* c, int n, double* left, double* right) {
   }
 }
 
-int sign_variations(const double* c, int n) {
+[[gnu::always_inline]] inline int sign_variations(const double* c, int n) {
   int v = 0;
   for (int i = 0; i < n; ++i)
     v += positive(c[i]) != positive(c[i + 1]);
@@ -450,7 +450,7 @@ int sign_variations(const double* c, int n) {
 
 // The single root in [0, 1] of c[0..n], whose end values c[0] and c[n] differ in sign: Newton
 // steps from a regula falsi start, falling back to bisection whenever they leave the bracket.
-double converge(const double* c, int n, double tol) {
+[[gnu::always_inline]] inline double converge(const double* c, int n, double tol) {
   if (c[n] == 0.0) return 1.0;  // exactly at the end: keep it exact (the half-open rule needs it)
   double a = 0.0, b = 1.0, ga = c[0];
   double u = c[0] / (c[0] - c[n]);
@@ -486,7 +486,7 @@ double converge(const double* c, int n, double tol) {
 // no sign change. One: the end coefficients (the end values) differ in sign, so exactly one
 // simple root. More: split in half and look again.
 template <class Found>
-void bernstein_roots(const double* c, int n, Found found) {
+[[gnu::always_inline]] inline void bernstein_roots(const double* c, int n, Found found) {
   struct Piece {
     double s0, s1;
     double c[kMaxRayDegree + 1];
@@ -686,9 +686,10 @@ ElementBins bin_elements(const std::vector<ActiveElement>& elements, int axis) {
 // same coefficients, to the bit. With exactly one reference axis moving along the ray, the
 // normal at a root comes from the same stages with the derivative basis across the ray
 // instead of a full evaluation of the tensor polynomial.
+template <int P>
 class StagedRestriction {
  public:
-  StagedRestriction(int p, const double* c) : p_(p), c_(c) {}
+  explicit StagedRestriction(const double* c) : c_(c) {}
 
   // Standard Bernstein coefficients along the segment a → b; returns the degree, or −1 when
   // a stage's values all have one strict sign: the bases that follow are nonnegative and sum to
@@ -786,7 +787,7 @@ class StagedRestriction {
     return all_positive || all_negative;
   }
 
-  int p_;
+  static constexpr int p_ = P;
   const double* c_;
   bool x_uniform_ = false, y_uniform_ = false;
   AxisBasis basis_x_, basis_y_, basis_z_;
@@ -861,6 +862,22 @@ class HexAxisBinding final : public AxisBinding {
   // in the order that keeps the staged restriction's first stages: rows of the image axis
   // whose world axis maps to the lower of the two reference axes across the ray.
   void cast_element(std::uint32_t e, const AxisRays& rays, std::vector<AxisHit>& out) const {
+    // The order as a constant: the stages' loops unroll.
+    switch (active_.order) {
+      case 1: return cast_element_order<1>(e, rays, out);
+      case 2: return cast_element_order<2>(e, rays, out);
+      case 3: return cast_element_order<3>(e, rays, out);
+      case 4: return cast_element_order<4>(e, rays, out);
+      case 5: return cast_element_order<5>(e, rays, out);
+      case 6: return cast_element_order<6>(e, rays, out);
+      case 7: return cast_element_order<7>(e, rays, out);
+      default: return cast_element_order<8>(e, rays, out);
+    }
+  }
+  static_assert(kMaxHexOrder == 8);
+
+  template <int P>
+  void cast_element_order(std::uint32_t e, const AxisRays& rays, std::vector<AxisHit>& out) const {
     const View& view = *rays.lattice;
     const ActiveElement& el = active_.elements[e];
     const int ua = exact_axis(view.u), va = exact_axis(view.v);
@@ -892,11 +909,11 @@ class HexAxisBinding final : public AxisBinding {
     const int ru = reference_of(ua), rv = reference_of(va);
     const bool columns_outer = ru >= 0 && ru < 3 && rv >= 0 && rv < 3 && ru < rv;
 
-    const int p = active_.order;
+    constexpr int p = P;
     const double* c = active_.coefficients_of(e);
     const glm::dvec3 rd = el.to_reference * rays.dir;
     const glm::dmat3 to_world_gradient = glm::transpose(el.to_reference);
-    StagedRestriction staged(p, c);
+    StagedRestriction<P> staged(c);
     double f[kMaxRayDegree + 1];
     const int outer0 = columns_outer ? i0 : j0, outer1 = columns_outer ? i1 : j1;
     const int inner0 = columns_outer ? j0 : i0, inner1 = columns_outer ? j1 : i1;
@@ -914,14 +931,18 @@ class HexAxisBinding final : public AxisBinding {
                          b = glm::clamp(ro + t1 * rd, 0.0, 1.0);
         const int degree = staged.restrict(a, b, f);
         if (degree <= 0) continue;  // constant along the ray, or no root possible
-        bernstein_roots(f, degree, [&](double s) {
+        const auto found = [&](double s) {
           glm::dvec3 g;
           if (!staged.gradient(f, degree, s, g)) g = evaluate_tensor(p, c, a + s * (b - a)).gradient;
           g = to_world_gradient * g;
           const double len = glm::length(g);
           const glm::vec3 normal = len > 0.0 ? glm::vec3(g / len) : glm::vec3(-rays.dir);
           out.push_back({std::uint32_t(k), {s == 1.0 ? t1 : t0 + s * (t1 - t0), normal, 0.0f}});
-        });
+        };
+        if (degree == P)  // one reference axis along the ray: the degree as a constant
+          bernstein_roots(f, P, found);
+        else
+          bernstein_roots(f, degree, found);
       }
   }
 
