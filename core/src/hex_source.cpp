@@ -289,8 +289,20 @@ PolynomialSample evaluate_tensor(int p, const double* coefficients, glm::dvec3 r
 // s^i (1 − s)^(n−i); coefficient i of a standard Bernstein polynomial is the scaled one divided
 // by C(n, i) (Farouki & Rajan 1988, "Algorithms for polynomials in Bernstein form").
 
-// out[0..m+n] = a[0..m] ⊛ b[0..n], accumulated.
-[[gnu::always_inline]] inline void convolve_add(const double* a, int m, const double* b, int n, double* out) {
+// out[0..m+n] = a[0..m] ⊛ b[0..n], accumulated. A factor of degree 0 (an axis the segment does
+// not move along) is a scaling, with the same operations in the same order.
+[[gnu::always_inline]] inline void convolve_add(const double* a, int m, const double* b, int n,
+                                                double* out) {
+  if (n == 0) {
+    for (int i = 0; i <= m; ++i)
+      out[i] += a[i] * b[0];
+    return;
+  }
+  if (m == 0) {
+    for (int j = 0; j <= n; ++j)
+      out[j] += a[0] * b[j];
+    return;
+  }
   for (int i = 0; i <= m; ++i)
     for (int j = 0; j <= n; ++j)
       out[i + j] += a[i] * b[j];
@@ -684,8 +696,9 @@ ElementBins bin_elements(const std::vector<ActiveElement>& elements, int axis) {
 // each stage kept while the segment's coordinates it depends on do not change: over a row of
 // pixels only the last stage is redone. The same arithmetic as restrict_to_segment, so the
 // same coefficients, to the bit. With exactly one reference axis moving along the ray, the
-// normal at a root comes from the same stages with the derivative basis across the ray
-// instead of a full evaluation of the tensor polynomial.
+// gradient at a root reuses the ξ stage (when ξ is fixed along the ray) and contracts the
+// rest with the 1-D bases and derivatives at the point: (p + 1)² work instead of the full
+// tensor evaluation's (p + 1)³.
 template <int P>
 class StagedRestriction {
  public:
@@ -701,7 +714,7 @@ class StagedRestriction {
       contract_x(p_, c_, basis_x_, x_);
       ax_ = a.x, bx_ = b.x;
       x_valid_ = true;
-      y_valid_ = dx_valid_ = dxy_valid_ = false;
+      y_valid_ = dx_valid_ = false;
       const int n = p_ + 1;
       x_uniform_ = one_sign(&x_.g[0][0][0], n, n, kMaxNodes * kMaxNodes, kMaxNodes,
                             basis_x_.degree + 1);
@@ -712,7 +725,6 @@ class StagedRestriction {
       contract_y(p_, x_, basis_x_.degree, basis_y_, y_);
       ay_ = a.y, by_ = b.y;
       y_valid_ = true;
-      dxy_valid_ = false;
       y_uniform_ = one_sign(&y_.h[0][0], p_ + 1, 1, 2 * kMaxHexOrder + 1, 0,
                             basis_x_.degree + basis_y_.degree + 1);
     }
@@ -731,42 +743,58 @@ class StagedRestriction {
     return degree;
   }
 
-  // ∇ξ at parameter s of the last restrict()'s segment, whose coefficients are f[0..degree];
-  // false unless exactly one reference axis moves along it.
-  bool gradient(const double* f, int degree, double s, glm::dvec3& g) {
-    int moving = -1, count = 0;
+  // ∇ξ at parameter s of the last restrict()'s segment; false unless exactly one reference axis
+  // moves along it. The ξ stage is reused where ξ is fixed along the ray.
+  bool gradient(double s, glm::dvec3& g) {
+    int count = 0;
     for (int k = 0; k < 3; ++k)
-      if (a_[k] != b_[k]) moving = k, ++count;
+      count += a_[k] != b_[k];
     if (count != 1) return false;
-    double value, derivative;
-    de_casteljau(f, degree, s, value, derivative);
-    g[moving] = derivative / (b_[moving] - a_[moving]);
-    double fd[kMaxRayDegree + 1];
-    AxisBasis d;
-    if (moving != 0) {  // ∂/∂ξ: the ξ stage with dB(ξ), then η and ζ as they are
+    // The hit's reference point, as evaluate_tensor would be given it, and the 1-D bases and
+    // their derivatives there.
+    const glm::dvec3 q = a_ + s * (b_ - a_);
+    double vy[kMaxNodes], dy[kMaxNodes], vz[kMaxNodes], dz[kMaxNodes];
+    bernstein_basis(p_, q.y, vy, dy);
+    bernstein_basis(p_, q.z, vz, dz);
+    // G_kj = Σ_i c_ijk B_i(ξ) and its ξ-derivative: the ξ stage itself where ξ is fixed along
+    // the ray (kept over the row), else contracted at the point.
+    double gv[kMaxNodes][kMaxNodes], gd[kMaxNodes][kMaxNodes];
+    constexpr int n = P + 1;
+    if (a_.x == b_.x) {
       if (!dx_valid_) {
+        AxisBasis d;
         derivative_basis(p_, a_.x, d);
         contract_x(p_, c_, d, dx_);
         dx_valid_ = true;
       }
-      if (!dxy_valid_) {
-        contract_y(p_, dx_, 0, basis_y_, dxy_);
-        dxy_valid_ = true;
+      for (int k = 0; k < n; ++k)
+        for (int j = 0; j < n; ++j)
+          gv[k][j] = x_.g[k][j][0], gd[k][j] = dx_.g[k][j][0];
+    } else {
+      double vx[kMaxNodes], dxb[kMaxNodes];
+      bernstein_basis(p_, q.x, vx, dxb);
+      for (int k = 0; k < n; ++k)
+        for (int j = 0; j < n; ++j) {
+          const double* row = c_ + n * (j + n * k);
+          double v = 0.0, d = 0.0;
+          for (int i = 0; i < n; ++i) {
+            v += row[i] * vx[i];
+            d += row[i] * dxb[i];
+          }
+          gv[k][j] = v, gd[k][j] = d;
+        }
+    }
+    g = glm::dvec3(0.0);
+    for (int k = 0; k < n; ++k) {
+      double sx = 0.0, sy = 0.0, sz = 0.0;
+      for (int j = 0; j < n; ++j) {
+        sx += gd[k][j] * vy[j];
+        sy += gv[k][j] * dy[j];
+        sz += gv[k][j] * vy[j];
       }
-      const int n = contract_z(p_, dxy_, basis_y_.degree, basis_z_, fd);
-      de_casteljau(fd, n, s, g.x, derivative);
-    }
-    if (moving != 1) {  // ∂/∂η
-      StageY y;
-      derivative_basis(p_, a_.y, d);
-      contract_y(p_, x_, basis_x_.degree, d, y);
-      const int n = contract_z(p_, y, basis_x_.degree, basis_z_, fd);
-      de_casteljau(fd, n, s, g.y, derivative);
-    }
-    if (moving != 2) {  // ∂/∂ζ
-      derivative_basis(p_, a_.z, d);
-      const int n = contract_z(p_, y_, basis_x_.degree + basis_y_.degree, d, fd);
-      de_casteljau(fd, n, s, g.z, derivative);
+      g.x += sx * vz[k];
+      g.y += sy * vz[k];
+      g.z += sz * dz[k];
     }
     return true;
   }
@@ -792,10 +820,9 @@ class StagedRestriction {
   bool x_uniform_ = false, y_uniform_ = false;
   AxisBasis basis_x_, basis_y_, basis_z_;
   StageX x_, dx_;
-  StageY y_, dxy_;
+  StageY y_;
   double ax_ = 0, bx_ = 0, ay_ = 0, by_ = 0, az_ = 0, bz_ = 0;
-  bool x_valid_ = false, y_valid_ = false, z_valid_ = false, dx_valid_ = false,
-       dxy_valid_ = false;
+  bool x_valid_ = false, y_valid_ = false, z_valid_ = false, dx_valid_ = false;
   glm::dvec3 a_{0.0}, b_{0.0};
 };
 
@@ -933,7 +960,7 @@ class HexAxisBinding final : public AxisBinding {
         if (degree <= 0) continue;  // constant along the ray, or no root possible
         const auto found = [&](double s) {
           glm::dvec3 g;
-          if (!staged.gradient(f, degree, s, g)) g = evaluate_tensor(p, c, a + s * (b - a)).gradient;
+          if (!staged.gradient(s, g)) g = evaluate_tensor(p, c, a + s * (b - a)).gradient;
           g = to_world_gradient * g;
           const double len = glm::length(g);
           const glm::vec3 normal = len > 0.0 ? glm::vec3(g / len) : glm::vec3(-rays.dir);
