@@ -465,7 +465,14 @@ int restrict_to_segment(int p, const double* c, glm::dvec3 a, glm::dvec3 b, doub
 [[gnu::always_inline]] inline double converge(const double* c, int n, double tol) {
   if (c[n] == 0.0) return 1.0;  // exactly at the end: keep it exact (the half-open rule needs it)
   double a = 0.0, b = 1.0, ga = c[0];
-  double u = c[0] / (c[0] - c[n]);
+  // Start where the control polygon crosses zero (its one sign change): far closer than the
+  // chord from c[0] to c[n] when the polynomial bends.
+  double u = 0.5;
+  for (int i = 0; i < n; ++i)
+    if (positive(c[i]) != positive(c[i + 1])) {
+      u = (i + c[i] / (c[i] - c[i + 1])) / n;
+      break;
+    }
   if (!(u > a && u < b)) u = 0.5;
   // A value within de Casteljau's rounding error (n steps, each within 2 ulp of the
   // coefficients' magnitude) is a root as far as the coefficients can tell: further steps would
