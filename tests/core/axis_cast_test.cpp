@@ -154,6 +154,27 @@ std::size_t compare_casters(const FieldSource& source, double iso, double pixel,
   return compared;
 }
 
+// The six axis views of `box` cast by `caster` on one and on two threads: the same LDIs, bit for
+// bit, and not empty.
+void expect_same_ldis_for_one_and_two_threads(const RayCaster& caster, const Box& box,
+                                              int resolution) {
+  for (const View& view : signed_axis_views(box, resolution)) {
+    Ldi one, two;
+    {
+      tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
+      one = caster.cast(view);
+    }
+    {
+      tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 2);
+      two = caster.cast(view);
+    }
+    EXPECT_EQ(one.offsets, two.offsets);
+    EXPECT_EQ(one.depth, two.depth);
+    EXPECT_EQ(one.normal, two.normal);
+    EXPECT_GT(one.sample_count(), 100u);
+  }
+}
+
 // ---------------------------------------------------------------------------------------------
 // Grid blocks
 
@@ -260,22 +281,7 @@ TEST(AxisCast, GridLdiIsTheSameForOneAndTwoThreads) {
   std::uniform_real_distribution<double> uniform(-1.0, 1.0);
   RandomGrid g = random_grid(rng, false, false, false, [&](std::mt19937& r) { return uniform(r); });
   const GridSource source(g.block, 3);
-  const RayCaster caster(source, 0.0);
-  for (const View& view : signed_axis_views(source.bounds(), 64)) {
-    Ldi one, two;
-    {
-      tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
-      one = caster.cast(view);
-    }
-    {
-      tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 2);
-      two = caster.cast(view);
-    }
-    EXPECT_EQ(one.offsets, two.offsets);
-    EXPECT_EQ(one.depth, two.depth);
-    EXPECT_EQ(one.normal, two.normal);
-    EXPECT_GT(one.sample_count(), 100u);
-  }
+  expect_same_ldis_for_one_and_two_threads(RayCaster(source, 0.0), source.bounds(), 64);
 }
 
 TEST(AxisCast, GridPrimitiveAndNonFiniteCountsMatchTheEmbreeBinding) {
@@ -425,22 +431,7 @@ TEST(AxisCast, ElementLdiIsTheSameForOneAndTwoThreads) {
                                        return std::sin(3 * x) + std::cos(2 * y) * z;
                                      });
   const HexElementSource source(r.block);
-  const RayCaster caster(source, 0.2);
-  for (const View& view : signed_axis_views(source.bounds(), 96)) {
-    Ldi one, two;
-    {
-      tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
-      one = caster.cast(view);
-    }
-    {
-      tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 2);
-      two = caster.cast(view);
-    }
-    EXPECT_EQ(one.offsets, two.offsets);
-    EXPECT_EQ(one.depth, two.depth);
-    EXPECT_EQ(one.normal, two.normal);
-    EXPECT_GT(one.sample_count(), 100u);
-  }
+  expect_same_ldis_for_one_and_two_threads(RayCaster(source, 0.2), source.bounds(), 96);
 }
 
 }  // namespace
