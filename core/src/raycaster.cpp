@@ -100,7 +100,11 @@ RayCaster::RayCaster(std::span<const FieldSource* const> sources, double isovalu
     }
   }
   axis_seconds_ = seconds_since(start);
-  if (axis_bindings_.empty()) ensure_scene();
+  if (axis_bindings_.empty()) {
+    ensure_scene();
+    for (const auto& binding : bindings_)
+      has_scalar_ = has_scalar_ || binding->has_scalar();
+  }
 }
 
 void RayCaster::ensure_scene() const {
@@ -116,13 +120,10 @@ void RayCaster::ensure_scene() const {
     }
     rtcSetSceneBuildQuality(scene_, RTC_BUILD_QUALITY_HIGH);
     try {
-      bool scalar = false;
       for (const FieldSource* source : sources_) {
         bindings_.push_back(source->bind(device_, isovalue_));
         rtcAttachGeometry(scene_, bindings_.back()->geometry());
-        scalar = scalar || bindings_.back()->has_scalar();
       }
-      if (axis_bindings_.empty()) const_cast<RayCaster*>(this)->has_scalar_ = scalar;
       rtcCommitScene(scene_);
       if (const RTCError error = rtcGetDeviceError(device_); error != RTC_ERROR_NONE)
         throw std::runtime_error("Embree: scene build failed (RTCError " +

@@ -64,7 +64,8 @@ struct RayCasterOptions {
 // threads. The sources, and the values they read, must stay unchanged while the caster lives.
 class RayCaster {
  public:
-  // Throws std::runtime_error when Embree cannot create a device or scene.
+  // Throws std::runtime_error when Embree cannot create a device or scene (where every source has
+  // an axis caster, the first cast of a ray that is not along an axis throws it instead).
   RayCaster(const FieldSource& source, double isovalue, RayCasterOptions options = {});
   // One caster of several sources (e.g. the blocks of one rank); a root that two sources both
   // report (on a face they share) counts once. `sources` must not be empty.
