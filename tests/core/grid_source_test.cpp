@@ -219,6 +219,44 @@ TEST(GridSource, TenThousandRandomRaysMatchABruteForceCellSolver) {
   EXPECT_GT(roots, 5000);  // most rays cross the surface: the comparison is not vacuous
 }
 
+TEST(GridSource, AxisRaysMatchABruteForceCellSolver) {
+  // The coherent caster (rays along ±x, ±y, ±z) against the dense scan.
+  const int n = 24;
+  const std::vector<double> values = sample<double>(n, -1.0, 1.0, wavy_field);
+  const GridSource grid(uniform_block(values.data(), ScalarType::float64, n, -1.0, 1.0));
+  const RayCaster caster(grid, 0.0);
+  const double h = 2.0 / (n - 1);
+  std::mt19937 rng(13);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  int compared = 0, roots = 0;
+  for (int a = 0; a < 3; ++a)
+    for (double sign : {1.0, -1.0}) {
+      glm::dvec3 dir(0.0);
+      dir[a] = sign;
+      const View view = make_view(grid.bounds(), dir, 64);
+      ASSERT_TRUE(caster.uses_axis_casters(view));
+      std::vector<glm::dvec2> points(800);
+      for (auto& p : points)
+        p = {unit(rng) * view.width, unit(rng) * view.height};
+      const RayHitList hits = caster.cast_points(view, points);
+      for (std::size_t k = 0; k < points.size(); ++k) {
+        bool ambiguous = false;
+        const glm::dvec3 o = view.point(points[k].x, points[k].y, 0.0);
+        const std::vector<double> expected =
+            brute_force_roots(grid, o, view.dir, 0.0, view.depth_extent, h, ambiguous);
+        if (ambiguous) continue;
+        ++compared;
+        roots += int(expected.size());
+        ASSERT_EQ(hits.offsets[k + 1] - hits.offsets[k], expected.size())
+            << "axis " << a << " sign " << sign << " ray " << k;
+        for (std::size_t r = 0; r < expected.size(); ++r)
+          ASSERT_NEAR(hits.depth[hits.offsets[k] + r], expected[r], 1e-6);
+      }
+    }
+  EXPECT_GT(compared, 4500);
+  EXPECT_GT(roots, 4000);  // most rays cross the surface: the comparison is not vacuous
+}
+
 TEST(GridSource, TwoBlocksWithGhostLayersGiveTheSameHitsAsOneBlock) {
   const int n = 33;
   const std::vector<double> values = sample<double>(n, -1.0, 1.0, [](double x, double y, double z) {
