@@ -13,6 +13,7 @@
 #include <vector>
 
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 namespace ldimesh {
 namespace {
@@ -401,16 +402,23 @@ class GridAxisBinding final : public AxisBinding {
   std::size_t primitive_count() const override {
     // The Embree binding's figure (its bricks after culling), computed when asked.
     std::call_once(count_once_, [this] {
-      active_bricks_ =
-          cull_bricks(g_, iso_, first_, last_, bricks_, brick_cells_).active_count;
+      // Isolated: a thread waiting here inside a task must not pick up another of its caller's.
+      tbb::this_task_arena::isolate([this] {
+        active_bricks_ =
+            cull_bricks(g_, iso_, first_, last_, bricks_, brick_cells_).active_count;
+      });
     });
     return active_bricks_;
   }
   std::uint64_t nonfinite_values() const override { return nonfinite_; }
 
+  void prepare(int a) const override {
+    std::call_once(column_once_[a], [this, a] { build_columns(a); });
+  }
+
   void cast(const AxisRays& rays, std::vector<AxisHit>& out) const override {
     const int a = rays.axis;
-    std::call_once(column_once_[a], [this, a] { build_columns(a); });
+    prepare(a);
     std::vector<RayHit> hits;
     const auto cast_one = [&](std::size_t k) {
       const AxisRay& ray = rays.rays[k];
@@ -527,6 +535,11 @@ class GridAxisBinding final : public AxisBinding {
     return std::size_t(((cells_[a] + kColumnBlock - 1) / kColumnBlock + 63) / 64);
   }
   void build_columns(int a) const {
+    // Isolated: should a thread get here inside one of the caster's tasks (prepare() not
+    // called), it must not pick up another of them while it waits (they share its buffers).
+    tbb::this_task_arena::isolate([this, a] { build_columns_isolated(a); });
+  }
+  void build_columns_isolated(int a) const {
     const int b = a == 0 ? 1 : 0, c = a == 2 ? 1 : 2;
     const std::size_t wpc = column_words(a);
     std::vector<std::uint64_t>& col = columns_[a];

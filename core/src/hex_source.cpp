@@ -845,10 +845,14 @@ class HexAxisBinding final : public AxisBinding {
   std::size_t primitive_count() const override { return active_.elements.size(); }
   std::uint64_t nonfinite_values() const override { return active_.nonfinite; }
 
+  void prepare(int axis) const override {
+    std::call_once(bins_once_[axis], [&] { bins_[axis] = bin_elements(active_.elements, axis); });
+  }
+
   void cast(const AxisRays& rays, std::vector<AxisHit>& out) const override {
     if (active_.elements.empty() || rays.rays.empty()) return;
     const int axis = rays.axis;
-    std::call_once(bins_once_[axis], [&] { bins_[axis] = bin_elements(active_.elements, axis); });
+    prepare(axis);
     const ElementBins& bins = bins_[axis];
     std::vector<RayHit> hits;
     if (!rays.lattice) {

@@ -298,6 +298,8 @@ void RayCaster::cast_axis_rays(const AxisRays& rays, std::span<const RaySegment>
 template <class Segment>
 std::vector<RayCaster::HitRun> RayCaster::cast_rows(const View& view, Segment segment_of) const {
   if (uses_axis_casters(view)) {
+    for (const auto& binding : axis_bindings_)
+      binding->prepare(exact_axis(view.dir));
     // Tasks of several rows, each cast by the axis casters as one lattice of pixel rays.
     const int rows = rows_per_task(view);
     const int tasks = (view.height + rows - 1) / rows;
@@ -430,6 +432,9 @@ RayHitList RayCaster::cast_points(const View& view, std::span<const glm::dvec2> 
   };
   const bool axis = uses_axis_casters(view);
   if (!axis && n > 0) ensure_scene();
+  if (axis)
+    for (const auto& binding : axis_bindings_)
+      binding->prepare(exact_axis(view.dir));
   constexpr std::size_t kChunk = 256;
   std::vector<RayCaster::HitRun> chunks((n + kChunk - 1) / kChunk);
   tbb::parallel_for(std::size_t(0), chunks.size(), [&](std::size_t c) {

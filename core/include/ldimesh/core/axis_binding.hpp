@@ -58,6 +58,9 @@ class AxisBinding {
   // source's Embree binding reports them (roots on a face two primitives share may come twice;
   // the caster merges them). Thread-safe.
   virtual void cast(const AxisRays& rays, std::vector<AxisHit>& hits) const = 0;
+  // Builds what casting along `axis` needs, once (thread-safe). The caster calls it before its
+  // parallel loops, so that cast() itself runs no parallel work of its own.
+  virtual void prepare(int /*axis*/) const {}
   // The same figures as the Embree binding's (GeometryBinding).
   virtual std::size_t primitive_count() const = 0;
   virtual bool has_scalar() const { return false; }
