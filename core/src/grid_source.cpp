@@ -3,10 +3,10 @@
 #include <algorithm>
 #include <atomic>
 #include <bit>
-#include <cstring>
-#include <mutex>
 #include <cmath>
+#include <cstring>
 #include <limits>
+#include <mutex>
 #include <stdexcept>
 #include <string>
 #include <type_traits>
@@ -137,10 +137,10 @@ void solve_cell(const GridView<T>& g, double iso, glm::dvec3 org, glm::dvec3 dir
     lo[k] = g.coord(k, c[k]);
     size[k] = g.coord(k, c[k] + 1) - lo[k];
     // Exactly 0 or 1 on the face the ray enters or leaves through.
-    a[k] = entry_face[k] ? (step[k] > 0 ? 0.0 : 1.0)
-                         : std::clamp((pa[k] - lo[k]) / size[k], 0.0, 1.0);
-    b[k] = exit_face[k] ? (step[k] > 0 ? 1.0 : 0.0)
-                        : std::clamp((pb[k] - lo[k]) / size[k], 0.0, 1.0);
+    a[k] =
+        entry_face[k] ? (step[k] > 0 ? 0.0 : 1.0) : std::clamp((pa[k] - lo[k]) / size[k], 0.0, 1.0);
+    b[k] =
+        exit_face[k] ? (step[k] > 0 ? 1.0 : 0.0) : std::clamp((pb[k] - lo[k]) / size[k], 0.0, 1.0);
   }
   double roots[3];
   const int n = trilinear_segment_roots(corner, a, b, roots);
@@ -284,8 +284,8 @@ void scan_row(const GridView<T>& g, std::int64_t i0, std::int64_t i1, std::int64
 
 // The bricks of a block, which of them may hold the isosurface, and the non-finite count.
 struct BrickCulling {
-  std::vector<Brick> bricks;          // all, x fastest
-  std::vector<std::uint8_t> active;   // per brick: its value range holds the isovalue
+  std::vector<Brick> bricks;         // all, x fastest
+  std::vector<std::uint8_t> active;  // per brick: its value range holds the isovalue
   std::uint64_t nonfinite = 0;
   std::size_t active_count = 0;
 };
@@ -404,8 +404,7 @@ class GridAxisBinding final : public AxisBinding {
     std::call_once(count_once_, [this] {
       // Isolated: a thread waiting here inside a task must not pick up another of its caller's.
       tbb::this_task_arena::isolate([this] {
-        active_bricks_ =
-            cull_bricks(g_, iso_, first_, last_, bricks_, brick_cells_).active_count;
+        active_bricks_ = cull_bricks(g_, iso_, first_, last_, bricks_, brick_cells_).active_count;
       });
     });
     return active_bricks_;
@@ -432,8 +431,8 @@ class GridAxisBinding final : public AxisBinding {
     // world axis is the block's faster one in memory (neighbouring rays then read the same
     // cache lines).
     const View* view = rays.lattice;
-    if (view && std::abs(g_.strides[exact_axis(view->v)]) <
-                    std::abs(g_.strides[exact_axis(view->u)])) {
+    if (view &&
+        std::abs(g_.strides[exact_axis(view->v)]) < std::abs(g_.strides[exact_axis(view->u)])) {
       const std::size_t width = std::size_t(view->width), rows = rays.rays.size() / width;
       for (std::size_t i = 0; i < width; ++i)
         for (std::size_t j = 0; j < rows; ++j)
@@ -547,7 +546,7 @@ class GridAxisBinding final : public AxisBinding {
     const std::size_t cw = row_words();
     const auto set = [&](std::int64_t cb, std::int64_t cc, std::int64_t q) {
       col[std::size_t(cb + cells_[b] * cc) * wpc + std::size_t(q / 64)] |= std::uint64_t(1)
-                                                                          << (q % 64);
+                                                                           << (q % 64);
     };
     if (a == 0) {
       tbb::parallel_for(std::int64_t(0), cells_[2], [&](std::int64_t z) {
@@ -590,8 +589,7 @@ class GridAxisBinding final : public AxisBinding {
       return std::int64_t(std::upper_bound(c + first_[b] + 1, c + last_[b] + 1, x) - c) - 1;
     }
     const double guess = std::floor((x - g_.origin[b]) / g_.spacing[b]);
-    std::int64_t i =
-        std::clamp(std::int64_t(std::clamp(guess, -1e18, 1e18)), first_[b], last_[b]);
+    std::int64_t i = std::clamp(std::int64_t(std::clamp(guess, -1e18, 1e18)), first_[b], last_[b]);
     while (i < last_[b] && g_.coord(b, i + 1) <= x)
       ++i;
     while (i > first_[b] && g_.coord(b, i) > x)

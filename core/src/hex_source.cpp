@@ -6,10 +6,10 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <mutex>
 #include <numbers>
 #include <stdexcept>
 #include <string>
-#include <mutex>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -246,7 +246,8 @@ Box bounding_box(const AffineFrame& f) {
 
 // B_i^p(x) and dB_i^p/dx for i = 0..p, from the triangle B_i^r = (1 − x) B_i^{r−1} + x
 // B_{i−1}^{r−1} and dB_i^p/dx = p (B_{i−1}^{p−1} − B_i^{p−1}).
-[[gnu::always_inline]] inline void bernstein_basis(int p, double x, double* value, double* derivative) {
+[[gnu::always_inline]] inline void bernstein_basis(int p, double x, double* value,
+                                                   double* derivative) {
   double b[kMaxNodes] = {1.0};
   for (int r = 1; r < p; ++r) {
     b[r] = x * b[r - 1];
@@ -311,7 +312,8 @@ PolynomialSample evaluate_tensor(int p, const double* coefficients, glm::dvec3 r
 // Scaled coefficients in s of B_i^p(x(s)), i = 0..p, for x(s) = xa (1 − s) + xb s. Returns their
 // degree in s: p, or 0 where the segment does not move along this axis (xa == xb, as for an
 // axis-aligned ray through an axis-aligned element), which keeps the degree along the ray low.
-[[gnu::always_inline]] inline int basis_along_segment(int p, double xa, double xb, double (*basis)[kMaxNodes]) {
+[[gnu::always_inline]] inline int basis_along_segment(int p, double xa, double xb,
+                                                      double (*basis)[kMaxNodes]) {
   if (xa == xb) {
     double value[kMaxNodes], derivative[kMaxNodes];
     bernstein_basis(p, xa, value, derivative);
@@ -364,7 +366,8 @@ struct AxisBasis {
 struct StageX {
   double g[kMaxNodes][kMaxNodes][kMaxNodes];
 };
-[[gnu::always_inline]] inline void contract_x(int p, const double* c, const AxisBasis& bx, StageX& out) {
+[[gnu::always_inline]] inline void contract_x(int p, const double* c, const AxisBasis& bx,
+                                              StageX& out) {
   const int n = p + 1, dx = bx.degree;
   for (int k = 0; k < n; ++k)
     for (int j = 0; j < n; ++j) {
@@ -380,7 +383,8 @@ struct StageX {
 struct StageY {
   double h[kMaxNodes][2 * kMaxHexOrder + 1];
 };
-[[gnu::always_inline]] inline void contract_y(int p, const StageX& x, int dx, const AxisBasis& by, StageY& out) {
+[[gnu::always_inline]] inline void contract_y(int p, const StageX& x, int dx, const AxisBasis& by,
+                                              StageY& out) {
   const int n = p + 1;
   for (int k = 0; k < n; ++k) {
     double* h = out.h[k];
@@ -389,10 +393,10 @@ struct StageY {
       convolve_add(x.g[k][j], dx, by.b[j], by.degree, h);
   }
 }
-// The ζ stage: the standard Bernstein coefficients f[0..degree] along the segment; returns the
-// degree dxy + bz.degree.
-// The ζ stage in the scaled basis (before the division by the binomials).
-[[gnu::always_inline]] inline int contract_z_scaled(int p, const StageY& y, int dxy, const AxisBasis& bz, double* f) {
+// The ζ stage in the scaled basis (before the division by the binomials); returns the degree
+// dxy + bz.degree.
+[[gnu::always_inline]] inline int contract_z_scaled(int p, const StageY& y, int dxy,
+                                                    const AxisBasis& bz, double* f) {
   const int n = p + 1, degree = dxy + bz.degree;
   std::fill(f, f + degree + 1, 0.0);
   for (int k = 0; k < n; ++k)
@@ -403,6 +407,7 @@ struct StageY {
   for (int l = 0; l <= degree; ++l)
     f[l] /= kBinomial[degree][l];
 }
+// The ζ stage: the standard Bernstein coefficients f[0..degree] along the segment.
 int contract_z(int p, const StageY& y, int dxy, const AxisBasis& bz, double* f) {
   const int degree = contract_z_scaled(p, y, dxy, bz, f);
   scaled_to_standard(degree, f);
@@ -428,7 +433,8 @@ int restrict_to_segment(int p, const double* c, glm::dvec3 a, glm::dvec3 b, doub
 // Roots of a univariate Bernstein polynomial on [0, 1]
 
 // Value and derivative at u of the Bernstein polynomial c[0..n] on [0, 1] (de Casteljau).
-[[gnu::always_inline]] inline void de_casteljau(const double* c, int n, double u, double& value, double& derivative) {
+[[gnu::always_inline]] inline void de_casteljau(const double* c, int n, double u, double& value,
+                                                double& derivative) {
   double w[kMaxRayDegree + 1];
   std::copy(c, c + n + 1, w);
   for (int r = n; r > 1; --r)
@@ -440,7 +446,8 @@ int restrict_to_segment(int p, const double* c, glm::dvec3 a, glm::dvec3 b, doub
 
 // Splits c[0..n] at 1/2 into the coefficients of the left and right halves (de Casteljau). The
 // halves share their middle coefficient exactly, so sign tests at the split agree.
-[[gnu::always_inline]] inline void split_in_half(const double* c, int n, double* left, double* right) {
+[[gnu::always_inline]] inline void split_in_half(const double* c, int n, double* left,
+                                                 double* right) {
   double w[kMaxRayDegree + 1];
   std::copy(c, c + n + 1, w);
   left[0] = w[0];
@@ -702,10 +709,9 @@ ElementBins bin_elements(const std::vector<ActiveElement>& elements, int axis) {
 // The polynomial along axis rays through one element, stage by stage (contract_x, _y, _z),
 // each stage kept while the segment's coordinates it depends on do not change: over a row of
 // pixels only the last stage is redone. The same arithmetic as restrict_to_segment, so the
-// same coefficients, to the bit. With exactly one reference axis moving along the ray, the
-// gradient at a root reuses the ξ stage (when ξ is fixed along the ray) and contracts the
-// rest with the 1-D bases and derivatives at the point: (p + 1)² work instead of the full
-// tensor evaluation's (p + 1)³.
+// same coefficients, to the bit. Where ξ is fixed along the ray, the gradient at a root reuses
+// the ξ stage and contracts the rest with the 1-D bases and derivatives at the point: (p + 1)²
+// work instead of the full tensor evaluation's (p + 1)³.
 template <int P>
 class StagedRestriction {
  public:
@@ -723,8 +729,8 @@ class StagedRestriction {
       x_valid_ = true;
       y_valid_ = dx_valid_ = false;
       const int n = p_ + 1;
-      x_uniform_ = one_sign(&x_.g[0][0][0], n, n, kMaxNodes * kMaxNodes, kMaxNodes,
-                            basis_x_.degree + 1);
+      x_uniform_ =
+          one_sign(&x_.g[0][0][0], n, n, kMaxNodes * kMaxNodes, kMaxNodes, basis_x_.degree + 1);
     }
     if (x_uniform_) return -1;
     if (!y_valid_ || a.y != ay_ || b.y != by_) {
@@ -750,54 +756,33 @@ class StagedRestriction {
     return degree;
   }
 
-  // ∇ξ at parameter s of the last restrict()'s segment; false unless exactly one reference axis
-  // moves along it. The ξ stage is reused where ξ is fixed along the ray.
+  // ∇ξ at parameter s of the last restrict()'s segment; false where ξ moves along it (then
+  // evaluate the tensor).
   bool gradient(double s, glm::dvec3& g) {
-    int count = 0;
-    for (int k = 0; k < 3; ++k)
-      count += a_[k] != b_[k];
-    if (count != 1) return false;
+    // G_kj = Σ_i c_ijk B_i(ξ) and its ξ-derivative are the ξ stage itself where ξ is fixed along
+    // the ray (kept over the row). Otherwise nothing is kept: evaluate_tensor does the same work.
+    if (a_.x != b_.x) return false;
     // The hit's reference point, as evaluate_tensor would be given it, and the 1-D bases and
     // their derivatives there.
     const glm::dvec3 q = a_ + s * (b_ - a_);
     double vy[kMaxNodes], dy[kMaxNodes], vz[kMaxNodes], dz[kMaxNodes];
     bernstein_basis(p_, q.y, vy, dy);
     bernstein_basis(p_, q.z, vz, dz);
-    // G_kj = Σ_i c_ijk B_i(ξ) and its ξ-derivative: the ξ stage itself where ξ is fixed along
-    // the ray (kept over the row), else contracted at the point.
-    double gv[kMaxNodes][kMaxNodes], gd[kMaxNodes][kMaxNodes];
-    constexpr int n = P + 1;
-    if (a_.x == b_.x) {
-      if (!dx_valid_) {
-        AxisBasis d;
-        derivative_basis(p_, a_.x, d);
-        contract_x(p_, c_, d, dx_);
-        dx_valid_ = true;
-      }
-      for (int k = 0; k < n; ++k)
-        for (int j = 0; j < n; ++j)
-          gv[k][j] = x_.g[k][j][0], gd[k][j] = dx_.g[k][j][0];
-    } else {
-      double vx[kMaxNodes], dxb[kMaxNodes];
-      bernstein_basis(p_, q.x, vx, dxb);
-      for (int k = 0; k < n; ++k)
-        for (int j = 0; j < n; ++j) {
-          const double* row = c_ + n * (j + n * k);
-          double v = 0.0, d = 0.0;
-          for (int i = 0; i < n; ++i) {
-            v += row[i] * vx[i];
-            d += row[i] * dxb[i];
-          }
-          gv[k][j] = v, gd[k][j] = d;
-        }
+    if (!dx_valid_) {
+      AxisBasis d;
+      derivative_basis(p_, a_.x, d);
+      contract_x(p_, c_, d, dx_);
+      dx_valid_ = true;
     }
+    constexpr int n = P + 1;
     g = glm::dvec3(0.0);
     for (int k = 0; k < n; ++k) {
       double sx = 0.0, sy = 0.0, sz = 0.0;
       for (int j = 0; j < n; ++j) {
-        sx += gd[k][j] * vy[j];
-        sy += gv[k][j] * dy[j];
-        sz += gv[k][j] * vy[j];
+        const double v = x_.g[k][j][0], d = dx_.g[k][j][0];
+        sx += d * vy[j];
+        sy += v * dy[j];
+        sz += v * vy[j];
       }
       g.x += sx * vz[k];
       g.y += sy * vz[k];
@@ -864,8 +849,8 @@ class HexAxisBinding final : public AxisBinding {
         hits.clear();
         for (std::uint32_t m = bins.first[bin]; m < bins.first[bin + 1]; ++m) {
           const std::uint32_t e = bins.elements[m];
-          intersect_element(active_.order, active_.elements[e], active_.coefficients_of(e),
-                            ray.org, rays.dir, ray.t0, ray.t1, hits);
+          intersect_element(active_.order, active_.elements[e], active_.coefficients_of(e), ray.org,
+                            rays.dir, ray.t0, ray.t1, hits);
         }
         for (const RayHit& h : hits)
           out.push_back({std::uint32_t(k), h});
@@ -896,21 +881,23 @@ class HexAxisBinding final : public AxisBinding {
   }
 
  private:
-  // The pixels of the lattice query `rays` that element e's box covers (a pixel of margin),
+  // The pixels of the lattice query `rays` whose centres element e's box covers,
   // in the order that keeps the staged restriction's first stages: rows of the image axis
   // whose world axis maps to the lower of the two reference axes across the ray.
   void cast_element(std::uint32_t e, const AxisRays& rays, std::vector<AxisHit>& out) const {
     // The order as a constant: the stages' loops unroll.
-    switch (active_.order) {
-      case 1: return cast_element_order<1>(e, rays, out);
-      case 2: return cast_element_order<2>(e, rays, out);
-      case 3: return cast_element_order<3>(e, rays, out);
-      case 4: return cast_element_order<4>(e, rays, out);
-      case 5: return cast_element_order<5>(e, rays, out);
-      case 6: return cast_element_order<6>(e, rays, out);
-      case 7: return cast_element_order<7>(e, rays, out);
-      default: return cast_element_order<8>(e, rays, out);
-    }
+    using Cast =
+        void (HexAxisBinding::*)(std::uint32_t, const AxisRays&, std::vector<AxisHit>&) const;
+    static constexpr Cast kByOrder[kMaxHexOrder + 1] = {nullptr,
+                                                        &HexAxisBinding::cast_element_order<1>,
+                                                        &HexAxisBinding::cast_element_order<2>,
+                                                        &HexAxisBinding::cast_element_order<3>,
+                                                        &HexAxisBinding::cast_element_order<4>,
+                                                        &HexAxisBinding::cast_element_order<5>,
+                                                        &HexAxisBinding::cast_element_order<6>,
+                                                        &HexAxisBinding::cast_element_order<7>,
+                                                        &HexAxisBinding::cast_element_order<8>};
+    (this->*kByOrder[active_.order])(e, rays, out);
   }
   static_assert(kMaxHexOrder == 8);
 

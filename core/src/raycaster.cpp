@@ -265,8 +265,9 @@ void RayCaster::cast_axis_rays(const AxisRays& rays, std::span<const RaySegment>
   if (has_scalar_) run.scalar.reserve(run.scalar.size() + x.hits.size());
   // Each ray's hits are sorted by depth below, so the order in which the sources reported them
   // does not matter; grouped by ray first (counting sort) unless they came so.
-  const bool grouped = std::is_sorted(x.hits.begin(), x.hits.end(),
-                                      [](const AxisHit& a, const AxisHit& b) { return a.ray < b.ray; });
+  const bool grouped =
+      std::is_sorted(x.hits.begin(), x.hits.end(),
+                     [](const AxisHit& a, const AxisHit& b) { return a.ray < b.ray; });
   if (!grouped) {
     x.first.assign(n + 1, 0);
     for (const AxisHit& h : x.hits)
@@ -290,8 +291,7 @@ void RayCaster::cast_axis_rays(const AxisRays& rays, std::span<const RaySegment>
     for (; h < x.hits.size() && x.hits[h].ray == k; ++h)
       x.ray_hits.push_back(x.hits[h].hit);
     const std::span<RayHit> hits(x.ray_hits);
-    run.append(hits.first(hits.empty() ? 0 : finish_ray(segments[k], rays.dir, hits)),
-               has_scalar_);
+    run.append(hits.first(hits.empty() ? 0 : finish_ray(segments[k], rays.dir, hits)), has_scalar_);
   }
 }
 
@@ -418,8 +418,8 @@ RayHitList RayCaster::cast_points(const View& view, std::span<const glm::dvec2> 
   const auto segment_of = [&](std::size_t k, RaySegment& segment) {
     const glm::dvec2 position = image_positions[k];
     segment = {0.0, view.depth_extent, true};
-    bool crosses = !sub || subdomain_segment(*sub, view.point(position.x, position.y, 0.0),
-                                             view.dir, segment);
+    bool crosses =
+        !sub || subdomain_segment(*sub, view.point(position.x, position.y, 0.0), view.dir, segment);
     if (crosses && !depth_ranges.empty()) {
       // The range is closed at both ends. Where it ends before the segment, the end is
       // closed; otherwise the segment's own rule (half-open at a shared face) stays.

@@ -120,13 +120,13 @@ std::size_t compare_casters(const FieldSource& source, double iso, double pixel,
     }
     for (const Box& part : parts) {
       const Subdomain sub{part, global};
-      const LdiFragment a = fast.cast_fragment(view, 0, sub), b = reference.cast_fragment(view, 0, sub);
-      EXPECT_EQ(a.pixels, b.pixels) << name << " fragment of [" << part.lo.x << ", " << part.lo.y
-                                    << ", " << part.lo.z << "] – [" << part.hi.x << ", "
-                                    << part.hi.y << ", " << part.hi.z << "] in [" << global.lo.x
-                                    << ", " << global.lo.y << ", " << global.lo.z << "] – ["
-                                    << global.hi.x << ", " << global.hi.y << ", " << global.hi.z
-                                    << "]";
+      const LdiFragment a = fast.cast_fragment(view, 0, sub),
+                        b = reference.cast_fragment(view, 0, sub);
+      EXPECT_EQ(a.pixels, b.pixels)
+          << name << " fragment of [" << part.lo.x << ", " << part.lo.y << ", " << part.lo.z
+          << "] – [" << part.hi.x << ", " << part.hi.y << ", " << part.hi.z << "] in ["
+          << global.lo.x << ", " << global.lo.y << ", " << global.lo.z << "] – [" << global.hi.x
+          << ", " << global.hi.y << ", " << global.hi.z << "]";
       EXPECT_EQ(a.counts, b.counts) << name << " fragment";
       EXPECT_EQ(a.depth.size(), b.depth.size()) << name << " fragment";
       if (a.depth.size() == b.depth.size()) {
@@ -158,8 +158,8 @@ std::size_t compare_casters(const FieldSource& source, double iso, double pixel,
         points.push_back({x, unit(rng) * view.height});
         ranges.push_back({0.0, view.depth_extent});
       }
-    compared += expect_same_list(fast.cast_points(view, points), reference.cast_points(view, points),
-                                 tol, name + " points");
+    compared += expect_same_list(fast.cast_points(view, points),
+                                 reference.cast_points(view, points), tol, name + " points");
     compared += expect_same_list(fast.cast_points(view, points, nullptr, ranges),
                                  reference.cast_points(view, points, nullptr, ranges), tol,
                                  name + " points with depth ranges");
@@ -174,8 +174,7 @@ std::size_t compare_casters(const FieldSource& source, double iso, double pixel,
 // The six axis views of `source` cast on 1, 2 and 8 threads (task arenas; 8 oversubscribes
 // this machine, so that threads steal each other's tasks), each with a caster of its own built
 // in the arena: the same LDIs, bit for bit, and not empty.
-void expect_same_ldis_for_any_thread_count(const FieldSource& source, double iso,
-                                           int resolution) {
+void expect_same_ldis_for_any_thread_count(const FieldSource& source, double iso, int resolution) {
   const std::vector<View> views = signed_axis_views(source.bounds(), resolution);
   std::vector<std::vector<Ldi>> ldis;
   for (int threads : {1, 2, 8}) {
@@ -274,8 +273,7 @@ TEST(AxisCast, GridBlocksGiveTheEmbreeHits) {
     });
     const GridSource source(g.block, 1 + trial % 4);
     const std::string what = "grid trial " + std::to_string(trial);
-    compared += compare_casters(source, 0.1 * (trial % 5) - 0.2, 0.125, g.lines,
-                                rng, what);
+    compared += compare_casters(source, 0.1 * (trial % 5) - 0.2, 0.125, g.lines, rng, what);
   }
   EXPECT_GT(compared, 50000u);
 }
@@ -291,7 +289,8 @@ TEST(AxisCast, GridIsovaluesAtNodeValuesAndRaysOnGridLines) {
                                [&](std::mt19937& r) { return double(level(r)); });
     const GridSource source(g.block, 2 + trial % 3);
     for (double iso : {0.0, 1.0, 0.5}) {
-      const std::string what = "levels trial " + std::to_string(trial) + " iso " + std::to_string(iso);
+      const std::string what =
+          "levels trial " + std::to_string(trial) + " iso " + std::to_string(iso);
       compared += compare_casters(source, iso, 0.125, g.lines, rng, what);
     }
   }
@@ -321,15 +320,20 @@ TEST(AxisCast, GridPrimitiveAndNonFiniteCountsMatchTheEmbreeBinding) {
   EXPECT_EQ(fast.primitive_count(), reference.primitive_count());
 }
 
-TEST(AxisCast, ObliqueViewsStillUseEmbree) {
+TEST(AxisCast, ObliqueViewsBuildTheEmbreeSceneOnFirstUse) {
+  // A caster that has cast axis views (no Embree scene yet) casts an oblique view through the
+  // scene it builds then: the same LDI as a caster that built it at construction.
   std::mt19937 rng(4);
   std::uniform_real_distribution<double> uniform(-1.0, 1.0);
   RandomGrid g = random_grid(rng, false, false, false, [&](std::mt19937& r) { return uniform(r); });
   const GridSource source(g.block, 3);
   const RayCaster caster(source, 0.0), reference(source, 0.0, kEmbree);
+  EXPECT_GT(caster.cast(make_view(source.bounds(), {0, 0, 1}, 32)).sample_count(), 50u);
+  const double axis_only = caster.build_seconds();
   const View oblique = make_view(source.bounds(), {1.0, 0.3, -0.2}, 32);
   EXPECT_FALSE(caster.uses_axis_casters(oblique));
   const Ldi a = caster.cast(oblique), b = reference.cast(oblique);
+  EXPECT_GT(caster.build_seconds(), axis_only);  // the scene was built just now
   EXPECT_EQ(a.offsets, b.offsets);
   EXPECT_EQ(a.depth, b.depth);
   EXPECT_GT(a.sample_count(), 50u);
@@ -360,9 +364,11 @@ RandomElements random_elements(std::mt19937& rng, int p, NodeSet nodes, int nx, 
         glm::dvec3 e1(1, 0, 0), e2(0, 1, 0), e3(0, 0, 1);
         if (frame == 1) e1 = {0, 1, 0}, e2 = {0, 0, 1}, e3 = {1, 0, 0};
         if (frame == 2) e3 = {0.25, 0, 1};
-        const glm::dvec3 base = frame == 2 ? o + double(ez) * glm::dvec3(0.25, 0, 0) - double(ez) * glm::dvec3(1, 0, 0) * 0.0 : o;
+        // Sheared elements lean by 1/4 per layer: layer ez starts ez/4 further along x.
+        const glm::dvec3 base = frame == 2 ? o + double(ez) * glm::dvec3(0.25, 0, 0) : o;
         for (int c = 0; c < 8; ++c) {
-          const glm::dvec3 q = base + double(c & 1) * e1 + double((c >> 1) & 1) * e2 + double((c >> 2) & 1) * e3;
+          const glm::dvec3 q =
+              base + double(c & 1) * e1 + double((c >> 1) & 1) * e2 + double((c >> 2) & 1) * e3;
           r.corners.insert(r.corners.end(), {q.x, q.y, q.z});
         }
         for (int k = 0; k < n; ++k)
@@ -415,9 +421,9 @@ TEST(AxisCast, ElementIsovaluesAtNodeValuesAndRaysOnElementFaces) {
   std::size_t compared = 0;
   for (int p : {1, 2, 3, 5})
     for (int frame = 0; frame < 3; ++frame) {
-      RandomElements r =
-          random_elements(rng, p, NodeSet::equispaced, 2, 2, 2, frame,
-                          [&](double, double, double, std::mt19937& g) { return double(level(g)); });
+      RandomElements r = random_elements(
+          rng, p, NodeSet::equispaced, 2, 2, 2, frame,
+          [&](double, double, double, std::mt19937& g) { return double(level(g)); });
       const HexElementSource source(r.block);
       for (double iso : {0.0, 1.0}) {
         const std::string what = "levels p " + std::to_string(p) + " frame " +
@@ -431,13 +437,12 @@ TEST(AxisCast, ElementIsovaluesAtNodeValuesAndRaysOnElementFaces) {
 TEST(AxisCast, ElementsWithNonFiniteValuesCountAndHitAlike) {
   std::mt19937 rng(29);
   std::uniform_real_distribution<double> unit(-1.0, 1.0);
-  RandomElements r = random_elements(rng, 3, NodeSet::gauss_legendre, 3, 2, 2, 0,
-                                     [&](double x, double y, double z, std::mt19937& g) {
-                                       const double v = x * x + y * y + z * z - 1.2;
-                                       return unit(g) > 0.995
-                                                  ? std::numeric_limits<double>::quiet_NaN()
-                                                  : v;
-                                     });
+  RandomElements r =
+      random_elements(rng, 3, NodeSet::gauss_legendre, 3, 2, 2, 0,
+                      [&](double x, double y, double z, std::mt19937& g) {
+                        const double v = x * x + y * y + z * z - 1.2;
+                        return unit(g) > 0.995 ? std::numeric_limits<double>::quiet_NaN() : v;
+                      });
   const HexElementSource source(r.block);
   const RayCaster fast(source, 0.0), reference(source, 0.0, kEmbree);
   EXPECT_GT(fast.nonfinite_values(), 0u);
@@ -458,4 +463,3 @@ TEST(AxisCast, ElementLdiIsTheSameForAnyThreadCount) {
 
 }  // namespace
 }  // namespace ldimesh
-

@@ -40,8 +40,8 @@ struct AxisHit {
 
 // Rays along one axis direction.
 struct AxisRays {
-  int axis = 2;               // the coordinate axis the rays are parallel to
-  glm::dvec3 dir{0, 0, 1};    // exactly ±e_axis
+  int axis = 2;             // the coordinate axis the rays are parallel to
+  glm::dvec3 dir{0, 0, 1};  // exactly ±e_axis
   std::span<const AxisRay> rays;
   // Set when the rays are the pixel centres of rows row_begin … row_begin + rays.size() / width
   // − 1 of this view (an axis view), row after row: ray k is pixel (k % width, row_begin + k /

@@ -93,9 +93,10 @@ GridPart grid_part(const GridBlock& whole, std::array<int, 3> blocks, std::array
 
 // The roots of the trilinear interpolant minus `iso` along a segment of one cell, by the cubic
 // it restricts to (Marmitt et al. 2004: split at the cubic's extrema, then one bracketed root
-// per monotone piece); a segment along one axis is a line, solved from its end values. `corner` holds the 8 values minus iso, index = x + 2y + 4z; `a` and `b`
-// are the segment's ends in the cell's local coordinates [0, 1]³. Writes the roots as segment
-// parameters s ∈ [0, 1] in increasing order to `roots` and returns how many (at most 3).
+// per monotone piece); a segment along one axis is a line, solved from its end values. `corner`
+// holds the 8 values minus iso, index = x + 2y + 4z; `a` and `b` are the segment's ends in the
+// cell's local coordinates [0, 1]³. Writes the roots as segment parameters s ∈ [0, 1] in increasing
+// order to `roots` and returns how many (at most 3).
 int trilinear_segment_roots(const double corner[8], glm::dvec3 a, glm::dvec3 b, double roots[3]);
 
 }  // namespace ldimesh
