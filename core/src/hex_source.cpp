@@ -10,6 +10,7 @@
 #include <numbers>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -242,32 +243,75 @@ Box bounding_box(const AffineFrame& f) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Evaluation
+// Evaluation. The kernels take the order p (and the degrees along a segment) as constants, so
+// that their loops unroll and their sums stay in registers; with_order and with_degree turn a
+// runtime value into one. The operations and their order do not depend on how a kernel is
+// instantiated: every caller gets the same values, to the bit.
 
-// B_i^p(x) and dB_i^p/dx for i = 0..p, from the triangle B_i^r = (1 − x) B_i^{r−1} + x
-// B_{i−1}^{r−1} and dB_i^p/dx = p (B_{i−1}^{p−1} − B_i^{p−1}).
-[[gnu::always_inline]] inline void bernstein_basis(int p, double x, double* value,
-                                                   double* derivative) {
+// Calls fn(std::integral_constant<int, p>{}) for the runtime order p = 1..kMaxHexOrder.
+template <class Fn>
+[[gnu::always_inline]] inline decltype(auto) with_order(int p, Fn&& fn) {
+  static_assert(kMaxHexOrder == 8);
+  switch (p) {
+    case 1:
+      return fn(std::integral_constant<int, 1>{});
+    case 2:
+      return fn(std::integral_constant<int, 2>{});
+    case 3:
+      return fn(std::integral_constant<int, 3>{});
+    case 4:
+      return fn(std::integral_constant<int, 4>{});
+    case 5:
+      return fn(std::integral_constant<int, 5>{});
+    case 6:
+      return fn(std::integral_constant<int, 6>{});
+    case 7:
+      return fn(std::integral_constant<int, 7>{});
+    default:
+      return fn(std::integral_constant<int, 8>{});
+  }
+}
+// Calls fn(std::integral_constant<int, d>{}) for a degree along a segment: p per reference axis
+// the segment moves along, so d ∈ {0, P, 2P, 3P}.
+template <int P, class Fn>
+[[gnu::always_inline]] inline decltype(auto) with_degree(int d, Fn&& fn) {
+  switch (d) {
+    case 0:
+      return fn(std::integral_constant<int, 0>{});
+    case P:
+      return fn(std::integral_constant<int, P>{});
+    case 2 * P:
+      return fn(std::integral_constant<int, 2 * P>{});
+    default:
+      return fn(std::integral_constant<int, 3 * P>{});
+  }
+}
+
+// B_i^P(x) and dB_i^P/dx for i = 0..P, from the triangle B_i^r = (1 − x) B_i^{r−1} + x
+// B_{i−1}^{r−1} and dB_i^P/dx = P (B_{i−1}^{P−1} − B_i^{P−1}).
+template <int P>
+[[gnu::always_inline]] inline void bernstein_basis(double x, double* value, double* derivative) {
   double b[kMaxNodes] = {1.0};
-  for (int r = 1; r < p; ++r) {
+  for (int r = 1; r < P; ++r) {
     b[r] = x * b[r - 1];
     for (int i = r - 1; i > 0; --i)
       b[i] = (1.0 - x) * b[i] + x * b[i - 1];
     b[0] *= 1.0 - x;
   }
-  for (int i = 0; i <= p; ++i) {
-    const double left = i > 0 ? b[i - 1] : 0.0, right = i < p ? b[i] : 0.0;
-    derivative[i] = p * (left - right);
+  for (int i = 0; i <= P; ++i) {
+    const double left = i > 0 ? b[i - 1] : 0.0, right = i < P ? b[i] : 0.0;
+    derivative[i] = P * (left - right);
     value[i] = (1.0 - x) * right + x * left;
   }
 }
 
-PolynomialSample evaluate_tensor(int p, const double* coefficients, glm::dvec3 r) {
-  const int n = p + 1;
+template <int P>
+PolynomialSample evaluate_tensor(const double* coefficients, glm::dvec3 r) {
+  constexpr int n = P + 1;
   double bx[kMaxNodes], dx[kMaxNodes], by[kMaxNodes], dy[kMaxNodes], bz[kMaxNodes], dz[kMaxNodes];
-  bernstein_basis(p, r.x, bx, dx);
-  bernstein_basis(p, r.y, by, dy);
-  bernstein_basis(p, r.z, bz, dz);
+  bernstein_basis<P>(r.x, bx, dx);
+  bernstein_basis<P>(r.y, by, dy);
+  bernstein_basis<P>(r.z, bz, dz);
   PolynomialSample out;
   for (int k = 0; k < n; ++k)
     for (int j = 0; j < n; ++j) {
@@ -290,53 +334,45 @@ PolynomialSample evaluate_tensor(int p, const double* coefficients, glm::dvec3 r
 // s^i (1 − s)^(n−i); coefficient i of a standard Bernstein polynomial is the scaled one divided
 // by C(n, i) (Farouki & Rajan 1988, "Algorithms for polynomials in Bernstein form").
 
-// out[0..m+n] = a[0..m] ⊛ b[0..n], accumulated. A factor of degree 0 (an axis the segment does
-// not move along) is a scaling, with the same operations in the same order.
-[[gnu::always_inline]] inline void convolve_add(const double* a, int m, const double* b, int n,
-                                                double* out) {
-  if (n == 0) {
-    for (int i = 0; i <= m; ++i)
-      out[i] += a[i] * b[0];
-    return;
-  }
-  if (m == 0) {
-    for (int j = 0; j <= n; ++j)
-      out[j] += a[0] * b[j];
-    return;
-  }
-  for (int i = 0; i <= m; ++i)
-    for (int j = 0; j <= n; ++j)
+// out[0..M+N] = a[0..M] ⊛ b[0..N], accumulated (a factor of degree 0 is a scaling).
+template <int M, int N>
+[[gnu::always_inline]] inline void convolve_add(const double* a, const double* b, double* out) {
+  for (int i = 0; i <= M; ++i)
+    for (int j = 0; j <= N; ++j)
       out[i + j] += a[i] * b[j];
 }
 
-// Scaled coefficients in s of B_i^p(x(s)), i = 0..p, for x(s) = xa (1 − s) + xb s. Returns their
-// degree in s: p, or 0 where the segment does not move along this axis (xa == xb, as for an
+// Scaled coefficients in s of B_i^P(x(s)), i = 0..P, for x(s) = xa (1 − s) + xb s. Returns their
+// degree in s: P, or 0 where the segment does not move along this axis (xa == xb, as for an
 // axis-aligned ray through an axis-aligned element), which keeps the degree along the ray low.
-[[gnu::always_inline]] inline int basis_along_segment(int p, double xa, double xb,
+template <int P>
+[[gnu::always_inline]] inline int basis_along_segment(double xa, double xb,
                                                       double (*basis)[kMaxNodes]) {
   if (xa == xb) {
     double value[kMaxNodes], derivative[kMaxNodes];
-    bernstein_basis(p, xa, value, derivative);
-    for (int i = 0; i <= p; ++i)
+    bernstein_basis<P>(xa, value, derivative);
+    for (int i = 0; i <= P; ++i)
       basis[i][0] = value[i];
     return 0;
   }
   double x_pow[kMaxNodes][kMaxNodes] = {}, y_pow[kMaxNodes][kMaxNodes] = {};  // X^i, (1 − X)^i
   x_pow[0][0] = y_pow[0][0] = 1.0;
-  for (int i = 1; i <= p; ++i)
+  for (int i = 1; i <= P; ++i)
     for (int l = 0; l <= i; ++l) {
       const double lo = l < i ? x_pow[i - 1][l] : 0.0, hi = l > 0 ? x_pow[i - 1][l - 1] : 0.0;
       x_pow[i][l] = xa * lo + xb * hi;
       const double ylo = l < i ? y_pow[i - 1][l] : 0.0, yhi = l > 0 ? y_pow[i - 1][l - 1] : 0.0;
       y_pow[i][l] = (1.0 - xa) * ylo + (1.0 - xb) * yhi;
     }
-  for (int i = 0; i <= p; ++i) {
-    std::fill(basis[i], basis[i] + p + 1, 0.0);
-    convolve_add(x_pow[i], i, y_pow[p - i], p - i, basis[i]);
-    for (int l = 0; l <= p; ++l)
-      basis[i][l] *= kBinomial[p][i];
+  for (int i = 0; i <= P; ++i) {
+    std::fill(basis[i], basis[i] + P + 1, 0.0);
+    for (int l = 0; l <= i; ++l)  // x_pow[i] ⊛ y_pow[P − i]
+      for (int m = 0; m <= P - i; ++m)
+        basis[i][l + m] += x_pow[i][l] * y_pow[P - i][m];
+    for (int l = 0; l <= P; ++l)
+      basis[i][l] *= kBinomial[P][i];
   }
-  return p;
+  return P;
 }
 
 // The restriction to a segment in stages, one reference axis after the other (ξ, then η, then
@@ -350,15 +386,17 @@ struct AxisBasis {
   int degree = 0;
   double b[kMaxNodes][kMaxNodes];
 };
-[[gnu::always_inline]] inline void segment_basis(int p, double xa, double xb, AxisBasis& out) {
-  out.degree = basis_along_segment(p, xa, xb, out.b);
+template <int P>
+[[gnu::always_inline]] inline void segment_basis(double xa, double xb, AxisBasis& out) {
+  out.degree = basis_along_segment<P>(xa, xb, out.b);
 }
-// dB_i^p/dx at x, as a degree-0 basis (a derivative across the segment).
-[[gnu::always_inline]] inline void derivative_basis(int p, double x, AxisBasis& out) {
+// dB_i^P/dx at x, as a degree-0 basis (a derivative across the segment).
+template <int P>
+[[gnu::always_inline]] inline void derivative_basis(double x, AxisBasis& out) {
   double value[kMaxNodes], derivative[kMaxNodes];
-  bernstein_basis(p, x, value, derivative);
+  bernstein_basis<P>(x, value, derivative);
   out.degree = 0;
-  for (int i = 0; i <= p; ++i)
+  for (int i = 0; i <= P; ++i)
     out.b[i][0] = derivative[i];
 }
 
@@ -366,67 +404,86 @@ struct AxisBasis {
 struct StageX {
   double g[kMaxNodes][kMaxNodes][kMaxNodes];
 };
-[[gnu::always_inline]] inline void contract_x(int p, const double* c, const AxisBasis& bx,
-                                              StageX& out) {
-  const int n = p + 1, dx = bx.degree;
-  for (int k = 0; k < n; ++k)
-    for (int j = 0; j < n; ++j) {
-      double* g = out.g[k][j];
-      std::fill(g, g + dx + 1, 0.0);
-      const double* row = c + n * (j + n * k);
-      for (int i = 0; i < n; ++i)
-        for (int l = 0; l <= dx; ++l)
-          g[l] += row[i] * bx.b[i][l];
-    }
+template <int P>
+[[gnu::always_inline]] inline void contract_x(const double* c, const AxisBasis& bx, StageX& out) {
+  with_degree<P>(bx.degree, [&](auto dx) {
+    constexpr int n = P + 1, D = dx;
+    if constexpr (D <= P)
+      for (int k = 0; k < n; ++k)
+        for (int j = 0; j < n; ++j) {
+          double g[D + 1] = {};
+          const double* row = c + n * (j + n * k);
+          for (int i = 0; i < n; ++i)
+            for (int l = 0; l <= D; ++l)
+              g[l] += row[i] * bx.b[i][l];
+          std::copy(g, g + D + 1, out.g[k][j]);
+        }
+  });
 }
 // After the η stage: h[k][l] = Σ_j g[k][j] ⊛ by_j, degree dx + by.degree.
 struct StageY {
   double h[kMaxNodes][2 * kMaxHexOrder + 1];
 };
-[[gnu::always_inline]] inline void contract_y(int p, const StageX& x, int dx, const AxisBasis& by,
+template <int P>
+[[gnu::always_inline]] inline void contract_y(const StageX& x, int dx, const AxisBasis& by,
                                               StageY& out) {
-  const int n = p + 1;
-  for (int k = 0; k < n; ++k) {
-    double* h = out.h[k];
-    std::fill(h, h + dx + by.degree + 1, 0.0);
-    for (int j = 0; j < n; ++j)
-      convolve_add(x.g[k][j], dx, by.b[j], by.degree, h);
-  }
+  with_degree<P>(dx, [&](auto dxc) {
+    with_degree<P>(by.degree, [&](auto dyc) {
+      constexpr int n = P + 1, DX = dxc, DY = dyc;
+      if constexpr (DX <= P && DY <= P)
+        for (int k = 0; k < n; ++k) {
+          double h[DX + DY + 1] = {};
+          for (int j = 0; j < n; ++j)
+            convolve_add<DX, DY>(x.g[k][j], by.b[j], h);
+          std::copy(h, h + DX + DY + 1, out.h[k]);
+        }
+    });
+  });
 }
 // The ζ stage in the scaled basis (before the division by the binomials); returns the degree
 // dxy + bz.degree.
-[[gnu::always_inline]] inline int contract_z_scaled(int p, const StageY& y, int dxy,
-                                                    const AxisBasis& bz, double* f) {
-  const int n = p + 1, degree = dxy + bz.degree;
-  std::fill(f, f + degree + 1, 0.0);
-  for (int k = 0; k < n; ++k)
-    convolve_add(y.h[k], dxy, bz.b[k], bz.degree, f);
-  return degree;
+template <int P>
+[[gnu::always_inline]] inline int contract_z_scaled(const StageY& y, int dxy, const AxisBasis& bz,
+                                                    double* f) {
+  return with_degree<P>(dxy, [&](auto dxyc) {
+    return with_degree<P>(bz.degree, [&](auto dzc) {
+      constexpr int n = P + 1, DXY = dxyc, DZ = dzc;
+      if constexpr (DXY <= 2 * P && DZ <= P) {
+        double s[DXY + DZ + 1] = {};
+        for (int k = 0; k < n; ++k)
+          convolve_add<DXY, DZ>(y.h[k], bz.b[k], s);
+        std::copy(s, s + DXY + DZ + 1, f);
+      }
+      return DXY + DZ;
+    });
+  });
 }
 [[gnu::always_inline]] inline void scaled_to_standard(int degree, double* f) {
   for (int l = 0; l <= degree; ++l)
     f[l] /= kBinomial[degree][l];
 }
 // The ζ stage: the standard Bernstein coefficients f[0..degree] along the segment.
-int contract_z(int p, const StageY& y, int dxy, const AxisBasis& bz, double* f) {
-  const int degree = contract_z_scaled(p, y, dxy, bz, f);
+template <int P>
+int contract_z(const StageY& y, int dxy, const AxisBasis& bz, double* f) {
+  const int degree = contract_z_scaled<P>(y, dxy, bz, f);
   scaled_to_standard(degree, f);
   return degree;
 }
 
 // Standard Bernstein coefficients f[0..n] on s ∈ [0, 1] of the tensor polynomial with
 // coefficients `c` along the straight segment from reference point a (s = 0) to b (s = 1);
-// returns the degree n ≤ 3p (p per reference axis the segment moves along).
-int restrict_to_segment(int p, const double* c, glm::dvec3 a, glm::dvec3 b, double* f) {
+// returns the degree n ≤ 3P (P per reference axis the segment moves along).
+template <int P>
+int restrict_to_segment(const double* c, glm::dvec3 a, glm::dvec3 b, double* f) {
   AxisBasis bx, by, bz;
-  segment_basis(p, a.x, b.x, bx);
-  segment_basis(p, a.y, b.y, by);
-  segment_basis(p, a.z, b.z, bz);
+  segment_basis<P>(a.x, b.x, bx);
+  segment_basis<P>(a.y, b.y, by);
+  segment_basis<P>(a.z, b.z, bz);
   StageX x;
   StageY y;
-  contract_x(p, c, bx, x);
-  contract_y(p, x, bx.degree, by, y);
-  return contract_z(p, y, bx.degree + by.degree, bz, f);
+  contract_x<P>(c, bx, x);
+  contract_y<P>(x, bx.degree, by, y);
+  return contract_z<P>(y, bx.degree + by.degree, bz, f);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -579,19 +636,20 @@ struct Activation {
 // `hits` with its normal: the ray in reference coordinates, clipped to the unit cube, the
 // polynomial along the clipped segment, its roots by Bernstein subdivision. Both casters call
 // this for a ray through an element (the coherent one where it has no shortcut).
-void intersect_element(int p, const ActiveElement& e, const double* c, glm::dvec3 org,
-                       glm::dvec3 dir, double t_min, double t_max, std::vector<RayHit>& hits) {
+template <int P>
+void intersect_element(const ActiveElement& e, const double* c, glm::dvec3 org, glm::dvec3 dir,
+                       double t_min, double t_max, std::vector<RayHit>& hits) {
   const glm::dvec3 ro = e.to_reference * (org - e.origin), rd = e.to_reference * dir;
   double t0 = t_min, t1 = t_max;
   if (!clip_ray_to_box(ro, rd, glm::dvec3(0.0), glm::dvec3(1.0), t0, t1)) return;
   const glm::dvec3 a = glm::clamp(ro + t0 * rd, 0.0, 1.0), b = glm::clamp(ro + t1 * rd, 0.0, 1.0);
 
   double f[kMaxRayDegree + 1];
-  const int degree = restrict_to_segment(p, c, a, b, f);
+  const int degree = restrict_to_segment<P>(c, a, b, f);
   const glm::dmat3 to_world_gradient = glm::transpose(e.to_reference);  // ∇x f = A⁻ᵀ ∇ξ f
   if (degree == 0) return;  // constant along the ray: no crossing
   bernstein_roots(f, degree, [&](double s) {
-    const glm::dvec3 g = to_world_gradient * evaluate_tensor(p, c, a + s * (b - a)).gradient;
+    const glm::dvec3 g = to_world_gradient * evaluate_tensor<P>(c, a + s * (b - a)).gradient;
     const double len = glm::length(g);
     // At singular points (∇f = 0) the normal faces the viewer, as for analytic sources.
     const glm::vec3 normal = len > 0.0 ? glm::vec3(g / len) : glm::vec3(-dir);
@@ -625,8 +683,10 @@ class HexBinding final : public GeometryBinding {
     const auto* self = static_cast<const HexBinding*>(args->geometryUserPtr);
     auto* q = reinterpret_cast<RayQuery*>(args->context);
     const Activation& act = self->active_;
-    intersect_element(act.order, act.elements[args->primID], act.coefficients_of(args->primID),
-                      q->org, q->dir, q->t_min, q->t_max, *q->hits);
+    with_order(act.order, [&](auto p) {
+      intersect_element<p>(act.elements[args->primID], act.coefficients_of(args->primID), q->org,
+                           q->dir, q->t_min, q->t_max, *q->hits);
+    });
   }
 
   Activation active_;
@@ -723,32 +783,32 @@ class StagedRestriction {
   // coefficient that is exactly zero: the values are far above underflow).
   int restrict(glm::dvec3 a, glm::dvec3 b, double* f) {
     if (!x_valid_ || a.x != ax_ || b.x != bx_) {
-      segment_basis(p_, a.x, b.x, basis_x_);
-      contract_x(p_, c_, basis_x_, x_);
+      segment_basis<P>(a.x, b.x, basis_x_);
+      contract_x<P>(c_, basis_x_, x_);
       ax_ = a.x, bx_ = b.x;
       x_valid_ = true;
       y_valid_ = dx_valid_ = false;
-      const int n = p_ + 1;
+      constexpr int n = P + 1;
       x_uniform_ =
           one_sign(&x_.g[0][0][0], n, n, kMaxNodes * kMaxNodes, kMaxNodes, basis_x_.degree + 1);
     }
     if (x_uniform_) return -1;
     if (!y_valid_ || a.y != ay_ || b.y != by_) {
-      segment_basis(p_, a.y, b.y, basis_y_);
-      contract_y(p_, x_, basis_x_.degree, basis_y_, y_);
+      segment_basis<P>(a.y, b.y, basis_y_);
+      contract_y<P>(x_, basis_x_.degree, basis_y_, y_);
       ay_ = a.y, by_ = b.y;
       y_valid_ = true;
-      y_uniform_ = one_sign(&y_.h[0][0], p_ + 1, 1, 2 * kMaxHexOrder + 1, 0,
+      y_uniform_ = one_sign(&y_.h[0][0], P + 1, 1, 2 * kMaxHexOrder + 1, 0,
                             basis_x_.degree + basis_y_.degree + 1);
     }
     if (y_uniform_) return -1;
     if (!z_valid_ || a.z != az_ || b.z != bz_) {
-      segment_basis(p_, a.z, b.z, basis_z_);
+      segment_basis<P>(a.z, b.z, basis_z_);
       az_ = a.z, bz_ = b.z;
       z_valid_ = true;
     }
     a_ = a, b_ = b;
-    const int degree = contract_z_scaled(p_, y_, basis_x_.degree + basis_y_.degree, basis_z_, f);
+    const int degree = contract_z_scaled<P>(y_, basis_x_.degree + basis_y_.degree, basis_z_, f);
     // Scaled and standard coefficients differ by positive factors: one strict sign in the
     // scaled ones (far above underflow) means no root, and the divisions can wait.
     if (degree > 0 && one_sign(f, 1, 1, 0, 0, degree + 1)) return -1;
@@ -766,12 +826,12 @@ class StagedRestriction {
     // their derivatives there.
     const glm::dvec3 q = a_ + s * (b_ - a_);
     double vy[kMaxNodes], dy[kMaxNodes], vz[kMaxNodes], dz[kMaxNodes];
-    bernstein_basis(p_, q.y, vy, dy);
-    bernstein_basis(p_, q.z, vz, dz);
+    bernstein_basis<P>(q.y, vy, dy);
+    bernstein_basis<P>(q.z, vz, dz);
     if (!dx_valid_) {
       AxisBasis d;
-      derivative_basis(p_, a_.x, d);
-      contract_x(p_, c_, d, dx_);
+      derivative_basis<P>(a_.x, d);
+      contract_x<P>(c_, d, dx_);
       dx_valid_ = true;
     }
     constexpr int n = P + 1;
@@ -807,7 +867,6 @@ class StagedRestriction {
     return all_positive || all_negative;
   }
 
-  static constexpr int p_ = P;
   const double* c_;
   bool x_uniform_ = false, y_uniform_ = false;
   AxisBasis basis_x_, basis_y_, basis_z_;
@@ -847,11 +906,13 @@ class HexAxisBinding final : public AxisBinding {
         const std::size_t bin = std::size_t(bins.bin_b(ray.org[bins.b])) +
                                 std::size_t(bins.nb) * std::size_t(bins.bin_c(ray.org[bins.c]));
         hits.clear();
-        for (std::uint32_t m = bins.first[bin]; m < bins.first[bin + 1]; ++m) {
-          const std::uint32_t e = bins.elements[m];
-          intersect_element(active_.order, active_.elements[e], active_.coefficients_of(e), ray.org,
-                            rays.dir, ray.t0, ray.t1, hits);
-        }
+        with_order(active_.order, [&](auto p) {
+          for (std::uint32_t m = bins.first[bin]; m < bins.first[bin + 1]; ++m) {
+            const std::uint32_t e = bins.elements[m];
+            intersect_element<p>(active_.elements[e], active_.coefficients_of(e), ray.org, rays.dir,
+                                 ray.t0, ray.t1, hits);
+          }
+        });
         for (const RayHit& h : hits)
           out.push_back({std::uint32_t(k), h});
       }
@@ -885,21 +946,8 @@ class HexAxisBinding final : public AxisBinding {
   // in the order that keeps the staged restriction's first stages: rows of the image axis
   // whose world axis maps to the lower of the two reference axes across the ray.
   void cast_element(std::uint32_t e, const AxisRays& rays, std::vector<AxisHit>& out) const {
-    // The order as a constant: the stages' loops unroll.
-    using Cast =
-        void (HexAxisBinding::*)(std::uint32_t, const AxisRays&, std::vector<AxisHit>&) const;
-    static constexpr Cast kByOrder[kMaxHexOrder + 1] = {nullptr,
-                                                        &HexAxisBinding::cast_element_order<1>,
-                                                        &HexAxisBinding::cast_element_order<2>,
-                                                        &HexAxisBinding::cast_element_order<3>,
-                                                        &HexAxisBinding::cast_element_order<4>,
-                                                        &HexAxisBinding::cast_element_order<5>,
-                                                        &HexAxisBinding::cast_element_order<6>,
-                                                        &HexAxisBinding::cast_element_order<7>,
-                                                        &HexAxisBinding::cast_element_order<8>};
-    (this->*kByOrder[active_.order])(e, rays, out);
+    with_order(active_.order, [&](auto p) { cast_element_order<p>(e, rays, out); });
   }
-  static_assert(kMaxHexOrder == 8);
 
   template <int P>
   void cast_element_order(std::uint32_t e, const AxisRays& rays, std::vector<AxisHit>& out) const {
@@ -934,7 +982,6 @@ class HexAxisBinding final : public AxisBinding {
     const int ru = reference_of(ua), rv = reference_of(va);
     const bool columns_outer = ru >= 0 && ru < 3 && rv >= 0 && rv < 3 && ru < rv;
 
-    constexpr int p = P;
     const double* c = active_.coefficients_of(e);
     const glm::dvec3 rd = el.to_reference * rays.dir;
     const glm::dmat3 to_world_gradient = glm::transpose(el.to_reference);
@@ -958,7 +1005,7 @@ class HexAxisBinding final : public AxisBinding {
         if (degree <= 0) continue;  // constant along the ray, or no root possible
         const auto found = [&](double s) {
           glm::dvec3 g;
-          if (!staged.gradient(s, g)) g = evaluate_tensor(p, c, a + s * (b - a)).gradient;
+          if (!staged.gradient(s, g)) g = evaluate_tensor<P>(c, a + s * (b - a)).gradient;
           g = to_world_gradient * g;
           const double len = glm::length(g);
           const glm::vec3 normal = len > 0.0 ? glm::vec3(g / len) : glm::vec3(-rays.dir);
@@ -1002,7 +1049,7 @@ PolynomialSample evaluate_bernstein(int order, std::span<const double> bernstein
   check_order(order);
   if (bernstein.size() != std::size_t(nodes_per_element(order)))
     throw std::invalid_argument("evaluate_bernstein: span must hold (order + 1)^3 values");
-  return evaluate_tensor(order, bernstein.data(), reference);
+  return with_order(order, [&](auto p) { return evaluate_tensor<p>(bernstein.data(), reference); });
 }
 
 HexElementSource::HexElementSource(const HexBlock& block) : block_(block) {
