@@ -392,6 +392,18 @@ LdiFragment RayCaster::cast_fragment(const View& view, std::uint32_t view_index,
         return subdomain_segment(sub, view.point(position.x, position.y, 0.0), view.dir, segment);
       });
   LdiFragment fragment = make_empty_fragment(view, view_index);
+  // Sized once: growing these by doubling costs more than the copy (fresh pages, each time).
+  std::size_t samples = 0, pixels = 0;
+  for (const RayCaster::HitRun& run : runs) {
+    samples += run.depth.size();
+    pixels += std::size_t(std::count_if(run.counts.begin(), run.counts.end(),
+                                        [](std::uint32_t c) { return c > 0; }));
+  }
+  fragment.pixels.reserve(pixels);
+  fragment.counts.reserve(pixels);
+  fragment.depth.reserve(samples);
+  fragment.normal.reserve(samples);
+  if (has_scalar_) fragment.scalar.reserve(samples);
   std::uint32_t pixel = 0;
   for (const RayCaster::HitRun& run : runs) {
     for (std::uint32_t c : run.counts) {
