@@ -175,28 +175,55 @@ const ConversionMatrix& conversion_matrix(int order, NodeSet set) {
   return table[order][int(set)];
 }
 
+// Calls fn(std::integral_constant<int, p>{}) for the runtime order p = 1..kMaxHexOrder.
+template <class Fn>
+[[gnu::always_inline]] inline decltype(auto) with_order(int p, Fn&& fn) {
+  static_assert(kMaxHexOrder == 8);
+  switch (p) {
+    case 1:
+      return fn(std::integral_constant<int, 1>{});
+    case 2:
+      return fn(std::integral_constant<int, 2>{});
+    case 3:
+      return fn(std::integral_constant<int, 3>{});
+    case 4:
+      return fn(std::integral_constant<int, 4>{});
+    case 5:
+      return fn(std::integral_constant<int, 5>{});
+    case 6:
+      return fn(std::integral_constant<int, 6>{});
+    case 7:
+      return fn(std::integral_constant<int, 7>{});
+    default:
+      return fn(std::integral_constant<int, 8>{});
+  }
+}
 // Sum factorisation: the 1-D conversion applied along ξ, then η, then ζ ((p + 1)⁴ operations
 // instead of (p + 1)⁶). `in` and `out` hold (p + 1)³ values and may not overlap.
-void convert_element(int order, const ConversionMatrix& m, const double* in, double* out) {
-  const int n = order + 1;
+template <int P>
+void convert_element_fixed(const ConversionMatrix& m, const double* in, double* out) {
+  constexpr int n = P + 1;
   double work[2][kMaxElementValues];
   const double* src = in;
-  const int strides[3] = {1, n, n * n};
   for (int axis = 0; axis < 3; ++axis) {
     double* dst = axis == 2 ? out : work[axis];
-    const int s = strides[axis];
-    // Lines along `axis` start at every index whose `axis` digit is zero.
-    for (int base = 0; base < n * n * n; ++base) {
-      if ((base / s) % n != 0) continue;
-      for (int r = 0; r < n; ++r) {
-        double sum = 0.0;
-        for (int c = 0; c < n; ++c)
-          sum += m[r * n + c] * src[base + c * s];
-        dst[base + r * s] = sum;
+    const int s = axis == 0 ? 1 : (axis == 1 ? n : n * n);
+    // The lines along `axis`: indices a + b·s·n with a < s, each with its n values s apart.
+    for (int b = 0; b < n * n * n / (s * n); ++b)
+      for (int a = 0; a < s; ++a) {
+        const int base = a + b * s * n;
+        for (int r = 0; r < n; ++r) {
+          double sum = 0.0;
+          for (int c = 0; c < n; ++c)
+            sum += m[r * n + c] * src[base + c * s];
+          dst[base + r * s] = sum;
+        }
       }
-    }
     src = dst;
   }
+}
+void convert_element(int order, const ConversionMatrix& m, const double* in, double* out) {
+  with_order(order, [&](auto p) { convert_element_fixed<p>(m, in, out); });
 }
 
 // Copies the (p + 1)³ = n nodal values of `element` as doubles into `nodal`; returns how many
@@ -248,29 +275,6 @@ Box bounding_box(const AffineFrame& f) {
 // runtime value into one. The operations and their order do not depend on how a kernel is
 // instantiated: every caller gets the same values, to the bit.
 
-// Calls fn(std::integral_constant<int, p>{}) for the runtime order p = 1..kMaxHexOrder.
-template <class Fn>
-[[gnu::always_inline]] inline decltype(auto) with_order(int p, Fn&& fn) {
-  static_assert(kMaxHexOrder == 8);
-  switch (p) {
-    case 1:
-      return fn(std::integral_constant<int, 1>{});
-    case 2:
-      return fn(std::integral_constant<int, 2>{});
-    case 3:
-      return fn(std::integral_constant<int, 3>{});
-    case 4:
-      return fn(std::integral_constant<int, 4>{});
-    case 5:
-      return fn(std::integral_constant<int, 5>{});
-    case 6:
-      return fn(std::integral_constant<int, 6>{});
-    case 7:
-      return fn(std::integral_constant<int, 7>{});
-    default:
-      return fn(std::integral_constant<int, 8>{});
-  }
-}
 // Calls fn(std::integral_constant<int, d>{}) for a degree along a segment: p per reference axis
 // the segment moves along, so d ∈ {0, P, 2P, 3P}.
 template <int P, class Fn>
