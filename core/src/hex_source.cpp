@@ -493,16 +493,27 @@ int restrict_to_segment(const double* c, glm::dvec3 a, glm::dvec3 b, double* f) 
 // ---------------------------------------------------------------------------------------------
 // Roots of a univariate Bernstein polynomial on [0, 1]
 
-// Value and derivative at u of the Bernstein polynomial c[0..n] on [0, 1] (de Casteljau).
-[[gnu::always_inline]] inline void de_casteljau(const double* c, int n, double u, double& value,
-                                                double& derivative) {
-  double w[kMaxRayDegree + 1];
-  std::copy(c, c + n + 1, w);
-  for (int r = n; r > 1; --r)
-    for (int i = 0; i < r; ++i)
-      w[i] = (1.0 - u) * w[i] + u * w[i + 1];
-  value = (1.0 - u) * w[0] + u * w[1];
-  derivative = n * (w[1] - w[0]);
+// Value and derivative at u of the Bernstein polynomial c[0..n] on [0, 1] by Horner's rule in
+// r = u / (1 − u) (or (1 − u) / u from the other end, for u > 1/2, so that |r| ≤ 1):
+// Σ C(n, i) c_i u^i (1 − u)^(n−i) = (1 − u)^n Σ C(n, i) c_i r^i. O(n) per evaluation where
+// de Casteljau's is O(n²).
+[[gnu::always_inline]] inline void bernstein_horner(const double* c, int n, double u, double& value,
+                                                    double& derivative) {
+  const bool low = u <= 0.5;
+  const double near = low ? 1.0 - u : u, r = (low ? u : 1.0 - u) / near;
+  // From the far end: coefficient i of the sum is c[low ? i : n − i].
+  const auto at = [&](int i) { return c[low ? i : n - i]; };
+  // f: Σ C(n, i) e_i r^i; d: Σ C(n − 1, i) (e_{i+1} − e_i) r^i (the derivative's); near^(n−1).
+  double f = at(n), d = at(n) - at(n - 1), power = 1.0;
+  for (int i = n - 1; i >= 0; --i) {
+    f = f * r + kBinomial[n][i] * at(i);
+    if (i > 0) {
+      d = d * r + kBinomial[n - 1][i - 1] * (at(i) - at(i - 1));
+      power *= near;
+    }
+  }
+  value = f * power * near;
+  derivative = (low ? n : -n) * d * power;  // d/du = −d/d(1 − u) from the far end
 }
 
 // Splits c[0..n] at 1/2 into the coefficients of the left and right halves (de Casteljau). The
@@ -551,7 +562,7 @@ int restrict_to_segment(const double* c, glm::dvec3 a, glm::dvec3 b, double* f) 
   const double noise = 4.0 * (n + 1) * std::numeric_limits<double>::epsilon() * magnitude;
   for (int iter = 0; iter < 64 && b - a > tol; ++iter) {
     double g, dg;
-    de_casteljau(c, n, u, g, dg);
+    bernstein_horner(c, n, u, g, dg);
     if (g == 0.0 || std::abs(g) <= noise) return u;
     if (positive(g) == positive(ga)) {
       a = u;
