@@ -609,6 +609,9 @@ class GridAxisBinding final : public AxisBinding {
     const std::uint64_t* column =
         &columns_[a][std::size_t(cell[b] - first_[b] + cells_[b] * (cell[c] - first_[c])) *
                      column_words(a)];
+    // No straddling cell in the column: nothing to find (solve_cell finds nothing elsewhere).
+    if (std::all_of(column, column + column_words(a), [](std::uint64_t w) { return w == 0; }))
+      return;
     // Local coordinates across the ray, as solve_cell computes them.
     double p[3];
     glm::dvec3 size;
@@ -696,6 +699,24 @@ class GridAxisBinding final : public AxisBinding {
       return st;
     };
 
+    // The column's straddle bits: word and bit of its cell at relative index k along a.
+    const std::size_t cw = row_words();
+    const std::int64_t rb = cell[b] - first_[b], rc = cell[c] - first_[c];
+    std::size_t base = 0, along = 0;  // word of cell 0 along a, words between cells along a
+    unsigned bit0 = 0;
+    if (a == 0) {
+      base = std::size_t(rb + cells_[1] * rc) * cw;
+    } else {
+      base = (a == 1 ? std::size_t(cells_[1]) * std::size_t(rc) : std::size_t(rc)) * cw +
+             std::size_t(rb) / 64;
+      along = a == 1 ? cw : std::size_t(cells_[1]) * cw;
+      bit0 = unsigned(rb % 64);
+    }
+    const auto straddling = [&](std::int64_t k) {
+      if (a == 0) return bool((straddle_[base + std::size_t(k) / 64] >> (k % 64)) & 1u);
+      return bool((straddle_[base + std::size_t(k) * along] >> bit0) & 1u);
+    };
+
     // The brick the ray's segment starts inside (not on its face): the Embree binding walks it
     // from the segment's start point; so does this caster, cell by cell.
     std::int64_t start_lo = -1, start_hi = -2;
@@ -715,7 +736,11 @@ class GridAxisBinding final : public AxisBinding {
           if (st.t0 > st.face_in && st.t0 < st.t1) {
             start_lo = st.lo;
             start_hi = st.hi;
-            walk(a, st, o, dir, step, inv, solve);
+            // solve_cell finds nothing in a cell that does not straddle: only those are solved.
+            walk(a, st, o, dir, step, inv,
+                 [&](std::int64_t k, double ta, double tb, bool on_entry, bool on_exit) {
+                   if (straddling(k - first_[a])) solve(k, ta, tb, on_entry, on_exit);
+                 });
             break;
           }
         }
@@ -726,24 +751,6 @@ class GridAxisBinding final : public AxisBinding {
     // and left on its faces, and so is every cell (no clipping to compute).
     const bool whole = ray.t0 <= std::min(t_at(first_[a]), t_at(last_[a] + 1)) &&
                        ray.t1 >= std::max(t_at(first_[a]), t_at(last_[a] + 1));
-    // The column's straddle bits: word and bit of its cell at relative index k along a.
-    const std::size_t cw = row_words();
-    const std::int64_t rb = cell[b] - first_[b], rc = cell[c] - first_[c];
-    std::size_t base = 0, along = 0;  // word of cell 0 along a, words between cells along a
-    unsigned bit0 = 0;
-    if (a == 0) {
-      base = std::size_t(rb + cells_[1] * rc) * cw;
-    } else {
-      base = (a == 1 ? std::size_t(cells_[1]) * std::size_t(rc) : std::size_t(rc)) * cw +
-             std::size_t(rb) / 64;
-      along = a == 1 ? cw : std::size_t(cells_[1]) * cw;
-      bit0 = unsigned(rb % 64);
-    }
-    const auto straddling = [&](std::int64_t k) {
-      if (a == 0) return bool((straddle_[base + std::size_t(k) / 64] >> (k % 64)) & 1u);
-      return bool((straddle_[base + std::size_t(k) * along] >> bit0) & 1u);
-    };
-
     // The straddling cells, in ray order.
     const std::int64_t n_blocks = (cells_[a] + kColumnBlock - 1) / kColumnBlock;
     const std::size_t wpc = column_words(a);
