@@ -8,7 +8,12 @@ ray; the 16³ elements of order 4 (GLL nodes) of ldimesh_bench_sources are set b
 on their field sampled at 65³ points (what a user would contour instead). Runs alternate, and
 every figure is the median of --repeats runs, so that the ratios hold on a noisy machine.
 
-    /usr/bin/python3 bench/flying_edges.py [--build build] [--repeats 5] [--threads 2]
+Both sides are timed as a running simulation meets them, step after step in one process: Flying
+Edges runs in this process (a first, untimed run warms it up), and each ldimesh process runs
+its step --steps times (`ldimesh mesh --repeat`); its first step, a cold start of a fresh
+process (page faults on every new buffer, cold caches), is reported on its own row.
+
+    /usr/bin/python3 bench/flying_edges.py [--build build] [--repeats 5] [--threads 2] [--steps 4]
 
 Prints a Markdown table (docs/benchmarks.md, "Ray casting beside Flying Edges") and, with
 --json FILE, writes the figures there.
@@ -62,17 +67,24 @@ def flying_edges(img, iso):
     return time.perf_counter() - start, fe.GetOutput().GetNumberOfCells()
 
 
-def ldimesh_grid(build, info, path, res, caster, threads):
+def ldimesh_grid(build, info, path, res, caster, threads, steps):
+    """One `ldimesh mesh` process that runs the step `steps` times (--repeat): the first run is
+    a cold start (a fresh process: page faults, cold caches), the later ones what each time step of
+    a running simulation pays."""
     dims = ",".join(str(d) for d in info["dims"])
     cmd = [os.path.join(build, "bin", "ldimesh"), "mesh", "--grid", path, "--dims", dims,
            "--origin", ",".join(repr(x) for x in info["origin"]),
            "--spacing", ",".join(repr(x) for x in info["spacing"]),
            "--iso", "0.5", "--res", str(res), "--caster", caster, "--threads", str(threads),
-           "--json"]
+           "--repeat", str(steps), "--json"]
     j = json.loads(subprocess.run(cmd, check=True, capture_output=True, text=True).stdout)
-    s = j["seconds"]
-    return {"cast": s["scene"] + s["raycast"], "solver": s["scene"] + s["raycast"] + s["reduce"],
-            "samples": j["samples"], "triangles": j["triangles"]}
+    runs = j["repeats"]
+    cast = [r["scene"] + r["raycast"] for r in runs]
+    solver = [r["scene"] + r["raycast"] + r["reduce"] for r in runs]
+    warm = slice(1, None) if len(runs) > 1 else slice(None)
+    return {"cast_cold": cast[0], "cast": statistics.median(cast[warm]),
+            "solver": statistics.median(solver[warm]), "samples": j["samples"],
+            "triangles": j["triangles"]}
 
 
 def element_casts(build, res, threads):
@@ -88,6 +100,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--build", default="build")
     ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--steps", type=int, default=4,
+                    help="steps per ldimesh process (the first is the cold start)")
     ap.add_argument("--threads", type=int, default=os.cpu_count())
     ap.add_argument("--json", help="write the figures to this file")
     args = ap.parse_args()
@@ -99,6 +113,7 @@ def main():
         grid_img, fine_img = image(grid_info, grid_path), image(fine_info, fine_path)
         fe, fe65, runs, elements = [], [], {}, []
         triangles = {}
+        flying_edges(grid_img, 0.5), flying_edges(fine_img, 0.5)  # warm-up, untimed
         for rep in range(args.repeats):
             print(f"flying_edges.py: run {rep + 1} of {args.repeats}", file=sys.stderr)
             for res in (256, 512):
@@ -106,7 +121,8 @@ def main():
                     t, tri = flying_edges(grid_img, 0.5)
                     fe.append(t)
                     triangles["fe"] = tri
-                    r = ldimesh_grid(args.build, grid_info, grid_path, res, caster, args.threads)
+                    r = ldimesh_grid(args.build, grid_info, grid_path, res, caster, args.threads,
+                                     args.steps)
                     runs.setdefault((res, caster), []).append(r)
             t, _ = flying_edges(fine_img, 0.5)
             fe65.append(t)
@@ -124,12 +140,16 @@ def main():
         for caster in ("auto", "embree"):
             rs = runs[(res, caster)]
             cast, solver = med(r["cast"] for r in rs), med(r["solver"] for r in rs)
+            cold = med(r["cast_cold"] for r in rs)
             name = "coherent" if caster == "auto" else "Embree"
-            print(f"| 256³ grid, 3 × {res}², {name}: ray cast (bind + cast) | {cast:.4f} | "
-                  f"{fe_s:.4f} | {cast / fe_s:.2f} |")
+            print(f"| 256³ grid, 3 × {res}², {name}: ray cast (bind + cast), first step of a "
+                  f"process | {cold:.4f} | {fe_s:.4f} | {cold / fe_s:.2f} |")
+            print(f"| 256³ grid, 3 × {res}², {name}: ray cast (bind + cast), later steps | "
+                  f"{cast:.4f} | {fe_s:.4f} | {cast / fe_s:.2f} |")
             print(f"| 256³ grid, 3 × {res}², {name}: solver's share (cast + encode + reduce, one "
-                  f"rank) | {solver:.4f} | {fe_s:.4f} | {solver / fe_s:.2f} |")
+                  f"rank), later steps | {solver:.4f} | {fe_s:.4f} | {solver / fe_s:.2f} |")
             rows.append({"source": "grid", "resolution": res, "caster": name, "cast": cast,
+                         "cast_first_step": cold,
                          "solver": solver, "flying_edges": fe_s, "samples": rs[0]["samples"]})
     for caster in ("coherent", "Embree"):
         s = med(e[("elements", caster, args.threads)]["seconds"] for e in elements)

@@ -60,6 +60,7 @@ struct MeshArgs {
   bool json = false;
   int bricks = 32;
   std::string caster = "auto";
+  int repeat = 1;
   std::optional<double> isovalue;
   double max_cost = ldimesh::MatchOptions{}.max_cost;
   bool lossless = false;
@@ -212,6 +213,17 @@ int run_mesh(const MeshArgs& args) {
     caster = std::make_unique<ldimesh::RayCaster>(*input.source, iso, caster_options);
     scene_seconds = seconds_since(start);
   });
+  const auto rebind = [&] {  // a new time step's bind: the caster of the same values again
+    on_all_ranks(comm, [&] {
+      caster.reset();
+      start = std::chrono::steady_clock::now();
+      ldimesh::RayCasterOptions caster_options;
+      caster_options.path =
+          args.caster == "embree" ? ldimesh::CastPath::embree : ldimesh::CastPath::automatic;
+      caster = std::make_unique<ldimesh::RayCaster>(*input.source, iso, caster_options);
+      scene_seconds = seconds_since(start);
+    });
+  };
 
   ldimesh::DistributedOptions options;
   options.encoding.lossless = args.lossless;
@@ -223,12 +235,25 @@ int run_mesh(const MeshArgs& args) {
   options.meshing.refinement = args.refinement;
   options.meshing.refinement.grow = !args.no_grow;
   options.meshing.merging.enabled = args.merge;
+  // --repeat: the whole step again on the same data, as the time steps of a running simulation
+  // would run it (warm caches and allocator); every run's figures are reported, the mesh is the
+  // last run's.
   ldimesh::DistributedResult step;
-  const ldimesh::Status status =
-      ldimesh::mesh_distributed(comm, *caster, input.subdomain, views, options, step);
-  if (!status) throw std::runtime_error(status.message());
   double max_scene = 0.0;
-  MPI_Reduce(&scene_seconds, &max_scene, 1, MPI_DOUBLE, MPI_MAX, 0, comm);
+  nlohmann::json repeats = nlohmann::json::array();
+  for (int run = 0; run < args.repeat; ++run) {
+    if (run > 0) rebind();
+    step = {};
+    const ldimesh::Status status =
+        ldimesh::mesh_distributed(comm, *caster, input.subdomain, views, options, step);
+    if (!status) throw std::runtime_error(status.message());
+    MPI_Reduce(&scene_seconds, &max_scene, 1, MPI_DOUBLE, MPI_MAX, 0, comm);
+    repeats.push_back(
+        {{"scene", max_scene}, {"raycast", step.seconds.cast}, {"reduce", step.seconds.reduce}});
+    if (root && args.repeat > 1 && !args.json)
+      std::fprintf(stderr, "ldimesh: run %d of %d: scene %.4f s, ray cast %.4f s, reduce %.4f s\n",
+                   run + 1, args.repeat, max_scene, step.seconds.cast, step.seconds.reduce);
+  }
   if (!root) return 0;
 
   const ldimesh::MeshingResult& result = step.meshing;
@@ -360,6 +385,7 @@ int run_mesh(const MeshArgs& args) {
                                  {"smooth", q.smooth_seconds}}}};
     }
     j["output"] = args.out.empty() ? nlohmann::json(nullptr) : nlohmann::json(args.out);
+    j["repeats"] = repeats;
     j["seconds"] = {{"load", load_seconds},
                     {"scene", max_scene},
                     {"raycast", t.cast},
@@ -635,6 +661,12 @@ int main(int argc, char** argv) {
                    "ray caster for axis views: auto (the coherent casters of grids and elements "
                    "where the source has one) or embree (Embree for every ray, the reference)")
       ->check(CLI::IsMember({"auto", "embree"}))
+      ->capture_default_str();
+  mesh->add_option("--repeat", args.repeat,
+                   "run the step (bind, cast, reduce, mesh) this many times on the same data, as "
+                   "time steps would, and report every run's seconds (JSON \"repeats\"); the "
+                   "output is the last run's")
+      ->check(CLI::Range(1, 1000))
       ->capture_default_str();
   mesh->add_option("--iso", args.isovalue,
                    "isovalue (default: the surface's; for --grid the middle of the value range)");

@@ -123,6 +123,24 @@ for extra in "" "--merge" "--refine 2"; do
   cmp -s "$tmp/w_auto.ply" "$tmp/w_embree.ply" || fail "wavy grid ($extra): the casters' meshes differ"
 done
 
+# --repeat runs the step again on the same data (benchmarks' warm figures): the same mesh as one
+# run, and one "repeats" entry per run with every stage's seconds.
+"$ldimesh" mesh --grid "$tmp/w.raw" --dims 24,24,24 --iso 0 --res 48 --merge --repeat 3 --json \
+  --out "$tmp/w_repeat.ply" >"$tmp/w_repeat.json" || fail "wavy grid --repeat 3 failed"
+"$ldimesh" mesh --grid "$tmp/w.raw" --dims 24,24,24 --iso 0 --res 48 --merge \
+  --out "$tmp/w_once.ply" >/dev/null || fail "wavy grid once failed"
+cmp -s "$tmp/w_repeat.ply" "$tmp/w_once.ply" || fail "--repeat 3 changed the mesh"
+python3 - "$tmp/w_repeat.json" <<'PY' || fail "--repeat 3: implausible repeats"
+import json, sys
+j = json.load(open(sys.argv[1]))
+runs = j["repeats"]
+assert len(runs) == 3, runs
+for r in runs:
+    assert set(r) == {"scene", "raycast", "reduce"} and all(v > 0 for v in r.values()), r
+assert runs[-1]["raycast"] == j["seconds"]["raycast"], (runs[-1], j["seconds"])
+PY
+expect_error "repeat 0" mesh --surface sphere --res 16 --repeat 0
+
 # ldimesh distance: the sphere meshed at two resolutions is close to itself and to the implicit
 # sphere (within a small fraction of the coarser pixel, 2.5/32); a mesh is at distance 0 from itself.
 "$ldimesh" mesh --surface sphere --res 32 --out "$tmp/s32.ply" >/dev/null || fail "sphere 32 failed"
