@@ -185,6 +185,7 @@ struct Job {
   double time = 0.0;
   std::vector<View> views;
   std::vector<LdiFragment> fragments;  // isovalue-major: isovalue i, view v at i·views + v
+  PendingMerge pending;                // the other ranks' fragments, merged by the worker
   std::map<std::string, double> seconds;
   std::uint64_t skipped_steps = 0;  // due steps dropped since the previous job was handed over
   std::uint64_t nonfinite_values = 0;
@@ -330,9 +331,11 @@ class AdaptorImpl final : public Adaptor {
     double tolerance = 0.0;
     for (const View& v : views)
       tolerance = std::max(tolerance, merge_tolerance(options_.encoding, v, domain_.diagonal()));
+    // The root merges what it receives on its worker (finish_merge), off the solver's path.
     ReductionStats stats;
-    const Status reduced =
-        reduce_fragments(comm_, 0, fragments, options_.encoding, tolerance, stats);
+    PendingMerge pending;
+    const Status reduced = reduce_fragments(comm_, 0, fragments, options_.encoding, tolerance,
+                                            stats, rank_ == 0 ? &pending : nullptr);
     int reduce_failed = reduced ? 0 : 1;
     MPI_Allreduce(MPI_IN_PLACE, &reduce_failed, 1, MPI_INT, MPI_MAX, comm_);
     double max_cast = 0.0;
@@ -355,6 +358,7 @@ class AdaptorImpl final : public Adaptor {
       job.time = time;
       job.views = std::move(views);
       job.fragments = std::move(fragments);
+      job.pending = std::move(pending);
       job.seconds = {{"cast", max_cast},
                      {"encode", stats.encode_seconds},
                      {"reduce", stats.wall_seconds},
@@ -474,6 +478,11 @@ class AdaptorImpl final : public Adaptor {
     meshing.merging.enabled = options_.merging;
     std::size_t samples = 0, quads = 0;
     double decode_s = 0.0, mesh_s = 0.0;
+    t = Clock::now();
+    ReductionStats merge_stats;
+    if (Status s = finish_merge(job.pending, job.fragments, merge_stats); !s)
+      throw std::runtime_error(s.message());
+    decode_s += seconds_since(t);
     for (std::size_t i = 0; i < options_.isovalues.size(); ++i) {
       t = Clock::now();
       std::vector<Ldi> ldis;

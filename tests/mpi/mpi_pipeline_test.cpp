@@ -6,6 +6,7 @@
 #include <mpi.h>
 
 #include <algorithm>
+#include <bit>
 #include <cstring>
 #include <memory>
 #include <random>
@@ -21,6 +22,7 @@
 #include "ldimesh/core/grid_source.hpp"
 #include "ldimesh/core/surfaces.hpp"
 #include "ldimesh/transport/distributed.hpp"
+#include "ldimesh/transport/mpi_reduce.hpp"
 #include "mpi_gtest.hpp"
 
 namespace ldimesh {
@@ -135,6 +137,49 @@ TEST(MpiPipeline, GridBlocksWithGhostLayersSplitAcrossRanks) {
       whole, blocks, {r % blocks[0], (r / blocks[0]) % blocks[1], r / (blocks[0] * blocks[1])});
   const GridSource mine(part.block);
   expect_distributed_equals_one_process(mine, {part.owned, reference.bounds()}, reference, 0.5, 64);
+}
+
+// The root may leave the decoding and merging of what it receives to later (its worker thread):
+// finish_merge then gives the fragments of the plain reduction, to the bit; a message that does
+// not decode is an error there.
+TEST(MpiPipeline, DeferredMergeOnTheRootGivesTheReducedFragments) {
+  const SurfaceInfo* s = find_surface("torus");
+  const auto source = make_surface_source("torus");
+  const Subdomain sub{decompose_box(s->domain, ranks())[rank_of()], s->domain};
+  const std::vector<View> views = make_axis_views(s->domain, 48);
+  const RayCaster caster(*source, s->isovalue);
+  std::vector<LdiFragment> cast;
+  for (std::size_t v = 0; v < views.size(); ++v)
+    cast.push_back(caster.cast_fragment(views[v], std::uint32_t(v), sub));
+  const FragmentEncoding encoding;
+  const double tolerance = 1e-6;
+  std::vector<LdiFragment> plain = cast, deferred = cast;
+  ReductionStats stats;
+  EXPECT_TRUE(reduce_fragments(MPI_COMM_WORLD, 0, plain, encoding, tolerance, stats));
+  PendingMerge pending;
+  EXPECT_TRUE(reduce_fragments(MPI_COMM_WORLD, 0, deferred, encoding, tolerance, stats, &pending));
+  if (rank_of() != 0) return;  // nothing collective below
+  EXPECT_EQ(pending.messages.size(), std::size_t(std::bit_width(unsigned(ranks() - 1))));
+  PendingMerge broken = pending;
+  ASSERT_TRUE(finish_merge(pending, deferred, stats));
+  EXPECT_TRUE(pending.messages.empty());
+  ASSERT_EQ(deferred.size(), plain.size());
+  std::size_t samples = 0;
+  for (std::size_t v = 0; v < plain.size(); ++v) {
+    EXPECT_EQ(deferred[v].pixels, plain[v].pixels);
+    EXPECT_EQ(deferred[v].counts, plain[v].counts);
+    EXPECT_EQ(deferred[v].depth, plain[v].depth);
+    EXPECT_EQ(deferred[v].normal, plain[v].normal);
+    samples += plain[v].depth.size();
+  }
+  EXPECT_GT(samples, 1000u);
+  if (!broken.messages.empty()) {
+    broken.messages.front().resize(broken.messages.front().size() / 2);  // truncated
+    std::vector<LdiFragment> own = cast;
+    for (LdiFragment& f : own)
+      quantize_fragment(f, encoding);
+    EXPECT_FALSE(finish_merge(broken, own, stats));
+  }
 }
 
 TEST(MpiPipeline, ARankWithAnEmptySubdomainSendsAnEmptyFragment) {

@@ -85,10 +85,42 @@ Status unpack(std::span<const std::uint8_t> in, std::size_t views, std::vector<L
 
 }  // namespace
 
+namespace {
+
+// One round of the tree on the receiving side: decodes a child's message and merges it into
+// `fragments`. A message that does not decode leaves `fragments` as they were and sets `status`.
+void merge_message(std::span<const std::uint8_t> message, std::vector<LdiFragment>& fragments,
+                   double tolerance, Status& status, bool& upstream_error, ReductionStats& stats) {
+  auto t = std::chrono::steady_clock::now();
+  std::vector<LdiFragment> received;
+  bool child_error = false;
+  const Status unpacked = unpack(message, fragments.size(), received, child_error);
+  stats.decode_seconds += seconds_since(t);
+  if (!unpacked) {
+    status = unpacked;
+    return;
+  }
+  if (child_error) upstream_error = true;
+  t = std::chrono::steady_clock::now();
+  try {
+    for (std::size_t v = 0; v < fragments.size(); ++v) {
+      const LdiFragment pair[2] = {std::move(fragments[v]), std::move(received[v])};
+      fragments[v] = merge_fragments(pair, tolerance);
+    }
+  } catch (const std::invalid_argument& e) {  // ranks disagree about the views
+    status = Status::error(std::string("reduction: ") + e.what());
+  }
+  stats.merge_seconds += seconds_since(t);
+}
+
+}  // namespace
+
 Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragments,
-                        const FragmentEncoding& encoding, double tolerance, ReductionStats& stats) {
+                        const FragmentEncoding& encoding, double tolerance, ReductionStats& stats,
+                        PendingMerge* deferred) {
   const auto start = std::chrono::steady_clock::now();
   stats = {};
+  if (deferred) *deferred = PendingMerge{{}, tolerance};
   int rank = 0, size = 1;
   MPI_Comm_rank(comm, &rank);
   MPI_Comm_size(comm, &size);
@@ -152,29 +184,26 @@ Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragm
     stats.bytes_received += message.size();
     ++stats.messages_received;
 
-    auto t = std::chrono::steady_clock::now();
-    std::vector<LdiFragment> received;
-    bool child_error = false;
-    const Status unpacked = unpack(message, fragments.size(), received, child_error);
-    stats.decode_seconds += seconds_since(t);
-    if (!unpacked) {
-      status = unpacked;
+    if (deferred && rank == root) {  // the worker decodes and merges it (finish_merge)
+      deferred->messages.push_back(std::move(message));
       continue;
     }
-    if (child_error) upstream_error = true;
-    t = std::chrono::steady_clock::now();
-    try {
-      for (std::size_t v = 0; v < fragments.size(); ++v) {
-        const LdiFragment pair[2] = {std::move(fragments[v]), std::move(received[v])};
-        fragments[v] = merge_fragments(pair, tolerance);
-      }
-    } catch (const std::invalid_argument& e) {  // ranks disagree about the views
-      status = Status::error(std::string("reduction: ") + e.what());
-    }
-    stats.merge_seconds += seconds_since(t);
+    merge_message(message, fragments, tolerance, status, upstream_error, stats);
   }
   stats.wall_seconds = seconds_since(start);
   if (status && upstream_error && rank == root)
+    status = Status::error("reduction: a fragment failed to decode on another rank");
+  return status;
+}
+
+Status finish_merge(PendingMerge& pending, std::vector<LdiFragment>& fragments,
+                    ReductionStats& stats) {
+  Status status = Status::ok();
+  bool upstream_error = false;
+  for (const std::vector<std::uint8_t>& message : pending.messages)
+    merge_message(message, fragments, pending.tolerance, status, upstream_error, stats);
+  pending.messages.clear();
+  if (status && upstream_error)
     status = Status::error("reduction: a fragment failed to decode on another rank");
   return status;
 }

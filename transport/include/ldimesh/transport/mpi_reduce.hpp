@@ -22,6 +22,12 @@ struct ReductionStats {
   int messages_received = 0;
 };
 
+// What the root of a deferred reduction received but has not merged (see reduce_fragments).
+struct PendingMerge {
+  std::vector<std::vector<std::uint8_t>> messages;  // the root's children's, in merge order
+  double tolerance = 0.0;
+};
+
 // Collective over `comm`. Every rank passes its fragments, one per view, in the same view
 // order on all ranks. On `root` the result is the merged fragment of every view (samples of
 // all ranks per pixel, sorted, duplicates closer than `tolerance` merged); on the other ranks
@@ -31,7 +37,19 @@ struct ReductionStats {
 // Merging decodes and re-encodes, which the codec keeps exact (re-encoding decoded data gives
 // the same bytes). A fragment that does not decode makes the result an error Status on the
 // rank that received it and on the root; no rank blocks.
+//
+// With `deferred` (read on the root only), the root receives its children's messages but does
+// not decode or merge them: they are returned in *deferred and the root's `fragments` hold its
+// own (quantized) samples; finish_merge later — on another thread, after the collective part —
+// gives the fragments the reduction would have given, to the bit (the same merges in the same
+// order). Decoding errors then surface there.
 Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragments,
-                        const FragmentEncoding& encoding, double tolerance, ReductionStats& stats);
+                        const FragmentEncoding& encoding, double tolerance, ReductionStats& stats,
+                        PendingMerge* deferred = nullptr);
+
+// Decodes and merges the messages reduce_fragments deferred into `fragments` (the root's own,
+// as it returned them); leaves `pending` empty. Not collective. Errors as reduce_fragments's.
+Status finish_merge(PendingMerge& pending, std::vector<LdiFragment>& fragments,
+                    ReductionStats& stats);
 
 }  // namespace ldimesh
