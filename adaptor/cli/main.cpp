@@ -201,29 +201,23 @@ int run_mesh(const MeshArgs& args) {
   std::unique_ptr<ldimesh::RayCaster> caster;
   std::vector<ldimesh::View> views;
   double iso = 0.0, load_seconds = 0.0, scene_seconds = 0.0;
-  on_all_ranks(comm, [&] {
-    load_input(args, rank, ranks, input);
-    load_seconds = seconds_since(start);
-    iso = args.isovalue.value_or(input.default_isovalue);
-    views = ldimesh::make_axis_views(input.subdomain.global, args.res, args.views);
+  // The bind of a time step (again for --repeat: the caster of the same values).
+  const auto bind = [&] {
+    caster.reset();
     start = std::chrono::steady_clock::now();
     ldimesh::RayCasterOptions caster_options;
     caster_options.path =
         args.caster == "embree" ? ldimesh::CastPath::embree : ldimesh::CastPath::automatic;
     caster = std::make_unique<ldimesh::RayCaster>(*input.source, iso, caster_options);
     scene_seconds = seconds_since(start);
-  });
-  const auto rebind = [&] {  // a new time step's bind: the caster of the same values again
-    on_all_ranks(comm, [&] {
-      caster.reset();
-      start = std::chrono::steady_clock::now();
-      ldimesh::RayCasterOptions caster_options;
-      caster_options.path =
-          args.caster == "embree" ? ldimesh::CastPath::embree : ldimesh::CastPath::automatic;
-      caster = std::make_unique<ldimesh::RayCaster>(*input.source, iso, caster_options);
-      scene_seconds = seconds_since(start);
-    });
   };
+  on_all_ranks(comm, [&] {
+    load_input(args, rank, ranks, input);
+    load_seconds = seconds_since(start);
+    iso = args.isovalue.value_or(input.default_isovalue);
+    views = ldimesh::make_axis_views(input.subdomain.global, args.res, args.views);
+    bind();
+  });
 
   ldimesh::DistributedOptions options;
   options.encoding.lossless = args.lossless;
@@ -242,7 +236,7 @@ int run_mesh(const MeshArgs& args) {
   double max_scene = 0.0;
   nlohmann::json repeats = nlohmann::json::array();
   for (int run = 0; run < args.repeat; ++run) {
-    if (run > 0) rebind();
+    if (run > 0) on_all_ranks(comm, bind);
     step = {};
     const ldimesh::Status status =
         ldimesh::mesh_distributed(comm, *caster, input.subdomain, views, options, step);
