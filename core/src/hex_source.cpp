@@ -553,9 +553,9 @@ int restrict_to_segment(const double* c, glm::dvec3 a, glm::dvec3 b, double* f) 
       break;
     }
   if (!(u > a && u < b)) u = 0.5;
-  // A value within de Casteljau's rounding error (n steps, each within 2 ulp of the
-  // coefficients' magnitude) is a root as far as the coefficients can tell: further steps would
-  // chase rounding noise (slowly, near a double root).
+  // A value within the evaluation's rounding error (about 2n operations, each within an ulp or
+  // two of the coefficients' magnitude) is a root as far as the coefficients can tell: further
+  // steps would chase rounding noise (slowly, near a double root).
   double magnitude = 0.0;
   for (int i = 0; i <= n; ++i)
     magnitude = std::max(magnitude, std::abs(c[i]));
