@@ -652,6 +652,23 @@ class GridAxisBinding final : public AxisBinding {
       }
       return cached_value;
     };
+    // The hit in cell i on [ta, tb] whose face values fa, fb (finite, nonzero) differ in sign:
+    // the one root of the linear function between the faces (as trilinear_segment_roots
+    // computes it for a segment along one axis), and the gradient there, as solve_cell.
+    const auto emit_root = [&](std::int64_t i, double fa, double fb, double ta, double tb) {
+      const double s = fa / (fa - fb);
+      double corner[8];
+      const T* lower = points + i * sa;
+      for (int n = 0; n < 8; ++n)
+        corner[n] = double(lower[offsets[n]]) - iso_;
+      glm::dvec3 local, cell_size = size;
+      local[b] = p[b];
+      local[c] = p[c];
+      local[a] = step > 0 ? s : 1.0 - s;
+      cell_size[a] = g_.coord(a, i + 1) - g_.coord(a, i);
+      hits.push_back({s == 1.0 ? tb : ta + s * (tb - ta),
+                      unit_normal(trilinear_gradient(corner, local, cell_size), dir), 0.0f});
+    };
     // Cell i on [ta, tb], entered / left exactly on its faces or not: the shortcut where it
     // decides, solve_cell (the Embree binding's) where it does not.
     const auto solve = [&](std::int64_t i, double ta, double tb, bool on_entry, bool on_exit) {
@@ -661,20 +678,7 @@ class GridAxisBinding final : public AxisBinding {
         const double fb = face_cached(step > 0 ? i + 1 : i);
         if (std::isfinite(fa) && std::isfinite(fb) && fa != 0.0 && fb != 0.0) {
           if (positive(fa) == positive(fb)) return;
-          // The one root of the linear function between the faces (as trilinear_segment_roots
-          // computes it for a segment along one axis), and the gradient there, as solve_cell.
-          const double s = fa / (fa - fb);
-          double corner[8];
-          const T* lower = points + i * sa;
-          for (int n = 0; n < 8; ++n)
-            corner[n] = double(lower[offsets[n]]) - iso_;
-          glm::dvec3 local, cell_size = size;
-          local[b] = p[b];
-          local[c] = p[c];
-          local[a] = step > 0 ? s : 1.0 - s;
-          cell_size[a] = g_.coord(a, i + 1) - g_.coord(a, i);
-          hits.push_back({s == 1.0 ? tb : ta + s * (tb - ta),
-                          unit_normal(trilinear_gradient(corner, local, cell_size), dir), 0.0f});
+          emit_root(i, fa, fb, ta, tb);
           return;
         }
       }
@@ -751,6 +755,20 @@ class GridAxisBinding final : public AxisBinding {
     // and left on its faces, and so is every cell (no clipping to compute).
     const bool whole = ray.t0 <= std::min(t_at(first_[a]), t_at(last_[a] + 1)) &&
                        ray.t1 >= std::max(t_at(first_[a]), t_at(last_[a] + 1));
+    // Sign changes found on the whole-segment path, solved in order (emit_root) when the buffer
+    // fills, before any other solve and at the end.
+    struct Pending {
+      std::int64_t i;
+      double fa, fb, ta, tb;
+    };
+    constexpr int kPending = 32;
+    Pending pending[kPending + 1];
+    int n_pending = 0;
+    const auto flush = [&] {
+      for (int k = 0; k < n_pending; ++k)
+        emit_root(pending[k].i, pending[k].fa, pending[k].fb, pending[k].ta, pending[k].tb);
+      n_pending = 0;
+    };
     // The straddling cells, in ray order.
     const std::int64_t n_blocks = (cells_[a] + kColumnBlock - 1) / kColumnBlock;
     const std::size_t wpc = column_words(a);
@@ -770,7 +788,19 @@ class GridAxisBinding final : public AxisBinding {
           if (!straddling(i - first_[a])) continue;
           const double t_in = t_at(step > 0 ? i : i + 1), t_out = t_at(step > 0 ? i + 1 : i);
           if (whole) {
-            if (t_out > t_in) solve(i, t_in, t_out, true, true);
+            if (!(t_out > t_in)) continue;
+            const double fa = face_cached(step > 0 ? i : i + 1);
+            const double fb = face_cached(step > 0 ? i + 1 : i);
+            if (std::isfinite(fa) && std::isfinite(fb) && fa != 0.0 && fb != 0.0) {
+              // A candidate whatever the signs, kept only where they differ: no branch on
+              // the outcome (which is near random), the roots solved in order below.
+              pending[n_pending] = {i, fa, fb, t_in, t_out};
+              n_pending += positive(fa) != positive(fb);
+              if (n_pending == kPending) flush();
+            } else {
+              flush();
+              solve(i, t_in, t_out, true, true);
+            }
             continue;
           }
           const Stretch st = stretch_of(i);
@@ -780,6 +810,7 @@ class GridAxisBinding final : public AxisBinding {
         }
       }
     }
+    flush();
   }
 
   // The Embree binding's walk through the cells of one brick's stretch of the ray, step by
