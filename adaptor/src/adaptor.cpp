@@ -478,7 +478,6 @@ class AdaptorImpl final : public Adaptor {
     meshing.merging.enabled = options_.merging;
     std::size_t samples = 0, quads = 0;
     double decode_s = 0.0, mesh_s = 0.0;
-    t = Clock::now();
     ReductionStats merge_stats;
     if (Status s = finish_merge(job.pending, job.fragments, merge_stats); !s)
       throw std::runtime_error(s.message());

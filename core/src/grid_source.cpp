@@ -762,7 +762,7 @@ class GridAxisBinding final : public AxisBinding {
       double fa, fb, ta, tb;
     };
     constexpr int kPending = 32;
-    Pending pending[kPending + 1];
+    Pending pending[kPending];
     int n_pending = 0;
     const auto flush = [&] {
       for (int k = 0; k < n_pending; ++k)

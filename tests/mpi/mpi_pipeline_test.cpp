@@ -158,7 +158,27 @@ TEST(MpiPipeline, DeferredMergeOnTheRootGivesTheReducedFragments) {
   EXPECT_TRUE(reduce_fragments(MPI_COMM_WORLD, 0, plain, encoding, tolerance, stats));
   PendingMerge pending;
   EXPECT_TRUE(reduce_fragments(MPI_COMM_WORLD, 0, deferred, encoding, tolerance, stats, &pending));
+  // Views that differ between the ranks (rank 1 casts at another resolution) fail both
+  // reductions on the root, the deferred one inside the step as the plain one.
+  std::vector<LdiFragment> odd = cast;
+  if (rank_of() == 1) {
+    const std::vector<View> other = make_axis_views(s->domain, 40);
+    for (std::size_t v = 0; v < other.size(); ++v)
+      odd[v] = caster.cast_fragment(other[v], std::uint32_t(v), sub);
+  }
+  std::vector<LdiFragment> odd_plain = odd;
+  const Status plain_odd =
+      reduce_fragments(MPI_COMM_WORLD, 0, odd_plain, encoding, tolerance, stats);
+  PendingMerge odd_pending;
+  const Status deferred_odd =
+      reduce_fragments(MPI_COMM_WORLD, 0, odd, encoding, tolerance, stats, &odd_pending);
   if (rank_of() != 0) return;  // nothing collective below
+  if (ranks() > 1) {
+    EXPECT_FALSE(plain_odd);
+    EXPECT_FALSE(deferred_odd);
+    // Rank 1's message is rejected, not kept; the root's other children's are.
+    EXPECT_EQ(odd_pending.messages.size(), std::size_t(std::bit_width(unsigned(ranks() - 1))) - 1);
+  }
   EXPECT_EQ(pending.messages.size(), std::size_t(std::bit_width(unsigned(ranks() - 1))));
   PendingMerge broken = pending;
   ASSERT_TRUE(finish_merge(pending, deferred, stats));

@@ -342,6 +342,31 @@ TEST(FragmentCodec, QuantizingInPlaceGivesTheRoundTripsFragment) {
   EXPECT_THROW(quantize_fragment(bad), std::invalid_argument);
 }
 
+// check_fragment accepts what decode_fragment accepts and gives its shape; it rejects a
+// truncated fragment, a flipped payload byte (checksum) and trailing bytes without decoding.
+TEST(FragmentCodec, CheckingWithoutDecodingGivesTheShape) {
+  for (const LdiFragment& f : torus_fragments())
+    for (const FragmentEncoding& e : {FragmentEncoding{}, FragmentEncoding{.lossless = true}}) {
+      std::vector<std::uint8_t> bytes = encode_fragment(f, e);
+      LdiFragment shape;
+      ASSERT_TRUE(check_fragment(bytes, shape));
+      EXPECT_EQ(shape.view, f.view);
+      EXPECT_EQ(shape.pixel_count, f.pixel_count);
+      EXPECT_EQ(shape.depth_lo, f.depth_lo);
+      EXPECT_EQ(shape.depth_hi, f.depth_hi);
+      EXPECT_TRUE(shape.depth.empty() && shape.pixels.empty());
+      const std::span<const std::uint8_t> all(bytes);
+      EXPECT_FALSE(check_fragment(all.first(all.size() - 1), shape));
+      std::vector<std::uint8_t> longer = bytes;
+      longer.push_back(0);
+      EXPECT_FALSE(check_fragment(longer, shape));
+      bytes[bytes.size() - 3] ^= 0x10;  // in the compressed payload
+      EXPECT_FALSE(check_fragment(bytes, shape));
+      LdiFragment unused;
+      EXPECT_FALSE(decode_fragment(bytes, unused));
+    }
+}
+
 TEST(FragmentCodec, LossyRoundTripOfEdgeCasesWithinBounds) {
   for (bool with_scalar : {false, true})
     for (const FragmentEncoding& e :

@@ -506,13 +506,20 @@ Status decode_payload(std::span<const std::uint8_t> payload, const Header& h, Ld
   return validate_fragment(f);
 }
 
-Status decode(std::span<const std::uint8_t> bytes, LdiFragment& out) {
-  Header h;
+// The header and the frame around the payload: sizes and both checksums.
+Status check_frame(std::span<const std::uint8_t> bytes, Header& h) {
   if (Status s = read_header(bytes, h); !s) return s;
   const std::span<const std::uint8_t> frame = bytes.subspan(kHeaderSize);
   if (frame.size() < h.compressed_size) return fail("truncated payload");
   if (frame.size() > h.compressed_size) return fail("trailing bytes after the payload");
   if (kVerifyChecksums && crc32(frame) != h.payload_crc) return fail("payload checksum mismatch");
+  return Status::ok();
+}
+
+Status decode(std::span<const std::uint8_t> bytes, LdiFragment& out) {
+  Header h;
+  if (Status s = check_frame(bytes, h); !s) return s;
+  const std::span<const std::uint8_t> frame = bytes.subspan(kHeaderSize);
   std::vector<std::uint8_t> payload;
   if (Status s = decompress(frame, std::size_t(h.payload_size), payload); !s) return s;
   LdiFragment f;
@@ -624,6 +631,17 @@ std::vector<std::uint8_t> encode_fragment(const LdiFragment& f, const FragmentEn
   put_header(out, h);
   out.insert(out.end(), frame.begin(), frame.end());
   return out;
+}
+
+Status check_fragment(std::span<const std::uint8_t> bytes, LdiFragment& shape) {
+  Header h;
+  if (Status s = check_frame(bytes, h); !s) return s;
+  shape = LdiFragment{};
+  shape.view = h.view;
+  shape.pixel_count = h.pixel_count;
+  shape.depth_lo = h.depth_lo;
+  shape.depth_hi = h.depth_hi;
+  return Status::ok();
 }
 
 Status decode_fragment(std::span<const std::uint8_t> bytes, LdiFragment& out) {

@@ -60,8 +60,9 @@ std::vector<std::uint8_t> pack(const std::vector<LdiFragment>& fragments,
   return out;
 }
 
-Status unpack(std::span<const std::uint8_t> in, std::size_t views, std::vector<LdiFragment>& out,
-              bool& upstream_error) {
+// The envelope of a message: its flags and the bytes of each of its `views` fragments.
+Status open_envelope(std::span<const std::uint8_t> in, std::size_t views,
+                     std::vector<std::span<const std::uint8_t>>& parts, bool& upstream_error) {
   std::size_t at = 0;
   std::uint32_t magic = 0, flags = 0, count = 0;
   if (!get_u32(in, at, magic) || !get_u32(in, at, flags) || !get_u32(in, at, count))
@@ -71,15 +72,42 @@ Status unpack(std::span<const std::uint8_t> in, std::size_t views, std::vector<L
     return Status::error("reduction: message holds " + std::to_string(count) + " views, expected " +
                          std::to_string(views));
   upstream_error = (flags & kUpstreamError) != 0;
-  out.resize(count);
+  parts.clear();
   for (std::uint32_t k = 0; k < count; ++k) {
     std::uint64_t size = 0;
     if (!get_u64(in, at, size) || size > in.size() - at)
       return Status::error("reduction: truncated message");
-    if (Status s = decode_fragment(in.subspan(at, size), out[k]); !s) return s;
-    at += size;
+    parts.push_back(in.subspan(at, std::size_t(size)));
+    at += std::size_t(size);
   }
   if (at != in.size()) return Status::error("reduction: trailing bytes in message");
+  return Status::ok();
+}
+
+Status unpack(std::span<const std::uint8_t> in, std::size_t views, std::vector<LdiFragment>& out,
+              bool& upstream_error) {
+  std::vector<std::span<const std::uint8_t>> parts;
+  if (Status s = open_envelope(in, views, parts, upstream_error); !s) return s;
+  out.resize(parts.size());
+  for (std::size_t k = 0; k < parts.size(); ++k)
+    if (Status s = decode_fragment(parts[k], out[k]); !s) return s;
+  return Status::ok();
+}
+
+// What merge_message would reject, found without decompressing: the envelope, each fragment's
+// frame and checksums, and views that differ from `fragments`' (as merge_fragments checks them).
+Status check_message(std::span<const std::uint8_t> in, const std::vector<LdiFragment>& fragments,
+                     bool& upstream_error) {
+  std::vector<std::span<const std::uint8_t>> parts;
+  if (Status s = open_envelope(in, fragments.size(), parts, upstream_error); !s) return s;
+  for (std::size_t v = 0; v < parts.size(); ++v) {
+    LdiFragment shape;
+    if (Status s = check_fragment(parts[v], shape); !s) return s;
+    const LdiFragment& own = fragments[v];
+    if (shape.view != own.view || shape.pixel_count != own.pixel_count ||
+        shape.depth_lo != own.depth_lo || shape.depth_hi != own.depth_hi)
+      return Status::error("reduction: merge_fragments: fragments of different views");
+  }
   return Status::ok();
 }
 
@@ -184,7 +212,15 @@ Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragm
     stats.bytes_received += message.size();
     ++stats.messages_received;
 
-    if (deferred && rank == root) {  // the worker decodes and merges it (finish_merge)
+    if (deferred && rank == root) {
+      // Decoded and merged later (finish_merge); checked now, so that a message the merge would
+      // reject fails the step here, as the plain reduction does.
+      bool child_error = false;
+      if (const Status checked = check_message(message, fragments, child_error); !checked) {
+        status = checked;
+        continue;
+      }
+      if (child_error) upstream_error = true;
       deferred->messages.push_back(std::move(message));
       continue;
     }

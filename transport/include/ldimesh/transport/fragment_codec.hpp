@@ -67,6 +67,12 @@ void quantize_fragment(LdiFragment& fragment, const FragmentEncoding& encoding =
 // left unchanged. Every fragment it accepts is accepted by encode_fragment.
 Status decode_fragment(std::span<const std::uint8_t> bytes, LdiFragment& out);
 
+// What decode_fragment checks before it decompresses — the header, every size, both checksums —
+// without decompressing: `shape` gets the fragment's view, pixel count and depth interval (no
+// samples). A fragment it accepts fails to decode only if its encoder wrote an inconsistent
+// payload under a valid checksum.
+Status check_fragment(std::span<const std::uint8_t> bytes, LdiFragment& shape);
+
 // The largest depth error of `encoding` for a depth in [lo, hi]:
 // (hi − lo) / (2·(2^b − 1)) + u, with b the depth bits the encoder uses and u the float
 // spacing at max(|lo|, |hi|) (the decoded depth is a float); (hi − lo) + u when b = 0

@@ -38,11 +38,14 @@ struct PendingMerge {
 // the same bytes). A fragment that does not decode makes the result an error Status on the
 // rank that received it and on the root; no rank blocks.
 //
-// With `deferred` (read on the root only), the root receives its children's messages but does
-// not decode or merge them: they are returned in *deferred and the root's `fragments` hold its
-// own (quantized) samples; finish_merge later — on another thread, after the collective part —
-// gives the fragments the reduction would have given, to the bit (the same merges in the same
-// order). Decoding errors then surface there.
+// With `deferred` (used on the root; reset on every rank), the root receives its children's
+// messages but does not decompress or merge them: they are returned in *deferred and the root's
+// `fragments` hold its own (quantized) samples; finish_merge later — on another thread, after
+// the collective part — gives the fragments the reduction would have given, to the bit (the
+// same merges in the same order). Each message is checked when it arrives (its envelope, each
+// fragment's frame and checksums, views equal to the root's: check_fragment), so what the merge
+// would reject fails the reduction as without `deferred`; finish_merge can then fail only on a
+// payload its encoder wrote inconsistently under a valid checksum.
 Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragments,
                         const FragmentEncoding& encoding, double tolerance, ReductionStats& stats,
                         PendingMerge* deferred = nullptr);
