@@ -103,12 +103,6 @@ glm::dvec3 trilinear_gradient(const double corner[8], glm::dvec3 p, glm::dvec3 s
   return grad;
 }
 
-// The unit normal for a gradient; at singular points (∇f = 0) it faces the viewer.
-glm::vec3 unit_normal(glm::dvec3 grad, glm::dvec3 dir) {
-  const double len = glm::length(grad);
-  return len > 0.0 ? glm::vec3(grad / len) : glm::vec3(-dir);
-}
-
 // The roots of one cell c on the ray segment [ta, tb], appended to `hits`: the cell's cubic
 // (Marmitt et al.). `entry_face`/`exit_face` say along which axes the segment starts/ends
 // exactly on a cell face (the local coordinate is then exactly 0 or 1, so that a face point is
@@ -669,19 +663,38 @@ class GridAxisBinding final : public AxisBinding {
       hits.push_back({s == 1.0 ? tb : ta + s * (tb - ta),
                       unit_normal(trilinear_gradient(corner, local, cell_size), dir), 0.0f});
     };
+    // The cells whose face values differ in sign, solved (emit_root) in ray order when the
+    // buffer fills, before solve_cell adds a hit and at the end.
+    struct Pending {
+      std::int64_t i;
+      double fa, fb, ta, tb;
+    };
+    constexpr int kPending = 32;
+    Pending pending[kPending];
+    int n_pending = 0;
+    const auto flush = [&] {
+      for (int k = 0; k < n_pending; ++k)
+        emit_root(pending[k].i, pending[k].fa, pending[k].fb, pending[k].ta, pending[k].tb);
+      n_pending = 0;
+    };
     // Cell i on [ta, tb], entered / left exactly on its faces or not: the shortcut where it
     // decides, solve_cell (the Embree binding's) where it does not.
-    const auto solve = [&](std::int64_t i, double ta, double tb, bool on_entry, bool on_exit) {
-      cell[a] = i;
+    const auto solve = [&](std::int64_t i, double ta, double tb, bool on_entry,
+                           bool on_exit) [[gnu::always_inline]] {
       if (on_entry && on_exit) {
         const double fa = face_cached(step > 0 ? i : i + 1);
         const double fb = face_cached(step > 0 ? i + 1 : i);
         if (std::isfinite(fa) && std::isfinite(fb) && fa != 0.0 && fb != 0.0) {
-          if (positive(fa) == positive(fb)) return;
-          emit_root(i, fa, fb, ta, tb);
+          // A candidate whatever the signs, kept only where they differ: no branch on the
+          // outcome, which is near random.
+          pending[n_pending] = {i, fa, fb, ta, tb};
+          n_pending += positive(fa) != positive(fb);
+          if (n_pending == kPending) flush();
           return;
         }
       }
+      flush();
+      cell[a] = i;
       std::array<bool, 3> entry_face{false, false, false}, exit_face{false, false, false};
       entry_face[a] = on_entry;
       exit_face[a] = on_exit;
@@ -755,20 +768,6 @@ class GridAxisBinding final : public AxisBinding {
     // and left on its faces, and so is every cell (no clipping to compute).
     const bool whole = ray.t0 <= std::min(t_at(first_[a]), t_at(last_[a] + 1)) &&
                        ray.t1 >= std::max(t_at(first_[a]), t_at(last_[a] + 1));
-    // Sign changes found on the whole-segment path, solved in order (emit_root) when the buffer
-    // fills, before any other solve and at the end.
-    struct Pending {
-      std::int64_t i;
-      double fa, fb, ta, tb;
-    };
-    constexpr int kPending = 32;
-    Pending pending[kPending];
-    int n_pending = 0;
-    const auto flush = [&] {
-      for (int k = 0; k < n_pending; ++k)
-        emit_root(pending[k].i, pending[k].fa, pending[k].fb, pending[k].ta, pending[k].tb);
-      n_pending = 0;
-    };
     // The straddling cells, in ray order.
     const std::int64_t n_blocks = (cells_[a] + kColumnBlock - 1) / kColumnBlock;
     const std::size_t wpc = column_words(a);
@@ -788,19 +787,7 @@ class GridAxisBinding final : public AxisBinding {
           if (!straddling(i - first_[a])) continue;
           const double t_in = t_at(step > 0 ? i : i + 1), t_out = t_at(step > 0 ? i + 1 : i);
           if (whole) {
-            if (!(t_out > t_in)) continue;
-            const double fa = face_cached(step > 0 ? i : i + 1);
-            const double fb = face_cached(step > 0 ? i + 1 : i);
-            if (std::isfinite(fa) && std::isfinite(fb) && fa != 0.0 && fb != 0.0) {
-              // A candidate whatever the signs, kept only where they differ: no branch on
-              // the outcome (which is near random), the roots solved in order below.
-              pending[n_pending] = {i, fa, fb, t_in, t_out};
-              n_pending += positive(fa) != positive(fb);
-              if (n_pending == kPending) flush();
-            } else {
-              flush();
-              solve(i, t_in, t_out, true, true);
-            }
+            if (t_out > t_in) solve(i, t_in, t_out, true, true);
             continue;
           }
           const Stretch st = stretch_of(i);

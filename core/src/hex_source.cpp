@@ -11,6 +11,7 @@
 #include <stdexcept>
 #include <string>
 #include <type_traits>
+#include <utility>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -175,28 +176,22 @@ const ConversionMatrix& conversion_matrix(int order, NodeSet set) {
   return table[order][int(set)];
 }
 
-// Calls fn(std::integral_constant<int, p>{}) for the runtime order p = 1..kMaxHexOrder.
+// Calls fn(std::integral_constant<int, v>{}) for the runtime value v, one of Vs (the last one
+// for any other value): a kernel instantiated per value, chosen at run time.
+template <int V, int... Vs, class Fn>
+[[gnu::always_inline]] inline decltype(auto) with_one_of(int v, Fn&& fn) {
+  if constexpr (sizeof...(Vs) == 0) {
+    return fn(std::integral_constant<int, V>{});
+  } else {
+    if (v == V) return fn(std::integral_constant<int, V>{});
+    return with_one_of<Vs...>(v, std::forward<Fn>(fn));
+  }
+}
+// The order p = 1..kMaxHexOrder as a constant.
 template <class Fn>
 [[gnu::always_inline]] inline decltype(auto) with_order(int p, Fn&& fn) {
   static_assert(kMaxHexOrder == 8);
-  switch (p) {
-    case 1:
-      return fn(std::integral_constant<int, 1>{});
-    case 2:
-      return fn(std::integral_constant<int, 2>{});
-    case 3:
-      return fn(std::integral_constant<int, 3>{});
-    case 4:
-      return fn(std::integral_constant<int, 4>{});
-    case 5:
-      return fn(std::integral_constant<int, 5>{});
-    case 6:
-      return fn(std::integral_constant<int, 6>{});
-    case 7:
-      return fn(std::integral_constant<int, 7>{});
-    default:
-      return fn(std::integral_constant<int, 8>{});
-  }
+  return with_one_of<1, 2, 3, 4, 5, 6, 7, 8>(p, std::forward<Fn>(fn));
 }
 // Sum factorisation: the 1-D conversion applied along ξ, then η, then ζ ((p + 1)⁴ operations
 // instead of (p + 1)⁶). `in` and `out` hold (p + 1)³ values and may not overlap.
@@ -275,20 +270,11 @@ Box bounding_box(const AffineFrame& f) {
 // runtime value into one. The operations and their order do not depend on how a kernel is
 // instantiated: every caller gets the same values, to the bit.
 
-// Calls fn(std::integral_constant<int, d>{}) for a degree along a segment: p per reference axis
-// the segment moves along, so d ∈ {0, P, 2P, 3P}.
+// A degree along a segment as a constant: P per reference axis the segment moves along, so
+// d ∈ {0, P, 2P, 3P}.
 template <int P, class Fn>
 [[gnu::always_inline]] inline decltype(auto) with_degree(int d, Fn&& fn) {
-  switch (d) {
-    case 0:
-      return fn(std::integral_constant<int, 0>{});
-    case P:
-      return fn(std::integral_constant<int, P>{});
-    case 2 * P:
-      return fn(std::integral_constant<int, 2 * P>{});
-    default:
-      return fn(std::integral_constant<int, 3 * P>{});
-  }
+  return with_one_of<0, P, 2 * P, 3 * P>(d, std::forward<Fn>(fn));
 }
 
 // B_i^P(x) and dB_i^P/dx for i = 0..P, from the triangle B_i^r = (1 − x) B_i^{r−1} + x
@@ -665,10 +651,7 @@ void intersect_element(const ActiveElement& e, const double* c, glm::dvec3 org, 
   if (degree == 0) return;  // constant along the ray: no crossing
   bernstein_roots(f, degree, [&](double s) {
     const glm::dvec3 g = to_world_gradient * evaluate_tensor<P>(c, a + s * (b - a)).gradient;
-    const double len = glm::length(g);
-    // At singular points (∇f = 0) the normal faces the viewer, as for analytic sources.
-    const glm::vec3 normal = len > 0.0 ? glm::vec3(g / len) : glm::vec3(-dir);
-    hits.push_back({s == 1.0 ? t1 : t0 + s * (t1 - t0), normal, 0.0f});
+    hits.push_back({s == 1.0 ? t1 : t0 + s * (t1 - t0), unit_normal(g, dir), 0.0f});
   });
 }
 
@@ -1021,10 +1004,9 @@ class HexAxisBinding final : public AxisBinding {
         const auto found = [&](double s) {
           glm::dvec3 g;
           if (!staged.gradient(s, g)) g = evaluate_tensor<P>(c, a + s * (b - a)).gradient;
-          g = to_world_gradient * g;
-          const double len = glm::length(g);
-          const glm::vec3 normal = len > 0.0 ? glm::vec3(g / len) : glm::vec3(-rays.dir);
-          out.push_back({std::uint32_t(k), {s == 1.0 ? t1 : t0 + s * (t1 - t0), normal, 0.0f}});
+          out.push_back({std::uint32_t(k),
+                         {s == 1.0 ? t1 : t0 + s * (t1 - t0),
+                          unit_normal(to_world_gradient * g, rays.dir), 0.0f}});
         };
         if (degree == P)  // one reference axis along the ray: the degree as a constant
           bernstein_roots(f, P, found);

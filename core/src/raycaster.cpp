@@ -150,6 +150,11 @@ double RayCaster::build_seconds() const {
   return axis_seconds_ + scene_seconds_;
 }
 
+void RayCaster::prepare_axis_casters(const View& view) const {
+  for (const auto& binding : axis_bindings_)
+    binding->prepare(exact_axis(view.dir));
+}
+
 bool RayCaster::uses_axis_casters(const View& view) const {
   return !axis_bindings_.empty() && exact_axis(view.dir) >= 0 && exact_axis(view.u) >= 0 &&
          exact_axis(view.v) >= 0;
@@ -298,8 +303,7 @@ void RayCaster::cast_axis_rays(const AxisRays& rays, std::span<const RaySegment>
 template <class Segment>
 std::vector<RayCaster::HitRun> RayCaster::cast_rows(const View& view, Segment segment_of) const {
   if (uses_axis_casters(view)) {
-    for (const auto& binding : axis_bindings_)
-      binding->prepare(exact_axis(view.dir));
+    prepare_axis_casters(view);
     // Tasks of several rows, each cast by the axis casters as one lattice of pixel rays.
     const int rows = rows_per_task(view);
     const int tasks = (view.height + rows - 1) / rows;
@@ -392,12 +396,12 @@ LdiFragment RayCaster::cast_fragment(const View& view, std::uint32_t view_index,
         return subdomain_segment(sub, view.point(position.x, position.y, 0.0), view.dir, segment);
       });
   LdiFragment fragment = make_empty_fragment(view, view_index);
-  // Sized once: growing these by doubling costs more than the copy (fresh pages, each time).
+  // Sized once (pixels: at most all of them; untouched capacity costs no pages): growing these
+  // by doubling costs more than the copy (fresh pages, each time).
   std::size_t samples = 0, pixels = 0;
   for (const RayCaster::HitRun& run : runs) {
     samples += run.depth.size();
-    pixels += std::size_t(std::count_if(run.counts.begin(), run.counts.end(),
-                                        [](std::uint32_t c) { return c > 0; }));
+    pixels += run.counts.size();
   }
   fragment.pixels.reserve(pixels);
   fragment.counts.reserve(pixels);
@@ -444,9 +448,7 @@ RayHitList RayCaster::cast_points(const View& view, std::span<const glm::dvec2> 
   };
   const bool axis = uses_axis_casters(view);
   if (!axis && n > 0) ensure_scene();
-  if (axis)
-    for (const auto& binding : axis_bindings_)
-      binding->prepare(exact_axis(view.dir));
+  if (axis) prepare_axis_casters(view);
   constexpr std::size_t kChunk = 256;
   std::vector<RayCaster::HitRun> chunks((n + kChunk - 1) / kChunk);
   tbb::parallel_for(std::size_t(0), chunks.size(), [&](std::size_t c) {

@@ -106,11 +106,9 @@ void find_roots(const Field& f, double iso, glm::dvec3 o, glm::dvec3 d, double t
   struct Segment {
     double ta, tb, ga, gb;
   };
-  // The hit at t with its unit normal; at singular points (∇f = 0) the normal faces the viewer.
+  // The hit at t with its unit normal.
   auto report = [&](double t) {
-    const glm::dvec3 n = gradient(f, o + t * d);
-    const double len = glm::length(n);
-    hits.push_back({t, len > 0.0 ? glm::vec3(n / len) : glm::vec3(-d), 0.0f});
+    hits.push_back({t, unit_normal(gradient(f, o + t * d), d), 0.0f});
   };
   Segment stack[128];
   int top = 0;

@@ -59,6 +59,13 @@ inline bool positive(double v) {
   return v >= 0.0;
 }
 
+// The unit normal for a gradient at a hit of a ray along `dir`; at singular points (∇f = 0) it
+// faces the viewer.
+inline glm::vec3 unit_normal(glm::dvec3 grad, glm::dvec3 dir) {
+  const double len = glm::length(grad);
+  return len > 0.0 ? glm::vec3(grad / len) : glm::vec3(-dir);
+}
+
 // Clips the ray o + t·d to the closed box [lo, hi], narrowing [t0, t1]; false if it misses.
 inline bool clip_ray_to_box(glm::dvec3 o, glm::dvec3 d, glm::dvec3 lo, glm::dvec3 hi, double& t0,
                             double& t1) {

@@ -138,6 +138,8 @@ class RayCaster {
   std::size_t finish_ray(const RaySegment& segment, glm::dvec3 dir, std::span<RayHit> hits) const;
   // Builds the Embree scene on first use (thread-safe).
   void ensure_scene() const;
+  // Has the axis casters build what rays along `view` need, before the parallel loops.
+  void prepare_axis_casters(const View& view) const;
 
   std::vector<const FieldSource*> sources_;
   double isovalue_ = 0.0;
