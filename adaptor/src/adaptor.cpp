@@ -1,14 +1,17 @@
 #include "ldimesh/adaptor.hpp"
 
+#include <array>
 #include <chrono>
 #include <condition_variable>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <mutex>
 #include <optional>
 #include <set>
 #include <sstream>
 #include <thread>
+#include <type_traits>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -46,6 +49,7 @@ struct Options {
   FragmentEncoding encoding;
   int compression_level = 7;
   bool log = true;
+  bool background = true;          // with MPI_THREAD_MULTIPLE: the solver waits for a snapshot only
   double slow_root_seconds = 0.0;  // testing only: the worker sleeps this long per step
 };
 
@@ -65,10 +69,10 @@ Status parse_options(const nlohmann::json& j, Options& o) {
     }
     return Status::ok();
   };
-  if (Status s = check_keys(
-          j, "",
-          {"isovalues", "views", "resolution", "r", "cadence", "busy", "refinement", "merging",
-           "server", "output_dir", "keep", "memory_mb", "encoding", "glb", "log", "testing"});
+  if (Status s = check_keys(j, "",
+                            {"isovalues", "views", "resolution", "r", "cadence", "busy",
+                             "refinement", "merging", "server", "output_dir", "keep", "memory_mb",
+                             "encoding", "glb", "log", "background", "testing"});
       !s)
     return s;
   try {
@@ -167,6 +171,7 @@ Status parse_options(const nlohmann::json& j, Options& o) {
       }
     }
     if (j.contains("log")) o.log = j["log"].get<bool>();
+    if (j.contains("background")) o.background = j["background"].get<bool>();
     if (j.contains("testing")) {
       const auto& t = j["testing"];
       if (Status s = check_keys(t, "testing.", {"slow_root_seconds"}); !s) return s;
@@ -190,6 +195,74 @@ struct Job {
   std::uint64_t skipped_steps = 0;  // due steps dropped since the previous job was handed over
   std::uint64_t nonfinite_values = 0;
 };
+
+std::size_t scalar_bytes(ScalarType type) {
+  return type == ScalarType::float32 ? sizeof(float) : sizeof(double);
+}
+
+// A block's arrays as copied at a due step (background path), kept from step to step so that
+// later copies reuse their pages.
+struct BlockCopy {
+  std::vector<unsigned char> values;
+  std::array<std::vector<double>, 3> coords;
+  std::vector<double> corners;
+  std::size_t bytes() const {
+    return values.size() +
+           (coords[0].size() + coords[1].size() + coords[2].size() + corners.size()) *
+               sizeof(double);
+  }
+};
+
+// The grid block's points (ghosts included), contiguous with x fastest, and its coordinates.
+GridBlock copy_grid(const GridBlock& block, BlockCopy& copy) {
+  const std::int64_t nx = block.dims[0], ny = block.dims[1], nz = block.dims[2];
+  const std::size_t size = scalar_bytes(block.type);
+  std::array<std::int64_t, 3> stride = block.strides;
+  if (stride == std::array<std::int64_t, 3>{0, 0, 0}) stride = {1, nx, nx * ny};
+  copy.values.resize(std::size_t(nx * ny * nz) * size);
+  const auto* src = static_cast<const unsigned char*>(block.values);
+  unsigned char* dst = copy.values.data();
+  if (stride == std::array<std::int64_t, 3>{1, nx, nx * ny}) {
+    std::memcpy(dst, src, copy.values.size());
+  } else {
+    for (std::int64_t k = 0; k < nz; ++k)
+      for (std::int64_t j = 0; j < ny; ++j)
+        for (std::int64_t i = 0; i < nx; ++i)
+          std::memcpy(dst + std::size_t((k * ny + j) * nx + i) * size,
+                      src + (i * stride[0] + j * stride[1] + k * stride[2]) * std::int64_t(size),
+                      size);
+  }
+  GridBlock out = block;
+  out.values = dst;
+  out.strides = {0, 0, 0};
+  for (int a = 0; a < 3; ++a) {
+    if (!block.coords[a]) continue;
+    copy.coords[a].assign(block.coords[a], block.coords[a] + block.dims[a]);
+    out.coords[a] = copy.coords[a].data();
+  }
+  return out;
+}
+
+// The high-order block's corners and nodal values, element after element without gaps.
+HexBlock copy_hex(const HexBlock& block, BlockCopy& copy) {
+  const std::size_t n = std::size_t(block.order + 1) * (block.order + 1) * (block.order + 1);
+  const std::size_t size = scalar_bytes(block.type);
+  const std::size_t stride = block.element_stride == 0 ? n : block.element_stride;
+  copy.corners.assign(block.corners, block.corners + 24 * block.element_count);
+  copy.values.resize(block.element_count * n * size);
+  const auto* src = static_cast<const unsigned char*>(block.values);
+  if (stride == n) {
+    std::memcpy(copy.values.data(), src, copy.values.size());
+  } else {
+    for (std::size_t e = 0; e < block.element_count; ++e)
+      std::memcpy(copy.values.data() + e * n * size, src + e * stride * size, n * size);
+  }
+  HexBlock out = block;
+  out.corners = copy.corners.data();
+  out.values = copy.values.data();
+  out.element_stride = 0;
+  return out;
+}
 
 class AdaptorImpl final : public Adaptor {
  public:
@@ -231,6 +304,26 @@ class AdaptorImpl final : public Adaptor {
     return Status::ok();
   }
 
+  // Collective, every rank: the background path where MPI allows it (every rank agrees).
+  void start_background() {
+    int level = MPI_THREAD_SINGLE;
+    MPI_Query_thread(&level);
+    int ok = options_.background && level >= MPI_THREAD_MULTIPLE ? 1 : 0;
+    MPI_Allreduce(MPI_IN_PLACE, &ok, 1, MPI_INT, MPI_MIN, comm_);
+    if (!ok) {
+      if (options_.background && rank_ == 0 && options_.log)
+        std::fprintf(stderr,
+                     "ldimesh: MPI runs without MPI_THREAD_MULTIPLE (MPI_Init_thread gave level "
+                     "%d): in situ steps run synchronously, the solver waits for the ray cast and "
+                     "the reduction\n",
+                     level);
+      return;
+    }
+    MPI_Comm_dup(comm_, &background_comm_);
+    background_ = true;
+    caster_ = std::thread([this] { cast_in_background(); });
+  }
+
   Status set_domain(const Box& global) override {
     if (!global.is_valid()) return fail("set_domain: the box is empty");
     domain_ = global;
@@ -245,7 +338,7 @@ class AdaptorImpl final : public Adaptor {
   }
   Status add_source(std::shared_ptr<const FieldSource> source, const Box& owned) override {
     if (!source) return fail("add_source: no source");
-    blocks_.push_back({std::move(source), owned});
+    blocks_.push_back({std::move(source), owned, std::nullopt, std::nullopt});
     return Status::ok();
   }
   void clear_blocks() override { blocks_.clear(); }
@@ -254,8 +347,12 @@ class AdaptorImpl final : public Adaptor {
     const auto start = Clock::now();
     report_ = {};
     report_.step = step;
-    // The root decides whether the step runs (cadence, busy worker); everyone follows.
-    int decision = 0;  // 0 not due, 1 run, 2 skipped: busy
+    // The root decides whether the step runs (cadence, busy worker); everyone follows. Each rank
+    // says whether it can take a snapshot (background path): all must, or the step runs
+    // synchronously everywhere. One collective for both.
+    std::size_t snapshot_bytes = 0;
+    const bool can_snapshot = background_ && snapshot_possible(snapshot_bytes);
+    int flags[2] = {0, background_ && !can_snapshot ? 1 : 0};  // decision, a rank cannot
     if (rank_ == 0) {
       const bool due =
           step % options_.every_steps == 0 && (options_.every_seconds <= 0.0 || !ran_before_ ||
@@ -263,10 +360,14 @@ class AdaptorImpl final : public Adaptor {
       if (due) {
         std::lock_guard lock(mutex_);
         const bool busy = working_ || pending_.has_value();
-        decision = busy && !options_.coalesce ? 2 : 1;
+        // A step still being cast or reduced in the background holds the snapshot buffers: the
+        // new one is skipped, or with "coalesce" it waits for them (hand_to_background), so
+        // that the newest due step is always published.
+        flags[0] = (casting_ || busy) && !options_.coalesce ? 2 : 1;  // 0 not due, 1 run, 2 busy
       }
     }
-    MPI_Bcast(&decision, 1, MPI_INT, 0, comm_);
+    MPI_Allreduce(MPI_IN_PLACE, flags, 2, MPI_INT, MPI_MAX, comm_);
+    const int decision = flags[0];
     if (decision != 1) {
       report_.skipped_busy = decision == 2;
       if (decision == 2 && rank_ == 0) ++skipped_since_handoff_;
@@ -280,102 +381,27 @@ class AdaptorImpl final : public Adaptor {
       last_run_ = Clock::now();
       ran_before_ = true;
     }
-
-    // Every rank casts its blocks; a local failure sends empty fragments (so that nobody
-    // waits forever) and fails the step everywhere.
-    std::string local_error;
-    std::vector<View> views;
-    std::vector<LdiFragment> fragments;
-    std::uint64_t nonfinite = 0;
-    const auto cast_start = Clock::now();
-    try {
-      if (!has_domain_) throw std::runtime_error("set_domain() was not called");
-      views = make_axis_views(domain_, options_.resolution, options_.views);
-      for (std::size_t i = 0; i < options_.isovalues.size(); ++i) {
-        // One scene per block and isovalue, cast along every view.
-        std::vector<std::vector<LdiFragment>> parts(views.size());
-        for (const Block& b : blocks_) {
-          const RayCaster caster(*b.source, options_.isovalues[i]);
-          // The values are the same for every isovalue: count them once.
-          if (i == 0) nonfinite += caster.nonfinite_values();
-          for (std::size_t v = 0; v < views.size(); ++v)
-            parts[v].push_back(caster.cast_fragment(views[v], std::uint32_t(i * views.size() + v),
-                                                    {b.owned, domain_}));
-        }
-        for (std::size_t v = 0; v < views.size(); ++v) {
-          const std::uint32_t index = std::uint32_t(i * views.size() + v);
-          fragments.push_back(parts[v].empty() ? make_empty_fragment(views[v], index)
-                                               : merge_fragments(parts[v], 0.0));
-        }
-      }
-    } catch (const std::exception& e) {
-      local_error = e.what();
-    }
-    if (!local_error.empty()) {
-      // Empty fragments of the right shape (views may be unknown: then none).
-      fragments.clear();
-      for (std::size_t i = 0; i < options_.isovalues.size(); ++i)
-        for (std::size_t v = 0; v < views.size(); ++v)
-          fragments.push_back(make_empty_fragment(views[v], std::uint32_t(i * views.size() + v)));
-    }
-    const double cast_seconds = seconds_since(cast_start);
-    int local_failed = local_error.empty() ? 0 : 1, any_failed = 0;
-    MPI_Allreduce(&local_failed, &any_failed, 1, MPI_INT, MPI_MAX, comm_);
-    if (any_failed) {
-      finish_report(start);
-      return fail(
-          "step " + std::to_string(step) + " skipped: " +
-          (local_error.empty() ? std::string("another rank failed to ray cast") : local_error));
-    }
-
-    double tolerance = 0.0;
-    for (const View& v : views)
-      tolerance = std::max(tolerance, merge_tolerance(options_.encoding, v, domain_.diagonal()));
-    // The root merges what it receives on its worker (finish_merge), off the solver's path.
-    ReductionStats stats;
-    PendingMerge pending;
-    const Status reduced = reduce_fragments(comm_, 0, fragments, options_.encoding, tolerance,
-                                            stats, rank_ == 0 ? &pending : nullptr);
-    int reduce_failed = reduced ? 0 : 1;
-    MPI_Allreduce(MPI_IN_PLACE, &reduce_failed, 1, MPI_INT, MPI_MAX, comm_);
-    double max_cast = 0.0;
-    MPI_Reduce(&cast_seconds, &max_cast, 1, MPI_DOUBLE, MPI_MAX, 0, comm_);
-    static_assert(sizeof(unsigned long long) == sizeof(std::uint64_t));
-    unsigned long long nonfinite_local = nonfinite, nonfinite_total = 0;
-    MPI_Reduce(&nonfinite_local, &nonfinite_total, 1, MPI_UNSIGNED_LONG_LONG, MPI_SUM, 0, comm_);
-    if (rank_ == 0) report_.nonfinite_values = nonfinite_total;
-    if (reduce_failed) {
-      finish_report(start);
-      return fail(
-          "step " + std::to_string(step) + " skipped: " +
-          (reduced ? std::string("the reduction failed on another rank") : reduced.message()));
-    }
-    // The solver's part ends here: the root hands the step to its worker.
-    finish_report(start);
+    Job job;
+    job.step = step;
+    job.time = time;
     if (rank_ == 0) {
-      Job job;
-      job.step = step;
-      job.time = time;
-      job.views = std::move(views);
-      job.fragments = std::move(fragments);
-      job.pending = std::move(pending);
-      job.seconds = {{"cast", max_cast},
-                     {"encode", stats.encode_seconds},
-                     {"reduce", stats.wall_seconds},
-                     {"blocked", report_.max_blocked_seconds}};
-      job.nonfinite_values = report_.nonfinite_values;
       job.skipped_steps = skipped_since_handoff_;
       skipped_since_handoff_ = 0;
-      std::lock_guard lock(mutex_);
-      report_.replaced_pending = pending_.has_value();
-      if (report_.replaced_pending) {
-        job.skipped_steps += pending_->skipped_steps + 1;
-        if (options_.log)
-          std::printf("ldimesh: step %llu replaces step %llu, which was still waiting\n",
-                      (unsigned long long)step, (unsigned long long)pending_->step);
-      }
-      pending_ = std::move(job);
-      wake_.notify_all();
+    }
+    if (background_ && flags[1] == 0) return hand_to_background(std::move(job), start);
+    if (background_ && rank_ == 0 && options_.log)
+      std::printf("ldimesh: step %llu runs synchronously: %s\n", (unsigned long long)step,
+                  "a rank's blocks cannot be copied (a FieldSource) or exceed memory_mb");
+
+    // The synchronous path: the solver waits for the cast and the reduction.
+    std::uint64_t nonfinite_total = 0;
+    const Status s = collective_step(comm_, blocks_, domain(), "", job, nonfinite_total);
+    if (rank_ == 0) report_.nonfinite_values = nonfinite_total;
+    finish_report(start);
+    if (!s) return fail("step " + std::to_string(step) + " skipped: " + s.message());
+    if (rank_ == 0) {
+      job.seconds["blocked"] = report_.max_blocked_seconds;
+      report_.replaced_pending = hand_to_worker(std::move(job));
     }
     return Status::ok();
   }
@@ -383,6 +409,16 @@ class AdaptorImpl final : public Adaptor {
   Status finalize() override {
     if (finalized_) return Status::ok();
     finalized_ = true;
+    if (caster_.joinable()) {
+      {
+        std::unique_lock lock(mutex_);
+        caster_idle_.wait(lock, [&] { return !caster_job_ && !casting_; });
+        caster_stopping_ = true;
+        caster_wake_.notify_all();
+      }
+      caster_.join();
+      MPI_Comm_free(&background_comm_);
+    }
     if (rank_ == 0 && worker_.joinable()) {
       {
         std::unique_lock lock(mutex_);
@@ -412,7 +448,221 @@ class AdaptorImpl final : public Adaptor {
   struct Block {
     std::shared_ptr<const FieldSource> source;
     Box owned;
+    // What the block reads, for the background path's copy (neither: a FieldSource, which
+    // cannot be copied).
+    std::optional<GridBlock> grid;
+    std::optional<HexBlock> hex;
   };
+  // A snapshotted step for this rank's caster thread.
+  struct CasterJob {
+    Job job;
+    std::optional<Box> domain;
+    std::string error;  // the snapshot failed: the step fails on every rank
+    double blocked_seconds = 0.0;
+  };
+
+  // The collective half of a due step over `comm`: every rank casts `blocks` and takes part in
+  // the reduction to the root, whose `job` gets the views, its fragments, the others' pending
+  // merge and the timings (all but "blocked"). A local failure (`local_error`, or one while
+  // casting) sends empty fragments, so that nobody waits forever, and fails the step everywhere.
+  // The solver's thread runs it on the adaptor's communicator (synchronous path), the caster
+  // thread on its duplicate (background path).
+  Status collective_step(MPI_Comm comm, const std::vector<Block>& blocks, std::optional<Box> domain,
+                         std::string local_error, Job& job, std::uint64_t& nonfinite_total) const {
+    std::vector<View> views;
+    std::vector<LdiFragment> fragments;
+    std::uint64_t nonfinite = 0;
+    const auto cast_start = Clock::now();
+    try {
+      if (!local_error.empty()) throw std::runtime_error(local_error);
+      if (!domain) throw std::runtime_error("set_domain() was not called");
+      views = make_axis_views(*domain, options_.resolution, options_.views);
+      for (std::size_t i = 0; i < options_.isovalues.size(); ++i) {
+        // One scene per block and isovalue, cast along every view.
+        std::vector<std::vector<LdiFragment>> parts(views.size());
+        for (const Block& b : blocks) {
+          const RayCaster caster(*b.source, options_.isovalues[i]);
+          // The values are the same for every isovalue: count them once.
+          if (i == 0) nonfinite += caster.nonfinite_values();
+          for (std::size_t v = 0; v < views.size(); ++v)
+            parts[v].push_back(caster.cast_fragment(views[v], std::uint32_t(i * views.size() + v),
+                                                    {b.owned, *domain}));
+        }
+        for (std::size_t v = 0; v < views.size(); ++v) {
+          const std::uint32_t index = std::uint32_t(i * views.size() + v);
+          fragments.push_back(parts[v].empty() ? make_empty_fragment(views[v], index)
+                                               : merge_fragments(parts[v], 0.0));
+        }
+      }
+    } catch (const std::exception& e) {
+      local_error = e.what();
+      if (local_error.empty()) local_error = "ray casting failed";
+    }
+    if (!local_error.empty()) {
+      // Empty fragments of the right shape (views may be unknown: then none).
+      fragments.clear();
+      for (std::size_t i = 0; i < options_.isovalues.size(); ++i)
+        for (std::size_t v = 0; v < views.size(); ++v)
+          fragments.push_back(make_empty_fragment(views[v], std::uint32_t(i * views.size() + v)));
+    }
+    const double cast_seconds = seconds_since(cast_start);
+    int local_failed = local_error.empty() ? 0 : 1, any_failed = 0;
+    MPI_Allreduce(&local_failed, &any_failed, 1, MPI_INT, MPI_MAX, comm);
+    if (any_failed)
+      return Status::error(local_error.empty() ? std::string("another rank failed to ray cast")
+                                               : local_error);
+
+    double tolerance = 0.0;
+    for (const View& v : views)
+      tolerance = std::max(tolerance, merge_tolerance(options_.encoding, v, domain->diagonal()));
+    // The root merges what it receives on its worker (finish_merge), off the solver's path.
+    ReductionStats stats;
+    const Status reduced = reduce_fragments(comm, 0, fragments, options_.encoding, tolerance, stats,
+                                            rank_ == 0 ? &job.pending : nullptr);
+    int reduce_failed = reduced ? 0 : 1;
+    MPI_Allreduce(MPI_IN_PLACE, &reduce_failed, 1, MPI_INT, MPI_MAX, comm);
+    double max_cast = 0.0;
+    MPI_Reduce(&cast_seconds, &max_cast, 1, MPI_DOUBLE, MPI_MAX, 0, comm);
+    static_assert(sizeof(unsigned long long) == sizeof(std::uint64_t));
+    unsigned long long nonfinite_local = nonfinite, total = 0;
+    MPI_Reduce(&nonfinite_local, &total, 1, MPI_UNSIGNED_LONG_LONG, MPI_SUM, 0, comm);
+    nonfinite_total = total;
+    if (reduce_failed)
+      return reduced ? Status::error("the reduction failed on another rank") : reduced;
+    if (rank_ == 0) {
+      job.views = std::move(views);
+      job.fragments = std::move(fragments);
+      job.seconds = {
+          {"cast", max_cast}, {"encode", stats.encode_seconds}, {"reduce", stats.wall_seconds}};
+      job.nonfinite_values = total;
+    }
+    return Status::ok();
+  }
+
+  // Root: gives `job` to the worker; true when it replaced a step still waiting ("coalesce").
+  bool hand_to_worker(Job job) {
+    std::lock_guard lock(mutex_);
+    const bool replaced = pending_.has_value();
+    if (replaced) {
+      job.skipped_steps += pending_->skipped_steps + 1;
+      if (options_.log)
+        std::printf("ldimesh: step %llu replaces step %llu, which was still waiting\n",
+                    (unsigned long long)job.step, (unsigned long long)pending_->step);
+    }
+    pending_ = std::move(job);
+    wake_.notify_all();
+    return replaced;
+  }
+
+  // ---- The background path: the solver waits for a copy of its blocks only.
+
+  // Whether the domain is set, every block can be copied (grid and high-order blocks: a
+  // FieldSource cannot) and the copies fit memory_mb; `bytes` is their size.
+  bool snapshot_possible(std::size_t& bytes) const {
+    bytes = 0;
+    if (!has_domain_) return false;  // the synchronous path fails the step on every rank
+    for (const Block& b : blocks_) {
+      if (b.grid) {
+        const auto& d = b.grid->dims;
+        bytes += std::size_t(d[0] * d[1] * d[2]) * scalar_bytes(b.grid->type);
+        if (b.grid->coords[0]) bytes += std::size_t(d[0] + d[1] + d[2]) * sizeof(double);
+      } else if (b.hex) {
+        const std::size_t n =
+            std::size_t(b.hex->order + 1) * (b.hex->order + 1) * (b.hex->order + 1);
+        bytes += b.hex->element_count * (n * scalar_bytes(b.hex->type) + 24 * sizeof(double));
+      } else {
+        return false;
+      }
+    }
+    return bytes <= (options_.memory_mb << 20);
+  }
+
+  // Copies the blocks into the snapshot buffers (kept from step to step) and hands the step to
+  // this rank's caster thread. Every rank does, even after a local failure (the caster thread
+  // then sends empty fragments and the step fails everywhere, as on the synchronous path).
+  Status hand_to_background(Job job, Clock::time_point start) {
+    {
+      // With "skip" the root decided the step runs because its own caster was idle, and the
+      // others' finish the previous step's reduction with it: a short wait. With "coalesce"
+      // the solver waits here for the rest of the previous step's cast and reduction.
+      std::unique_lock lock(mutex_);
+      caster_idle_.wait(lock, [&] { return !caster_job_ && !casting_; });
+    }
+    std::string error;
+    std::size_t bytes = 0;
+    try {
+      snapshot_.resize(blocks_.size());
+      snapshot_blocks_.clear();
+      for (std::size_t k = 0; k < blocks_.size(); ++k) {
+        const Block& b = blocks_[k];
+        Block copy;
+        copy.owned = b.owned;
+        if (b.grid)
+          copy.source = std::make_shared<GridSource>(copy_grid(*b.grid, snapshot_[k]));
+        else
+          copy.source = std::make_shared<HexElementSource>(copy_hex(*b.hex, snapshot_[k]));
+        bytes += snapshot_[k].bytes();
+        snapshot_blocks_.push_back(std::move(copy));
+      }
+    } catch (const std::exception& e) {
+      error = std::string("snapshot: ") + e.what();
+      snapshot_blocks_.clear();
+    }
+    report_.background = true;
+    report_.snapshot_bytes = bytes;
+    CasterJob cj;
+    cj.job = std::move(job);
+    cj.domain = domain();
+    cj.error = std::move(error);
+    cj.blocked_seconds = seconds_since(start);
+    {
+      std::lock_guard lock(mutex_);
+      caster_job_ = std::move(cj);
+      if (rank_ == 0) casting_ = true;  // busy from now on for the root's next decision
+      caster_wake_.notify_all();
+    }
+    finish_report(start);
+    return Status::ok();
+  }
+
+  // Every rank's caster thread: the collective half of each snapshotted step on the duplicated
+  // communicator, then (root) the hand-off to the worker.
+  void cast_in_background() {
+    while (true) {
+      CasterJob cj;
+      {
+        std::unique_lock lock(mutex_);
+        caster_wake_.wait(lock, [&] { return caster_stopping_ || caster_job_.has_value(); });
+        if (!caster_job_) return;
+        cj = std::move(*caster_job_);
+        caster_job_.reset();
+        casting_ = true;
+      }
+      std::string error;
+      try {
+        std::uint64_t nonfinite = 0;
+        const Status s = collective_step(background_comm_, snapshot_blocks_, cj.domain, cj.error,
+                                         cj.job, nonfinite);
+        double max_blocked = 0.0;
+        MPI_Reduce(&cj.blocked_seconds, &max_blocked, 1, MPI_DOUBLE, MPI_MAX, 0, background_comm_);
+        if (!s) throw std::runtime_error(s.message());
+        if (rank_ == 0) {
+          cj.job.seconds["blocked"] = max_blocked;
+          hand_to_worker(std::move(cj.job));
+        }
+      } catch (const std::exception& e) {
+        error = e.what();
+      }
+      std::lock_guard lock(mutex_);
+      casting_ = false;
+      if (!error.empty()) {
+        last_error_ = worker_error_ = "step " + std::to_string(cj.job.step) + " skipped: " + error;
+        if (options_.log && rank_ == 0)
+          std::fprintf(stderr, "ldimesh: error: %s\n", last_error_.c_str());
+      }
+      caster_idle_.notify_all();
+    }
+  }
 
   // A block whose hits belong to its own bounds (the owned region of a grid block).
   template <class Source, class Description>
@@ -420,10 +670,20 @@ class AdaptorImpl final : public Adaptor {
     try {
       auto source = std::make_shared<Source>(block);
       const Box owned = source->bounds();
-      return add_source(std::move(source), owned);
+      Block b{std::move(source), owned, std::nullopt, std::nullopt};
+      if constexpr (std::is_same_v<Description, GridBlock>)
+        b.grid = block;
+      else
+        b.hex = block;
+      blocks_.push_back(std::move(b));
+      return Status::ok();
     } catch (const std::exception& e) {
       return fail(std::string(what) + ": " + e.what());
     }
+  }
+
+  std::optional<Box> domain() const {
+    return has_domain_ ? std::optional<Box>(domain_) : std::nullopt;
   }
 
   Status fail(const std::string& message) {
@@ -582,7 +842,19 @@ class AdaptorImpl final : public Adaptor {
   bool stopping_ = false;
   std::uint64_t published_ = 0;
   std::string last_error_;
-  std::string worker_error_;  // the last failure of the root's background work
+  std::string worker_error_;  // the last failure of this rank's background work
+
+  // Every rank, background path (MPI_THREAD_MULTIPLE): the caster thread, its communicator (a
+  // duplicate, so that its collectives never meet the solver's) and the snapshot it reads.
+  bool background_ = false;
+  MPI_Comm background_comm_ = MPI_COMM_NULL;
+  std::thread caster_;
+  std::condition_variable caster_wake_, caster_idle_;
+  std::optional<CasterJob> caster_job_;
+  bool casting_ = false;  // root: from the hand-off until the step is reduced
+  bool caster_stopping_ = false;
+  std::vector<BlockCopy> snapshot_;
+  std::vector<Block> snapshot_blocks_;  // sources over snapshot_, read by the caster thread
 };
 
 }  // namespace
@@ -609,6 +881,7 @@ Status Adaptor::create(MPI_Comm comm, std::string_view options_json,
     MPI_Allreduce(MPI_IN_PLACE, &failed, 1, MPI_INT, MPI_MAX, comm);
     if (failed) return status ? Status::error("options: invalid on another rank") : status;
     auto adaptor = std::make_unique<AdaptorImpl>(comm, std::move(options));
+    adaptor->start_background();
     Status started = adaptor->start_root();
     int start_failed = started ? 0 : 1;
     MPI_Bcast(&start_failed, 1, MPI_INT, 0, comm);

@@ -12,7 +12,9 @@ namespace ldimesh::miniapp {
 
 MiniApp::MiniApp(std::string name, int& argc, char**& argv) : name_(std::move(name)) {
   int provided = MPI_THREAD_SINGLE;
-  MPI_Init_thread(&argc, &argv, MPI_THREAD_FUNNELED, &provided);
+  // MULTIPLE: the adaptor's background path (the solver waits for a snapshot only); with less
+  // the adaptor says so and runs its steps synchronously.
+  MPI_Init_thread(&argc, &argv, MPI_THREAD_MULTIPLE, &provided);
   MPI_Comm_rank(MPI_COMM_WORLD, &rank_);
   MPI_Comm_size(MPI_COMM_WORLD, &size_);
   if (provided < MPI_THREAD_FUNNELED && rank_ == 0)

@@ -1,4 +1,4 @@
-// What the mini-apps share: MPI start-up with MPI_THREAD_FUNNELED, the options every mini-app
+// What the mini-apps share: MPI start-up with MPI_THREAD_MULTIPLE, the options every mini-app
 // takes, the adaptor's options document, and the step loop that calls Adaptor::execute and
 // checks every Status. A solver would write the same few lines; they live here once so that each
 // mini-app's main.cpp shows only its solver and the data it hands over.
@@ -32,8 +32,8 @@ inline constexpr int kExitOptions = 2;  // the adaptor refused its options: noth
 
 class MiniApp {
  public:
-  // MPI_Init_thread with MPI_THREAD_FUNNELED (the adaptor calls MPI from the thread that calls
-  // execute() only); MPI_Finalize on destruction.
+  // MPI_Init_thread with MPI_THREAD_MULTIPLE (the adaptor's background path: its caster
+  // threads call MPI while the solver does); MPI_Finalize on destruction.
   MiniApp(std::string name, int& argc, char**& argv);
   ~MiniApp();
   MiniApp(const MiniApp&) = delete;

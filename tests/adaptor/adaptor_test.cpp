@@ -5,6 +5,7 @@
 #include <chrono>
 #include <filesystem>
 #include <thread>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -33,8 +34,16 @@ std::unique_ptr<Adaptor> make(const std::string& options, const char* surface = 
   return a;
 }
 
+bool thread_multiple() {
+  int level = MPI_THREAD_SINGLE;
+  MPI_Query_thread(&level);
+  return level >= MPI_THREAD_MULTIPLE;
+}
+
+// Distinct per thread level: the funneled and the --thread-multiple runs may run at once.
 std::string temp_dir(const std::string& name) {
-  return testing::fresh_temp_dir("ldimesh_adaptor", name);
+  return testing::fresh_temp_dir(thread_multiple() ? "ldimesh_adaptor_mt" : "ldimesh_adaptor",
+                                 name);
 }
 
 TEST(Adaptor, InvalidOptionsAreReportedOnEveryRankWithTheKey) {
@@ -132,6 +141,148 @@ TEST(Adaptor, MergingPublishesOneClosedMesh) {
     EXPECT_GT(meta.triangles, 1000u);
     EXPECT_EQ(meta.triangles, 2 * (meta.vertices - 2));
   }
+}
+
+// ---- The background path (MPI_THREAD_MULTIPLE: the binary's --thread-multiple run) and the
+// synchronous one (MPI_THREAD_FUNNELED).
+
+// This rank's slab (split along z) of an n³-point float32 grid over [−1, 1]³ holding
+// f = |x|² + shift, as a solver hands it over: owned points tile the grid, one ghost point layer
+// towards each neighbour (miniapps/grayscott describes the rule).
+struct GridSlab {
+  std::vector<float> values;
+  GridBlock block;
+
+  GridSlab(int n, double shift) {
+    const int r = rank_of(), size = ranks();
+    const int p0 = n * r / size, p1 = n * (r + 1) / size - 1;  // owned points along z
+    const int g_lo = r > 0 ? 1 : 0, g_hi = r + 1 < size ? 1 : 0;
+    const int k0 = p0 - g_lo, nz = p1 + g_hi - k0 + 1;
+    const double h = 2.0 / (n - 1);
+    values.resize(std::size_t(n) * n * nz);
+    for (int k = 0; k < nz; ++k)
+      for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i) {
+          const double x = -1 + i * h, y = -1 + j * h, z = -1 + (k0 + k) * h;
+          values[(std::size_t(k) * n + j) * n + i] = float(x * x + y * y + z * z + shift);
+        }
+    block.dims = {n, n, nz};
+    block.values = values.data();
+    block.type = ScalarType::float32;
+    block.origin = {-1.0, -1.0, -1.0 + k0 * h};
+    block.spacing = glm::dvec3(h);
+    block.ghost_lo = {0, 0, g_lo};
+    block.ghost_hi = {0, 0, g_hi};
+  }
+};
+
+constexpr int kSlabPoints = 40;
+
+std::unique_ptr<Adaptor> make_grid_adaptor(const std::string& options, GridSlab& slab) {
+  std::unique_ptr<Adaptor> a;
+  const Status s = Adaptor::create(MPI_COMM_WORLD, options, a);
+  EXPECT_TRUE(s) << s.message();
+  if (!a) return a;
+  EXPECT_TRUE(a->set_domain({glm::dvec3(-1.0), glm::dvec3(1.0)}));
+  EXPECT_TRUE(a->add_grid_block(slab.block));
+  return a;
+}
+
+std::string grid_options(const std::string& dir, bool background) {
+  return R"({"server": {"enabled": false}, "resolution": 40, "log": false, "isovalues": [0.36],
+             "busy": "coalesce", "background": )" +
+         std::string(background ? "true" : "false") + R"(, "output_dir": ")" + dir + R"("})";
+}
+
+std::vector<std::uint8_t> published_glb(const std::string& dir, std::uint64_t step) {
+  Snapshot snapshot;
+  const Status s = read_step_files(dir, step, snapshot);
+  EXPECT_TRUE(s) << s.message();
+  return s && snapshot.glb ? *snapshot.glb : std::vector<std::uint8_t>{};
+}
+
+TEST(Adaptor, GridBlocksRunInTheBackgroundWhereMpiAllowsIt) {
+  GridSlab slab(kSlabPoints, 0.0);
+  auto a = make_grid_adaptor(grid_options(temp_dir("background"), true), slab);
+  if (!a) return;
+  EXPECT_TRUE(a->execute(0, 0.0));
+  EXPECT_EQ(a->last_report().background, thread_multiple());
+  if (thread_multiple())  // the copy: the slab's points, nothing else (uniform spacing)
+    EXPECT_EQ(a->last_report().snapshot_bytes, slab.values.size() * sizeof(float));
+  EXPECT_TRUE(a->finalize());
+  if (rank_of() == 0) EXPECT_EQ(a->published_steps(), 1u);
+  // A FieldSource cannot be copied: such steps run synchronously whatever the thread level.
+  auto b = make(R"({"server": {"enabled": false}, "resolution": 32, "log": false})");
+  if (!b) return;
+  EXPECT_TRUE(b->execute(0, 0.0));
+  EXPECT_FALSE(b->last_report().background);
+  EXPECT_TRUE(b->finalize());
+}
+
+// Both paths publish the same bytes; and the solver may overwrite its arrays as soon as
+// execute() returns: the published mesh is that of the values at the call.
+TEST(Adaptor, TheSnapshotPathPublishesTheSynchronousMeshWhateverTheSolverDoesNext) {
+  const std::string sync_dir = temp_dir("sync"), snap_dir = temp_dir("snapshot");
+  constexpr int kSteps = 3;
+  const auto shift = [](int step) { return -0.02 * step; };  // the sphere grows step by step
+  {
+    std::vector<GridSlab> slabs;
+    for (int step = 0; step < kSteps; ++step)
+      slabs.emplace_back(kSlabPoints, shift(step));
+    auto a = make_grid_adaptor(grid_options(sync_dir, false), slabs[0]);
+    if (!a) return;
+    for (int step = 0; step < kSteps; ++step) {
+      a->clear_blocks();
+      EXPECT_TRUE(a->add_grid_block(slabs[step].block));
+      EXPECT_TRUE(a->execute(step, 0.0));
+      EXPECT_FALSE(a->last_report().background);
+      // Every step of the reference published (the others wait in the next collective).
+      for (int wait = 0;
+           rank_of() == 0 && a->published_steps() < std::uint64_t(step + 1) && wait < 1000; ++wait)
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    EXPECT_TRUE(a->finalize());
+  }
+  // One array, overwritten with the next step's values right after each execute(), and with
+  // values that hold no surface at all after the last one.
+  GridSlab slab(kSlabPoints, shift(0));
+  auto b = make_grid_adaptor(grid_options(snap_dir, true), slab);
+  if (!b) return;
+  for (int step = 0; step < kSteps; ++step) {
+    EXPECT_TRUE(b->execute(step, 0.0));
+    EXPECT_EQ(b->last_report().background, thread_multiple());
+    const GridSlab next(kSlabPoints, step + 1 < kSteps ? shift(step + 1) : 100.0);
+    std::copy(next.values.begin(), next.values.end(), slab.values.begin());
+    // Then wait for the step to be published (a due step finding the background busy would be
+    // skipped).
+    for (int wait = 0;
+         rank_of() == 0 && b->published_steps() < std::uint64_t(step + 1) && wait < 1000; ++wait)
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  EXPECT_TRUE(b->finalize());
+  if (rank_of() == 0) {
+    for (int step = 0; step < kSteps; ++step) {
+      const auto expected = published_glb(sync_dir, step), got = published_glb(snap_dir, step);
+      EXPECT_GT(expected.size(), 1000u);
+      EXPECT_TRUE(expected == got)
+          << "step " << step << ": " << expected.size() << " vs " << got.size() << " bytes";
+    }
+  }
+}
+
+// With less than MPI_THREAD_MULTIPLE the adaptor says that steps run synchronously.
+TEST(Adaptor, WithoutThreadMultipleTheLogSaysStepsRunSynchronously) {
+  ::testing::internal::CaptureStderr();
+  std::unique_ptr<Adaptor> a;
+  const Status s = Adaptor::create(MPI_COMM_WORLD, R"({"server": {"enabled": false}})", a);
+  const std::string err = ::testing::internal::GetCapturedStderr();
+  EXPECT_TRUE(s) << s.message();
+  if (rank_of() == 0) {
+    const bool says = err.find("MPI_THREAD_MULTIPLE") != std::string::npos &&
+                      err.find("synchronously") != std::string::npos;
+    EXPECT_EQ(says, !thread_multiple()) << err;
+  }
+  if (a) EXPECT_TRUE(a->finalize());
 }
 
 TEST(Adaptor, ExecuteWithoutADomainFailsCleanly) {

@@ -34,13 +34,15 @@ inline std::string fresh_temp_dir(const std::string& prefix, const std::string& 
   return dir.string();
 }
 
-// The body of main(): initialises MPI (funneled), runs the tests with only rank 0 printing,
-// and returns failure on every rank if any rank failed. `before_tests` runs after MPI_Init;
-// what it returns lives while the tests run (e.g. a tbb::global_control).
+// The body of main(): initialises MPI (funneled, or MPI_THREAD_MULTIPLE when the first
+// argument is --thread-multiple), runs the tests with only rank 0 printing, and returns failure
+// on every rank if any rank failed. `before_tests` runs after MPI_Init; what it returns lives
+// while the tests run (e.g. a tbb::global_control).
 template <class Setup>
 int run_mpi_tests(int argc, char** argv, Setup before_tests) {
   int provided = 0;
-  MPI_Init_thread(&argc, &argv, MPI_THREAD_FUNNELED, &provided);
+  const bool multiple = argc > 1 && std::string(argv[1]) == "--thread-multiple";
+  MPI_Init_thread(&argc, &argv, multiple ? MPI_THREAD_MULTIPLE : MPI_THREAD_FUNNELED, &provided);
   ::testing::InitGoogleTest(&argc, argv);
   if (rank_of() != 0) {
     auto& listeners = ::testing::UnitTest::GetInstance()->listeners();

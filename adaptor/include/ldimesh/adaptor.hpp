@@ -6,15 +6,24 @@
 // execute(step, time) every step, and finalize (or destroy) at the end.
 //
 // On a due step (options "cadence") every rank ray casts the isosurfaces of its own blocks and
-// hands its LDI fragments to the root (the only time the solver waits: ray casting + the
-// reduction); the root's decode, meshing, Draco encoding and publishing run on a worker
-// thread while the solver continues. If the worker is still busy with an earlier step the new
-// one is skipped or replaces the waiting one ("busy": "skip" | "coalesce").
+// hands its LDI fragments to the root; the root's decode, meshing, Draco encoding and
+// publishing run on a worker thread while the solver continues. If the root is still busy with
+// an earlier step the new one is skipped or replaces the waiting one ("busy": "skip" |
+// "coalesce").
+//
+// What the solver waits for depends on MPI's thread level. With MPI_THREAD_MULTIPLE (and
+// option "background", the default) execute() copies the grid and high-order blocks' arrays
+// (a snapshot; the solver may overwrite its arrays as soon as execute() returns) and returns:
+// the ray casting and the reduction run on a caster thread of every rank, over a duplicate of
+// the communicator. With less (MPI_THREAD_FUNNELED at least), or when a block is a FieldSource
+// (nothing to copy) or the copies would exceed "memory_mb", the step runs synchronously: the
+// solver waits for the ray casting and the reduction, and MPI is called from the thread that
+// calls execute() only.
 //
 // Never harms the solver: no exception leaves the adaptor's functions, it never calls
 // MPI_Abort or exit; an error is returned as a Status (also kept as last_error()) and the step
-// is skipped. MPI must be initialised with at least MPI_THREAD_FUNNELED; the adaptor calls MPI
-// from the thread that calls execute() only.
+// is skipped. A step that fails in the background is reported by last_error(), the root's log
+// and finalize().
 #pragma once
 
 #include <cstdint>
@@ -41,7 +50,10 @@ struct StepReport {
   double max_blocked_seconds = 0.0;  // the slowest rank's (root only)
   // NaN/±Inf values met in the fields of all ranks' blocks (root only). The cells and elements
   // they touch are left out of the surface; the step is still published.
+  // (Synchronous path; in the background path the count comes with the published step.)
   std::uint64_t nonfinite_values = 0;
+  bool background = false;         // the step was snapshotted and runs on the caster thread
+  std::size_t snapshot_bytes = 0;  // this rank's copy of its blocks (background path)
 };
 
 class Adaptor {
