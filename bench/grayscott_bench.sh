@@ -1,9 +1,14 @@
 #!/usr/bin/env bash
 # In situ cost on a real solver loop: ldimesh-grayscott on 2 ranks at a size where one output
 # step (--substeps solver steps) computes in about a second, every step due, "busy": "skip".
-# Per executed step: the slowest rank's compute time, the time the solver was blocked inside
-# execute() (StepReport::max_blocked_seconds, from --report), and the root's background stages
-# (the published step's JSON "seconds"). Prints Markdown for docs/benchmarks.md.
+# Runs the same simulation three times, one after the other: without in situ (no step due: the
+# solver's own time), with the synchronous path ("background": false: the solver waits for the
+# cast and the reduction) and with the background path (the default with MPI_THREAD_MULTIPLE:
+# the solver waits for a copy of its block). Per executed step of the last run: the slowest
+# rank's compute time, the time the solver was blocked inside execute()
+# (StepReport::max_blocked_seconds, from --report), and the root's background stages (the
+# published step's JSON "seconds"); then the three runs side by side. Prints Markdown for
+# docs/benchmarks.md.
 # Usage: bench/grayscott_bench.sh [SIZE=192] [SUBSTEPS=60] [STEPS=20] [RESOLUTION=256]
 # (binaries from build/bin, or from $LDIMESH_BIN)
 set -euo pipefail
@@ -16,22 +21,34 @@ bin=${LDIMESH_BIN:-build/bin}
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
-printf '{"server": {"enabled": false}, "output_dir": "%s/steps", "resolution": %d, "keep": 4}\n' \
-  "$tmp" "$resolution" >"$tmp/options.json"
-# --bind-to none: the ray caster runs threads on every rank.
-mpiexec -n 2 --bind-to none "$bin/ldimesh-grayscott" --size "$size" --substeps "$substeps" \
-  --steps "$steps" --options "$tmp/options.json" --report >"$tmp/run.log"
+for mode in none sync background; do
+  mkdir -p "$tmp/$mode"
+  extra='"background": true'
+  [ "$mode" = sync ] && extra='"background": false'
+  [ "$mode" = none ] && extra='"cadence": {"every_steps": 1000000000}'
+  printf '{"server": {"enabled": false}, "output_dir": "%s/%s/steps", "resolution": %d, "keep": 4, %s}\n' \
+    "$tmp" "$mode" "$resolution" "$extra" >"$tmp/$mode/options.json"
+  # --bind-to none: the ray caster runs threads on every rank.
+  mpiexec -n 2 --bind-to none "$bin/ldimesh-grayscott" --size "$size" --substeps "$substeps" \
+    --steps "$steps" --options "$tmp/$mode/options.json" --report >"$tmp/$mode/run.log"
+done
 python3 - "$tmp" "$size" "$substeps" "$steps" "$resolution" <<'PY'
 import json, os, statistics, sys
-tmp, size, substeps, steps, res = sys.argv[1:]
-reports = {}
-for line in open(os.path.join(tmp, "run.log")):
-    if line.startswith("report "):
-        r = dict(kv.split("=") for kv in line.split()[1:])
-        reports[int(r["step"])] = r
+root, size, substeps, steps, res = sys.argv[1:]
+
+def read_reports(mode):
+    reports = {}
+    for line in open(os.path.join(root, mode, "run.log")):
+        if line.startswith("report "):
+            r = dict(kv.split("=") for kv in line.split()[1:])
+            reports[int(r["step"])] = r
+    return reports
+
+tmp = os.path.join(root, "background")
+reports = read_reports("background")
 stages = ["cast", "encode", "reduce", "decode", "mesh", "glb"]
 print(f"2 ranks, {size}³ points, {substeps} substeps per step, {steps} steps, {res}² views, "
-      f"every step due, busy = skip\n")
+      f"every step due, busy = skip; background path\n")
 executed = [s for s, r in sorted(reports.items()) if r["executed"] == "1"]
 every = max(1, -(-len(executed) // 20))  # at most about 20 rows; the median covers them all
 if every > 1:
@@ -57,4 +74,19 @@ mc = statistics.median(c for c, _ in rows)
 mb = statistics.median(b for _, b in rows)
 print(f"\nMedian over the {len(rows)} executed steps: compute {mc:.3f} s, blocked {mb:.3f} s "
       f"({100 * mb / mc:.1f} %); {skipped} of {len(reports)} steps skipped (root busy).")
+print("\n| run | compute s (median) | blocked s (median) | blocked / compute | compute + blocked s | "
+      "vs. no in situ | steps skipped |")
+print("|---|---|---|---|---|---|---|")
+base = None
+for mode, name in (("none", "no in situ (nothing due)"), ("sync", "synchronous path"),
+                   ("background", "background path")):
+    rs = read_reports(mode)
+    ex = [r for r in rs.values() if mode == "none" or r["executed"] == "1"]
+    c = statistics.median(float(r["compute_s"]) for r in ex)
+    b = statistics.median(float(r["blocked_s"]) for r in ex)
+    total = statistics.median(float(r["compute_s"]) + float(r["blocked_s"]) for r in ex)
+    base = base or total
+    skipped = sum(1 for r in rs.values() if r["skipped_busy"] == "1")
+    print(f"| {name} | {c:.3f} | {b:.4f} | {100 * b / c:.1f} % | {total:.3f} | "
+          f"{100 * (total / base - 1):+.1f} % | {skipped} |")
 PY

@@ -51,6 +51,8 @@ module ldimesh_mod
     real(c_double) :: blocked_seconds = 0.0_c_double
     real(c_double) :: max_blocked_seconds = 0.0_c_double
     integer(c_int64_t) :: nonfinite_values = 0
+    integer(c_int) :: background = 0
+    integer(c_int64_t) :: snapshot_bytes = 0
   end type ldimesh_step_report
 
   ! The adaptor handle; null until ldimesh_create succeeds.

@@ -15,10 +15,12 @@
  * step is skipped and the next one is tried. Every function accepts a NULL adaptor (and then
  * returns LDIMESH_ERROR_ARGUMENT), so a solver may keep calling after a failed create.
  *
- * MPI must be initialised (MPI_Init_thread with MPI_THREAD_FUNNELED recommended: the adaptor
- * calls MPI only from the thread that calls it, and runs a worker thread on the root that never
- * calls MPI). ldimesh_create, ldimesh_execute, ldimesh_finalize and ldimesh_destroy are
- * collective over the adaptor's communicator.
+ * MPI must be initialised. With MPI_THREAD_MULTIPLE (MPI_Init_thread) a due step copies the
+ * blocks' arrays and returns; the ray casting and the reduction run on a thread of every rank
+ * (docs/adaptor.md, option "background"). With less (MPI_THREAD_FUNNELED at least) the step
+ * runs synchronously and the adaptor calls MPI only from the thread that calls it; the root's
+ * worker thread never calls MPI. ldimesh_create, ldimesh_execute, ldimesh_finalize and
+ * ldimesh_destroy are collective over the adaptor's communicator.
  */
 #ifndef LDIMESH_H
 #define LDIMESH_H
@@ -90,7 +92,10 @@ typedef struct ldimesh_step_report {
   int replaced_pending;       /* 1: replaced a waiting step ("busy": "coalesce") */
   double blocked_seconds;     /* this rank's time inside ldimesh_execute */
   double max_blocked_seconds; /* the slowest rank's (root only) */
-  uint64_t nonfinite_values;  /* NaN/Inf field values met on all ranks (root only) */
+  uint64_t nonfinite_values;  /* NaN/Inf field values met on all ranks (root only; synchronous
+                                 path) */
+  int background;             /* 1: snapshotted, cast and reduced on the caster thread */
+  uint64_t snapshot_bytes;    /* this rank's copy of its blocks (background path) */
 } ldimesh_step_report;
 
 /* Collective. Creates the adaptor from a JSON options document ("" or NULL: defaults). On

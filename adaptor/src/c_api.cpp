@@ -315,6 +315,8 @@ int ldimesh_last_report(const ldimesh_adaptor* a, ldimesh_step_report* out) {
   out->blocked_seconds = r.blocked_seconds;
   out->max_blocked_seconds = r.max_blocked_seconds;
   out->nonfinite_values = r.nonfinite_values;
+  out->background = r.background ? 1 : 0;
+  out->snapshot_bytes = r.snapshot_bytes;
   return LDIMESH_OK;
 }
 

@@ -228,6 +228,33 @@ TEST(CApi, NaNsInTheFieldAreCountedAndTheirCellsLeftOut) {
   ldimesh_destroy(a);
 }
 
+// With MPI_THREAD_MULTIPLE (the c_api.background tests) a grid step runs on the caster thread
+// over a copy of the block's array: the report says so and counts the copy's bytes; funneled,
+// the step runs in the call and copies nothing. Both publish the sphere.
+TEST(CApi, TheReportSaysWhetherTheStepRanInTheBackground) {
+  int level = MPI_THREAD_SINGLE;
+  MPI_Query_thread(&level);
+  const bool multiple = level >= MPI_THREAD_MULTIPLE;
+  const std::string dir = temp_dir(multiple ? "background_mt" : "background");
+  ldimesh_adaptor* a = create(options(dir));
+  if (!a) return;
+  Slab slab;
+  ldimesh_grid_block b = slab.block();
+  EXPECT_EQ(ldimesh_add_grid_block(a, &b), LDIMESH_OK) << ldimesh_last_error(a);
+  EXPECT_EQ(ldimesh_execute(a, 1, 0.0), LDIMESH_OK) << ldimesh_last_error(a);
+  ldimesh_step_report report;
+  EXPECT_EQ(ldimesh_last_report(a, &report), LDIMESH_OK);
+  EXPECT_EQ(report.executed, 1);
+  EXPECT_EQ(report.background, multiple ? 1 : 0);
+  EXPECT_EQ(report.snapshot_bytes, multiple ? slab.values.size() * sizeof(double) : 0u);
+  EXPECT_EQ(ldimesh_finalize(a), LDIMESH_OK) << ldimesh_last_error(a);
+  if (rank_of() == 0) {
+    EXPECT_EQ(ldimesh_published_steps(a), 1u);
+    EXPECT_GT(published_step(dir, 1).triangles, 1000u);
+  }
+  ldimesh_destroy(a);
+}
+
 TEST(CApi, AStepWithoutSurfaceIsPublishedEmpty) {
   const std::string dir = temp_dir("empty");
   ldimesh_adaptor* a = create(options(dir, "7"));  // |x|² ≤ 3 in the box
