@@ -4,6 +4,7 @@
 #include <chrono>
 #include <climits>
 #include <cstring>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <tuple>
@@ -58,83 +59,183 @@ double merge_tolerance(const FragmentEncoding& encoding, const View& view, doubl
                   2.0 * depth_error_bound(encoding, 0.0, view.depth_extent));
 }
 
+bool meshing_samples(const MeshingOptions& options) {
+  // levels != 0, as mesh_ldis tests it: negative levels fail in refinement, on every rank.
+  return options.refinement.levels != 0 || merging_projects(options.merging);
+}
+
+Status cast_and_reduce(MPI_Comm comm, const StepBlocks& blocks, std::span<const View> views,
+                       const FragmentEncoding& encoding, double tolerance,
+                       const std::string& local_error, bool defer, CastStep& step) {
+  step = {};
+  int rank = 0;
+  MPI_Comm_rank(comm, &rank);
+  const std::size_t nv = views.size();
+  std::string error = local_error;
+  std::vector<LdiFragment> fragments;
+  std::uint64_t nonfinite = 0;
+  const auto start = std::chrono::steady_clock::now();
+  if (error.empty()) {
+    try {
+      for (std::size_t i = 0; i < blocks.size(); ++i) {
+        // The values are the same for every isovalue: count them once.
+        if (i == 0)
+          for (const CastBlock& b : blocks[0])
+            nonfinite += b.caster->nonfinite_values();
+        for (std::size_t v = 0; v < nv; ++v) {
+          const std::uint32_t index = std::uint32_t(i * nv + v);
+          std::vector<LdiFragment> parts;
+          for (const CastBlock& b : blocks[i])
+            parts.push_back(b.caster->cast_fragment(views[v], index, b.sub));
+          if (parts.empty())
+            fragments.push_back(make_empty_fragment(views[v], index));
+          else if (parts.size() == 1)
+            fragments.push_back(std::move(parts.front()));
+          else
+            fragments.push_back(merge_fragments(parts, 0.0));
+        }
+      }
+    } catch (const std::exception& e) {
+      error = e.what();
+      if (error.empty()) error = "ray casting failed";
+    }
+  }
+  const double cast_seconds = seconds_since(start);
+  // A failure anywhere fails the step everywhere before the reduction, whose fragment counts
+  // would no longer agree.
+  int failed = error.empty() ? 0 : 1, any_failed = 0;
+  MPI_Allreduce(&failed, &any_failed, 1, MPI_INT, MPI_MAX, comm);
+  if (any_failed)
+    return Status::error(error.empty() ? std::string("another rank failed to ray cast") : error);
+
+  ReductionStats stats;
+  const Status reduced = reduce_fragments(comm, 0, fragments, encoding, tolerance, stats,
+                                          defer && rank == 0 ? &step.pending : nullptr);
+  // Every rank learns whether the reduction failed anywhere (and the slowest rank's times); the
+  // root the totals.
+  double maxima[3] = {reduced ? 0.0 : 1.0, cast_seconds, stats.encode_seconds};
+  MPI_Allreduce(MPI_IN_PLACE, maxima, 3, MPI_DOUBLE, MPI_MAX, comm);
+  static_assert(sizeof(unsigned long long) == sizeof(std::uint64_t));
+  const unsigned long long mine[2] = {stats.bytes_sent, nonfinite};
+  unsigned long long sums[2] = {0, 0};
+  MPI_Reduce(mine, sums, 2, MPI_UNSIGNED_LONG_LONG, MPI_SUM, 0, comm);
+  if (maxima[0] != 0.0) {
+    step = {};
+    return reduced ? Status::error("the reduction failed on another rank") : reduced;
+  }
+  step.seconds.cast = maxima[1];
+  step.seconds.encode = maxima[2];
+  if (rank == 0) {
+    step.fragments = std::move(fragments);
+    step.seconds.reduce = stats.wall_seconds;
+    step.seconds.decode = stats.decode_seconds;
+    step.bytes_to_root = stats.bytes_received;
+    step.bytes_moved = sums[0];
+    step.nonfinite_values = sums[1];
+  }
+  return Status::ok();
+}
+
+Status mesh_step(MPI_Comm comm, const StepBlocks& blocks, std::span<const View> views,
+                 double tolerance, const MeshingOptions& options, CastStep& step,
+                 std::vector<MeshingResult>& results, std::vector<std::vector<Ldi>>* ldis) {
+  int rank = 0;
+  MPI_Comm_rank(comm, &rank);
+  results.clear();
+  if (ldis) ldis->clear();
+  const std::size_t nv = views.size();
+  const bool collective = meshing_samples(options);
+  if (rank != 0) {
+    if (!collective) return Status::ok();
+    // Answer the root's requests, isovalue after isovalue, as it meshes them.
+    for (const std::vector<CastBlock>& mine : blocks)
+      MpiSampleSource(comm, mine, std::vector<View>(views.begin(), views.end()), tolerance).serve();
+    return root_status(comm, Status::ok());
+  }
+  // The root: what a deferred reduction left, then each isovalue's LDIs and mesh.
+  Status status = Status::ok();
+  if (!step.pending.messages.empty()) {
+    const auto start = std::chrono::steady_clock::now();
+    ReductionStats stats;
+    status = finish_merge(step.pending, step.fragments, stats);
+    step.seconds.decode += seconds_since(start);
+  }
+  if (status && step.fragments.size() != blocks.size() * nv)
+    status = Status::error("the step has " + std::to_string(step.fragments.size()) +
+                           " fragments for " + std::to_string(blocks.size()) + " isovalues of " +
+                           std::to_string(nv) + " views");
+  for (std::size_t i = 0; i < blocks.size(); ++i) {
+    std::optional<MpiSampleSource> samples;
+    if (collective)
+      samples.emplace(comm, blocks[i], std::vector<View>(views.begin(), views.end()), tolerance);
+    if (status) {
+      try {
+        auto start = std::chrono::steady_clock::now();
+        std::vector<Ldi> isovalue_ldis;
+        for (std::size_t v = 0; v < nv; ++v)
+          isovalue_ldis.push_back(ldi_from_fragment(step.fragments[i * nv + v], views[v]));
+        step.seconds.decode += seconds_since(start);
+        start = std::chrono::steady_clock::now();
+        results.push_back(mesh_ldis(isovalue_ldis, options, samples ? &*samples : nullptr));
+        step.seconds.mesh += seconds_since(start);
+        if (ldis) ldis->push_back(std::move(isovalue_ldis));
+      } catch (const std::exception& e) {
+        status = Status::error(e.what());
+      } catch (...) {
+        status = Status::error("meshing failed on the root");
+      }
+    }
+    // The other ranks serve every isovalue: end each one, also after a failure.
+    if (samples) samples->finish();
+  }
+  if (!status) {
+    results.clear();
+    if (ldis) ldis->clear();
+  }
+  return collective ? root_status(comm, status) : status;
+}
+
 Status mesh_distributed(MPI_Comm comm, const RayCaster& caster, const Subdomain& sub,
                         std::span<const View> views, const DistributedOptions& options,
                         DistributedResult& result) {
   result = {};
   int rank = 0;
   MPI_Comm_rank(comm, &rank);
-
-  auto start = std::chrono::steady_clock::now();
-  std::vector<LdiFragment> fragments;
   double tolerance = 0.0;
-  for (std::size_t v = 0; v < views.size(); ++v) {
-    fragments.push_back(caster.cast_fragment(views[v], std::uint32_t(v), sub));
-    tolerance =
-        std::max(tolerance, merge_tolerance(options.encoding, views[v], sub.global.diagonal()));
-  }
-  const double cast_seconds = seconds_since(start);
-
-  ReductionStats stats;
-  const Status reduced = reduce_fragments(comm, 0, fragments, options.encoding, tolerance, stats);
-  result.seconds.cast = max_over_ranks(comm, cast_seconds);
-  result.seconds.encode = max_over_ranks(comm, stats.encode_seconds);
-  std::uint64_t sent = stats.bytes_sent;
-  MPI_Reduce(&sent, &result.bytes_moved, 1, MPI_UINT64_T, MPI_SUM, 0, comm);
-  // Every rank learns whether the step failed anywhere, so all return the same status.
+  for (const View& view : views)
+    tolerance = std::max(tolerance, merge_tolerance(options.encoding, view, sub.global.diagonal()));
+  const StepBlocks blocks{{CastBlock{&caster, sub}}};
+  CastStep step;
+  Status status =
+      cast_and_reduce(comm, blocks, views, options.encoding, tolerance, "", false, step);
+  // Ranks that would serve requests the root never sends, or the reverse, would wait forever.
   const int levels = options.meshing.refinement.levels;
-  // §5 merging moves new vertices onto the surface with samples, too.
   const bool projects = merging_projects(options.meshing.merging);
-  const Agreement agreed = agree(comm, bool(reduced), levels, projects);
-  if (!agreed.reduced) {
-    return reduced ? Status::error("reduction failed on another rank") : reduced;
-  }
+  const Agreement agreed = agree(comm, bool(status), levels, projects);
+  if (!agreed.reduced) return status ? Status::error("the step failed on another rank") : status;
   if (!agreed.same_levels) return Status::error("refinement levels differ between ranks");
   if (!agreed.same_projection) return Status::error("merging options differ between ranks");
-  // levels != 0, as mesh_ldis tests it: negative levels fail in refinement, on every rank.
-  const bool serve = levels != 0 || projects;
-  if (rank != 0 && !serve) return Status::ok();
 
-  const auto mesh_on_root = [&](SampleSource* samples) {
-    result.bytes_to_root = stats.bytes_received;
-    result.seconds.reduce = stats.wall_seconds;
-    start = std::chrono::steady_clock::now();
-    for (std::size_t v = 0; v < views.size(); ++v)
-      result.ldis.push_back(ldi_from_fragment(fragments[v], views[v]));
-    result.seconds.decode = stats.decode_seconds + seconds_since(start);
-    start = std::chrono::steady_clock::now();
-    result.meshing = mesh_ldis(result.ldis, options.meshing, samples);
-    result.seconds.mesh = seconds_since(start);
-  };
-  if (!serve) {
-    mesh_on_root(nullptr);
-    return Status::ok();
+  std::vector<MeshingResult> meshed;
+  std::vector<std::vector<Ldi>> ldis;
+  status = mesh_step(comm, blocks, views, tolerance, options.meshing, step, meshed, &ldis);
+  result.seconds = step.seconds;
+  result.bytes_to_root = step.bytes_to_root;
+  result.bytes_moved = step.bytes_moved;
+  if (status && rank == 0) {
+    result.meshing = std::move(meshed.front());
+    result.ldis = std::move(ldis.front());
   }
-
-  // §4 and §5: the root refines and merges, the other ranks cast the extra samples in their
-  // subdomains. The root ends the serving whatever happens, then tells every rank how it went.
-  MpiSampleSource source(comm, caster, sub, std::vector<View>(views.begin(), views.end()),
-                         tolerance);
-  if (rank != 0) {
-    source.serve();
-    return root_status(comm, Status::ok());
-  }
-  Status status = Status::ok();
-  try {
-    mesh_on_root(&source);
-  } catch (const std::exception& e) {
-    status = Status::error(e.what());
-  } catch (...) {
-    status = Status::error("meshing failed on the root");
-  }
-  source.finish();
-  if (!status) result.meshing = {};
-  return root_status(comm, status);
+  return status;
 }
 
 MpiSampleSource::MpiSampleSource(MPI_Comm comm, const RayCaster& caster, Subdomain sub,
                                  std::vector<View> views, double tolerance)
-    : comm_(comm), caster_(caster), sub_(sub), views_(std::move(views)), tolerance_(tolerance) {}
+    : MpiSampleSource(comm, {CastBlock{&caster, sub}}, std::move(views), tolerance) {}
+
+MpiSampleSource::MpiSampleSource(MPI_Comm comm, std::vector<CastBlock> blocks,
+                                 std::vector<View> views, double tolerance)
+    : comm_(comm), blocks_(std::move(blocks)), views_(std::move(views)), tolerance_(tolerance) {}
 
 namespace {
 
@@ -247,11 +348,64 @@ std::vector<std::vector<std::uint8_t>> gather(MPI_Comm comm,
   return parts;
 }
 
+// Per ray, the hits of all answers by depth, those within `tolerance` of the previous one
+// dropped (a hit on a shared face, seen by two ranks or two blocks).
+RayHitList merge_hit_lists(const std::vector<RayHitList>& answers, std::size_t rays,
+                           double tolerance) {
+  const bool with_scalar = std::any_of(answers.begin(), answers.end(),
+                                       [](const RayHitList& a) { return !a.scalar.empty(); });
+  struct Hit {
+    float depth;
+    glm::vec3 normal;
+    float scalar;
+  };
+  RayHitList merged;
+  merged.offsets.reserve(rays + 1);
+  merged.offsets.push_back(0);
+  std::vector<Hit> hits;
+  for (std::size_t k = 0; k < rays; ++k) {
+    hits.clear();
+    for (const RayHitList& a : answers)
+      for (std::uint32_t s = a.offsets[k]; s < a.offsets[k + 1]; ++s)
+        hits.push_back({a.depth[s], a.normal[s], a.scalar.empty() ? 0.0f : a.scalar[s]});
+    std::sort(hits.begin(), hits.end(), [](const Hit& a, const Hit& b) {
+      return std::tie(a.depth, a.normal.x, a.normal.y, a.normal.z) <
+             std::tie(b.depth, b.normal.x, b.normal.y, b.normal.z);
+    });
+    std::uint32_t kept = 0;
+    for (const Hit& h : hits) {
+      if (kept > 0 && double(h.depth) - double(merged.depth.back()) <= tolerance) continue;
+      merged.depth.push_back(h.depth);
+      merged.normal.push_back(h.normal);
+      if (with_scalar) merged.scalar.push_back(h.scalar);
+      ++kept;
+    }
+    merged.offsets.push_back(merged.offsets.back() + kept);
+  }
+  return merged;
+}
+
 }  // namespace
+
+RayHitList MpiSampleSource::cast_here(std::span<const SamplePoint> points) const {
+  if (blocks_.size() == 1)
+    return cast_sample_points(*blocks_.front().caster, views_, points, &blocks_.front().sub);
+  for (const SamplePoint& p : points)  // as cast_sample_points checks it
+    if (p.view >= views_.size()) throw std::out_of_range("sample request for an unknown view");
+  std::vector<RayHitList> answers;
+  for (const CastBlock& b : blocks_)
+    answers.push_back(cast_sample_points(*b.caster, views_, points, &b.sub));
+  if (answers.empty()) {
+    RayHitList none;
+    none.offsets.assign(points.size() + 1, 0);
+    return none;
+  }
+  return merge_hit_lists(answers, points.size(), tolerance_);
+}
 
 std::vector<std::uint8_t> MpiSampleSource::answer(std::span<const SamplePoint> points) const {
   try {
-    std::vector<std::uint8_t> bytes = serialize(cast_sample_points(caster_, views_, points, &sub_));
+    std::vector<std::uint8_t> bytes = serialize(cast_here(points));
     if (bytes.size() > std::size_t(INT_MAX)) return serialize_error("its answer is over 2 GiB");
     return bytes;
   } catch (const std::exception& e) {
@@ -270,14 +424,14 @@ RayHitList MpiSampleSource::sample(std::span<const SamplePoint> points) {
   if (ranks == 1) {
     // Alone: the own answer as it is, without the trip through bytes (the same hits).
     try {
-      answers.push_back(cast_sample_points(caster_, views_, points, &sub_));
+      answers.push_back(cast_here(points));
     } catch (const std::exception& e) {
       throw std::runtime_error(std::string("sampling failed on rank 0: ") + e.what());
     }
   } else {
     answers = ask_all(points);
   }
-  return merge_answers(answers, points.size());
+  return merge_hit_lists(answers, points.size(), tolerance_);
 }
 
 std::vector<RayHitList> MpiSampleSource::ask_all(std::span<const SamplePoint> points) {
@@ -303,41 +457,6 @@ std::vector<RayHitList> MpiSampleSource::ask_all(std::span<const SamplePoint> po
       throw std::runtime_error("sample answer of rank " + std::to_string(r) + " is malformed");
   }
   return answers;
-}
-
-RayHitList MpiSampleSource::merge_answers(const std::vector<RayHitList>& answers,
-                                          std::size_t rays) const {
-  const bool with_scalar = std::any_of(answers.begin(), answers.end(),
-                                       [](const RayHitList& a) { return !a.scalar.empty(); });
-  struct Hit {
-    float depth;
-    glm::vec3 normal;
-    float scalar;
-  };
-  RayHitList merged;
-  merged.offsets.reserve(rays + 1);
-  merged.offsets.push_back(0);
-  std::vector<Hit> hits;
-  for (std::size_t k = 0; k < rays; ++k) {
-    hits.clear();
-    for (const RayHitList& a : answers)
-      for (std::uint32_t s = a.offsets[k]; s < a.offsets[k + 1]; ++s)
-        hits.push_back({a.depth[s], a.normal[s], a.scalar.empty() ? 0.0f : a.scalar[s]});
-    std::sort(hits.begin(), hits.end(), [](const Hit& a, const Hit& b) {
-      return std::tie(a.depth, a.normal.x, a.normal.y, a.normal.z) <
-             std::tie(b.depth, b.normal.x, b.normal.y, b.normal.z);
-    });
-    std::uint32_t kept = 0;
-    for (const Hit& h : hits) {
-      if (kept > 0 && double(h.depth) - double(merged.depth.back()) <= tolerance_) continue;
-      merged.depth.push_back(h.depth);
-      merged.normal.push_back(h.normal);
-      if (with_scalar) merged.scalar.push_back(h.scalar);
-      ++kept;
-    }
-    merged.offsets.push_back(merged.offsets.back() + kept);
-  }
-  return merged;
 }
 
 void MpiSampleSource::finish() {

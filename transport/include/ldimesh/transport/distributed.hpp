@@ -44,11 +44,67 @@ struct DistributedResult {
 // larger of 1e-9 of the domain diagonal and twice the depth quantization error.
 double merge_tolerance(const FragmentEncoding& encoding, const View& view, double domain_diagonal);
 
-// Collective over `comm` (rank 0 is the root). Every rank ray casts the part `sub` owns of
-// each of `views` (the same views on every rank, derived from the global domain), the
-// fragments are reduced to the root, which turns them into full LDIs and meshes them with
-// options.meshing. Ranks with nothing to cast contribute empty fragments. `options` must be the
-// same on every rank.
+// ---------------------------------------------------------------------------------------------
+// One step of the method over MPI, in two halves. The CLI (mesh_distributed) and the in situ
+// adaptor run the same functions:
+//   collective half, every rank:  cast its blocks along the views → fragments → reduction
+//                                 (cast_and_reduce)
+//   root half:                    decode → §3 match and trim → §4 refinement and §5 merging,
+//                                 with samples from every rank's blocks (mesh_step)
+
+// One of this rank's blocks for one isovalue: its caster and the part of the domain it owns.
+struct CastBlock {
+  const RayCaster* caster = nullptr;
+  Subdomain sub;
+};
+
+// This rank's blocks of a step, per isovalue: blocks[i] are cast for isovalue i (the same count
+// of isovalues on every rank; a rank may have no blocks).
+using StepBlocks = std::vector<std::vector<CastBlock>>;
+
+// What the collective half gives the root (the other ranks: only `seconds.cast` and `encode`).
+struct CastStep {
+  // Isovalue-major: isovalue i, view v at i · views + v (their view_index likewise).
+  std::vector<LdiFragment> fragments;
+  PendingMerge pending;  // a deferred reduction's messages, merged by mesh_step
+  DistributedTimes seconds;
+  std::uint64_t bytes_to_root = 0;
+  std::uint64_t bytes_moved = 0;       // all ranks' bytes sent together
+  std::uint64_t nonfinite_values = 0;  // NaN/Inf values in all ranks' blocks (isovalue 0's)
+};
+
+// Whether meshing with these options asks every rank for samples (§4 refinement, or §5 merging
+// that projects): then mesh_step is collective.
+bool meshing_samples(const MeshingOptions& options);
+
+// The collective half, on every rank of `comm` (rank 0 the root). Every rank casts each of its
+// blocks along every view (a block's samples only where it owns the ray, the half-open rule of
+// subdomain_segment) and merges its blocks' fragments per view; the fragments are reduced to
+// the root (reduce_fragments with `tolerance`; with `defer`, the root's merging of what it
+// received is left to mesh_step, off the collective part). A non-empty `local_error` (this
+// rank could not set up its blocks) or an exception while casting sends empty fragments and
+// fails the step on every rank: the first failing rank's message there, "another rank failed
+// to ray cast" elsewhere. `views` and the number of isovalues must be the same on every rank.
+Status cast_and_reduce(MPI_Comm comm, const StepBlocks& blocks, std::span<const View> views,
+                       const FragmentEncoding& encoding, double tolerance,
+                       const std::string& local_error, bool defer, CastStep& step);
+
+// The root half. On the root: merges what a deferred reduction left (finish_merge), decodes each
+// isovalue's LDIs and meshes them with `options` (mesh_ldis), results[i] for isovalue i (ldis,
+// when given, gets the LDIs too). Where meshing_samples(options), every rank calls it: the root
+// meshes with an MpiSampleSource over each isovalue's blocks while the other ranks serve it,
+// and every rank returns the root's status. Otherwise only the root calls it (not collective).
+// Errors (a failed merge, meshing's exceptions) come back as a Status.
+Status mesh_step(MPI_Comm comm, const StepBlocks& blocks, std::span<const View> views,
+                 double tolerance, const MeshingOptions& options, CastStep& step,
+                 std::vector<MeshingResult>& results,
+                 std::vector<std::vector<Ldi>>* ldis = nullptr);
+
+// Collective over `comm` (rank 0 is the root): one step of one caster over the subdomain `sub`
+// it owns. Every rank ray casts the part `sub` owns of each of `views` (the same views on
+// every rank, derived from the global domain), the fragments are reduced to the root, which
+// turns them into full LDIs and meshes them with options.meshing. Ranks with nothing to cast
+// contribute empty fragments. `options` must be the same on every rank.
 //
 // Without refinement (options.meshing.refinement.levels == 0) and without merging that projects
 // (§5, options.meshing.merging enabled with project) the other ranks return as soon as the
@@ -58,8 +114,8 @@ double merge_tolerance(const FragmentEncoding& encoding, const View& view, doubl
 // Returns an error Status, on every rank, if a fragment failed to decode anywhere, or the
 // refinement levels or the merging projection differ between ranks (the mesh is then not
 // built), or, when the other ranks serve samples, if meshing failed on the root (the root's
-// message; no rank is left waiting). Otherwise an exception from meshing (e.g. r outside
-// [0, 1]) propagates on the root only.
+// message; no rank is left waiting). Without samples, meshing's errors (e.g. r outside [0, 1])
+// come back on the root only.
 Status mesh_distributed(MPI_Comm comm, const RayCaster& caster, const Subdomain& sub,
                         std::span<const View> views, const DistributedOptions& options,
                         DistributedResult& result);
@@ -85,6 +141,11 @@ class MpiSampleSource final : public SampleSource {
   // as for the reduction (merge_tolerance).
   MpiSampleSource(MPI_Comm comm, const RayCaster& caster, Subdomain sub, std::vector<View> views,
                   double tolerance);
+  // This rank's answers from several blocks (each cast where it owns the ray, their hits merged
+  // per ray as the ranks' are); none: this rank answers without hits. Their casters must
+  // outlive this object.
+  MpiSampleSource(MPI_Comm comm, std::vector<CastBlock> blocks, std::vector<View> views,
+                  double tolerance);
   // Root only (collective with the other ranks' serve()).
   RayHitList sample(std::span<const SamplePoint> points) override;
   // Root only: ends every rank's serve(). Call it exactly once, also when meshing failed.
@@ -97,12 +158,10 @@ class MpiSampleSource final : public SampleSource {
   std::vector<std::uint8_t> answer(std::span<const SamplePoint> points) const;
   // Every rank's hits of `points` (the request broadcast, the answers gathered).
   std::vector<RayHitList> ask_all(std::span<const SamplePoint> points);
-  // Per ray, the hits of all answers by depth, those within tolerance of the previous one
-  // dropped (a hit on a shared face, seen by both ranks).
-  RayHitList merge_answers(const std::vector<RayHitList>& answers, std::size_t rays) const;
+  // This rank's hits of `points` from its blocks.
+  RayHitList cast_here(std::span<const SamplePoint> points) const;
   MPI_Comm comm_;
-  const RayCaster& caster_;
-  Subdomain sub_;
+  std::vector<CastBlock> blocks_;
   std::vector<View> views_;
   double tolerance_;
 };
