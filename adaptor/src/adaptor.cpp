@@ -189,8 +189,10 @@ struct Job {
   std::uint64_t step = 0;
   double time = 0.0;
   std::vector<View> views;
-  std::vector<LdiFragment> fragments;  // isovalue-major: isovalue i, view v at i·views + v
-  PendingMerge pending;                // the other ranks' fragments, merged by the worker
+  CastStep cast;  // the collective half's fragments (isovalue-major) and the others' pending merge
+  // Meshed already, one per isovalue (merging that projects: on the thread that made the step's
+  // MPI calls, while every rank served samples); otherwise the worker meshes.
+  std::optional<std::vector<MeshingResult>> meshed;
   std::map<std::string, double> seconds;
   std::uint64_t skipped_steps = 0;  // due steps dropped since the previous job was handed over
   std::uint64_t nonfinite_values = 0;
@@ -393,10 +395,12 @@ class AdaptorImpl final : public Adaptor {
       std::printf("ldimesh: step %llu runs synchronously: %s\n", (unsigned long long)step,
                   "a rank's blocks cannot be copied (a FieldSource) or exceed memory_mb");
 
-    // The synchronous path: the solver waits for the cast and the reduction.
-    std::uint64_t nonfinite_total = 0;
-    const Status s = collective_step(comm_, blocks_, domain(), "", job, nonfinite_total);
-    if (rank_ == 0) report_.nonfinite_values = nonfinite_total;
+    // The synchronous path: the solver waits for the cast and the reduction (and for the
+    // meshing, where it needs every rank's samples).
+    StepCasters casters;
+    Status s = collective_step(comm_, blocks_, domain(), "", job, casters);
+    if (s && meshing_samples(meshing_options())) s = mesh_with_samples(comm_, casters, job);
+    if (rank_ == 0) report_.nonfinite_values = job.cast.nonfinite_values;
     finish_report(start);
     if (!s) return fail("step " + std::to_string(step) + " skipped: " + s.message());
     if (rank_ == 0) {
@@ -461,82 +465,79 @@ class AdaptorImpl final : public Adaptor {
     double blocked_seconds = 0.0;
   };
 
-  // The collective half of a due step over `comm`: every rank casts `blocks` and takes part in
-  // the reduction to the root, whose `job` gets the views, its fragments, the others' pending
-  // merge and the timings (all but "blocked"). A local failure (`local_error`, or one while
-  // casting) sends empty fragments, so that nobody waits forever, and fails the step everywhere.
-  // The solver's thread runs it on the adaptor's communicator (synchronous path), the caster
-  // thread on its duplicate (background path).
-  Status collective_step(MPI_Comm comm, const std::vector<Block>& blocks, std::optional<Box> domain,
-                         std::string local_error, Job& job, std::uint64_t& nonfinite_total) const {
+  // This rank's casters of one step (one per block and isovalue) and the step's views: alive
+  // until the root has meshed, for it may ask every rank for samples.
+  struct StepCasters {
+    std::vector<std::unique_ptr<RayCaster>> owned;
+    StepBlocks blocks;
     std::vector<View> views;
-    std::vector<LdiFragment> fragments;
-    std::uint64_t nonfinite = 0;
-    const auto cast_start = Clock::now();
-    try {
-      if (!local_error.empty()) throw std::runtime_error(local_error);
-      if (!domain) throw std::runtime_error("set_domain() was not called");
-      views = make_axis_views(*domain, options_.resolution, options_.views);
-      for (std::size_t i = 0; i < options_.isovalues.size(); ++i) {
-        // One scene per block and isovalue, cast along every view.
-        std::vector<std::vector<LdiFragment>> parts(views.size());
-        for (const Block& b : blocks) {
-          const RayCaster caster(*b.source, options_.isovalues[i]);
-          // The values are the same for every isovalue: count them once.
-          if (i == 0) nonfinite += caster.nonfinite_values();
-          for (std::size_t v = 0; v < views.size(); ++v)
-            parts[v].push_back(caster.cast_fragment(views[v], std::uint32_t(i * views.size() + v),
-                                                    {b.owned, *domain}));
-        }
-        for (std::size_t v = 0; v < views.size(); ++v) {
-          const std::uint32_t index = std::uint32_t(i * views.size() + v);
-          fragments.push_back(parts[v].empty() ? make_empty_fragment(views[v], index)
-                                               : merge_fragments(parts[v], 0.0));
-        }
+    double tolerance = 0.0;
+  };
+
+  MeshingOptions meshing_options() const {
+    MeshingOptions meshing;
+    meshing.r = options_.r;
+    meshing.merging.enabled = options_.merging;
+    return meshing;
+  }
+
+  // The collective half of a due step over `comm` (cast_and_reduce): every rank binds and casts
+  // `blocks` and takes part in the reduction to the root, whose `job` gets the views, the
+  // fragments, the others' pending merge and the timings (all but "blocked"). A local failure
+  // (`local_error`, or one while binding) fails the step everywhere. The solver's thread runs it
+  // on the adaptor's communicator (synchronous path), the caster thread on its duplicate
+  // (background path).
+  Status collective_step(MPI_Comm comm, const std::vector<Block>& blocks, std::optional<Box> domain,
+                         std::string local_error, Job& job, StepCasters& casters) const {
+    casters = {};
+    casters.blocks.resize(options_.isovalues.size());
+    const auto bind_start = Clock::now();
+    if (local_error.empty()) {
+      try {
+        if (!domain) throw std::runtime_error("set_domain() was not called");
+        casters.views = make_axis_views(*domain, options_.resolution, options_.views);
+        for (const View& v : casters.views)
+          casters.tolerance = std::max(casters.tolerance,
+                                       merge_tolerance(options_.encoding, v, domain->diagonal()));
+        for (std::size_t i = 0; i < options_.isovalues.size(); ++i)
+          for (const Block& b : blocks) {
+            casters.owned.push_back(std::make_unique<RayCaster>(*b.source, options_.isovalues[i]));
+            casters.blocks[i].push_back({casters.owned.back().get(), {b.owned, *domain}});
+          }
+      } catch (const std::exception& e) {
+        local_error = e.what();
+        if (local_error.empty()) local_error = "binding the blocks failed";
       }
-    } catch (const std::exception& e) {
-      local_error = e.what();
-      if (local_error.empty()) local_error = "ray casting failed";
     }
     if (!local_error.empty()) {
-      // Empty fragments of the right shape (views may be unknown: then none).
-      fragments.clear();
-      for (std::size_t i = 0; i < options_.isovalues.size(); ++i)
-        for (std::size_t v = 0; v < views.size(); ++v)
-          fragments.push_back(make_empty_fragment(views[v], std::uint32_t(i * views.size() + v)));
+      casters = {};
+      casters.blocks.resize(options_.isovalues.size());
     }
-    const double cast_seconds = seconds_since(cast_start);
-    int local_failed = local_error.empty() ? 0 : 1, any_failed = 0;
-    MPI_Allreduce(&local_failed, &any_failed, 1, MPI_INT, MPI_MAX, comm);
-    if (any_failed)
-      return Status::error(local_error.empty() ? std::string("another rank failed to ray cast")
-                                               : local_error);
-
-    double tolerance = 0.0;
-    for (const View& v : views)
-      tolerance = std::max(tolerance, merge_tolerance(options_.encoding, v, domain->diagonal()));
-    // The root merges what it receives on its worker (finish_merge), off the solver's path.
-    ReductionStats stats;
-    const Status reduced = reduce_fragments(comm, 0, fragments, options_.encoding, tolerance, stats,
-                                            rank_ == 0 ? &job.pending : nullptr);
-    int reduce_failed = reduced ? 0 : 1;
-    MPI_Allreduce(MPI_IN_PLACE, &reduce_failed, 1, MPI_INT, MPI_MAX, comm);
-    double max_cast = 0.0;
-    MPI_Reduce(&cast_seconds, &max_cast, 1, MPI_DOUBLE, MPI_MAX, 0, comm);
-    static_assert(sizeof(unsigned long long) == sizeof(std::uint64_t));
-    unsigned long long nonfinite_local = nonfinite, total = 0;
-    MPI_Reduce(&nonfinite_local, &total, 1, MPI_UNSIGNED_LONG_LONG, MPI_SUM, 0, comm);
-    nonfinite_total = total;
-    if (reduce_failed)
-      return reduced ? Status::error("the reduction failed on another rank") : reduced;
+    // The root merges what it receives on its worker (mesh_step), off the solver's path.
+    const Status s =
+        cast_and_reduce(comm, casters.blocks, casters.views, options_.encoding, casters.tolerance,
+                        local_error, true, job.cast, seconds_since(bind_start));
+    if (!s) return s;
     if (rank_ == 0) {
-      job.views = std::move(views);
-      job.fragments = std::move(fragments);
-      job.seconds = {
-          {"cast", max_cast}, {"encode", stats.encode_seconds}, {"reduce", stats.wall_seconds}};
-      job.nonfinite_values = total;
+      job.views = casters.views;
+      job.seconds = {{"cast", job.cast.seconds.cast},
+                     {"encode", job.cast.seconds.encode},
+                     {"reduce", job.cast.seconds.reduce}};
+      job.nonfinite_values = job.cast.nonfinite_values;
     }
     return Status::ok();
+  }
+
+  // The root half where meshing needs every rank's samples (merging that projects), collective
+  // over `comm`: the root meshes (mesh_step) while the other ranks serve from `casters`; the
+  // root's worker then only encodes and publishes. On the thread that made the step's MPI calls.
+  Status mesh_with_samples(MPI_Comm comm, const StepCasters& casters, Job& job) const {
+    CastStep none;
+    std::vector<MeshingResult> results;
+    const Status s = mesh_step(comm, casters.blocks, casters.views, casters.tolerance,
+                               meshing_options(), rank_ == 0 ? job.cast : none, results);
+    if (s && rank_ == 0) job.meshed = std::move(results);
+    return s;
   }
 
   // Root: gives `job` to the worker; true when it replaced a step still waiting ("coalesce").
@@ -640,11 +641,14 @@ class AdaptorImpl final : public Adaptor {
       }
       std::string error;
       try {
-        std::uint64_t nonfinite = 0;
-        const Status s = collective_step(background_comm_, snapshot_blocks_, cj.domain, cj.error,
-                                         cj.job, nonfinite);
+        StepCasters casters;
+        Status s = collective_step(background_comm_, snapshot_blocks_, cj.domain, cj.error, cj.job,
+                                   casters);
         double max_blocked = 0.0;
         MPI_Reduce(&cj.blocked_seconds, &max_blocked, 1, MPI_DOUBLE, MPI_MAX, 0, background_comm_);
+        // The snapshot stays until the next step: the ranks serve the root's samples from it.
+        if (s && meshing_samples(meshing_options()))
+          s = mesh_with_samples(background_comm_, casters, cj.job);
         if (!s) throw std::runtime_error(s.message());
         if (rank_ == 0) {
           cj.job.seconds["blocked"] = max_blocked;
@@ -731,30 +735,24 @@ class AdaptorImpl final : public Adaptor {
     if (options_.slow_root_seconds > 0.0)
       std::this_thread::sleep_for(std::chrono::duration<double>(options_.slow_root_seconds));
     auto t = Clock::now();
-    const std::size_t nv = job.views.size();
-    Mesh mesh;
-    MeshingOptions meshing;
-    meshing.r = options_.r;
-    meshing.merging.enabled = options_.merging;
-    std::size_t samples = 0, quads = 0;
-    double decode_s = 0.0, mesh_s = 0.0;
-    ReductionStats merge_stats;
-    if (Status s = finish_merge(job.pending, job.fragments, merge_stats); !s)
+    const MeshingOptions meshing = meshing_options();
+    // The root half (mesh_step) unless it ran where the samples are: no MPI call here.
+    std::vector<MeshingResult> results;
+    if (job.meshed) {
+      results = std::move(*job.meshed);
+    } else if (Status s = mesh_step(MPI_COMM_NULL, StepBlocks(options_.isovalues.size()), job.views,
+                                    0.0, meshing, job.cast, results);
+               !s) {
       throw std::runtime_error(s.message());
-    decode_s += seconds_since(t);
-    for (std::size_t i = 0; i < options_.isovalues.size(); ++i) {
-      t = Clock::now();
-      std::vector<Ldi> ldis;
-      for (std::size_t v = 0; v < nv; ++v)
-        ldis.push_back(ldi_from_fragment(job.fragments[i * nv + v], job.views[v]));
-      decode_s += seconds_since(t);
-      t = Clock::now();
-      const MeshingResult r = mesh_ldis(ldis, meshing);
-      mesh_s += seconds_since(t);
+    }
+    Mesh mesh;
+    std::size_t samples = 0, quads = 0;
+    for (const MeshingResult& r : results) {
       samples += r.samples;
       quads += r.quads;
       append(mesh, r.mesh);
     }
+    const double decode_s = job.cast.seconds.decode, mesh_s = job.cast.seconds.mesh;
     t = Clock::now();
     GlbOptions glb_options;
     glb_options.pixel_size = job.views.front().spacing;

@@ -12,7 +12,11 @@
 #include "../mpi/mpi_gtest.hpp"
 #include "ldimesh/adaptor.hpp"
 #include "ldimesh/core/decomposition.hpp"
+#include "ldimesh/core/raycaster.hpp"
 #include "ldimesh/core/surfaces.hpp"
+#include "ldimesh/transport/distributed.hpp"
+#include "ldimesh/transport/glb.hpp"
+#include "ldimesh/transport/snapshot_store.hpp"
 #include "published_step.hpp"
 
 namespace ldimesh {
@@ -143,6 +147,57 @@ TEST(Adaptor, MergingPublishesOneClosedMesh) {
   }
 }
 
+// Collective: runs the CLI's pipeline (mesh_distributed, then encode_glb as `ldimesh mesh --out
+// x.glb` calls it) on `caster` over `sub`, three 40² views of sub.global, merged or not, and
+// checks on the root that the adaptor published those bytes as step `step` in `dir`.
+void expect_cli_mesh_published(const RayCaster& caster, const Subdomain& sub, bool merging,
+                               const std::string& dir, std::uint64_t step) {
+  const std::vector<View> views = make_axis_views(sub.global, 40);
+  DistributedOptions options;
+  options.meshing.merging.enabled = merging;
+  DistributedResult cli;
+  const Status s = mesh_distributed(MPI_COMM_WORLD, caster, sub, views, options, cli);
+  EXPECT_TRUE(s) << s.message();
+  if (rank_of() != 0) return;
+  GlbOptions glb_options;
+  glb_options.pixel_size = views.front().spacing;
+  std::vector<std::uint8_t> expected;
+  EXPECT_TRUE(encode_glb(cli.meshing.mesh, glb_options, expected));
+  EXPECT_GT(cli.meshing.mesh.face_count(), 500u);
+  Snapshot published;
+  const Status r = read_step_files(dir, step, published);
+  EXPECT_TRUE(r) << r.message();
+  if (!r) return;
+  EXPECT_TRUE(*published.glb == expected)
+      << "published " << published.glb->size() << " bytes, the CLI's pipeline " << expected.size();
+}
+
+// One pipeline, one result: the adaptor publishes the GLB that the CLI's pipeline
+// (mesh_distributed, then encode_glb as `ldimesh mesh --out x.glb` calls it) gives for the same
+// blocks and options, byte for byte — plain, and merged (§5, its new vertices projected with
+// samples that every rank casts from its blocks: in the step on the synchronous path, on the
+// caster threads on the background one).
+TEST(Adaptor, PublishesTheMeshOfTheCommandLinePipeline) {
+  const SurfaceInfo* info = find_surface("torus");
+  for (const bool merging : {false, true}) {
+    SCOPED_TRACE(merging ? "merged" : "views");
+    const std::string dir = temp_dir(merging ? "same_as_cli_merged" : "same_as_cli");
+    auto a =
+        make(R"({"server": {"enabled": false}, "resolution": 40, "log": false, "isovalues": [)" +
+                 std::to_string(info->isovalue) + R"(], "merging": )" +
+                 (merging ? "true" : "false") + R"(, "output_dir": ")" + dir + R"("})",
+             "torus");
+    if (!a) return;
+    EXPECT_TRUE(a->execute(3, 0.0)) << a->last_error();
+    EXPECT_TRUE(a->finalize()) << a->last_error();
+
+    const auto source = make_surface_source("torus");
+    const RayCaster caster(*source, info->isovalue);
+    const Subdomain sub{decompose_box(info->domain, ranks())[rank_of()], info->domain};
+    expect_cli_mesh_published(caster, sub, merging, dir, 3);
+  }
+}
+
 // ---- The background path (MPI_THREAD_MULTIPLE: the binary's --thread-multiple run) and the
 // synchronous one (MPI_THREAD_FUNNELED).
 
@@ -201,16 +256,45 @@ std::vector<std::uint8_t> published_glb(const std::string& dir, std::uint64_t st
   return s && snapshot.glb ? *snapshot.glb : std::vector<std::uint8_t>{};
 }
 
+// The same for a grid block on both paths: synchronous, and (with --thread-multiple) cast,
+// reduced and — merged — sampled by the caster threads from the snapshot.
+TEST(Adaptor, GridBlocksPublishTheMeshOfTheCommandLinePipelineOnBothPaths) {
+  GridSlab slab(kSlabPoints, 0.0);
+  const Box domain{glm::dvec3(-1.0), glm::dvec3(1.0)};
+  const GridSource source(slab.block);
+  const RayCaster caster(source, 0.36);
+  const Subdomain sub{source.bounds(), domain};
+  for (const bool merging : {false, true})
+    for (const bool background : {false, true}) {
+      SCOPED_TRACE(std::string(merging ? "merged" : "views") +
+                   (background ? ", background" : ", synchronous"));
+      const std::string dir =
+          temp_dir(std::string("grid_as_cli_") + (merging ? "m" : "v") + (background ? "b" : "s"));
+      std::string options = grid_options(dir, background);
+      if (merging) options = R"({"merging": true, )" + options.substr(1);
+      auto a = make_grid_adaptor(options, slab);
+      if (!a) return;
+      EXPECT_TRUE(a->execute(1, 0.0)) << a->last_error();
+      EXPECT_EQ(a->last_report().background, background && thread_multiple());
+      EXPECT_TRUE(a->finalize()) << a->last_error();
+
+      expect_cli_mesh_published(caster, sub, merging, dir, 1);
+    }
+}
+
 TEST(Adaptor, GridBlocksRunInTheBackgroundWhereMpiAllowsIt) {
   GridSlab slab(kSlabPoints, 0.0);
   auto a = make_grid_adaptor(grid_options(temp_dir("background"), true), slab);
   if (!a) return;
   EXPECT_TRUE(a->execute(0, 0.0));
   EXPECT_EQ(a->last_report().background, thread_multiple());
-  if (thread_multiple())  // the copy: the slab's points, nothing else (uniform spacing)
+  if (thread_multiple()) {  // the copy: the slab's points, nothing else (uniform spacing)
     EXPECT_EQ(a->last_report().snapshot_bytes, slab.values.size() * sizeof(float));
+  }
   EXPECT_TRUE(a->finalize());
-  if (rank_of() == 0) EXPECT_EQ(a->published_steps(), 1u);
+  if (rank_of() == 0) {
+    EXPECT_EQ(a->published_steps(), 1u);
+  }
   // A FieldSource cannot be copied: such steps run synchronously whatever the thread level.
   auto b = make(R"({"server": {"enabled": false}, "resolution": 32, "log": false})");
   if (!b) return;
@@ -282,7 +366,9 @@ TEST(Adaptor, WithoutThreadMultipleTheLogSaysStepsRunSynchronously) {
                       err.find("synchronously") != std::string::npos;
     EXPECT_EQ(says, !thread_multiple()) << err;
   }
-  if (a) EXPECT_TRUE(a->finalize());
+  if (a) {
+    EXPECT_TRUE(a->finalize());
+  }
 }
 
 TEST(Adaptor, ExecuteWithoutADomainFailsCleanly) {

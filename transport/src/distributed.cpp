@@ -32,12 +32,6 @@ Agreement agree(MPI_Comm comm, bool reduced, int levels, bool projects) {
   return {all[0] == 1, all[1] == -all[2], all[3] == -all[4]};
 }
 
-double max_over_ranks(MPI_Comm comm, double v) {
-  double out = 0.0;
-  MPI_Allreduce(&v, &out, 1, MPI_DOUBLE, MPI_MAX, comm);
-  return out;
-}
-
 // The root's `status` on every rank (collective).
 Status root_status(MPI_Comm comm, const Status& status) {
   int rank = 0;
@@ -66,7 +60,8 @@ bool meshing_samples(const MeshingOptions& options) {
 
 Status cast_and_reduce(MPI_Comm comm, const StepBlocks& blocks, std::span<const View> views,
                        const FragmentEncoding& encoding, double tolerance,
-                       const std::string& local_error, bool defer, CastStep& step) {
+                       const std::string& local_error, bool defer, CastStep& step,
+                       double bind_seconds) {
   step = {};
   int rank = 0;
   MPI_Comm_rank(comm, &rank);
@@ -100,7 +95,7 @@ Status cast_and_reduce(MPI_Comm comm, const StepBlocks& blocks, std::span<const 
       if (error.empty()) error = "ray casting failed";
     }
   }
-  const double cast_seconds = seconds_since(start);
+  const double cast_seconds = bind_seconds + seconds_since(start);
   // A failure anywhere fails the step everywhere before the reduction, whose fragment counts
   // would no longer agree.
   int failed = error.empty() ? 0 : 1, any_failed = 0;
@@ -139,12 +134,12 @@ Status cast_and_reduce(MPI_Comm comm, const StepBlocks& blocks, std::span<const 
 Status mesh_step(MPI_Comm comm, const StepBlocks& blocks, std::span<const View> views,
                  double tolerance, const MeshingOptions& options, CastStep& step,
                  std::vector<MeshingResult>& results, std::vector<std::vector<Ldi>>* ldis) {
-  int rank = 0;
-  MPI_Comm_rank(comm, &rank);
   results.clear();
   if (ldis) ldis->clear();
   const std::size_t nv = views.size();
   const bool collective = meshing_samples(options);
+  int rank = 0;  // without samples only the root calls, and no MPI call is made
+  if (collective) MPI_Comm_rank(comm, &rank);
   if (rank != 0) {
     if (!collective) return Status::ok();
     // Answer the root's requests, isovalue after isovalue, as it meshes them.
@@ -218,7 +213,9 @@ Status mesh_distributed(MPI_Comm comm, const RayCaster& caster, const Subdomain&
 
   std::vector<MeshingResult> meshed;
   std::vector<std::vector<Ldi>> ldis;
-  status = mesh_step(comm, blocks, views, tolerance, options.meshing, step, meshed, &ldis);
+  // Without samples the root meshes alone.
+  if (rank == 0 || meshing_samples(options.meshing))
+    status = mesh_step(comm, blocks, views, tolerance, options.meshing, step, meshed, &ldis);
   result.seconds = step.seconds;
   result.bytes_to_root = step.bytes_to_root;
   result.bytes_moved = step.bytes_moved;

@@ -85,15 +85,19 @@ bool meshing_samples(const MeshingOptions& options);
 // rank could not set up its blocks) or an exception while casting sends empty fragments and
 // fails the step on every rank: the first failing rank's message there, "another rank failed
 // to ray cast" elsewhere. `views` and the number of isovalues must be the same on every rank.
+// `bind_seconds` (this rank's time to bind its casters) is counted in seconds.cast.
 Status cast_and_reduce(MPI_Comm comm, const StepBlocks& blocks, std::span<const View> views,
                        const FragmentEncoding& encoding, double tolerance,
-                       const std::string& local_error, bool defer, CastStep& step);
+                       const std::string& local_error, bool defer, CastStep& step,
+                       double bind_seconds = 0.0);
 
 // The root half. On the root: merges what a deferred reduction left (finish_merge), decodes each
 // isovalue's LDIs and meshes them with `options` (mesh_ldis), results[i] for isovalue i (ldis,
 // when given, gets the LDIs too). Where meshing_samples(options), every rank calls it: the root
 // meshes with an MpiSampleSource over each isovalue's blocks while the other ranks serve it,
-// and every rank returns the root's status. Otherwise only the root calls it (not collective).
+// and every rank returns the root's status. Otherwise only the root calls it: it is not
+// collective and makes no MPI call (any thread may run it; `comm` is not used, and of `blocks`
+// only the count of isovalues).
 // Errors (a failed merge, meshing's exceptions) come back as a Status.
 Status mesh_step(MPI_Comm comm, const StepBlocks& blocks, std::span<const View> views,
                  double tolerance, const MeshingOptions& options, CastStep& step,
