@@ -258,9 +258,9 @@ int run_mesh(const MeshArgs& args) {
   const bool want_glb = has_extension(args.out, ".glb") || !args.steps_dir.empty();
   if (want_glb) {
     start = std::chrono::steady_clock::now();
-    ldimesh::GlbOptions glb_options;
-    glb_options.pixel_size = views.front().spacing;
-    if (const ldimesh::Status s = ldimesh::encode_glb(result.mesh, glb_options, glb, &glb_info); !s)
+    if (const ldimesh::Status s = ldimesh::encode_glb(
+            result.mesh, ldimesh::step_glb_options(views.front()), glb, &glb_info);
+        !s)
       throw std::runtime_error(s.message());
     glb_seconds = seconds_since(start);
   }

@@ -754,9 +754,7 @@ class AdaptorImpl final : public Adaptor {
     }
     const double decode_s = job.cast.seconds.decode, mesh_s = job.cast.seconds.mesh;
     t = Clock::now();
-    GlbOptions glb_options;
-    glb_options.pixel_size = job.views.front().spacing;
-    glb_options.compression_level = options_.compression_level;
+    const GlbOptions glb_options = step_glb_options(job.views.front(), options_.compression_level);
     std::vector<std::uint8_t> glb;
     GlbInfo info;
     if (Status s = encode_glb(mesh, glb_options, glb, &info); !s)

@@ -159,10 +159,8 @@ void expect_cli_mesh_published(const RayCaster& caster, const Subdomain& sub, bo
   const Status s = mesh_distributed(MPI_COMM_WORLD, caster, sub, views, options, cli);
   EXPECT_TRUE(s) << s.message();
   if (rank_of() != 0) return;
-  GlbOptions glb_options;
-  glb_options.pixel_size = views.front().spacing;
   std::vector<std::uint8_t> expected;
-  EXPECT_TRUE(encode_glb(cli.meshing.mesh, glb_options, expected));
+  EXPECT_TRUE(encode_glb(cli.meshing.mesh, step_glb_options(views.front()), expected));
   EXPECT_GT(cli.meshing.mesh.face_count(), 500u);
   Snapshot published;
   const Status r = read_step_files(dir, step, published);

@@ -23,6 +23,7 @@
 
 #include "ldimesh/core/mesh.hpp"
 #include "ldimesh/core/status.hpp"
+#include "ldimesh/core/view.hpp"
 
 namespace ldimesh {
 
@@ -58,6 +59,15 @@ struct GlbInfo {
   float scalar_min = 0.0f;
   float scalar_max = 0.0f;
 };
+
+// The options of a published step's GLB, the same for the CLI and the adaptor: positions
+// quantized to a tenth of `view`'s pixel (the step's first view), Draco `compression_level`.
+inline GlbOptions step_glb_options(const View& view, int compression_level = 7) {
+  GlbOptions options;
+  options.pixel_size = view.spacing;
+  options.compression_level = compression_level;
+  return options;
+}
 
 // Encodes `mesh` into `out` (replaced). Quads are split into two triangles along their shorter
 // diagonal (same winding); the triangles follow, quads' triangles first. A vertex takes the
