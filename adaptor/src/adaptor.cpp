@@ -16,6 +16,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "ldimesh/core/grid_source.hpp"
+#include "ldimesh/core/hex_source.hpp"
 #include "ldimesh/core/pipeline.hpp"
 #include "ldimesh/core/raycaster.hpp"
 #include "ldimesh/core/timing.hpp"

@@ -12,6 +12,7 @@
 #include "../mpi/mpi_gtest.hpp"
 #include "ldimesh/adaptor.hpp"
 #include "ldimesh/core/decomposition.hpp"
+#include "ldimesh/core/grid_source.hpp"
 #include "ldimesh/core/raycaster.hpp"
 #include "ldimesh/core/surfaces.hpp"
 #include "ldimesh/transport/distributed.hpp"

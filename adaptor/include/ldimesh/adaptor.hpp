@@ -33,12 +33,13 @@
 
 #include <mpi.h>
 
-#include "ldimesh/core/field_source.hpp"
-#include "ldimesh/core/grid_source.hpp"
-#include "ldimesh/core/hex_source.hpp"
+#include "ldimesh/core/blocks.hpp"
+#include "ldimesh/core/geometry.hpp"
 #include "ldimesh/core/status.hpp"
 
 namespace ldimesh {
+
+class FieldSource;  // ldimesh/core/field_source.hpp (needs Embree's headers)
 
 // What one step did, for logs and the snapshot metadata.
 struct StepReport {

@@ -18,35 +18,10 @@
 #include <span>
 #include <vector>
 
+#include "ldimesh/core/blocks.hpp"
 #include "ldimesh/core/field_source.hpp"
-#include "ldimesh/core/scalar_type.hpp"
 
 namespace ldimesh {
-
-// Where an element's p + 1 nodes per axis lie.
-enum class NodeSet {
-  gauss_lobatto_legendre,  // both ends and the roots of P'_p (spectral elements, Nek5000)
-  gauss_legendre,          // the roots of P_{p+1}, no ends (DG codes such as FLEXI)
-  equispaced,              // evenly spaced, both ends (Lagrange finite elements)
-};
-
-inline constexpr int kMaxHexOrder = 8;
-
-// One block of hexahedral elements of one polynomial order and node set, described by pointers
-// into the solver's own arrays (nothing is copied).
-struct HexBlock {
-  int order = 0;  // polynomial degree p per axis, 1..kMaxHexOrder
-  NodeSet nodes = NodeSet::gauss_lobatto_legendre;
-  std::size_t element_count = 0;
-  // 8 corners × (x, y, z) per element, element after element. Corner c sits at reference
-  // coordinates (c & 1, (c >> 1) & 1, (c >> 2) & 1) along ξ, η, ζ.
-  const double* corners = nullptr;
-  // (p + 1)³ nodal values per element; node (i, j, k) (along ξ, η, ζ) is value
-  // i + (p + 1)·(j + (p + 1)·k) of its element, and element e starts at value e·element_stride.
-  const void* values = nullptr;
-  ScalarType type = ScalarType::float64;
-  std::size_t element_stride = 0;  // in values, not bytes; 0 means (p + 1)³
-};
 
 // A polynomial's value and gradient at one point.
 struct PolynomialSample {
