@@ -13,6 +13,8 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
 
+#include "ldimesh/core/field_source.hpp"
+
 namespace ldimesh {
 namespace {
 
@@ -324,9 +326,7 @@ float float_above(double x) {
 
 class EmbreeDevice {
  public:
-  EmbreeDevice() : device_(rtcNewDevice(nullptr)) {
-    if (!device_) throw std::runtime_error("Embree: cannot create a device");
-  }
+  EmbreeDevice() : device_(make_embree_device()) {}
   ~EmbreeDevice() { rtcReleaseDevice(device_); }
   EmbreeDevice(const EmbreeDevice&) = delete;
   EmbreeDevice& operator=(const EmbreeDevice&) = delete;
@@ -366,9 +366,10 @@ class TriangleScene {
     rtcAttachGeometry(scene_, g);
     rtcReleaseGeometry(g);
     rtcCommitScene(scene_);
-    if (rtcGetDeviceError(device) != RTC_ERROR_NONE) {
+    if (const std::string failure = embree_failure(device, "building the triangle BVH");
+        !failure.empty()) {
       rtcReleaseScene(scene_);
-      throw std::runtime_error("Embree: building the triangle BVH failed");
+      throw std::runtime_error(failure);
     }
   }
   ~TriangleScene() { rtcReleaseScene(scene_); }

@@ -110,8 +110,7 @@ RayCaster::RayCaster(std::span<const FieldSource* const> sources, double isovalu
 void RayCaster::ensure_scene() const {
   std::call_once(scene_once_, [this] {
     const auto start = std::chrono::steady_clock::now();
-    device_ = rtcNewDevice(nullptr);
-    if (!device_) throw std::runtime_error("Embree: cannot create a device");
+    device_ = make_embree_device();
     scene_ = rtcNewScene(device_);
     if (!scene_) {
       rtcReleaseDevice(device_);
@@ -125,9 +124,9 @@ void RayCaster::ensure_scene() const {
         rtcAttachGeometry(scene_, bindings_.back()->geometry());
       }
       rtcCommitScene(scene_);
-      if (const RTCError error = rtcGetDeviceError(device_); error != RTC_ERROR_NONE)
-        throw std::runtime_error("Embree: scene build failed (RTCError " +
-                                 std::to_string(int(error)) + ")");
+      if (const std::string failure = embree_failure(device_, "building the scene");
+          !failure.empty())
+        throw std::runtime_error(failure);
     } catch (...) {
       rtcReleaseScene(scene_);
       bindings_.clear();

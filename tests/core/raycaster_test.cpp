@@ -170,5 +170,20 @@ TEST(RayCaster, BuiltinSurfacesProduceHits) {
   EXPECT_THROW(make_surface_source("no-such-surface"), std::invalid_argument);
 }
 
+// A failing Embree call is reported with Embree's own message, once.
+TEST(EmbreeDevice, AFailureCarriesEmbreesMessage) {
+  RTCDevice device = make_embree_device();
+  EXPECT_EQ(embree_failure(device, "nothing"), "");
+  RTCGeometry geometry = rtcNewGeometry(device, RTCGeometryType(9999));  // no such type
+  EXPECT_EQ(geometry, nullptr);
+  const std::string failure = embree_failure(device, "making a geometry");
+  const std::string head = "Embree: making a geometry failed: ";
+  EXPECT_EQ(failure.rfind(head, 0), 0u) << failure;
+  EXPECT_NE(failure.find(" (RTCError "), std::string::npos) << failure;
+  EXPECT_GT(failure.find(" (RTCError "), head.size()) << "no message of Embree's: " << failure;
+  EXPECT_EQ(embree_failure(device, "nothing again"), "");  // reported once
+  rtcReleaseDevice(device);
+}
+
 }  // namespace
 }  // namespace ldimesh

@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <memory>
 #include <stdexcept>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -116,6 +117,15 @@ class UserGeometry {
  private:
   RTCGeometry geometry_;
 };
+
+// A new Embree device whose error function keeps Embree's own message of a failure (per thread,
+// the last one), so that embree_failure can report what Embree said. Throws
+// std::runtime_error when Embree cannot create a device (its message included).
+RTCDevice make_embree_device();
+
+// The device's pending error as one line — "Embree: <what> failed: <Embree's message>
+// (RTCError <code>)" — and clears it; empty when there is none.
+std::string embree_failure(RTCDevice device, const std::string& what);
 
 class FieldSource {
  public:
