@@ -736,7 +736,6 @@ class AdaptorImpl final : public Adaptor {
   void publish(Job& job) {
     if (options_.slow_root_seconds > 0.0)
       std::this_thread::sleep_for(std::chrono::duration<double>(options_.slow_root_seconds));
-    auto t = Clock::now();
     const MeshingOptions meshing = meshing_options();
     // The root half (mesh_step) unless it ran where the samples are: no MPI call here.
     std::vector<MeshingResult> results;
@@ -755,7 +754,7 @@ class AdaptorImpl final : public Adaptor {
       append(mesh, r.mesh);
     }
     const double decode_s = job.cast.seconds.decode, mesh_s = job.cast.seconds.mesh;
-    t = Clock::now();
+    const auto t = Clock::now();
     const GlbOptions glb_options = step_glb_options(job.views.front(), options_.compression_level);
     std::vector<std::uint8_t> glb;
     GlbInfo info;

@@ -49,6 +49,9 @@ cmake -S "$src" -B "$work/client" -DLDIMESH_CLIENT_ONLY=ON -DCMAKE_DISABLE_FIND_
 cmake --build "$work/client" --target ldimesh-fetch -j2 >"$work/build.log" 2>&1 ||
   { tail -20 "$work/build.log"; fail "ldimesh-fetch does not build client-only"; }
 link=$(cat "$work/client/viewer/CMakeFiles/ldimesh-fetch.dir/link.txt")
-if grep -Eio 'mpi|embree|tbb|openmesh' <<<"$link"; then fail "ldimesh-fetch's link line: $link"; fi
+# Library names only (-lNAME, libNAME…): a path may hold "mpi" (as in "compile") by chance.
+if grep -Eio '(-l|lib)(mpi|embree|tbb|openmesh)[^ ]*' <<<"$link"; then
+  fail "ldimesh-fetch's link line: $link"
+fi
 "$work/client/bin/ldimesh-fetch" --help >/dev/null || fail "the client-only ldimesh-fetch does not run"
 echo "client only: ldimesh-fetch built and linked without MPI, Embree, TBB, OpenMesh"
