@@ -17,7 +17,7 @@ intersection with their edges, linearly interpolated). The result is written as 
 triangles, vertices, seconds (median of --repeat runs of the extraction alone; the clip and the
 PLY write separately), VTK's version and SMP backend.
 
-Needs Debian's python3-vtk9 (run with /usr/bin/python3); numpy comes with it.
+Needs Debian's python3-vtk9 (run with /usr/bin/python3); and python3-numpy (python3-vtk9 only recommends it).
 """
 import argparse
 import json

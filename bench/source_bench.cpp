@@ -8,6 +8,7 @@
 //                                   [--embree] [--json]
 #include <chrono>
 #include <cstdio>
+#include <string>
 #include <vector>
 
 #include <tbb/global_control.h>
@@ -86,6 +87,9 @@ int main(int argc, char** argv) {
   bool with_embree = false, json = false;
   app.add_flag("--embree", with_embree, "also cast with Embree for every ray (the reference)");
   app.add_flag("--json", json, "end with one JSON line of the cast rows");
+  std::string only;
+  app.add_option("--only", only, "cast only this source (to profile one)")
+      ->check(CLI::IsMember({"grid", "elements"}));
   CLI11_PARSE(app, argc, argv);
   const int all = tbb::info::default_concurrency();
   const ldimesh::fields::MarschnerLobb ml;
@@ -162,9 +166,9 @@ int main(int argc, char** argv) {
   for (ldimesh::CastPath path : {ldimesh::CastPath::automatic, ldimesh::CastPath::embree}) {
     if (path == ldimesh::CastPath::embree && !with_embree) continue;
     for (int threads : {1, all})
-      cast_row(grid_label, grid, 0.5, res, threads, path, rows);
+      if (only != "elements") cast_row(grid_label, grid, 0.5, res, threads, path, rows);
     for (int threads : {1, all})
-      cast_row(hex_label, elems, 0.5, res, threads, path, rows);
+      if (only != "grid") cast_row(hex_label, elems, 0.5, res, threads, path, rows);
   }
   if (json) std::printf("%s\n", nlohmann::json{{"casts", rows}}.dump().c_str());
   return 0;
