@@ -23,7 +23,8 @@ module ldimesh_mod
 
   integer, parameter, public :: LDIMESH_OK = 0, LDIMESH_ERROR_ARGUMENT = 1, &
                                 LDIMESH_ERROR_OPTIONS = 2, LDIMESH_ERROR_STEP = 3, &
-                                LDIMESH_ERROR_RUNTIME = 4
+                                LDIMESH_ERROR_RUNTIME = 4, LDIMESH_ERROR_CORRUPT = 5, &
+                                LDIMESH_ERROR_IO = 6, LDIMESH_ERROR_MEMORY = 7
   integer(c_int), parameter, public :: LDIMESH_FLOAT32 = 0, LDIMESH_FLOAT64 = 1
   integer(c_int), parameter, public :: LDIMESH_NODES_GLL = 0, LDIMESH_NODES_GL = 1, &
                                        LDIMESH_NODES_EQUISPACED = 2

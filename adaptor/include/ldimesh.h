@@ -34,13 +34,18 @@
 extern "C" {
 #endif
 
-/* Status codes. */
+/* Status codes, by cause, whichever function returns them; ldimesh_last_error says which. */
 enum {
   LDIMESH_OK = 0,
-  LDIMESH_ERROR_ARGUMENT = 1, /* a NULL or malformed argument, a wrong-size array */
+  LDIMESH_ERROR_ARGUMENT = 1, /* a NULL or malformed argument, a wrong-size array, a block the
+                                 step cannot use, a call out of order (no domain) */
   LDIMESH_ERROR_OPTIONS = 2,  /* the options document is invalid (the message names the key) */
-  LDIMESH_ERROR_STEP = 3,     /* an in situ step failed and was skipped */
-  LDIMESH_ERROR_RUNTIME = 4   /* anything else: out of memory, the server could not start… */
+  LDIMESH_ERROR_STEP = 3,     /* the step failed on another rank (its message is there) and was
+                                 skipped here */
+  LDIMESH_ERROR_RUNTIME = 4,  /* an internal error: a bug, please report it with the message */
+  LDIMESH_ERROR_CORRUPT = 5,  /* data failed validation (a message between ranks, a file) */
+  LDIMESH_ERROR_IO = 6,       /* a file, folder, socket or port could not be used */
+  LDIMESH_ERROR_MEMORY = 7    /* out of memory */
 };
 
 /* Element types of the solver's arrays. */

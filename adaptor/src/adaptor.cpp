@@ -57,9 +57,9 @@ struct Options {
 
 // Reads `j` into `o`, naming the first unknown key or bad value.
 Status parse_options(const nlohmann::json& j, Options& o) {
-  if (!j.is_object()) return Status::error("options: the document must be a JSON object");
+  if (!j.is_object()) return Status::invalid_options("options: the document must be a JSON object");
   auto bad = [](const std::string& key, const std::string& why) {
-    return Status::error("options: '" + key + "' " + why);
+    return Status::invalid_options("options: '" + key + "' " + why);
   };
   auto check_keys = [&](const nlohmann::json& obj, const std::string& prefix,
                         std::initializer_list<const char*> known) -> Status {
@@ -181,7 +181,7 @@ Status parse_options(const nlohmann::json& j, Options& o) {
         o.slow_root_seconds = t["slow_root_seconds"].get<double>();
     }
   } catch (const nlohmann::json::exception& e) {
-    return Status::error(std::string("options: a value has the wrong type: ") + e.what());
+    return Status::invalid_options(std::string("options: a value has the wrong type: ") + e.what());
   }
   return Status::ok();
 }
@@ -302,7 +302,7 @@ class AdaptorImpl final : public Adaptor {
     if (!options_.output_dir.empty()) {
       std::error_code ec;
       std::filesystem::create_directories(options_.output_dir, ec);
-      if (ec) return Status::error("options: 'output_dir' cannot be created: " + ec.message());
+      if (ec) return Status::io("options: 'output_dir' cannot be created: " + ec.message());
     }
     worker_ = std::thread([this] { work(); });
     return Status::ok();
@@ -329,7 +329,7 @@ class AdaptorImpl final : public Adaptor {
   }
 
   Status set_domain(const Box& global) override {
-    if (!global.is_valid()) return fail("set_domain: the box is empty");
+    if (!global.is_valid()) return fail(Status::invalid_argument("set_domain: the box is empty"));
     domain_ = global;
     has_domain_ = true;
     return Status::ok();
@@ -341,7 +341,7 @@ class AdaptorImpl final : public Adaptor {
     return add_block<HexElementSource>(block, "add_hex_block");
   }
   Status add_source(std::shared_ptr<const FieldSource> source, const Box& owned) override {
-    if (!source) return fail("add_source: no source");
+    if (!source) return fail(Status::invalid_argument("add_source: no source"));
     blocks_.push_back({std::move(source), owned, std::nullopt, std::nullopt});
     return Status::ok();
   }
@@ -404,7 +404,7 @@ class AdaptorImpl final : public Adaptor {
     if (s && meshing_samples(meshing_options())) s = mesh_with_samples(comm_, casters, job);
     if (rank_ == 0) report_.nonfinite_values = job.cast.nonfinite_values;
     finish_report(start);
-    if (!s) return fail("step " + std::to_string(step) + " skipped: " + s.message());
+    if (!s) return fail(s.prefixed("step " + std::to_string(step) + " skipped: "));
     if (rank_ == 0) {
       job.seconds["blocked"] = report_.max_blocked_seconds;
       report_.replaced_pending = hand_to_worker(std::move(job));
@@ -436,7 +436,7 @@ class AdaptorImpl final : public Adaptor {
       if (server_) server_->stop();
     }
     std::lock_guard lock(mutex_);
-    return worker_error_.empty() ? Status::ok() : Status::error(worker_error_);
+    return worker_status_;
   }
 
   std::string url() const override { return server_ ? server_->url() : std::string(); }
@@ -641,8 +641,8 @@ class AdaptorImpl final : public Adaptor {
         caster_job_.reset();
         casting_ = true;
       }
-      std::string error;
-      try {
+      const std::uint64_t step = cj.job.step;
+      const Status failed = guard("", [&] {
         StepCasters casters;
         Status s = collective_step(background_comm_, snapshot_blocks_, cj.domain, cj.error, cj.job,
                                    casters);
@@ -651,18 +651,18 @@ class AdaptorImpl final : public Adaptor {
         // The snapshot stays until the next step: the ranks serve the root's samples from it.
         if (s && meshing_samples(meshing_options()))
           s = mesh_with_samples(background_comm_, casters, cj.job);
-        if (!s) throw std::runtime_error(s.message());
+        LDIMESH_RETURN_IF_ERROR(s);
         if (rank_ == 0) {
           cj.job.seconds["blocked"] = max_blocked;
           hand_to_worker(std::move(cj.job));
         }
-      } catch (const std::exception& e) {
-        error = e.what();
-      }
+        return Status::ok();
+      });
       std::lock_guard lock(mutex_);
       casting_ = false;
-      if (!error.empty()) {
-        last_error_ = worker_error_ = "step " + std::to_string(cj.job.step) + " skipped: " + error;
+      if (!failed) {
+        worker_status_ = failed.prefixed("step " + std::to_string(step) + " skipped: ");
+        last_error_ = worker_status_.message();
         if (options_.log && rank_ == 0)
           std::fprintf(stderr, "ldimesh: error: %s\n", last_error_.c_str());
       }
@@ -683,8 +683,8 @@ class AdaptorImpl final : public Adaptor {
         b.hex = block;
       blocks_.push_back(std::move(b));
       return Status::ok();
-    } catch (const std::exception& e) {
-      return fail(std::string(what) + ": " + e.what());
+    } catch (...) {
+      return fail(status_from_current_exception(std::string(what) + ": "));
     }
   }
 
@@ -692,10 +692,11 @@ class AdaptorImpl final : public Adaptor {
     return has_domain_ ? std::optional<Box>(domain_) : std::nullopt;
   }
 
-  Status fail(const std::string& message) {
+  // Keeps the failure as the last error and returns it.
+  Status fail(Status failure) {
     std::lock_guard lock(mutex_);
-    last_error_ = message;
-    return Status::error(message);
+    last_error_ = failure.message();
+    return failure;
   }
 
   void finish_report(Clock::time_point start) {
@@ -717,23 +718,19 @@ class AdaptorImpl final : public Adaptor {
         pending_.reset();
         working_ = true;
       }
-      std::string error;
-      try {
-        publish(job);
-      } catch (const std::exception& e) {
-        error = e.what();
-      }
+      const Status failed = guard("", [&] { return publish(job); });
       std::lock_guard lock(mutex_);
       working_ = false;
-      if (!error.empty()) {
-        last_error_ = worker_error_ = "step " + std::to_string(job.step) + ": " + error;
+      if (!failed) {
+        worker_status_ = failed.prefixed("step " + std::to_string(job.step) + ": ");
+        last_error_ = worker_status_.message();
         if (options_.log) std::fprintf(stderr, "ldimesh: error: %s\n", last_error_.c_str());
       }
       idle_.notify_all();
     }
   }
 
-  void publish(Job& job) {
+  Status publish(Job& job) {
     if (options_.slow_root_seconds > 0.0)
       std::this_thread::sleep_for(std::chrono::duration<double>(options_.slow_root_seconds));
     const MeshingOptions meshing = meshing_options();
@@ -744,7 +741,7 @@ class AdaptorImpl final : public Adaptor {
     } else if (Status s = mesh_step(MPI_COMM_NULL, StepBlocks(options_.isovalues.size()), job.views,
                                     0.0, meshing, job.cast, results);
                !s) {
-      throw std::runtime_error(s.message());
+      return s;
     }
     Mesh mesh;
     std::size_t samples = 0, quads = 0;
@@ -758,8 +755,7 @@ class AdaptorImpl final : public Adaptor {
     const GlbOptions glb_options = step_glb_options(job.views.front(), options_.compression_level);
     std::vector<std::uint8_t> glb;
     GlbInfo info;
-    if (Status s = encode_glb(mesh, glb_options, glb, &info); !s)
-      throw std::runtime_error(s.message());
+    LDIMESH_RETURN_IF_ERROR(encode_glb(mesh, glb_options, glb, &info));
     const double glb_s = seconds_since(t);
 
     StepMetadata meta = describe_step(job.step, job.time, options_.isovalues, job.views,
@@ -773,9 +769,8 @@ class AdaptorImpl final : public Adaptor {
     const std::size_t bytes = glb.size();
     Snapshot snapshot = make_snapshot(std::move(meta), std::move(glb));
     if (!options_.output_dir.empty())
-      if (Status s = write_step_files(options_.output_dir, snapshot); !s)
-        throw std::runtime_error(s.message());
-    if (Status s = store_->publish(std::move(snapshot)); !s) throw std::runtime_error(s.message());
+      LDIMESH_RETURN_IF_ERROR(write_step_files(options_.output_dir, snapshot));
+    LDIMESH_RETURN_IF_ERROR(store_->publish(std::move(snapshot)));
     {
       std::lock_guard lock(mutex_);
       ++published_;
@@ -788,6 +783,7 @@ class AdaptorImpl final : public Adaptor {
           job.seconds["cast"], job.seconds["reduce"], mesh_s, glb_s, step_notes(job).c_str());
       std::fflush(stdout);
     }
+    return Status::ok();
   }
 
   // The log line's warnings: steps dropped before this one, non-finite field values.
@@ -839,7 +835,7 @@ class AdaptorImpl final : public Adaptor {
   bool stopping_ = false;
   std::uint64_t published_ = 0;
   std::string last_error_;
-  std::string worker_error_;  // the last failure of this rank's background work
+  Status worker_status_ = Status::ok();  // the last failure of this rank's background work
 
   // Every rank, background path (MPI_THREAD_MULTIPLE): the caster thread, its communicator (a
   // duplicate, so that its collectives never meet the solver's) and the snapshot it reads.
@@ -863,31 +859,33 @@ Status Adaptor::create(MPI_Comm comm, std::string_view options_json,
   MPI_Initialized(&initialized);
   MPI_Finalized(&finalized);
   if (!initialized || finalized)
-    return Status::error("ldimesh: MPI is not initialised (call MPI_Init_thread first)");
-  if (comm == MPI_COMM_NULL) return Status::error("ldimesh: the communicator is MPI_COMM_NULL");
+    return Status::invalid_argument("ldimesh: MPI is not initialised (call MPI_Init_thread first)");
+  if (comm == MPI_COMM_NULL)
+    return Status::invalid_argument("ldimesh: the communicator is MPI_COMM_NULL");
   try {
     Options options;
     Status status = Status::ok();
     if (!options_json.empty()) {
       const nlohmann::json j = nlohmann::json::parse(options_json, nullptr, false);
-      status = j.is_discarded() ? Status::error("options: not a valid JSON document")
+      status = j.is_discarded() ? Status::invalid_options("options: not a valid JSON document")
                                 : parse_options(j, options);
     }
     // Everyone gets the same verdict (the document is the same on every rank).
     int failed = status ? 0 : 1;
     MPI_Allreduce(MPI_IN_PLACE, &failed, 1, MPI_INT, MPI_MAX, comm);
-    if (failed) return status ? Status::error("options: invalid on another rank") : status;
+    if (failed)
+      return status ? Status::invalid_options("options: invalid on another rank") : status;
     auto adaptor = std::make_unique<AdaptorImpl>(comm, std::move(options));
     adaptor->start_background();
     Status started = adaptor->start_root();
     int start_failed = started ? 0 : 1;
     MPI_Bcast(&start_failed, 1, MPI_INT, 0, comm);
     if (start_failed)
-      return started ? Status::error("the root could not start (see its message)") : started;
+      return started ? Status::other_rank("the root could not start (see its message)") : started;
     out = std::move(adaptor);
     return Status::ok();
-  } catch (const std::exception& e) {
-    return Status::error(std::string("ldimesh: ") + e.what());
+  } catch (...) {
+    return status_from_current_exception("ldimesh: ");
   }
 }
 
@@ -898,7 +896,7 @@ Status Adaptor::create_from_file(MPI_Comm comm, const std::string& path,
     if (const char* env = std::getenv("LDIMESH_OPTIONS")) file = env;
   if (file.empty()) return create(comm, "", out);
   std::ifstream in(file);
-  if (!in) return Status::error("options: cannot read '" + file + "'");
+  if (!in) return Status::io("options: cannot read '" + file + "'");
   std::stringstream text;
   text << in.rdbuf();
   return create(comm, text.str(), out);

@@ -22,8 +22,27 @@ using ldimesh::Status;
 // The last failed create on this thread (there is no handle to keep it on).
 thread_local std::string create_error;
 
-int code_of(const Status& s, int failure) {
-  return s ? LDIMESH_OK : failure;
+// The C code of a status: from its cause, whichever call it came from.
+int code_of(const Status& s) {
+  switch (s.code()) {
+    case ldimesh::StatusCode::ok:
+      return LDIMESH_OK;
+    case ldimesh::StatusCode::invalid_argument:
+      return LDIMESH_ERROR_ARGUMENT;
+    case ldimesh::StatusCode::invalid_options:
+      return LDIMESH_ERROR_OPTIONS;
+    case ldimesh::StatusCode::other_rank:
+      return LDIMESH_ERROR_STEP;
+    case ldimesh::StatusCode::corrupt_input:
+      return LDIMESH_ERROR_CORRUPT;
+    case ldimesh::StatusCode::io:
+      return LDIMESH_ERROR_IO;
+    case ldimesh::StatusCode::out_of_memory:
+      return LDIMESH_ERROR_MEMORY;
+    case ldimesh::StatusCode::internal:
+      break;
+  }
+  return LDIMESH_ERROR_RUNTIME;
 }
 
 // Keeps `message` on the handle and returns `code`.
@@ -32,35 +51,19 @@ int fail(ldimesh_adaptor* a, int code, std::string message) {
   return code;
 }
 
-int result(ldimesh_adaptor* a, const Status& s, int failure) {
-  if (!s) a->error = s.message();
-  return code_of(s, failure);
-}
-
-// Runs `body` (which returns a status code) and turns any exception into an error code.
+// Runs `body` (which returns a Status) behind the boundary's guard: keeps a failure's message
+// on the handle and returns its code.
 template <class Body>
-int guarded(ldimesh_adaptor* a, Body&& body) {
-  try {
-    return body();
-  } catch (const std::bad_alloc&) {
-    return fail(a, LDIMESH_ERROR_RUNTIME, "out of memory");
-  } catch (const std::exception& e) {
-    return fail(a, LDIMESH_ERROR_RUNTIME, e.what());
-  } catch (...) {
-    return fail(a, LDIMESH_ERROR_RUNTIME, "unknown error");
-  }
+int guarded(ldimesh_adaptor* a, const char* where, Body&& body) {
+  const Status s = ldimesh::guard(where, body);
+  if (!s) a->error = s.message();
+  return code_of(s);
 }
 
 int no_handle() {
   // Nothing to keep the message on: a caller checking ldimesh_last_error(NULL) finds it.
   create_error = "ldimesh: the adaptor handle is NULL (did ldimesh_create fail?)";
   return LDIMESH_ERROR_ARGUMENT;
-}
-
-// Options errors name a key and start with "options:".
-int create_code(const Status& s) {
-  if (s) return LDIMESH_OK;
-  return s.message().rfind("options:", 0) == 0 ? LDIMESH_ERROR_OPTIONS : LDIMESH_ERROR_RUNTIME;
 }
 
 template <class Create>
@@ -70,21 +73,18 @@ int create_with(ldimesh_adaptor** out, Create&& create) {
     return LDIMESH_ERROR_ARGUMENT;
   }
   *out = nullptr;
-  try {
+  const Status s = ldimesh::guard("ldimesh_create: ", [&] {
     auto handle = std::make_unique<ldimesh_adaptor>();
-    const Status s = create(handle->impl);
-    if (!s) {
-      create_error = s.message();
-      return create_code(s);
-    }
+    LDIMESH_RETURN_IF_ERROR(create(handle->impl));
     handle->url = handle->impl->url();
-    create_error.clear();
     *out = handle.release();
-    return LDIMESH_OK;
-  } catch (const std::exception& e) {
-    create_error = std::string("ldimesh_create: ") + e.what();
-    return LDIMESH_ERROR_RUNTIME;
-  }
+    return Status::ok();
+  });
+  if (s)
+    create_error.clear();
+  else
+    create_error = s.message();
+  return code_of(s);
 }
 
 // A Fortran communicator handle in C; MPI_COMM_NULL before MPI_Init (MPI_Comm_f2c is not
@@ -154,9 +154,8 @@ void ldimesh_hex_block_init(ldimesh_hex_block* block) {
 int ldimesh_set_domain(ldimesh_adaptor* a, const double lo[3], const double hi[3]) {
   if (!a) return no_handle();
   if (!lo || !hi) return fail(a, LDIMESH_ERROR_ARGUMENT, "ldimesh_set_domain: lo or hi is NULL");
-  return guarded(a, [&] {
-    return result(a, a->impl->set_domain({{lo[0], lo[1], lo[2]}, {hi[0], hi[1], hi[2]}}),
-                  LDIMESH_ERROR_ARGUMENT);
+  return guarded(a, "ldimesh_set_domain: ", [&] {
+    return a->impl->set_domain({{lo[0], lo[1], lo[2]}, {hi[0], hi[1], hi[2]}});
   });
 }
 
@@ -210,7 +209,7 @@ int ldimesh_add_grid_block(ldimesh_adaptor* a, const ldimesh_grid_block* b) {
     g.ghost_lo[i] = b->ghost_lo[i];
     g.ghost_hi[i] = b->ghost_hi[i];
   }
-  return guarded(a, [&] { return result(a, a->impl->add_grid_block(g), LDIMESH_ERROR_ARGUMENT); });
+  return guarded(a, "ldimesh_add_grid_block: ", [&] { return a->impl->add_grid_block(g); });
 }
 
 int ldimesh_add_hex_block(ldimesh_adaptor* a, const ldimesh_hex_block* b) {
@@ -257,25 +256,25 @@ int ldimesh_add_hex_block(ldimesh_adaptor* a, const ldimesh_hex_block* b) {
   h.corners = b->corners;
   h.values = b->values;
   h.element_stride = std::size_t(stride);
-  return guarded(a, [&] { return result(a, a->impl->add_hex_block(h), LDIMESH_ERROR_ARGUMENT); });
+  return guarded(a, "ldimesh_add_hex_block: ", [&] { return a->impl->add_hex_block(h); });
 }
 
 int ldimesh_clear_blocks(ldimesh_adaptor* a) {
   if (!a) return no_handle();
-  return guarded(a, [&] {
+  return guarded(a, "ldimesh_clear_blocks: ", [&] {
     a->impl->clear_blocks();
-    return LDIMESH_OK;
+    return Status::ok();
   });
 }
 
 int ldimesh_execute(ldimesh_adaptor* a, uint64_t step, double time) {
   if (!a) return no_handle();
-  return guarded(a, [&] { return result(a, a->impl->execute(step, time), LDIMESH_ERROR_STEP); });
+  return guarded(a, "ldimesh_execute: ", [&] { return a->impl->execute(step, time); });
 }
 
 int ldimesh_finalize(ldimesh_adaptor* a) {
   if (!a) return no_handle();
-  return guarded(a, [&] { return result(a, a->impl->finalize(), LDIMESH_ERROR_STEP); });
+  return guarded(a, "ldimesh_finalize: ", [&] { return a->impl->finalize(); });
 }
 
 void ldimesh_destroy(ldimesh_adaptor* a) {

@@ -33,30 +33,32 @@ LdiFragment fragment_from_ldi(const Ldi& ldi, std::uint32_t view_index) {
 
 Status validate_fragment(const LdiFragment& f) {
   if (f.pixels.size() != f.counts.size())
-    return Status::error("fragment: " + std::to_string(f.pixels.size()) + " pixel ids but " +
-                         std::to_string(f.counts.size()) + " counts");
+    return Status::corrupt_input("fragment: " + std::to_string(f.pixels.size()) +
+                                 " pixel ids but " + std::to_string(f.counts.size()) + " counts");
   if (f.normal.size() != f.depth.size())
-    return Status::error("fragment: normals and depths differ in number");
+    return Status::corrupt_input("fragment: normals and depths differ in number");
   if (!f.scalar.empty() && f.scalar.size() != f.depth.size())
-    return Status::error("fragment: scalars and depths differ in number");
+    return Status::corrupt_input("fragment: scalars and depths differ in number");
   if (!(f.depth_lo <= f.depth_hi) || !std::isfinite(f.depth_lo) || !std::isfinite(f.depth_hi))
-    return Status::error("fragment: invalid depth interval");
+    return Status::corrupt_input("fragment: invalid depth interval");
   std::uint64_t total = 0;
   for (std::size_t k = 0; k < f.pixels.size(); ++k) {
-    if (f.pixels[k] >= f.pixel_count) return Status::error("fragment: pixel id out of range");
+    if (f.pixels[k] >= f.pixel_count)
+      return Status::corrupt_input("fragment: pixel id out of range");
     if (k > 0 && f.pixels[k] <= f.pixels[k - 1])
-      return Status::error("fragment: pixel ids not strictly increasing");
-    if (f.counts[k] == 0) return Status::error("fragment: a listed pixel has no sample");
+      return Status::corrupt_input("fragment: pixel ids not strictly increasing");
+    if (f.counts[k] == 0) return Status::corrupt_input("fragment: a listed pixel has no sample");
     const std::uint64_t begin = total;
     total += f.counts[k];
-    if (total > f.depth.size()) return Status::error("fragment: counts exceed the samples");
+    if (total > f.depth.size()) return Status::corrupt_input("fragment: counts exceed the samples");
     for (std::uint64_t s = begin; s < total; ++s) {
-      if (!std::isfinite(f.depth[s])) return Status::error("fragment: non-finite depth");
+      if (!std::isfinite(f.depth[s])) return Status::corrupt_input("fragment: non-finite depth");
       if (s > begin && f.depth[s] < f.depth[s - 1])
-        return Status::error("fragment: depths of a pixel not sorted");
+        return Status::corrupt_input("fragment: depths of a pixel not sorted");
     }
   }
-  if (total != f.depth.size()) return Status::error("fragment: counts do not sum to the samples");
+  if (total != f.depth.size())
+    return Status::corrupt_input("fragment: counts do not sum to the samples");
   return Status::ok();
 }
 

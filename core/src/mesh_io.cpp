@@ -25,7 +25,7 @@ using File = std::unique_ptr<std::FILE, FileCloser>;
 
 Status open_for_writing(const std::string& path, File& file) {
   file.reset(std::fopen(path.c_str(), "wb"));
-  if (!file) return Status::error("cannot write '" + path + "': " + std::strerror(errno));
+  if (!file) return Status::io("cannot write '" + path + "': " + std::strerror(errno));
   return Status::ok();
 }
 
@@ -33,7 +33,7 @@ Status finish(const std::string& path, File& file) {
   const bool failed = std::ferror(file.get()) != 0;
   const int closed = std::fclose(file.release());
   if (failed || closed != 0)
-    return Status::error("writing '" + path + "' failed: " + std::strerror(errno));
+    return Status::io("writing '" + path + "' failed: " + std::strerror(errno));
   return Status::ok();
 }
 
@@ -268,7 +268,7 @@ class PlyValues {
 };
 
 Status ply_error(const std::string& what) {
-  return Status::error("PLY: " + what);
+  return Status::corrupt_input("PLY: " + what);
 }
 
 struct PlyHeader {
@@ -582,7 +582,8 @@ Status write_mesh(const std::string& path, const Mesh& mesh) {
                  [](unsigned char c) { return char(std::tolower(c)); });
   if (ext == ".ply") return write_ply(path, mesh);
   if (ext == ".obj") return write_obj(path, mesh);
-  return Status::error("cannot tell the format of '" + path + "': use a .ply or .obj file name");
+  return Status::invalid_argument("cannot tell the format of '" + path +
+                                  "': use a .ply or .obj file name");
 }
 
 Status parse_ply(std::string_view bytes, Mesh& mesh) {
@@ -597,15 +598,15 @@ Status parse_ply(std::string_view bytes, Mesh& mesh) {
 Status read_ply(const std::string& path, Mesh& mesh) {
   mesh = Mesh{};
   File file(std::fopen(path.c_str(), "rb"));
-  if (!file) return Status::error("cannot read '" + path + "': " + std::strerror(errno));
+  if (!file) return Status::io("cannot read '" + path + "': " + std::strerror(errno));
   std::string bytes;
   char block[1 << 16];
   for (std::size_t n; (n = std::fread(block, 1, sizeof(block), file.get())) > 0;)
     bytes.append(block, n);
   if (std::ferror(file.get()))
-    return Status::error("cannot read '" + path + "': " + std::strerror(errno));
+    return Status::io("cannot read '" + path + "': " + std::strerror(errno));
   const Status status = parse_ply(bytes, mesh);
-  if (!status) return Status::error("'" + path + "': " + status.message());
+  if (!status) return status.prefixed("'" + path + "': ");
   return status;
 }
 

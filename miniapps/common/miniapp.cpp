@@ -115,12 +115,14 @@ Status options_document(const std::string& path, std::optional<double> isovalue,
   nlohmann::json doc = nlohmann::json::object();
   if (!file.empty()) {
     std::ifstream in(file, std::ios::binary);
-    if (!in) return Status::error("cannot read options file '" + file + "'");
+    if (!in) return Status::io("cannot read options file '" + file + "'");
     std::stringstream text;
     text << in.rdbuf();
     doc = nlohmann::json::parse(text.str(), nullptr, /*allow_exceptions=*/false);
-    if (doc.is_discarded()) return Status::error("options file '" + file + "' is not valid JSON");
-    if (!doc.is_object()) return Status::error("options file '" + file + "' is not a JSON object");
+    if (doc.is_discarded())
+      return Status::invalid_options("options file '" + file + "' is not valid JSON");
+    if (!doc.is_object())
+      return Status::invalid_options("options file '" + file + "' is not a JSON object");
   }
   if (isovalue) {
     doc["isovalues"] = nlohmann::json::array({*isovalue});

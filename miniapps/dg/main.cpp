@@ -137,10 +137,10 @@ int main(int argc, char** argv) {
   const std::array<int, 3> blocks = ldimesh::block_grid(domain, app.size());
   for (int a = 0; a < 3; ++a) {
     if (elements < blocks[a]) {
-      app.check(
-          ldimesh::Status::error("--elements " + std::to_string(elements) + " is too small for " +
-                                 std::to_string(blocks[a]) + " blocks along an axis"),
-          "start");
+      app.check(ldimesh::Status::invalid_argument("--elements " + std::to_string(elements) +
+                                                  " is too small for " + std::to_string(blocks[a]) +
+                                                  " blocks along an axis"),
+                "start");
       return ldimesh::miniapp::kExitUsage;
     }
   }

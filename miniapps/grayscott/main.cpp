@@ -255,8 +255,9 @@ int main(int argc, char** argv) {
   for (int a = 0; a < 3; ++a) {
     // Every block needs two points per axis: one cell at the top boundary.
     if (size < 2 * blocks[a]) {
-      app.check(ldimesh::Status::error("--size " + std::to_string(size) + " is too small for " +
-                                       std::to_string(blocks[a]) + " blocks along an axis"),
+      app.check(ldimesh::Status::invalid_argument("--size " + std::to_string(size) +
+                                                  " is too small for " + std::to_string(blocks[a]) +
+                                                  " blocks along an axis"),
                 "start");
       return ldimesh::miniapp::kExitUsage;
     }

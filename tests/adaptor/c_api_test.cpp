@@ -6,6 +6,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
+#include <fstream>
 #include <limits>
 #include <string>
 #include <thread>
@@ -130,8 +132,9 @@ TEST(CApi, InvalidOptionsAreNamedOnEveryRank) {
   EXPECT_NE(std::string(ldimesh_last_error(nullptr)).find("'resolution'"), std::string::npos)
       << ldimesh_last_error(nullptr);
   EXPECT_EQ(ldimesh_create(MPI_COMM_WORLD, "{not json", &a), LDIMESH_ERROR_OPTIONS);
+  // An options file that cannot be read is an I/O error, by its cause.
   EXPECT_EQ(ldimesh_create_from_file(MPI_COMM_WORLD, "/nonexistent/options.json", &a),
-            LDIMESH_ERROR_OPTIONS);
+            LDIMESH_ERROR_IO);
   EXPECT_NE(std::string(ldimesh_last_error(nullptr)).find("/nonexistent/options.json"),
             std::string::npos);
   // A later good create clears the message.
@@ -281,15 +284,60 @@ TEST(CApi, AStepWithoutSurfaceIsPublishedEmpty) {
   ldimesh_destroy(a);
 }
 
-TEST(CApi, ExecuteWithoutADomainFailsWithAStepError) {
+TEST(CApi, AnOutputFolderThatCannotBeMadeIsAnIoErrorOnTheRootAndAStepErrorElsewhere) {
+  // The folder's parent is a regular file: the root cannot create it.
+  const std::string dir = temp_dir("io");
+  const std::string file = dir + "/a_file";
+  if (rank_of() == 0) {
+    std::filesystem::create_directories(dir);
+    std::ofstream(file) << "not a folder\n";
+    ASSERT_TRUE(std::filesystem::is_regular_file(file));
+  }
+  MPI_Barrier(MPI_COMM_WORLD);
+  ldimesh_adaptor* a = nullptr;
+  const int rc = ldimesh_create(MPI_COMM_WORLD, options(file + "/steps").c_str(), &a);
+  EXPECT_EQ(a, nullptr);
+  if (rank_of() == 0) {
+    EXPECT_EQ(rc, LDIMESH_ERROR_IO) << ldimesh_last_error(nullptr);
+    EXPECT_NE(std::string(ldimesh_last_error(nullptr)).find("output_dir"), std::string::npos);
+  } else {
+    EXPECT_EQ(rc, LDIMESH_ERROR_STEP) << ldimesh_last_error(nullptr);
+    EXPECT_NE(std::string(ldimesh_last_error(nullptr)).find("root"), std::string::npos);
+  }
+  ldimesh_destroy(a);
+}
+
+TEST(CApi, AStepThatFailsOnOneRankIsAStepErrorOnTheOthers) {
+  if (ranks() < 2) GTEST_SKIP() << "needs 2 or more ranks";
+  // The last rank never sets its domain: its step fails with the cause, the others' because
+  // of it.
+  ldimesh_adaptor* a = nullptr;
+  ASSERT_EQ(ldimesh_create(MPI_COMM_WORLD, R"({"server": {"enabled": false}, "log": false})", &a),
+            LDIMESH_OK);
+  const double lo[3] = {-1, -1, -1}, hi[3] = {1, 1, 1};
+  const bool last = rank_of() == ranks() - 1;
+  if (!last) {
+    EXPECT_EQ(ldimesh_set_domain(a, lo, hi), LDIMESH_OK);
+  }
+  const int rc = ldimesh_execute(a, 1, 0.0);
+  if (last) {
+    EXPECT_EQ(rc, LDIMESH_ERROR_ARGUMENT) << ldimesh_last_error(a);
+    EXPECT_NE(std::string(ldimesh_last_error(a)).find("set_domain"), std::string::npos);
+  } else {
+    EXPECT_EQ(rc, LDIMESH_ERROR_STEP) << ldimesh_last_error(a);
+  }
+  ldimesh_destroy(a);
+}
+
+TEST(CApi, ExecuteWithoutADomainFailsWithAnArgumentError) {
   ldimesh_adaptor* a = nullptr;
   EXPECT_EQ(ldimesh_create(MPI_COMM_WORLD, R"({"server": {"enabled": false}, "log": false})", &a),
             LDIMESH_OK);
   if (!a) return;
-  EXPECT_EQ(ldimesh_execute(a, 1, 0.0), LDIMESH_ERROR_STEP);
+  EXPECT_EQ(ldimesh_execute(a, 1, 0.0), LDIMESH_ERROR_ARGUMENT);
   EXPECT_NE(std::string(ldimesh_last_error(a)).find("set_domain"), std::string::npos);
   // The next step is tried again (and fails the same way): nothing is stuck.
-  EXPECT_EQ(ldimesh_execute(a, 2, 0.0), LDIMESH_ERROR_STEP);
+  EXPECT_EQ(ldimesh_execute(a, 2, 0.0), LDIMESH_ERROR_ARGUMENT);
   ldimesh_destroy(a);
 }
 

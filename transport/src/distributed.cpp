@@ -43,7 +43,7 @@ Status root_status(MPI_Comm comm, const Status& status) {
   if (length < 0) return Status::ok();
   message.resize(std::size_t(length));
   MPI_Bcast(message.data(), length, MPI_CHAR, 0, comm);
-  return Status::error(std::move(message));
+  return rank == 0 ? status : Status::other_rank(std::move(message));
 }
 
 }  // namespace
@@ -101,7 +101,8 @@ Status cast_and_reduce(MPI_Comm comm, const StepBlocks& blocks, std::span<const 
   int failed = error.empty() ? 0 : 1, any_failed = 0;
   MPI_Allreduce(&failed, &any_failed, 1, MPI_INT, MPI_MAX, comm);
   if (any_failed)
-    return Status::error(error.empty() ? std::string("another rank failed to ray cast") : error);
+    return error.empty() ? Status::other_rank("another rank failed to ray cast")
+                         : Status::invalid_argument(error);
 
   ReductionStats stats;
   const Status reduced = reduce_fragments(comm, 0, fragments, encoding, tolerance, stats,
@@ -116,7 +117,7 @@ Status cast_and_reduce(MPI_Comm comm, const StepBlocks& blocks, std::span<const 
   MPI_Reduce(mine, sums, 2, MPI_UNSIGNED_LONG_LONG, MPI_SUM, 0, comm);
   if (maxima[0] != 0.0) {
     step = {};
-    return reduced ? Status::error("the reduction failed on another rank") : reduced;
+    return reduced ? Status::other_rank("the reduction failed on another rank") : reduced;
   }
   step.seconds.cast = maxima[1];
   step.seconds.encode = maxima[2];
@@ -156,9 +157,9 @@ Status mesh_step(MPI_Comm comm, const StepBlocks& blocks, std::span<const View> 
     step.seconds.decode += seconds_since(start);
   }
   if (status && step.fragments.size() != blocks.size() * nv)
-    status = Status::error("the step has " + std::to_string(step.fragments.size()) +
-                           " fragments for " + std::to_string(blocks.size()) + " isovalues of " +
-                           std::to_string(nv) + " views");
+    status = Status::internal("the step has " + std::to_string(step.fragments.size()) +
+                              " fragments for " + std::to_string(blocks.size()) + " isovalues of " +
+                              std::to_string(nv) + " views");
   for (std::size_t i = 0; i < blocks.size(); ++i) {
     std::optional<MpiSampleSource> samples;
     if (collective)
@@ -174,10 +175,8 @@ Status mesh_step(MPI_Comm comm, const StepBlocks& blocks, std::span<const View> 
         results.push_back(mesh_ldis(isovalue_ldis, options, samples ? &*samples : nullptr));
         step.seconds.mesh += seconds_since(start);
         if (ldis) ldis->push_back(std::move(isovalue_ldis));
-      } catch (const std::exception& e) {
-        status = Status::error(e.what());
       } catch (...) {
-        status = Status::error("meshing failed on the root");
+        status = status_from_current_exception("");
       }
     }
     // The other ranks serve every isovalue: end each one, also after a failure.
@@ -207,9 +206,12 @@ Status mesh_distributed(MPI_Comm comm, const RayCaster& caster, const Subdomain&
   const int levels = options.meshing.refinement.levels;
   const bool projects = merging_projects(options.meshing.merging);
   const Agreement agreed = agree(comm, bool(status), levels, projects);
-  if (!agreed.reduced) return status ? Status::error("the step failed on another rank") : status;
-  if (!agreed.same_levels) return Status::error("refinement levels differ between ranks");
-  if (!agreed.same_projection) return Status::error("merging options differ between ranks");
+  if (!agreed.reduced)
+    return status ? Status::other_rank("the step failed on another rank") : status;
+  if (!agreed.same_levels)
+    return Status::invalid_argument("refinement levels differ between ranks");
+  if (!agreed.same_projection)
+    return Status::invalid_argument("merging options differ between ranks");
 
   std::vector<MeshingResult> meshed;
   std::vector<std::vector<Ldi>> ldis;

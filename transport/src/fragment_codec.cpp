@@ -353,7 +353,7 @@ void check_encoding(const FragmentEncoding& e) {
 // ---- Decoding -------------------------------------------------------------------------------
 
 Status fail(const char* what) {
-  return Status::error(std::string("fragment: ") + what);
+  return Status::corrupt_input(std::string("fragment: ") + what);
 }
 
 Status read_header(std::span<const std::uint8_t> bytes, Header& h) {
@@ -362,7 +362,8 @@ Status read_header(std::span<const std::uint8_t> bytes, Header& h) {
     return fail("not an LDI fragment (bad magic)");
   // The version comes before the checksum: a later version may lay out the header otherwise.
   if (bytes[4] != kVersion)
-    return Status::error("fragment: unsupported format version " + std::to_string(bytes[4]));
+    return Status::corrupt_input("fragment: unsupported format version " +
+                                 std::to_string(bytes[4]));
   Reader in{bytes.first(kHeaderSize), kMagic.size()};
   h.version = std::uint8_t(in.le(1));
   h.flags = std::uint8_t(in.le(1));
@@ -651,7 +652,7 @@ Status decode_fragment(std::span<const std::uint8_t> bytes, LdiFragment& out) {
   } catch (const std::bad_alloc&) {
     return fail("out of memory");
   } catch (const std::exception& e) {
-    return Status::error(std::string("fragment: ") + e.what());
+    return Status::corrupt_input(std::string("fragment: ") + e.what());
   }
 }
 

@@ -85,35 +85,38 @@ struct GlbChunks {
 };
 
 Status parse_glb(std::span<const std::uint8_t> glb, GlbChunks& chunks) {
-  if (glb.size() < kGlbHeader + kChunkHeader) return Status::error("glb: too short for a GLB");
-  if (read_u32(glb.data()) != kGlbMagic) return Status::error("glb: no glTF magic");
-  if (read_u32(glb.data() + 4) != kGlbVersion) return Status::error("glb: not glTF version 2");
+  if (glb.size() < kGlbHeader + kChunkHeader)
+    return Status::corrupt_input("glb: too short for a GLB");
+  if (read_u32(glb.data()) != kGlbMagic) return Status::corrupt_input("glb: no glTF magic");
+  if (read_u32(glb.data() + 4) != kGlbVersion)
+    return Status::corrupt_input("glb: not glTF version 2");
   const std::uint32_t length = read_u32(glb.data() + 8);
   if (length != glb.size())
-    return Status::error("glb: header length " + std::to_string(length) + " but " +
-                         std::to_string(glb.size()) + " bytes (truncated or padded)");
+    return Status::corrupt_input("glb: header length " + std::to_string(length) + " but " +
+                                 std::to_string(glb.size()) + " bytes (truncated or padded)");
   std::size_t pos = kGlbHeader;
   bool first = true, have_bin = false;
   while (pos < glb.size()) {
-    if (glb.size() - pos < kChunkHeader) return Status::error("glb: truncated chunk header");
+    if (glb.size() - pos < kChunkHeader)
+      return Status::corrupt_input("glb: truncated chunk header");
     const std::uint32_t chunk_len = read_u32(glb.data() + pos);
     const std::uint32_t type = read_u32(glb.data() + pos + 4);
     pos += kChunkHeader;
-    if (chunk_len > glb.size() - pos) return Status::error("glb: chunk runs past the end");
+    if (chunk_len > glb.size() - pos) return Status::corrupt_input("glb: chunk runs past the end");
     const std::span<const std::uint8_t> data = glb.subspan(pos, chunk_len);
     pos += chunk_len;
     if (first) {
-      if (type != kChunkJson) return Status::error("glb: first chunk is not JSON");
+      if (type != kChunkJson) return Status::corrupt_input("glb: first chunk is not JSON");
       chunks.json = Json::parse(data.begin(), data.end(), nullptr, /*allow_exceptions=*/false);
       if (chunks.json.is_discarded() || !chunks.json.is_object())
-        return Status::error("glb: JSON chunk is not a JSON object");
+        return Status::corrupt_input("glb: JSON chunk is not a JSON object");
       first = false;
     } else if (type == kChunkBin && !have_bin) {
       chunks.bin = data;
       have_bin = true;
     }  // chunks of unknown types are ignored, as the GLB format asks
   }
-  if (first) return Status::error("glb: no JSON chunk");
+  if (first) return Status::corrupt_input("glb: no JSON chunk");
   return Status::ok();
 }
 
@@ -123,7 +126,7 @@ Status get_index(const Json& object, const char* key, std::size_t limit, std::si
   const auto it = object.find(key);
   if (it == object.end() || !it->is_number_integer() || it->get<std::int64_t>() < 0 ||
       std::uint64_t(it->get<std::int64_t>()) >= limit)
-    return Status::error("glb: " + what + " '" + key + "' missing or out of range");
+    return Status::corrupt_input("glb: " + what + " '" + key + "' missing or out of range");
   value = std::size_t(it->get<std::int64_t>());
   return Status::ok();
 }
@@ -163,19 +166,19 @@ double quantization_range(const BoundingBox& b) {
 
 Status check_options(const GlbOptions& o) {
   if (o.position_bits < 0 || o.position_bits > 30)
-    return Status::error("glb: position_bits must be 0 (automatic) or 1..30");
+    return Status::invalid_argument("glb: position_bits must be 0 (automatic) or 1..30");
   if (!std::isfinite(o.pixel_size) || o.pixel_size < 0.0)
-    return Status::error("glb: pixel_size must be finite and ≥ 0");
+    return Status::invalid_argument("glb: pixel_size must be finite and ≥ 0");
   if (o.normal_bits < 2 || o.normal_bits > 30)
-    return Status::error("glb: normal_bits must be 2..30");
+    return Status::invalid_argument("glb: normal_bits must be 2..30");
   if (o.scalar_bits < 1 || o.scalar_bits > 30)
-    return Status::error("glb: scalar_bits must be 1..30");
+    return Status::invalid_argument("glb: scalar_bits must be 1..30");
   if (o.compression_level < 0 || o.compression_level > 10)
-    return Status::error("glb: compression_level must be 0..10");
+    return Status::invalid_argument("glb: compression_level must be 0..10");
   if (o.scalar_range) {
     const auto [lo, hi] = *o.scalar_range;
     if (!std::isfinite(lo) || !std::isfinite(hi) || !(lo < hi))
-      return Status::error("glb: scalar_range must be finite with min < max");
+      return Status::invalid_argument("glb: scalar_range must be finite with min < max");
   }
   return Status::ok();
 }
@@ -188,24 +191,25 @@ bool all_finite(const std::vector<glm::vec3>& v) {
 
 Status check_mesh(const Mesh& m) {
   const std::size_t n = m.vertex_count();
-  if (n > kMaxIndex) return Status::error("glb: more than 2^31 - 1 vertices");
-  if (m.normals.size() != n) return Status::error("glb: normals and positions differ in count");
+  if (n > kMaxIndex) return Status::invalid_argument("glb: more than 2^31 - 1 vertices");
+  if (m.normals.size() != n)
+    return Status::invalid_argument("glb: normals and positions differ in count");
   if (!m.scalars.empty() && m.scalars.size() != n)
-    return Status::error("glb: scalars and positions differ in count");
+    return Status::invalid_argument("glb: scalars and positions differ in count");
   if (m.quads.size() % 4 != 0 || m.triangles.size() % 3 != 0)
-    return Status::error("glb: quads or triangles not a multiple of 4 or 3 indices");
+    return Status::invalid_argument("glb: quads or triangles not a multiple of 4 or 3 indices");
   if (m.quad_view.size() != m.quad_count() || m.triangle_view.size() != m.triangle_count())
-    return Status::error("glb: quad_view or triangle_view differ from the face counts");
+    return Status::invalid_argument("glb: quad_view or triangle_view differ from the face counts");
   if (2 * m.quad_count() + m.triangle_count() > kMaxIndex)
-    return Status::error("glb: more than 2^31 - 1 triangles");
+    return Status::invalid_argument("glb: more than 2^31 - 1 triangles");
   const auto in_range = [n](std::uint32_t i) { return i < n; };
   if (!std::all_of(m.quads.begin(), m.quads.end(), in_range) ||
       !std::all_of(m.triangles.begin(), m.triangles.end(), in_range))
-    return Status::error("glb: a face index is out of range");
+    return Status::invalid_argument("glb: a face index is out of range");
   if (!all_finite(m.positions) || !all_finite(m.normals))
-    return Status::error("glb: a position or normal is not finite");
+    return Status::invalid_argument("glb: a position or normal is not finite");
   if (!std::all_of(m.scalars.begin(), m.scalars.end(), [](float s) { return std::isfinite(s); }))
-    return Status::error("glb: a scalar is not finite");
+    return Status::invalid_argument("glb: a scalar is not finite");
   return Status::ok();
 }
 
@@ -253,7 +257,7 @@ Status build_draco_mesh(const Mesh& m, const std::vector<std::uint32_t>& tris,
   draco::PointAttribute* pos = add(draco::GeometryAttribute::POSITION, 3, draco::DT_FLOAT32, false);
   draco::PointAttribute* nrm = add(draco::GeometryAttribute::NORMAL, 3, draco::DT_FLOAT32, false);
   draco::PointAttribute* col = add(draco::GeometryAttribute::COLOR, 3, draco::DT_UINT8, true);
-  if (!pos || !nrm || !col) return Status::error("glb: Draco could not add an attribute");
+  if (!pos || !nrm || !col) return Status::internal("glb: Draco could not add an attribute");
   static_assert(sizeof(glm::vec3) == 3 * sizeof(float));
   pos->buffer()->Write(0, m.positions.data(), n * sizeof(glm::vec3));
   nrm->buffer()->Write(0, m.normals.data(), n * sizeof(glm::vec3));
@@ -278,7 +282,7 @@ Status build_draco_mesh(const Mesh& m, const std::vector<std::uint32_t>& tris,
   if (!m.scalars.empty()) {
     draco::PointAttribute* uv =
         add(draco::GeometryAttribute::TEX_COORD, 2, draco::DT_FLOAT32, false);
-    if (!uv) return Status::error("glb: Draco could not add an attribute");
+    if (!uv) return Status::internal("glb: Draco could not add an attribute");
     // GltfEncoder flips v (v ↦ 1 − v, draco::MeshUtils::FlipTextureUvValues) because Draco
     // keeps texture coordinates upside down relative to glTF: v = 1 here is v = 0 in the GLB.
     std::vector<std::array<float, 2>> uvs(n);
@@ -360,7 +364,7 @@ Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
   draco::GltfEncoder encoder;
   draco::EncoderBuffer buffer;
   if (const draco::Status s = encoder.EncodeToBuffer(dm, &buffer); !s.ok())
-    return Status::error("glb: Draco's glTF encoder failed: " + s.error_msg_string());
+    return Status::internal("glb: Draco's glTF encoder failed: " + s.error_msg_string());
 
   // Add what a client needs beyond glTF's attributes, in the place glTF reserves for
   // application data ("extras"), and name the writer (Draco writes "draco_decoder").
@@ -368,7 +372,7 @@ Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
   const std::span<const std::uint8_t> encoded(reinterpret_cast<const std::uint8_t*>(buffer.data()),
                                               buffer.size());
   if (Status s = parse_glb(encoded, chunks); !s)
-    return Status::error("glb: Draco's glTF encoder wrote an unreadable GLB: " + s.message());
+    return Status::internal("glb: Draco's glTF encoder wrote an unreadable GLB: " + s.message());
   Json& json = chunks.json;
   json["asset"]["generator"] = "ldimesh (Draco glTF encoder)";
   Json extras;
@@ -380,7 +384,7 @@ Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
   primitive_counts(json, result);
   const std::string text = json.dump();
   if (text.size() + chunks.bin.size() > std::numeric_limits<std::uint32_t>::max() - 64)
-    return Status::error("glb: the GLB would exceed 4 GiB (glTF's 32-bit length)");
+    return Status::invalid_argument("glb: the GLB would exceed 4 GiB (glTF's 32-bit length)");
   out = assemble_glb(text, chunks.bin);
   if (info) *info = result;
   return Status::ok();
@@ -392,48 +396,49 @@ Status decode_primitive(const Json& json, const Json& primitive, std::span<const
                         const std::vector<std::array<std::uint8_t, 3>>& view_colours) {
   if (const auto mode = primitive.find("mode");
       mode != primitive.end() && !(mode->is_number_integer() && mode->get<std::int64_t>() == 4))
-    return Status::error("glb: a primitive is not made of triangles");
+    return Status::corrupt_input("glb: a primitive is not made of triangles");
   const auto extensions = primitive.find("extensions");
   if (extensions == primitive.end() || !extensions->is_object() || !extensions->contains(kDraco) ||
       !(*extensions)[kDraco].is_object())
-    return Status::error("glb: a primitive is not Draco-compressed (unsupported)");
+    return Status::corrupt_input("glb: a primitive is not Draco-compressed (unsupported)");
   const Json& draco_ext = (*extensions)[kDraco];
   const Json* views = array_member(json, "bufferViews");
-  if (!views) return Status::error("glb: no bufferViews");
+  if (!views) return Status::corrupt_input("glb: no bufferViews");
   std::size_t view_index = 0, buffer_index = 0, length = 0, offset = 0;
   if (Status s = get_index(draco_ext, "bufferView", views->size(), view_index, kDraco); !s)
     return s;
   const Json& view = (*views)[view_index];
-  if (!view.is_object()) return Status::error("glb: a bufferView is not an object");
+  if (!view.is_object()) return Status::corrupt_input("glb: a bufferView is not an object");
   if (Status s = get_index(view, "buffer", 1, buffer_index, "bufferView"); !s)
-    return Status::error("glb: the Draco bufferView is not in the GLB's BIN chunk (buffer 0)");
+    return Status::corrupt_input(
+        "glb: the Draco bufferView is not in the GLB's BIN chunk (buffer 0)");
   if (Status s = get_index(view, "byteLength", bin.size() + 1, length, "bufferView"); !s) return s;
   if (view.contains("byteOffset")) {
     if (Status s = get_index(view, "byteOffset", bin.size() + 1, offset, "bufferView"); !s)
       return s;
   }
   if (length > bin.size() - offset)
-    return Status::error("glb: the Draco bufferView runs past the BIN chunk");
+    return Status::corrupt_input("glb: the Draco bufferView runs past the BIN chunk");
   const auto attributes = draco_ext.find("attributes");
   const auto gltf_attributes = primitive.find("attributes");
   if (attributes == draco_ext.end() || !attributes->is_object() ||
       gltf_attributes == primitive.end() || !gltf_attributes->is_object())
-    return Status::error("glb: a Draco primitive has no attribute map");
+    return Status::corrupt_input("glb: a Draco primitive has no attribute map");
 
   draco::DecoderBuffer buffer;
   buffer.Init(reinterpret_cast<const char*>(bin.data() + offset), length);
   draco::Decoder decoder;
   auto decoded = decoder.DecodeMeshFromBuffer(&buffer);
   if (!decoded.ok())
-    return Status::error("glb: Draco could not decode the mesh: " +
-                         decoded.status().error_msg_string());
+    return Status::corrupt_input("glb: Draco could not decode the mesh: " +
+                                 decoded.status().error_msg_string());
   const std::unique_ptr<draco::Mesh> dm = std::move(decoded).value();
-  if (!dm) return Status::error("glb: Draco returned no mesh");
+  if (!dm) return Status::corrupt_input("glb: Draco returned no mesh");
   const std::size_t n = dm->num_points(), t = dm->num_faces();
 
   // The glTF accessors must agree with the Draco data (KHR_draco_mesh_compression).
   const Json* accessors = array_member(json, "accessors");
-  if (!accessors) return Status::error("glb: no accessors");
+  if (!accessors) return Status::corrupt_input("glb: no accessors");
   const auto accessor_count = [&](const Json& index, std::size_t& count) {
     if (!index.is_number_integer() || index.get<std::int64_t>() < 0 ||
         std::uint64_t(index.get<std::int64_t>()) >= accessors->size())
@@ -447,12 +452,12 @@ Status decode_primitive(const Json& json, const Json& primitive, std::span<const
   for (const auto& [name, index] : gltf_attributes->items()) {
     std::size_t count = 0;
     if (!accessor_count(index, count) || count != n)
-      return Status::error("glb: accessor of " + name + " disagrees with the Draco data");
+      return Status::corrupt_input("glb: accessor of " + name + " disagrees with the Draco data");
   }
   if (const auto indices = primitive.find("indices"); indices != primitive.end()) {
     std::size_t count = 0;
     if (!accessor_count(*indices, count) || count != 3 * t)
-      return Status::error("glb: the index accessor disagrees with the Draco data");
+      return Status::corrupt_input("glb: the index accessor disagrees with the Draco data");
   }
 
   const auto attribute = [&](const char* name, int min_components) -> const draco::PointAttribute* {
@@ -467,12 +472,12 @@ Status decode_primitive(const Json& json, const Json& primitive, std::span<const
   const draco::PointAttribute* nrm = attribute("NORMAL", 3);
   const draco::PointAttribute* col = attribute("COLOR_0", 3);
   const draco::PointAttribute* tex = attribute("TEXCOORD_0", 2);
-  if (!pos || !nrm) return Status::error("glb: a Draco primitive lacks POSITION or NORMAL");
+  if (!pos || !nrm) return Status::corrupt_input("glb: a Draco primitive lacks POSITION or NORMAL");
   if (!out.positions.empty() && !out.scalars.empty() != (tex != nullptr))
-    return Status::error("glb: primitives disagree on TEXCOORD_0");
+    return Status::corrupt_input("glb: primitives disagree on TEXCOORD_0");
   const std::size_t base = out.positions.size();
   if (base + n > kMaxIndex || out.triangle_count() + t > kMaxIndex)
-    return Status::error("glb: more than 2^31 - 1 vertices or triangles");
+    return Status::corrupt_input("glb: more than 2^31 - 1 vertices or triangles");
 
   // Values of point i; a point mapped outside its attribute, or a value Draco cannot convert,
   // is an error rather than a read out of bounds.
@@ -492,29 +497,29 @@ Status decode_primitive(const Json& json, const Json& primitive, std::span<const
   for (std::size_t i = 0; i < n; ++i) {
     float p[3], q[3];
     if (!value(pos, i, p) || !value(nrm, i, q))
-      return Status::error("glb: Draco point " + std::to_string(i) + " has no value");
+      return Status::corrupt_input("glb: Draco point " + std::to_string(i) + " has no value");
     const glm::vec3 position(p[0], p[1], p[2]), normal(q[0], q[1], q[2]);
     const float len = glm::length(normal);
     if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]) ||
         !std::isfinite(len) || len <= 0.0f)
-      return Status::error("glb: a decoded position or normal is not finite or zero");
+      return Status::corrupt_input("glb: a decoded position or normal is not finite or zero");
     out.positions[base + i] = position;
     out.normals[base + i] = normal / len;
     if (tex) {
       float uv[3];
       if (!value(tex, i, uv) || !std::isfinite(uv[0]))
-        return Status::error("glb: a decoded TEXCOORD_0 is missing or not finite");
+        return Status::corrupt_input("glb: a decoded TEXCOORD_0 is missing or not finite");
       out.scalars[base + i] = uv[0];
     }
     if (col) {
       std::uint32_t key = 0;
       if (col->data_type() == draco::DT_UINT8) {
         std::uint8_t c[3];
-        if (!value(col, i, c)) return Status::error("glb: a decoded COLOR_0 is missing");
+        if (!value(col, i, c)) return Status::corrupt_input("glb: a decoded COLOR_0 is missing");
         key = std::uint32_t(c[0]) << 16 | std::uint32_t(c[1]) << 8 | c[2];
       } else {
         float c[3];
-        if (!value(col, i, c)) return Status::error("glb: a decoded COLOR_0 is missing");
+        if (!value(col, i, c)) return Status::corrupt_input("glb: a decoded COLOR_0 is missing");
         for (float x : c)
           key = key << 8 | std::uint32_t(std::lround(std::clamp(x, 0.0f, 1.0f) * 255.0f));
       }
@@ -527,7 +532,8 @@ Status decode_primitive(const Json& json, const Json& primitive, std::span<const
   for (std::size_t f = 0; f < t; ++f) {
     const draco::Mesh::Face& face = dm->face(draco::FaceIndex(std::uint32_t(f)));
     for (int c = 0; c < 3; ++c) {
-      if (face[c].value() >= n) return Status::error("glb: a decoded face index is out of range");
+      if (face[c].value() >= n)
+        return Status::corrupt_input("glb: a decoded face index is out of range");
       out.triangles.push_back(std::uint32_t(base + face[c].value()));
     }
     out.triangle_view.push_back(vertex_view[face[0].value()]);
@@ -544,12 +550,13 @@ Status decode_glb_unguarded(std::span<const std::uint8_t> glb, Mesh& out, GlbInf
   const auto asset = json.find("asset");
   if (asset == json.end() || !asset->is_object() || !asset->contains("version") ||
       (*asset)["version"] != "2.0")
-    return Status::error("glb: asset.version is not \"2.0\"");
+    return Status::corrupt_input("glb: asset.version is not \"2.0\"");
 
   Mesh mesh;
   GlbInfo result;
   const Json* meshes = array_member(json, "meshes");
-  if (json.contains("meshes") && !meshes) return Status::error("glb: meshes is not an array");
+  if (json.contains("meshes") && !meshes)
+    return Status::corrupt_input("glb: meshes is not an array");
   // View directions and scalar range from extras.ldimesh of the first mesh, when there.
   if (meshes && !meshes->empty() && (*meshes)[0].is_object()) {
     const Json& m0 = (*meshes)[0];
@@ -561,10 +568,10 @@ Status decode_glb_unguarded(std::span<const std::uint8_t> glb, Mesh& out, GlbInf
         for (const Json& d : *dirs) {
           if (!d.is_array() || d.size() != 3 ||
               !std::all_of(d.begin(), d.end(), [](const Json& x) { return x.is_number(); }))
-            return Status::error("glb: extras.ldimesh.view_dirs is malformed");
+            return Status::corrupt_input("glb: extras.ldimesh.view_dirs is malformed");
           const glm::dvec3 v(d[0].get<double>(), d[1].get<double>(), d[2].get<double>());
           if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z))
-            return Status::error("glb: extras.ldimesh.view_dirs is not finite");
+            return Status::corrupt_input("glb: extras.ldimesh.view_dirs is not finite");
           mesh.view_dirs.push_back(v);
         }
       }
@@ -582,9 +589,9 @@ Status decode_glb_unguarded(std::span<const std::uint8_t> glb, Mesh& out, GlbInf
   if (meshes) {
     for (const Json& m : *meshes) {
       const Json* primitives = m.is_object() ? array_member(m, "primitives") : nullptr;
-      if (!primitives) return Status::error("glb: a mesh has no primitives array");
+      if (!primitives) return Status::corrupt_input("glb: a mesh has no primitives array");
       for (const Json& p : *primitives) {
-        if (!p.is_object()) return Status::error("glb: a primitive is not an object");
+        if (!p.is_object()) return Status::corrupt_input("glb: a primitive is not an object");
         if (Status s = decode_primitive(json, p, chunks.bin, mesh, result, view_colours); !s)
           return s;
       }
@@ -660,9 +667,9 @@ Status encode_glb(const Mesh& mesh, const GlbOptions& options, std::vector<std::
   try {
     return encode_glb_unguarded(mesh, options, out, info);
   } catch (const std::bad_alloc&) {
-    return Status::error("glb: out of memory while encoding");
+    return Status::out_of_memory("glb: out of memory while encoding");
   } catch (const std::exception& e) {
-    return Status::error(std::string("glb: encoding failed: ") + e.what());
+    return Status::internal(std::string("glb: encoding failed: ") + e.what());
   }
 }
 
@@ -670,9 +677,9 @@ Status decode_glb(std::span<const std::uint8_t> glb, Mesh& out, GlbInfo* info) {
   try {
     return decode_glb_unguarded(glb, out, info);
   } catch (const std::bad_alloc&) {
-    return Status::error("glb: out of memory while decoding");
+    return Status::out_of_memory("glb: out of memory while decoding");
   } catch (const std::exception& e) {
-    return Status::error(std::string("glb: decoding failed: ") + e.what());
+    return Status::internal(std::string("glb: decoding failed: ") + e.what());
   }
 }
 

@@ -46,7 +46,7 @@ std::string server_message(std::string_view body) {
 Status parse_step(std::string body, RemoteStep& out) {
   RemoteStep step;
   if (Status s = metadata_from_json(body, step.metadata); !s)
-    return Status::error("the server sent bad " + s.message());
+    return Status::corrupt_input("the server sent bad " + s.message());
   step.json = std::move(body);
   out = std::move(step);
   return Status::ok();
@@ -67,8 +67,10 @@ Status parse_server_url(std::string_view url, ServerUrl& out) {
     std::transform(name.begin(), name.end(), name.begin(),
                    [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
     if (name == "https")
-      return Status::error("https is not served: the server speaks http (use an SSH tunnel)");
-    if (name != "http") return Status::error("'" + std::string(url) + "' is not an http:// URL");
+      return Status::invalid_argument(
+          "https is not served: the server speaks http (use an SSH tunnel)");
+    if (name != "http")
+      return Status::invalid_argument("'" + std::string(url) + "' is not an http:// URL");
     rest.remove_prefix(scheme + 3);
   }
   const std::size_t authority_end = std::min(rest.find_first_of("/?#"), rest.size());
@@ -77,11 +79,12 @@ Status parse_server_url(std::string_view url, ServerUrl& out) {
   if (authority.starts_with("[")) {
     const std::size_t close = authority.find(']');
     if (close == std::string_view::npos)
-      return Status::error("'" + std::string(url) + "': unclosed [ in the address");
+      return Status::invalid_argument("'" + std::string(url) + "': unclosed [ in the address");
     parsed.host = std::string(authority.substr(1, close - 1));
     const std::string_view after = authority.substr(close + 1);
     if (!after.empty()) {
-      if (after.front() != ':') return Status::error("'" + std::string(url) + "': bad address");
+      if (after.front() != ':')
+        return Status::invalid_argument("'" + std::string(url) + "': bad address");
       port_text = after.substr(1);
     }
   } else {
@@ -89,14 +92,15 @@ Status parse_server_url(std::string_view url, ServerUrl& out) {
     parsed.host = std::string(authority.substr(0, colon));
     if (colon != std::string_view::npos) port_text = authority.substr(colon + 1);
   }
-  if (parsed.host.empty()) return Status::error("'" + std::string(url) + "' names no host");
+  if (parsed.host.empty())
+    return Status::invalid_argument("'" + std::string(url) + "' names no host");
   if (!port_text.empty() || authority.ends_with(":")) {
     int port = 0;
     const auto [end, ec] =
         std::from_chars(port_text.data(), port_text.data() + port_text.size(), port);
     if (ec != std::errc() || end != port_text.data() + port_text.size() || port < 1 ||
         port > 65535) {
-      return Status::error("'" + std::string(url) + "': the port is not in 1..65535");
+      return Status::invalid_argument("'" + std::string(url) + "': the port is not in 1..65535");
     }
     parsed.port = port;
   }
@@ -145,34 +149,34 @@ Status HttpClient::Impl::transport_error(httplib::Error error, const std::string
       hints.ai_socktype = SOCK_STREAM;
       addrinfo* found = nullptr;
       if (::getaddrinfo(url.host.c_str(), nullptr, &hints, &found) != 0)
-        return Status::error("cannot connect to " + base + ": unknown host '" + url.host + "'");
+        return Status::io("cannot connect to " + base + ": unknown host '" + url.host + "'");
       ::freeaddrinfo(found);
-      return Status::error("cannot connect to " + base +
-                           ": connection refused (is the server running? is the SSH tunnel up?)");
+      return Status::io("cannot connect to " + base +
+                        ": connection refused (is the server running? is the SSH tunnel up?)");
     }
     case httplib::Error::ConnectionTimeout:
-      return Status::error("cannot connect to " + base + ": timed out after " +
-                           std::to_string(options.connect_timeout.count()) + " s");
+      return Status::io("cannot connect to " + base + ": timed out after " +
+                        std::to_string(options.connect_timeout.count()) + " s");
     case httplib::Error::Read:
-      return Status::error(base + ": the connection broke or timed out while reading " + what);
+      return Status::io(base + ": the connection broke or timed out while reading " + what);
     case httplib::Error::Write:
-      return Status::error(base + ": the connection broke while asking for " + what);
+      return Status::io(base + ": the connection broke while asking for " + what);
     case httplib::Error::Canceled:
-      return Status::error(base + ": " + what + ": interrupted");
+      return Status::io(base + ": " + what + ": interrupted");
     default:
-      return Status::error(base + ": " + what + ": " + httplib::to_string(error));
+      return Status::io(base + ": " + what + ": " + httplib::to_string(error));
   }
 }
 
 Status HttpClient::Impl::http_error(int status, const std::string& body, const std::string& what) {
   if (status == 401) {
-    return Status::error(url.token.empty()
-                             ? "the server wants a token: use the URL it printed (…/?token=…)"
-                             : "the server refused the token (use the one in the URL it printed)");
+    return Status::io(url.token.empty()
+                          ? "the server wants a token: use the URL it printed (…/?token=…)"
+                          : "the server refused the token (use the one in the URL it printed)");
   }
   const std::string said = server_message(body);
-  return Status::error(url.base() + ": " + what + ": HTTP " + std::to_string(status) +
-                       (said.empty() ? "" : " (" + said + ")"));
+  return Status::io(url.base() + ": " + what + ": HTTP " + std::to_string(status) +
+                    (said.empty() ? "" : " (" + said + ")"));
 }
 
 Status HttpClient::Impl::get(const std::string& path, const std::string& what, std::string& body,
@@ -206,7 +210,8 @@ Status HttpClient::Impl::not_found(std::uint64_t step) {
       kept =
           "it keeps steps " + std::to_string(steps.front()) + " to " + std::to_string(steps.back());
   }
-  return Status::error("step " + std::to_string(step) + " is not on the server (" + kept + ")");
+  return Status::invalid_argument("step " + std::to_string(step) + " is not on the server (" +
+                                  kept + ")");
 }
 
 HttpClient::HttpClient(std::string_view url, std::string token, HttpClientOptions options) {
@@ -234,7 +239,7 @@ Status HttpClient::list_steps(std::vector<RemoteStep>& out) {
   if (status != 200) return impl_->http_error(status, body, what);
   const auto j = nlohmann::ordered_json::parse(body, nullptr, /*allow_exceptions=*/false);
   if (!j.is_object() || !j.contains("steps") || !j["steps"].is_array())
-    return Status::error(impl_->url.base() + ": the list of steps is not {\"steps\": […]}");
+    return Status::corrupt_input(impl_->url.base() + ": the list of steps is not {\"steps\": […]}");
   std::vector<RemoteStep> steps;
   for (const auto& s : j["steps"]) {
     RemoteStep step;
@@ -250,7 +255,7 @@ Status HttpClient::latest(RemoteStep& out) {
   int status = 0;
   const std::string what = "the latest step";
   if (Status s = impl_->get("/api/v1/latest", what, body, status); !s) return s;
-  if (status == 404) return Status::error("the server has no step yet");
+  if (status == 404) return Status::io("the server has no step yet");
   if (status != 200) return impl_->http_error(status, body, what);
   return parse_step(std::move(body), out);
 }
@@ -303,22 +308,23 @@ Status HttpClient::mesh(std::uint64_t step, std::vector<std::uint8_t>& out,
         return true;
       });
   if (too_large) {
-    return Status::error(what + ": corrupt download: larger than the limit of " +
-                         std::to_string(limit) + " bytes");
+    return Status::corrupt_input(what + ": corrupt download: larger than the limit of " +
+                                 std::to_string(limit) + " bytes");
   }
   if (!result) return impl_->transport_error(result.error(), "the mesh of " + what);
   if (status == 404) return impl_->not_found(step);
   if (status != 200) return impl_->http_error(status, error_body, "the mesh of " + what);
   if (content_length && *content_length != glb.size()) {
-    return Status::error(what + ": corrupt download: " + std::to_string(glb.size()) +
-                         " bytes, the Content-Length says " + std::to_string(*content_length));
+    return Status::corrupt_input(what + ": corrupt download: " + std::to_string(glb.size()) +
+                                 " bytes, the Content-Length says " +
+                                 std::to_string(*content_length));
   }
   if (expected_bytes && *expected_bytes != glb.size()) {
-    return Status::error(what + ": corrupt download: " + std::to_string(glb.size()) +
-                         " bytes, the metadata says " + std::to_string(*expected_bytes));
+    return Status::corrupt_input(what + ": corrupt download: " + std::to_string(glb.size()) +
+                                 " bytes, the metadata says " + std::to_string(*expected_bytes));
   }
   if (Status s = check_glb_header(glb); !s)
-    return Status::error(what + ": corrupt download: " + s.message());
+    return Status::corrupt_input(what + ": corrupt download: " + s.message());
   out = std::move(glb);
   return Status::ok();
 }

@@ -406,18 +406,18 @@ HttpServer::~HttpServer() {
 Status HttpServer::start() {
   Impl& m = *impl_;
   const HttpServerOptions& o = m.options;
-  if (m.server) return Status::error("the HTTP server is already running");
-  if (o.threads < 2) return Status::error("the HTTP server needs at least 2 threads");
+  if (m.server) return Status::invalid_argument("the HTTP server is already running");
+  if (o.threads < 2) return Status::invalid_argument("the HTTP server needs at least 2 threads");
   if (o.max_streams < 1 || o.max_streams >= o.threads)
-    return Status::error("max_streams must be at least 1 and less than threads");
+    return Status::invalid_argument("max_streams must be at least 1 and less than threads");
   if (o.max_request_bytes == 0 || o.read_timeout.count() <= 0 || o.write_timeout.count() <= 0 ||
       o.keep_alive_timeout.count() <= 0 || o.event_keep_alive.count() <= 0) {
-    return Status::error("the request size limit and the timeouts must be positive");
+    return Status::invalid_argument("the request size limit and the timeouts must be positive");
   }
   if (o.port < 0 || o.port > 65535)
-    return Status::error("port " + std::to_string(o.port) + " is not in 0..65535");
+    return Status::invalid_argument("port " + std::to_string(o.port) + " is not in 0..65535");
   if (!o.token.empty() && !is_url_safe_token(o.token))
-    return Status::error("the token may hold only letters, digits and -._~");
+    return Status::invalid_argument("the token may hold only letters, digits and -._~");
   m.token = o.token.empty() ? random_token() : o.token;
   for (const auto& [dir, root, what] :
        {std::tuple{&o.static_dir, &m.static_root, "viewer directory"},
@@ -427,7 +427,8 @@ Status HttpServer::start() {
     std::error_code ec;
     *root = fs::canonical(*dir, ec);
     if (ec || !fs::is_directory(*root, ec))
-      return Status::error(std::string(what) + " '" + dir->string() + "' is not a directory");
+      return Status::invalid_argument(std::string(what) + " '" + dir->string() +
+                                      "' is not a directory");
   }
 
   // httplib::Server's constructor ignores SIGPIPE for the whole process; the host's handler
@@ -472,8 +473,8 @@ Status HttpServer::start() {
       why = "permission denied (ports below 1024 need privileges)";
     else
       why = err ? std::strerror(err) : "the address cannot be resolved or bound";
-    return Status::error("cannot listen on " + o.bind_address + ":" + std::to_string(o.port) +
-                         ": " + why);
+    return Status::io("cannot listen on " + o.bind_address + ":" + std::to_string(o.port) + ": " +
+                      why);
   }
 
   m.server = std::move(server);
@@ -496,7 +497,7 @@ Status HttpServer::start() {
   }
   if (!m.server->is_running()) {
     stop();
-    return Status::error("the HTTP server did not start listening");
+    return Status::io("the HTTP server did not start listening");
   }
   return Status::ok();
 }

@@ -66,21 +66,21 @@ Status open_envelope(std::span<const std::uint8_t> in, std::size_t views,
   std::size_t at = 0;
   std::uint32_t magic = 0, flags = 0, count = 0;
   if (!get_u32(in, at, magic) || !get_u32(in, at, flags) || !get_u32(in, at, count))
-    return Status::error("reduction: truncated message");
-  if (magic != kEnvelopeMagic) return Status::error("reduction: not a fragment message");
+    return Status::corrupt_input("reduction: truncated message");
+  if (magic != kEnvelopeMagic) return Status::corrupt_input("reduction: not a fragment message");
   if (count != views)
-    return Status::error("reduction: message holds " + std::to_string(count) + " views, expected " +
-                         std::to_string(views));
+    return Status::corrupt_input("reduction: message holds " + std::to_string(count) +
+                                 " views, expected " + std::to_string(views));
   upstream_error = (flags & kUpstreamError) != 0;
   parts.clear();
   for (std::uint32_t k = 0; k < count; ++k) {
     std::uint64_t size = 0;
     if (!get_u64(in, at, size) || size > in.size() - at)
-      return Status::error("reduction: truncated message");
+      return Status::corrupt_input("reduction: truncated message");
     parts.push_back(in.subspan(at, std::size_t(size)));
     at += std::size_t(size);
   }
-  if (at != in.size()) return Status::error("reduction: trailing bytes in message");
+  if (at != in.size()) return Status::corrupt_input("reduction: trailing bytes in message");
   return Status::ok();
 }
 
@@ -106,7 +106,7 @@ Status check_message(std::span<const std::uint8_t> in, const std::vector<LdiFrag
     const LdiFragment& own = fragments[v];
     if (shape.view != own.view || shape.pixel_count != own.pixel_count ||
         shape.depth_lo != own.depth_lo || shape.depth_hi != own.depth_hi)
-      return Status::error("reduction: merge_fragments: fragments of different views");
+      return Status::corrupt_input("reduction: merge_fragments: fragments of different views");
   }
   return Status::ok();
 }
@@ -136,7 +136,7 @@ void merge_message(std::span<const std::uint8_t> message, std::vector<LdiFragmen
       fragments[v] = merge_fragments(pair, tolerance);
     }
   } catch (const std::invalid_argument& e) {  // ranks disagree about the views
-    status = Status::error(std::string("reduction: ") + e.what());
+    status = Status::invalid_argument(std::string("reduction: ") + e.what());
   }
   stats.merge_seconds += seconds_since(t);
 }
@@ -177,7 +177,7 @@ Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragm
       }
     });
     for (const std::string& error : errors)
-      if (!error.empty()) status = Status::error(error);
+      if (!error.empty()) status = Status::internal(error);
     stats.encode_seconds += seconds_since(t);
   }
 
@@ -192,7 +192,7 @@ Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragm
         // Still send a (small) error message so that the parent does not wait forever.
         const std::vector<std::uint8_t> failed = pack({}, encoding, true);
         MPI_Send(failed.data(), int(failed.size()), MPI_BYTE, parent, kTag, comm);
-        status = Status::error("reduction: a message over 2 GiB is not supported");
+        status = Status::invalid_argument("reduction: a message over 2 GiB is not supported");
       } else {
         MPI_Send(message.data(), int(message.size()), MPI_BYTE, parent, kTag, comm);
         stats.bytes_sent += message.size();
@@ -228,7 +228,7 @@ Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragm
   }
   stats.wall_seconds = seconds_since(start);
   if (status && upstream_error && rank == root)
-    status = Status::error("reduction: a fragment failed to decode on another rank");
+    status = Status::other_rank("reduction: a fragment failed to decode on another rank");
   return status;
 }
 
@@ -240,7 +240,7 @@ Status finish_merge(PendingMerge& pending, std::vector<LdiFragment>& fragments,
     merge_message(message, fragments, pending.tolerance, status, upstream_error, stats);
   pending.messages.clear();
   if (status && upstream_error)
-    status = Status::error("reduction: a fragment failed to decode on another rank");
+    status = Status::other_rank("reduction: a fragment failed to decode on another rank");
   return status;
 }
 

@@ -63,8 +63,8 @@ bool read_double(const json& j, const char* key, double& out, std::string& error
 
 Status parse_metadata(const json& j, StepMetadata& m) {
   std::string error;
-  if (!j.is_object()) return Status::error("metadata: not a JSON object");
-  if (!j.contains("step")) return Status::error("metadata: no \"step\"");
+  if (!j.is_object()) return Status::corrupt_input("metadata: not a JSON object");
+  if (!j.contains("step")) return Status::corrupt_input("metadata: no \"step\"");
   std::uint64_t resolution = 0;
   if (!read_u64(j, "step", m.step, error) || !read_double(j, "time", m.time, error) ||
       !read_u64(j, "triangles", m.triangles, error) ||
@@ -73,48 +73,49 @@ Status parse_metadata(const json& j, StepMetadata& m) {
       !read_u64(j, "resolution", resolution, error) || !read_double(j, "r", m.r, error) ||
       !read_u64(j, "skipped_steps", m.skipped_steps, error) ||
       !read_u64(j, "nonfinite_values", m.nonfinite_values, error)) {
-    return Status::error("metadata: " + error);
+    return Status::corrupt_input("metadata: " + error);
   }
   if (resolution > std::numeric_limits<std::uint32_t>::max())
-    return Status::error("metadata: \"resolution\" is out of range");
+    return Status::corrupt_input("metadata: \"resolution\" is out of range");
   m.resolution = static_cast<std::uint32_t>(resolution);
 
   if (const auto it = j.find("isovalues"); it != j.end()) {
-    if (!it->is_array()) return Status::error("metadata: \"isovalues\" is not an array");
+    if (!it->is_array()) return Status::corrupt_input("metadata: \"isovalues\" is not an array");
     for (const json& v : *it) {
       double x = 0.0;
-      if (!read_number(v, x)) return Status::error("metadata: an isovalue is not a number");
+      if (!read_number(v, x)) return Status::corrupt_input("metadata: an isovalue is not a number");
       m.isovalues.push_back(x);
     }
   }
   if (const auto it = j.find("views"); it != j.end()) {
-    if (!it->is_array()) return Status::error("metadata: \"views\" is not an array");
+    if (!it->is_array()) return Status::corrupt_input("metadata: \"views\" is not an array");
     for (const json& v : *it) {
       std::array<double, 3> d{};
       if (!v.is_array() || v.size() != 3 || !read_number(v[0], d[0]) || !read_number(v[1], d[1]) ||
           !read_number(v[2], d[2])) {
-        return Status::error("metadata: a view is not an array of three numbers");
+        return Status::corrupt_input("metadata: a view is not an array of three numbers");
       }
       m.views.push_back(d);
     }
   }
   if (const auto it = j.find("scalar"); it != j.end() && !it->is_null()) {
     ScalarRange s;
-    if (!it->is_object()) return Status::error("metadata: \"scalar\" is not an object");
+    if (!it->is_object()) return Status::corrupt_input("metadata: \"scalar\" is not an object");
     if (const auto name = it->find("name"); name != it->end()) {
-      if (!name->is_string()) return Status::error("metadata: \"scalar.name\" is not a string");
+      if (!name->is_string())
+        return Status::corrupt_input("metadata: \"scalar.name\" is not a string");
       s.name = name->get<std::string>();
     }
     if (!read_double(*it, "min", s.min, error) || !read_double(*it, "max", s.max, error))
-      return Status::error("metadata: scalar: " + error);
+      return Status::corrupt_input("metadata: scalar: " + error);
     m.scalar = std::move(s);
   }
   if (const auto it = j.find("seconds"); it != j.end()) {
-    if (!it->is_object()) return Status::error("metadata: \"seconds\" is not an object");
+    if (!it->is_object()) return Status::corrupt_input("metadata: \"seconds\" is not an object");
     for (const auto& [stage, value] : it->items()) {
       double x = 0.0;
       if (!read_number(value, x))
-        return Status::error("metadata: \"seconds." + stage + "\" is not a number");
+        return Status::corrupt_input("metadata: \"seconds." + stage + "\" is not a number");
       m.seconds[stage] = x;
     }
   }
@@ -125,16 +126,15 @@ Status parse_metadata(const json& j, StepMetadata& m) {
 // describes this step and these bytes.
 Status check_snapshot(const Snapshot& s) {
   const std::string what = "step " + std::to_string(s.step) + ": ";
-  if (!s.glb) return Status::error(what + "no GLB");
-  if (Status st = check_glb_header(*s.glb); !st) return Status::error(what + st.message());
+  if (!s.glb) return Status::corrupt_input(what + "no GLB");
+  if (Status st = check_glb_header(*s.glb); !st) return st.prefixed(what);
   StepMetadata m;
-  if (Status st = metadata_from_json(s.metadata_json, m); !st)
-    return Status::error(what + st.message());
+  if (Status st = metadata_from_json(s.metadata_json, m); !st) return st.prefixed(what);
   if (m.step != s.step)
-    return Status::error(what + "the metadata is of step " + std::to_string(m.step));
+    return Status::corrupt_input(what + "the metadata is of step " + std::to_string(m.step));
   if (m.bytes != 0 && m.bytes != s.glb->size()) {
-    return Status::error(what + "the metadata says " + std::to_string(m.bytes) +
-                         " GLB bytes, the GLB has " + std::to_string(s.glb->size()));
+    return Status::corrupt_input(what + "the metadata says " + std::to_string(m.bytes) +
+                                 " GLB bytes, the GLB has " + std::to_string(s.glb->size()));
   }
   return Status::ok();
 }
@@ -147,36 +147,36 @@ Status write_atomically(const fs::path& path, const void* bytes, std::size_t siz
       path.parent_path() / ("." + path.filename().string() + ".tmp." + std::to_string(::getpid()) +
                             "." + std::to_string(counter++));
   std::FILE* f = std::fopen(tmp.c_str(), "wb");
-  if (!f) return Status::error("cannot write '" + path.string() + "': " + std::strerror(errno));
+  if (!f) return Status::io("cannot write '" + path.string() + "': " + std::strerror(errno));
   const bool written = std::fwrite(bytes, 1, size, f) == size;
   const int write_errno = errno;
   const bool closed = std::fclose(f) == 0;
   if (!written || !closed) {
     std::error_code ignored;
     fs::remove(tmp, ignored);
-    return Status::error("cannot write '" + path.string() +
-                         "': " + std::strerror(written ? errno : write_errno));
+    return Status::io("cannot write '" + path.string() +
+                      "': " + std::strerror(written ? errno : write_errno));
   }
   std::error_code ec;
   fs::rename(tmp, path, ec);
   if (ec) {
     std::error_code ignored;
     fs::remove(tmp, ignored);
-    return Status::error("cannot write '" + path.string() + "': " + ec.message());
+    return Status::io("cannot write '" + path.string() + "': " + ec.message());
   }
   return Status::ok();
 }
 
 Status read_file(const fs::path& path, std::vector<std::uint8_t>& out) {
   std::ifstream in(path, std::ios::binary);
-  if (!in) return Status::error("cannot read '" + path.string() + "'");
+  if (!in) return Status::io("cannot read '" + path.string() + "'");
   in.seekg(0, std::ios::end);
   const std::streamoff size = in.tellg();
-  if (size < 0) return Status::error("cannot read '" + path.string() + "'");
+  if (size < 0) return Status::io("cannot read '" + path.string() + "'");
   in.seekg(0);
   out.resize(static_cast<std::size_t>(size));
   if (!in.read(reinterpret_cast<char*>(out.data()), size))
-    return Status::error("cannot read '" + path.string() + "' (changed while reading?)");
+    return Status::io("cannot read '" + path.string() + "' (changed while reading?)");
   return Status::ok();
 }
 
@@ -245,28 +245,29 @@ std::string metadata_to_json(const StepMetadata& m) {
 Status metadata_from_json(std::string_view text, StepMetadata& out) {
   try {
     const json j = json::parse(text, nullptr, /*allow_exceptions=*/false);
-    if (j.is_discarded()) return Status::error("metadata: not valid JSON");
+    if (j.is_discarded()) return Status::corrupt_input("metadata: not valid JSON");
     StepMetadata m;
     if (Status s = parse_metadata(j, m); !s) return s;
     out = std::move(m);
     return Status::ok();
   } catch (const std::exception& e) {  // allocation failure, a number nlohmann cannot hold
-    return Status::error(std::string("metadata: ") + e.what());
+    return Status::corrupt_input(std::string("metadata: ") + e.what());
   }
 }
 
 Status check_glb_header(std::span<const std::uint8_t> bytes) {
   if (bytes.size() < 12) {
-    return Status::error("not a glTF binary: " + std::to_string(bytes.size()) +
-                         " bytes, shorter than the 12-byte header");
+    return Status::corrupt_input("not a glTF binary: " + std::to_string(bytes.size()) +
+                                 " bytes, shorter than the 12-byte header");
   }
   if (std::memcmp(bytes.data(), "glTF", 4) != 0)
-    return Status::error("not a glTF binary: no \"glTF\" magic");
+    return Status::corrupt_input("not a glTF binary: no \"glTF\" magic");
   if (const std::uint32_t version = read_le32(bytes.data() + 4); version != 2)
-    return Status::error("not a glTF binary: version " + std::to_string(version) + ", not 2");
+    return Status::corrupt_input("not a glTF binary: version " + std::to_string(version) +
+                                 ", not 2");
   if (const std::uint32_t length = read_le32(bytes.data() + 8); length != bytes.size()) {
-    return Status::error("not a glTF binary: the header says " + std::to_string(length) +
-                         " bytes, there are " + std::to_string(bytes.size()));
+    return Status::corrupt_input("not a glTF binary: the header says " + std::to_string(length) +
+                                 " bytes, there are " + std::to_string(bytes.size()));
   }
   return Status::ok();
 }
@@ -317,9 +318,9 @@ Status SnapshotStore::publish(Snapshot snapshot) {
   {
     std::lock_guard lock(mutex_);
     if (!snapshots_.empty() && entry->step <= snapshots_.back()->step) {
-      return Status::error("step " + std::to_string(entry->step) +
-                           " is not newer than the latest published step " +
-                           std::to_string(snapshots_.back()->step));
+      return Status::invalid_argument("step " + std::to_string(entry->step) +
+                                      " is not newer than the latest published step " +
+                                      std::to_string(snapshots_.back()->step));
     }
     snapshots_.push_back(std::move(entry));
     memory_bytes_ += size;
@@ -391,10 +392,11 @@ std::string step_file_stem(std::uint64_t step) {
 }
 
 Status write_step_files(const fs::path& dir, const Snapshot& snapshot) {
-  if (!snapshot.glb) return Status::error("step " + std::to_string(snapshot.step) + ": no GLB");
+  if (!snapshot.glb)
+    return Status::invalid_argument("step " + std::to_string(snapshot.step) + ": no GLB");
   std::error_code ec;
   fs::create_directories(dir, ec);
-  if (ec) return Status::error("cannot create folder '" + dir.string() + "': " + ec.message());
+  if (ec) return Status::io("cannot create folder '" + dir.string() + "': " + ec.message());
   const std::string stem = step_file_stem(snapshot.step);
   // The .json last: its presence tells DirectoryWatcher that the .glb is complete.
   if (Status s =
@@ -437,14 +439,14 @@ Status DirectoryWatcher::scan(SnapshotStore& store, std::size_t* loaded) {
   std::map<std::uint64_t, Found> found;
   std::error_code ec;
   fs::directory_iterator it(dir_, ec);
-  if (ec) return Status::error("cannot list '" + dir_.string() + "': " + ec.message());
+  if (ec) return Status::io("cannot list '" + dir_.string() + "': " + ec.message());
   for (; it != fs::directory_iterator(); it.increment(ec)) {
     bool is_glb = false;
     const auto step = parse_step_file_name(it->path().filename().string(), is_glb);
     if (!step) continue;  // other files, the writer's hidden temporaries
     (is_glb ? found[*step].glb : found[*step].json) = true;
   }
-  if (ec) return Status::error("cannot list '" + dir_.string() + "': " + ec.message());
+  if (ec) return Status::io("cannot list '" + dir_.string() + "': " + ec.message());
 
   const auto newest = store.latest();
   std::vector<Snapshot> picked;  // newest first

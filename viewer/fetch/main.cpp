@@ -108,7 +108,7 @@ ldimesh::Status fetch_step(ldimesh::HttpClient& client, const ldimesh::RemoteSte
   ldimesh::Mesh mesh;
   if (args.ply) {
     if (ldimesh::Status s = ldimesh::decode_glb(glb, mesh); !s)
-      return ldimesh::Status::error("step " + std::to_string(m.step) + ": " + s.message());
+      return s.prefixed("step " + std::to_string(m.step) + ": ");
   }
   ldimesh::Snapshot snapshot;
   snapshot.step = m.step;

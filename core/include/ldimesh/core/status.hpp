@@ -1,25 +1,134 @@
-// Results that carry a message (after Draco's Status): no silent failure.
+// The error model (after Draco's and Abseil's Status): every fallible operation on data, files,
+// messages and the network returns a Status — a code saying what kind of thing went wrong and a
+// message saying which — or a StatusOr<T> holding either the value or that Status. Exceptions
+// are for programming errors and for core's argument checks; one guard at each API boundary
+// (the C API, the adaptor's worker, the CLI) turns them into a Status, so nothing escapes to the
+// solver.
+//
+// Threads: Status and StatusOr are values; nothing here is shared.
 #pragma once
 
+#include <cassert>
+#include <optional>
 #include <string>
+#include <string_view>
 #include <utility>
 
 namespace ldimesh {
 
+// What went wrong, by cause. The C API's codes follow from these (ldimesh.h).
+enum class StatusCode {
+  ok = 0,
+  invalid_argument,  // the caller passed something malformed (NULL, wrong sizes, bad values)
+  invalid_options,   // the adaptor's options document (the message names the key)
+  corrupt_input,     // data that fails validation: a file, a message, an encoded buffer
+  io,                // a file, socket or MPI call failed
+  out_of_memory,     // an allocation failed
+  other_rank,        // a collective step failed on another rank (its message is there)
+  internal,          // a bug: an unexpected exception or state
+};
+
+// "invalid argument", "corrupt input", …
+const char* to_string(StatusCode code);
+
 class Status {
  public:
   static Status ok() { return Status(); }
-  static Status error(std::string message) { return Status(std::move(message)); }
+  static Status error(StatusCode code, std::string message) {
+    assert(code != StatusCode::ok);
+    return Status(code, std::move(message));
+  }
+  static Status invalid_argument(std::string m) {
+    return error(StatusCode::invalid_argument, std::move(m));
+  }
+  static Status invalid_options(std::string m) {
+    return error(StatusCode::invalid_options, std::move(m));
+  }
+  static Status corrupt_input(std::string m) {
+    return error(StatusCode::corrupt_input, std::move(m));
+  }
+  static Status io(std::string m) { return error(StatusCode::io, std::move(m)); }
+  static Status out_of_memory(std::string m) {
+    return error(StatusCode::out_of_memory, std::move(m));
+  }
+  static Status other_rank(std::string m) { return error(StatusCode::other_rank, std::move(m)); }
+  static Status internal(std::string m) { return error(StatusCode::internal, std::move(m)); }
 
-  bool is_ok() const { return !failed_; }
-  explicit operator bool() const { return !failed_; }
+  bool is_ok() const { return code_ == StatusCode::ok; }
+  explicit operator bool() const { return is_ok(); }
+  StatusCode code() const { return code_; }
   const std::string& message() const { return message_; }
+
+  // The same code with `prefix` before the message ("reading 'a.glb': " + message).
+  Status prefixed(std::string_view prefix) const {
+    return is_ok() ? *this : Status(code_, std::string(prefix) + message_);
+  }
 
  private:
   Status() = default;
-  explicit Status(std::string message) : failed_(true), message_(std::move(message)) {}
-  bool failed_ = false;
+  Status(StatusCode code, std::string message) : code_(code), message_(std::move(message)) {}
+  StatusCode code_ = StatusCode::ok;
   std::string message_;
 };
 
+// A value or the Status that says why there is none.
+template <class T>
+class StatusOr {
+ public:
+  StatusOr(T value) : value_(std::move(value)) {}         // NOLINT: implicit, as Abseil's
+  StatusOr(Status status) : status_(std::move(status)) {  // NOLINT
+    assert(!status_.is_ok() && "StatusOr from an ok Status holds no value");
+    if (status_.is_ok()) status_ = Status::internal("StatusOr made from an ok Status");
+  }
+
+  bool is_ok() const { return value_.has_value(); }
+  explicit operator bool() const { return is_ok(); }
+  const Status& status() const { return status_; }
+
+  // The value; only where is_ok().
+  T& value() & { return *value_; }
+  const T& value() const& { return *value_; }
+  T&& value() && { return std::move(*value_); }
+  T* operator->() { return &*value_; }
+  const T* operator->() const { return &*value_; }
+  T& operator*() & { return *value_; }
+  const T& operator*() const& { return *value_; }
+
+ private:
+  Status status_ = Status::ok();
+  std::optional<T> value_;
+};
+
+// The Status of the exception being handled (call inside a catch block): std::bad_alloc → out
+// of memory, std::invalid_argument → invalid argument, anything else → internal. `where` leads
+// the message ("ldimesh_execute: ").
+Status status_from_current_exception(std::string_view where);
+
+// The guard at an API boundary: runs body() (which returns a Status) and turns any exception
+// into a Status. Nothing escapes.
+template <class Body>
+Status guard(std::string_view where, Body&& body) noexcept {
+  try {
+    return body();
+  } catch (...) {
+    return status_from_current_exception(where);
+  }
+}
+
 }  // namespace ldimesh
+
+// Return the Status of `expr` from the enclosing function where it is not ok.
+#define LDIMESH_RETURN_IF_ERROR(expr)                                         \
+  do {                                                                        \
+    if (::ldimesh::Status ldimesh_status_ = (expr); !ldimesh_status_.is_ok()) \
+      return ldimesh_status_;                                                 \
+  } while (0)
+
+#define LDIMESH_STATUS_CONCAT_INNER_(a, b) a##b
+#define LDIMESH_STATUS_CONCAT_(a, b) LDIMESH_STATUS_CONCAT_INNER_(a, b)
+// `lhs = value of expr` (a StatusOr), or return its Status from the enclosing function.
+#define LDIMESH_ASSIGN_OR_RETURN(lhs, expr)                        \
+  auto LDIMESH_STATUS_CONCAT_(ldimesh_or_, __LINE__) = (expr);     \
+  if (!LDIMESH_STATUS_CONCAT_(ldimesh_or_, __LINE__).is_ok())      \
+    return LDIMESH_STATUS_CONCAT_(ldimesh_or_, __LINE__).status(); \
+  lhs = std::move(LDIMESH_STATUS_CONCAT_(ldimesh_or_, __LINE__)).value()
