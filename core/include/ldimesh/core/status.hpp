@@ -1,6 +1,6 @@
 // The error model (after Draco's and Abseil's Status): every fallible operation on data, files,
 // messages and the network returns a Status — a code saying what kind of thing went wrong and a
-// message saying which — or a StatusOr<T> holding either the value or that Status. Exceptions
+// message saying which. Exceptions
 // are for programming errors and for core's argument checks; one guard at each API boundary
 // (the C API, the adaptor's worker, the CLI) turns them into a Status, so nothing escapes to the
 // solver.
@@ -71,34 +71,6 @@ class Status {
   std::string message_;
 };
 
-// A value or the Status that says why there is none.
-template <class T>
-class StatusOr {
- public:
-  StatusOr(T value) : value_(std::move(value)) {}         // NOLINT: implicit, as Abseil's
-  StatusOr(Status status) : status_(std::move(status)) {  // NOLINT
-    assert(!status_.is_ok() && "StatusOr from an ok Status holds no value");
-    if (status_.is_ok()) status_ = Status::internal("StatusOr made from an ok Status");
-  }
-
-  bool is_ok() const { return value_.has_value(); }
-  explicit operator bool() const { return is_ok(); }
-  const Status& status() const { return status_; }
-
-  // The value; only where is_ok().
-  T& value() & { return *value_; }
-  const T& value() const& { return *value_; }
-  T&& value() && { return std::move(*value_); }
-  T* operator->() { return &*value_; }
-  const T* operator->() const { return &*value_; }
-  T& operator*() & { return *value_; }
-  const T& operator*() const& { return *value_; }
-
- private:
-  Status status_ = Status::ok();
-  std::optional<T> value_;
-};
-
 // The Status of the exception being handled (call inside a catch block): std::bad_alloc → out
 // of memory, std::invalid_argument → invalid argument, anything else → internal. `where` leads
 // the message ("ldimesh_execute: ").
@@ -123,12 +95,3 @@ Status guard(std::string_view where, Body&& body) noexcept {
     if (::ldimesh::Status ldimesh_status_ = (expr); !ldimesh_status_.is_ok()) \
       return ldimesh_status_;                                                 \
   } while (0)
-
-#define LDIMESH_STATUS_CONCAT_INNER_(a, b) a##b
-#define LDIMESH_STATUS_CONCAT_(a, b) LDIMESH_STATUS_CONCAT_INNER_(a, b)
-// `lhs = value of expr` (a StatusOr), or return its Status from the enclosing function.
-#define LDIMESH_ASSIGN_OR_RETURN(lhs, expr)                        \
-  auto LDIMESH_STATUS_CONCAT_(ldimesh_or_, __LINE__) = (expr);     \
-  if (!LDIMESH_STATUS_CONCAT_(ldimesh_or_, __LINE__).is_ok())      \
-    return LDIMESH_STATUS_CONCAT_(ldimesh_or_, __LINE__).status(); \
-  lhs = std::move(LDIMESH_STATUS_CONCAT_(ldimesh_or_, __LINE__)).value()
