@@ -1,11 +1,10 @@
 // The error model (after Draco's and Abseil's Status): every fallible operation on data, files,
 // messages and the network returns a Status — a code saying what kind of thing went wrong and a
-// message saying which. Exceptions
-// are for programming errors and for core's argument checks; one guard at each API boundary
-// (the C API, the adaptor's worker, the CLI) turns them into a Status, so nothing escapes to the
-// solver.
+// message saying which. Exceptions are for programming errors and for core's argument checks;
+// one guard at each API boundary (the C API, the adaptor's create, worker and caster threads)
+// turns them into a Status, so nothing escapes to the solver.
 //
-// Threads: Status and StatusOr are values; nothing here is shared.
+// Threads: a Status is a value; nothing here is shared.
 #pragma once
 
 #include <cassert>
