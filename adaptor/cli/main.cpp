@@ -32,6 +32,7 @@
 #include "ldimesh/core/pipeline.hpp"
 #include "ldimesh/core/raw_volume.hpp"
 #include "ldimesh/core/raycaster.hpp"
+#include "ldimesh/core/status.hpp"
 #include "ldimesh/core/surfaces.hpp"
 #include "ldimesh/core/timing.hpp"
 #include "ldimesh/transport/distributed.hpp"
@@ -162,8 +163,8 @@ void on_all_ranks(MPI_Comm comm, Step step) {
   std::string error;
   try {
     step();
-  } catch (const std::exception& e) {
-    error = e.what();
+  } catch (...) {
+    error = ldimesh::status_from_current_exception("").message();
     if (error.empty()) error = "unknown error";
   }
   int failed = error.empty() ? size : rank, first = size;
@@ -580,6 +581,25 @@ int run_distance(const DistanceArgs& args) {
 
 }  // namespace
 
+// The CLI's guard: runs body() (which returns the exit code) and turns what it throws into a
+// message on stderr (where `print`: the root only under MPI) and an exit code — help: CLI11's,
+// a usage error: 2, anything else: 1 (its cause, as the adaptor's API names it).
+template <class Body>
+int guarded_main(CLI::App& app, bool print, Body&& body) {
+  try {
+    return body();
+  } catch (const CLI::Success& e) {  // --help, --help-all
+    return print ? app.exit(e) : 0;
+  } catch (const CLI::ParseError& e) {
+    if (print) std::fprintf(stderr, "ldimesh: error: %s\n", e.what());
+    return 2;
+  } catch (...) {
+    const ldimesh::Status s = ldimesh::status_from_current_exception("");
+    if (print) std::fprintf(stderr, "ldimesh: error: %s\n", s.message().c_str());
+    return 1;
+  }
+}
+
 int main(int argc, char** argv) {
   CLI::App app{"ldimesh: isosurface meshes from Layered Depth Images (Frey, Sadlo, Ertl)"};
   app.require_subcommand(1);
@@ -693,19 +713,11 @@ int main(int argc, char** argv) {
 
   // `ldimesh serve` is a plain server process and `ldimesh distance` a plain tool: no MPI.
   if (argc > 1 && (std::string(argv[1]) == "serve" || std::string(argv[1]) == "distance")) {
-    try {
+    return guarded_main(app, true, [&] {
       app.parse(argc, argv);
       if (*distance) return run_distance(distance_args);
       return ldimesh::run_serve(serve_args, "ldimesh serve");
-    } catch (const CLI::CallForHelp& e) {
-      return app.exit(e);
-    } catch (const CLI::ParseError& e) {
-      std::fprintf(stderr, "ldimesh: error: %s\n", e.what());
-      return 2;
-    } catch (const std::exception& e) {
-      std::fprintf(stderr, "ldimesh: error: %s\n", e.what());
-      return 1;
-    }
+    });
   }
 
   // MPI is initialised for every other command, so that `mpiexec -n N ldimesh mesh …` splits
@@ -714,25 +726,11 @@ int main(int argc, char** argv) {
   MPI_Init_thread(&argc, &argv, MPI_THREAD_FUNNELED, &provided);
   int rank = 0;
   MPI_Comm_rank(MPI_COMM_WORLD, &rank);
-  int code = 0;
-  try {
+  const int code = guarded_main(app, rank == 0, [&] {
     app.parse(argc, argv);
-    if (*surfaces) {
-      if (rank == 0) code = run_surfaces();
-    } else {
-      code = run_mesh(args);
-    }
-  } catch (const CLI::CallForHelp& e) {
-    code = rank == 0 ? app.exit(e) : 0;
-  } catch (const CLI::CallForAllHelp& e) {
-    code = rank == 0 ? app.exit(e) : 0;
-  } catch (const CLI::ParseError& e) {
-    if (rank == 0) std::fprintf(stderr, "ldimesh: error: %s\n", e.what());
-    code = 2;
-  } catch (const std::exception& e) {
-    if (rank == 0) std::fprintf(stderr, "ldimesh: error: %s\n", e.what());
-    code = 1;
-  }
+    if (*surfaces) return rank == 0 ? run_surfaces() : 0;
+    return run_mesh(args);
+  });
   MPI_Finalize();
   return code;
 }

@@ -7,9 +7,11 @@
 #include <cstring>
 #include <fstream>
 #include <mutex>
+#include <new>
 #include <optional>
 #include <set>
 #include <sstream>
+#include <stdexcept>
 #include <thread>
 #include <type_traits>
 #include <vector>
@@ -53,6 +55,10 @@ struct Options {
   bool log = true;
   bool background = true;          // with MPI_THREAD_MULTIPLE: the solver waits for a snapshot only
   double slow_root_seconds = 0.0;  // testing only: the worker sleeps this long per step
+  // Testing only: a fault injected into step `fault_step` on rank `fault_rank`.
+  std::string fault;  // "", "out_of_memory", "exception" or "corrupt_message"
+  std::uint64_t fault_step = 0;
+  int fault_rank = 0;
 };
 
 // Reads `j` into `o`, naming the first unknown key or bad value.
@@ -176,9 +182,24 @@ Status parse_options(const nlohmann::json& j, Options& o) {
     if (j.contains("background")) o.background = j["background"].get<bool>();
     if (j.contains("testing")) {
       const auto& t = j["testing"];
-      if (Status s = check_keys(t, "testing.", {"slow_root_seconds"}); !s) return s;
+      if (Status s = check_keys(t, "testing.", {"slow_root_seconds", "fault"}); !s) return s;
       if (t.contains("slow_root_seconds"))
         o.slow_root_seconds = t["slow_root_seconds"].get<double>();
+      if (t.contains("fault")) {
+        const auto& f = t["fault"];
+        if (Status s = check_keys(f, "testing.fault.", {"kind", "step", "rank"}); !s) return s;
+        o.fault = f.at("kind").get<std::string>();
+        if (o.fault != "out_of_memory" && o.fault != "exception" && o.fault != "corrupt_message")
+          return bad("testing.fault.kind",
+                     "must be \"out_of_memory\", \"exception\" or \"corrupt_message\"");
+        o.fault_step = f.value("step", std::uint64_t(0));
+        o.fault_rank = f.value("rank", 0);
+        // The root sends no message in the reduction: only another rank's can be damaged.
+        if (o.fault_rank < (o.fault == "corrupt_message" ? 1 : 0))
+          return bad("testing.fault.rank", o.fault == "corrupt_message"
+                                               ? "must be a rank other than the root (≥ 1)"
+                                               : "must be ≥ 0");
+      }
     }
   } catch (const nlohmann::json::exception& e) {
     return Status::invalid_options(std::string("options: a value has the wrong type: ") + e.what());
@@ -400,7 +421,7 @@ class AdaptorImpl final : public Adaptor {
     // The synchronous path: the solver waits for the cast and the reduction (and for the
     // meshing, where it needs every rank's samples).
     StepCasters casters;
-    Status s = collective_step(comm_, blocks_, domain(), "", job, casters);
+    Status s = collective_step(comm_, blocks_, domain(), Status::ok(), job, casters);
     if (s && meshing_samples(meshing_options())) s = mesh_with_samples(comm_, casters, job);
     if (rank_ == 0) report_.nonfinite_values = job.cast.nonfinite_values;
     finish_report(start);
@@ -463,7 +484,7 @@ class AdaptorImpl final : public Adaptor {
   struct CasterJob {
     Job job;
     std::optional<Box> domain;
-    std::string error;  // the snapshot failed: the step fails on every rank
+    Status status = Status::ok();  // the snapshot failed: the step fails on every rank
     double blocked_seconds = 0.0;
   };
 
@@ -483,20 +504,28 @@ class AdaptorImpl final : public Adaptor {
     return meshing;
   }
 
+  // Whether the options inject `kind` into this rank's step `step` (testing only).
+  bool fault_here(const char* kind, std::uint64_t step) const {
+    return options_.fault == kind && options_.fault_step == step && options_.fault_rank == rank_;
+  }
+
   // The collective half of a due step over `comm` (cast_and_reduce): every rank binds and casts
   // `blocks` and takes part in the reduction to the root, whose `job` gets the views, the
   // fragments, the others' pending merge and the timings (all but "blocked"). A local failure
-  // (`local_error`, or one while binding) fails the step everywhere. The solver's thread runs it
-  // on the adaptor's communicator (synchronous path), the caster thread on its duplicate
+  // (`local`, or one while binding) fails the step everywhere. The solver's thread runs it on
+  // the adaptor's communicator (synchronous path), the caster thread on its duplicate
   // (background path).
   Status collective_step(MPI_Comm comm, const std::vector<Block>& blocks, std::optional<Box> domain,
-                         std::string local_error, Job& job, StepCasters& casters) const {
+                         Status local, Job& job, StepCasters& casters) const {
     casters = {};
     casters.blocks.resize(options_.isovalues.size());
     const auto bind_start = Clock::now();
-    if (local_error.empty()) {
-      try {
-        if (!domain) throw std::runtime_error("set_domain() was not called");
+    if (local && !domain) local = Status::invalid_argument("set_domain() was not called");
+    if (local)
+      local = guard("binding the blocks: ", [&] {
+        if (fault_here("out_of_memory", job.step)) throw std::bad_alloc();
+        if (fault_here("exception", job.step))
+          throw std::logic_error("testing.fault: an injected exception");
         casters.views = make_axis_views(*domain, options_.resolution, options_.views);
         for (const View& v : casters.views)
           casters.tolerance = std::max(casters.tolerance,
@@ -506,19 +535,18 @@ class AdaptorImpl final : public Adaptor {
             casters.owned.push_back(std::make_unique<RayCaster>(*b.source, options_.isovalues[i]));
             casters.blocks[i].push_back({casters.owned.back().get(), {b.owned, *domain}});
           }
-      } catch (const std::exception& e) {
-        local_error = e.what();
-        if (local_error.empty()) local_error = "binding the blocks failed";
-      }
-    }
-    if (!local_error.empty()) {
+        return Status::ok();
+      });
+    if (!local) {
       casters = {};
       casters.blocks.resize(options_.isovalues.size());
     }
+    ReductionFaults faults;
+    faults.damage_sent_message = fault_here("corrupt_message", job.step);
     // The root merges what it receives on its worker (mesh_step), off the solver's path.
     const Status s =
         cast_and_reduce(comm, casters.blocks, casters.views, options_.encoding, casters.tolerance,
-                        local_error, true, job.cast, seconds_since(bind_start));
+                        local, true, job.cast, seconds_since(bind_start), faults);
     if (!s) return s;
     if (rank_ == 0) {
       job.views = casters.views;
@@ -591,9 +619,8 @@ class AdaptorImpl final : public Adaptor {
       std::unique_lock lock(mutex_);
       caster_idle_.wait(lock, [&] { return !caster_job_ && !casting_; });
     }
-    std::string error;
     std::size_t bytes = 0;
-    try {
+    const Status copied = guard("snapshot: ", [&] {
       snapshot_.resize(blocks_.size());
       snapshot_blocks_.clear();
       for (std::size_t k = 0; k < blocks_.size(); ++k) {
@@ -607,16 +634,15 @@ class AdaptorImpl final : public Adaptor {
         bytes += snapshot_[k].bytes();
         snapshot_blocks_.push_back(std::move(copy));
       }
-    } catch (const std::exception& e) {
-      error = std::string("snapshot: ") + e.what();
-      snapshot_blocks_.clear();
-    }
+      return Status::ok();
+    });
+    if (!copied) snapshot_blocks_.clear();
     report_.background = true;
     report_.snapshot_bytes = bytes;
     CasterJob cj;
     cj.job = std::move(job);
     cj.domain = domain();
-    cj.error = std::move(error);
+    cj.status = copied;
     cj.blocked_seconds = seconds_since(start);
     {
       std::lock_guard lock(mutex_);
@@ -644,7 +670,7 @@ class AdaptorImpl final : public Adaptor {
       const std::uint64_t step = cj.job.step;
       const Status failed = guard("", [&] {
         StepCasters casters;
-        Status s = collective_step(background_comm_, snapshot_blocks_, cj.domain, cj.error, cj.job,
+        Status s = collective_step(background_comm_, snapshot_blocks_, cj.domain, cj.status, cj.job,
                                    casters);
         double max_blocked = 0.0;
         MPI_Reduce(&cj.blocked_seconds, &max_blocked, 1, MPI_DOUBLE, MPI_MAX, 0, background_comm_);
@@ -869,6 +895,14 @@ Status Adaptor::create(MPI_Comm comm, std::string_view options_json,
       const nlohmann::json j = nlohmann::json::parse(options_json, nullptr, false);
       status = j.is_discarded() ? Status::invalid_options("options: not a valid JSON document")
                                 : parse_options(j, options);
+    }
+    if (status && !options.fault.empty()) {
+      int size = 1;
+      MPI_Comm_size(comm, &size);
+      if (options.fault_rank >= size)
+        status = Status::invalid_options(
+            "options: 'testing.fault.rank' must be below the communicator's size (" +
+            std::to_string(size) + ")");
     }
     // Everyone gets the same verdict (the document is the same on every rank).
     int failed = status ? 0 : 1;

@@ -341,6 +341,62 @@ TEST(CApi, ExecuteWithoutADomainFailsWithAnArgumentError) {
   ldimesh_destroy(a);
 }
 
+// Faults injected by the options (testing.fault) in step 2 of three: the rank where it went
+// wrong returns the code of the cause with `words` in its message, the others STEP; the steps
+// before and after run. `at` is where the fault is injected, `failing` the rank that sees it.
+void expect_fault_code(const std::string& kind, int at, int failing, int code,
+                       const std::string& words) {
+  ldimesh_adaptor* a = create(R"({"server": {"enabled": false}, "log": false, "resolution": 32,
+                                  "background": false, "testing": {"fault": {"kind": ")" +
+                              kind + R"(", "step": 2, "rank": )" + std::to_string(at) + "}}}");
+  if (!a) return;
+  Slab slab;
+  add_slab(a, slab);
+  EXPECT_EQ(ldimesh_execute(a, 1, 0.0), LDIMESH_OK) << ldimesh_last_error(a);
+  wait_published(a, 1);  // step 2 then runs (the root's worker is not busy)
+  const int rc = ldimesh_execute(a, 2, 1.0);
+  if (rank_of() == failing) {
+    EXPECT_EQ(rc, code) << ldimesh_last_error(a);
+    EXPECT_NE(std::string(ldimesh_last_error(a)).find(words), std::string::npos)
+        << ldimesh_last_error(a);
+  } else {
+    EXPECT_EQ(rc, LDIMESH_ERROR_STEP) << ldimesh_last_error(a);
+  }
+  EXPECT_EQ(ldimesh_execute(a, 3, 2.0), LDIMESH_OK) << ldimesh_last_error(a);
+  EXPECT_EQ(ldimesh_finalize(a), LDIMESH_OK) << ldimesh_last_error(a);
+  ldimesh_destroy(a);
+}
+
+TEST(CApi, AnAllocationThatFailsIsAMemoryError) {
+  expect_fault_code("out_of_memory", ranks() - 1, ranks() - 1, LDIMESH_ERROR_MEMORY,
+                    "out of memory");
+}
+
+TEST(CApi, AnUnexpectedExceptionIsARuntimeError) {
+  expect_fault_code("exception", 0, 0, LDIMESH_ERROR_RUNTIME, "injected exception");
+}
+
+TEST(CApi, ADamagedMessageIsCorruptInputWhereItArrives) {
+  if (ranks() < 2) GTEST_SKIP() << "needs 2 or more ranks (the root sends no message)";
+  // Rank 1 sends to the root directly in the reduction's tree.
+  expect_fault_code("corrupt_message", 1, 0, LDIMESH_ERROR_CORRUPT, "not a fragment message");
+}
+
+TEST(CApi, AFaultOptionNamingNoRankIsAnOptionsError) {
+  for (const std::string& fault :
+       {std::string(R"({"kind": "corrupt_message", "rank": 0})"),
+        R"({"kind": "exception", "rank": )" + std::to_string(ranks()) + "}",
+        std::string(R"({"kind": "crash"})")}) {
+    ldimesh_adaptor* a = nullptr;
+    const std::string json =
+        R"({"server": {"enabled": false}, "testing": {"fault": )" + fault + "}}";
+    EXPECT_EQ(ldimesh_create(MPI_COMM_WORLD, json.c_str(), &a), LDIMESH_ERROR_OPTIONS) << fault;
+    EXPECT_NE(std::string(ldimesh_last_error(nullptr)).find("testing.fault"), std::string::npos)
+        << ldimesh_last_error(nullptr);
+    ldimesh_destroy(a);
+  }
+}
+
 }  // namespace
 }  // namespace ldimesh
 

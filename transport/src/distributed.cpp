@@ -59,54 +59,47 @@ bool meshing_samples(const MeshingOptions& options) {
 }
 
 Status cast_and_reduce(MPI_Comm comm, const StepBlocks& blocks, std::span<const View> views,
-                       const FragmentEncoding& encoding, double tolerance,
-                       const std::string& local_error, bool defer, CastStep& step,
-                       double bind_seconds) {
+                       const FragmentEncoding& encoding, double tolerance, const Status& local,
+                       bool defer, CastStep& step, double bind_seconds,
+                       const ReductionFaults& faults) {
   step = {};
   int rank = 0;
   MPI_Comm_rank(comm, &rank);
   const std::size_t nv = views.size();
-  std::string error = local_error;
   std::vector<LdiFragment> fragments;
   std::uint64_t nonfinite = 0;
   const auto start = std::chrono::steady_clock::now();
-  if (error.empty()) {
-    try {
-      for (std::size_t i = 0; i < blocks.size(); ++i) {
-        // The values are the same for every isovalue: count them once.
-        if (i == 0)
-          for (const CastBlock& b : blocks[0])
-            nonfinite += b.caster->nonfinite_values();
-        for (std::size_t v = 0; v < nv; ++v) {
-          const std::uint32_t index = std::uint32_t(i * nv + v);
-          std::vector<LdiFragment> parts;
-          for (const CastBlock& b : blocks[i])
-            parts.push_back(b.caster->cast_fragment(views[v], index, b.sub));
-          if (parts.empty())
-            fragments.push_back(make_empty_fragment(views[v], index));
-          else if (parts.size() == 1)
-            fragments.push_back(std::move(parts.front()));
-          else
-            fragments.push_back(merge_fragments(parts, 0.0));
-        }
+  const Status cast = !local ? local : guard("ray casting: ", [&] {
+    for (std::size_t i = 0; i < blocks.size(); ++i) {
+      // The values are the same for every isovalue: count them once.
+      if (i == 0)
+        for (const CastBlock& b : blocks[0])
+          nonfinite += b.caster->nonfinite_values();
+      for (std::size_t v = 0; v < nv; ++v) {
+        const std::uint32_t index = std::uint32_t(i * nv + v);
+        std::vector<LdiFragment> parts;
+        for (const CastBlock& b : blocks[i])
+          parts.push_back(b.caster->cast_fragment(views[v], index, b.sub));
+        if (parts.empty())
+          fragments.push_back(make_empty_fragment(views[v], index));
+        else if (parts.size() == 1)
+          fragments.push_back(std::move(parts.front()));
+        else
+          fragments.push_back(merge_fragments(parts, 0.0));
       }
-    } catch (const std::exception& e) {
-      error = e.what();
-      if (error.empty()) error = "ray casting failed";
     }
-  }
+    return Status::ok();
+  });
   const double cast_seconds = bind_seconds + seconds_since(start);
   // A failure anywhere fails the step everywhere before the reduction, whose fragment counts
   // would no longer agree.
-  int failed = error.empty() ? 0 : 1, any_failed = 0;
+  int failed = cast ? 0 : 1, any_failed = 0;
   MPI_Allreduce(&failed, &any_failed, 1, MPI_INT, MPI_MAX, comm);
-  if (any_failed)
-    return error.empty() ? Status::other_rank("another rank failed to ray cast")
-                         : Status::invalid_argument(error);
+  if (any_failed) return cast ? Status::other_rank("another rank failed to ray cast") : cast;
 
   ReductionStats stats;
   const Status reduced = reduce_fragments(comm, 0, fragments, encoding, tolerance, stats,
-                                          defer && rank == 0 ? &step.pending : nullptr);
+                                          defer && rank == 0 ? &step.pending : nullptr, faults);
   // Every rank learns whether the reduction failed anywhere (and the slowest rank's times); the
   // root the totals.
   double maxima[3] = {reduced ? 0.0 : 1.0, cast_seconds, stats.encode_seconds};
@@ -201,7 +194,7 @@ Status mesh_distributed(MPI_Comm comm, const RayCaster& caster, const Subdomain&
   const StepBlocks blocks{{CastBlock{&caster, sub}}};
   CastStep step;
   Status status =
-      cast_and_reduce(comm, blocks, views, options.encoding, tolerance, "", false, step);
+      cast_and_reduce(comm, blocks, views, options.encoding, tolerance, Status::ok(), false, step);
   // Ranks that would serve requests the root never sends, or the reverse, would wait forever.
   const int levels = options.meshing.refinement.levels;
   const bool projects = merging_projects(options.meshing.merging);

@@ -145,7 +145,7 @@ void merge_message(std::span<const std::uint8_t> message, std::vector<LdiFragmen
 
 Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragments,
                         const FragmentEncoding& encoding, double tolerance, ReductionStats& stats,
-                        PendingMerge* deferred) {
+                        PendingMerge* deferred, const ReductionFaults& faults) {
   const auto start = std::chrono::steady_clock::now();
   stats = {};
   if (deferred) *deferred = PendingMerge{{}, tolerance};
@@ -160,15 +160,15 @@ Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragm
   // the result does not depend on which rank a sample came from (nor on the number of ranks).
   {
     const auto t = std::chrono::steady_clock::now();
-    std::vector<std::string> errors(fragments.size());
+    std::vector<Status> errors(fragments.size(), Status::ok());
     tbb::parallel_for(std::size_t(0), fragments.size(), [&](std::size_t v) {
       LdiFragment& f = fragments[v];
       try {
         quantize_fragment(f, encoding);
-      } catch (const std::exception& e) {
+      } catch (...) {
         // Never leave the collective: go on with the fragment emptied (its view kept), and
         // report the failure up the tree.
-        errors[v] = std::string("reduction: ") + e.what();
+        errors[v] = status_from_current_exception("reduction: ");
         f.pixels.clear();
         f.counts.clear();
         f.depth.clear();
@@ -176,8 +176,8 @@ Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragm
         f.scalar.clear();
       }
     });
-    for (const std::string& error : errors)
-      if (!error.empty()) status = Status::internal(error);
+    for (const Status& error : errors)
+      if (!error) status = error;
     stats.encode_seconds += seconds_since(t);
   }
 
@@ -185,8 +185,8 @@ Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragm
     if (vrank & mask) {
       const int parent = ((vrank ^ mask) + root) % size;
       auto t = std::chrono::steady_clock::now();
-      const std::vector<std::uint8_t> message =
-          pack(fragments, encoding, upstream_error || !status);
+      std::vector<std::uint8_t> message = pack(fragments, encoding, upstream_error || !status);
+      if (faults.damage_sent_message && !message.empty()) message[0] ^= 0xFF;
       stats.encode_seconds += seconds_since(t);
       if (message.size() > std::size_t(INT_MAX)) {
         // Still send a (small) error message so that the parent does not wait forever.

@@ -81,15 +81,16 @@ bool meshing_samples(const MeshingOptions& options);
 // blocks along every view (a block's samples only where it owns the ray, the half-open rule of
 // subdomain_segment) and merges its blocks' fragments per view; the fragments are reduced to
 // the root (reduce_fragments with `tolerance`; with `defer`, the root's merging of what it
-// received is left to mesh_step, off the collective part). A non-empty `local_error` (this
-// rank could not set up its blocks) or an exception while casting sends empty fragments and
-// fails the step on every rank: the first failing rank's message there, "another rank failed
-// to ray cast" elsewhere. `views` and the number of isovalues must be the same on every rank.
-// `bind_seconds` (this rank's time to bind its casters) is counted in seconds.cast.
+// received is left to mesh_step, off the collective part). A failed `local` status (this rank
+// could not set up its blocks) or an exception while casting sends no fragments and fails the
+// step on every rank: the failing rank returns its own status (an exception's by
+// status_from_current_exception), the others other_rank. `views` and the number of isovalues
+// must be the same on every rank. `bind_seconds` (this rank's time to bind its casters) is
+// counted in seconds.cast; `faults` go to reduce_fragments (tests only).
 Status cast_and_reduce(MPI_Comm comm, const StepBlocks& blocks, std::span<const View> views,
-                       const FragmentEncoding& encoding, double tolerance,
-                       const std::string& local_error, bool defer, CastStep& step,
-                       double bind_seconds = 0.0);
+                       const FragmentEncoding& encoding, double tolerance, const Status& local,
+                       bool defer, CastStep& step, double bind_seconds = 0.0,
+                       const ReductionFaults& faults = {});
 
 // The root half. On the root: merges what a deferred reduction left (finish_merge), decodes each
 // isovalue's LDIs and meshes them with `options` (mesh_ldis), results[i] for isovalue i (ldis,

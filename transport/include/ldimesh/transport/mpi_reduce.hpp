@@ -46,9 +46,15 @@ struct PendingMerge {
 // fragment's frame and checksums, views equal to the root's: check_fragment), so what the merge
 // would reject fails the reduction as without `deferred`; finish_merge can then fail only on a
 // payload its encoder wrote inconsistently under a valid checksum.
+// Faults a reduction injects on purpose, to test its receivers' validation on real damaged
+// messages (the adaptor's `testing.fault` option). Off by default.
+struct ReductionFaults {
+  bool damage_sent_message = false;  // this rank's message leaves with its magic number broken
+};
+
 Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragments,
                         const FragmentEncoding& encoding, double tolerance, ReductionStats& stats,
-                        PendingMerge* deferred = nullptr);
+                        PendingMerge* deferred = nullptr, const ReductionFaults& faults = {});
 
 // Decodes and merges the messages reduce_fragments deferred into `fragments` (the root's own,
 // as it returned them); leaves `pending` empty. Not collective. Errors as reduce_fragments's.
