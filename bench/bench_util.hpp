@@ -4,7 +4,7 @@
 #include <algorithm>
 #include <vector>
 
-#include "ldimesh/core/timing.hpp"
+#include "ldimesh/core/base/timing.hpp"
 
 namespace ldimesh::bench {
 

@@ -18,11 +18,11 @@
 #include <CLI/CLI.hpp>
 
 #include "bench_util.hpp"
-#include "ldimesh/core/analytic_fields.hpp"
-#include "ldimesh/core/analytic_source.hpp"
+#include "ldimesh/core/field/analytic_fields.hpp"
+#include "ldimesh/core/field/analytic_source.hpp"
 #include "ldimesh/core/pipeline.hpp"
-#include "ldimesh/core/raycaster.hpp"
-#include "ldimesh/core/surfaces.hpp"
+#include "ldimesh/core/raycast/raycaster.hpp"
+#include "ldimesh/core/field/surfaces.hpp"
 
 namespace {
 

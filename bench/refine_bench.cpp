@@ -25,12 +25,12 @@
 #include <CLI/CLI.hpp>
 
 #include "bench_util.hpp"
-#include "ldimesh/core/hex_source.hpp"
-#include "ldimesh/core/mesh_io.hpp"
+#include "ldimesh/core/field/hex_source.hpp"
+#include "ldimesh/core/io/mesh_io.hpp"
 #include "ldimesh/core/pipeline.hpp"
-#include "ldimesh/core/raycaster.hpp"
-#include "ldimesh/core/sample_source.hpp"
-#include "ldimesh/core/surfaces.hpp"
+#include "ldimesh/core/raycast/raycaster.hpp"
+#include "ldimesh/core/raycast/sample_source.hpp"
+#include "ldimesh/core/field/surfaces.hpp"
 
 namespace {
 

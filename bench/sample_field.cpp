@@ -32,8 +32,8 @@
 #include <nlohmann/json.hpp>
 
 #include "bench_util.hpp"
-#include "ldimesh/core/analytic_fields.hpp"
-#include "ldimesh/core/surfaces.hpp"
+#include "ldimesh/core/field/analytic_fields.hpp"
+#include "ldimesh/core/field/surfaces.hpp"
 
 namespace {
 

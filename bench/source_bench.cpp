@@ -18,10 +18,10 @@
 #include <nlohmann/json.hpp>
 
 #include "bench_util.hpp"
-#include "ldimesh/core/analytic_fields.hpp"
-#include "ldimesh/core/grid_source.hpp"
-#include "ldimesh/core/hex_source.hpp"
-#include "ldimesh/core/raycaster.hpp"
+#include "ldimesh/core/field/analytic_fields.hpp"
+#include "ldimesh/core/field/grid_source.hpp"
+#include "ldimesh/core/field/hex_source.hpp"
+#include "ldimesh/core/raycast/raycaster.hpp"
 
 namespace {
 

@@ -25,7 +25,7 @@ fi
 
 out=build-fuzz
 bin=$out/fragment_decoder_fuzz
-sources=(core/src/fragment.cpp core/src/ldi.cpp transport/src/fragment_codec.cpp
+sources=(core/src/raycast/fragment.cpp core/src/raycast/ldi.cpp transport/src/fragment_codec.cpp
          tests/fuzz/fragment_decoder_fuzz.cpp)
 headers=(core/include/ldimesh/core/*.hpp transport/include/ldimesh/transport/*.hpp)
 mkdir -p "$out/corpus" "$out/artifacts"

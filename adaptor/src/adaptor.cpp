@@ -18,11 +18,11 @@
 
 #include <nlohmann/json.hpp>
 
-#include "ldimesh/core/grid_source.hpp"
-#include "ldimesh/core/hex_source.hpp"
+#include "ldimesh/core/field/grid_source.hpp"
+#include "ldimesh/core/field/hex_source.hpp"
 #include "ldimesh/core/pipeline.hpp"
-#include "ldimesh/core/raycaster.hpp"
-#include "ldimesh/core/timing.hpp"
+#include "ldimesh/core/raycast/raycaster.hpp"
+#include "ldimesh/core/base/timing.hpp"
 #include "ldimesh/transport/distributed.hpp"
 #include "ldimesh/transport/glb.hpp"
 #include "ldimesh/transport/http_server.hpp"

@@ -4,8 +4,8 @@
 #include <chrono>
 #include <stdexcept>
 
-#include "ldimesh/core/timing.hpp"
-#include "ldimesh/core/trim.hpp"
+#include "ldimesh/core/base/timing.hpp"
+#include "ldimesh/core/mesh/trim.hpp"
 
 namespace ldimesh {
 namespace {

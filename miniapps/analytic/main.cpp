@@ -17,10 +17,10 @@
 #include <CLI/CLI.hpp>
 
 #include "ldimesh/adaptor.hpp"
-#include "ldimesh/core/analytic_fields.hpp"
-#include "ldimesh/core/analytic_source.hpp"
-#include "ldimesh/core/decomposition.hpp"
-#include "ldimesh/core/surfaces.hpp"
+#include "ldimesh/core/field/analytic_fields.hpp"
+#include "ldimesh/core/field/analytic_source.hpp"
+#include "ldimesh/core/raycast/decomposition.hpp"
+#include "ldimesh/core/field/surfaces.hpp"
 #include "miniapp.hpp"
 
 namespace {

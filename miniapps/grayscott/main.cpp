@@ -26,7 +26,7 @@
 #include <CLI/CLI.hpp>
 
 #include "ldimesh/adaptor.hpp"
-#include "ldimesh/core/decomposition.hpp"
+#include "ldimesh/core/raycast/decomposition.hpp"
 #include "miniapp.hpp"
 
 namespace {

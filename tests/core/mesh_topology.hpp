@@ -10,7 +10,7 @@
 #include <utility>
 #include <vector>
 
-#include "ldimesh/core/mesh.hpp"
+#include "ldimesh/core/base/mesh.hpp"
 
 namespace ldimesh::testing {
 

@@ -10,11 +10,11 @@
 #include <tbb/info.h>
 #include <tbb/task_arena.h>
 
-#include "ldimesh/core/analytic_fields.hpp"
-#include "ldimesh/core/analytic_source.hpp"
-#include "ldimesh/core/mesh_io.hpp"
-#include "ldimesh/core/raycaster.hpp"
-#include "ldimesh/core/surfaces.hpp"
+#include "ldimesh/core/field/analytic_fields.hpp"
+#include "ldimesh/core/field/analytic_source.hpp"
+#include "ldimesh/core/io/mesh_io.hpp"
+#include "ldimesh/core/raycast/raycaster.hpp"
+#include "ldimesh/core/field/surfaces.hpp"
 #include "test_helpers.hpp"
 
 namespace ldimesh {

@@ -10,9 +10,9 @@
 
 #include <gtest/gtest.h>
 
-#include "ldimesh/core/ldi.hpp"
-#include "ldimesh/core/mesh.hpp"
-#include "ldimesh/core/view.hpp"
+#include "ldimesh/core/raycast/ldi.hpp"
+#include "ldimesh/core/base/mesh.hpp"
+#include "ldimesh/core/base/view.hpp"
 
 namespace ldimesh::testing {
 

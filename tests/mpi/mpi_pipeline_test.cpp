@@ -16,11 +16,11 @@
 #include <tbb/global_control.h>
 #include <tbb/info.h>
 
-#include "ldimesh/core/analytic_fields.hpp"
-#include "ldimesh/core/analytic_source.hpp"
-#include "ldimesh/core/decomposition.hpp"
-#include "ldimesh/core/grid_source.hpp"
-#include "ldimesh/core/surfaces.hpp"
+#include "ldimesh/core/field/analytic_fields.hpp"
+#include "ldimesh/core/field/analytic_source.hpp"
+#include "ldimesh/core/raycast/decomposition.hpp"
+#include "ldimesh/core/field/grid_source.hpp"
+#include "ldimesh/core/field/surfaces.hpp"
 #include "ldimesh/transport/distributed.hpp"
 #include "ldimesh/transport/mpi_reduce.hpp"
 #include "mpi_gtest.hpp"

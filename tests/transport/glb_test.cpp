@@ -21,8 +21,8 @@
 #include <nlohmann/json.hpp>
 
 #include "ldimesh/core/pipeline.hpp"
-#include "ldimesh/core/raycaster.hpp"
-#include "ldimesh/core/surfaces.hpp"
+#include "ldimesh/core/raycast/raycaster.hpp"
+#include "ldimesh/core/field/surfaces.hpp"
 
 namespace ldimesh {
 namespace {

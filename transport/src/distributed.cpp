@@ -9,7 +9,7 @@
 #include <string>
 #include <tuple>
 
-#include "ldimesh/core/timing.hpp"
+#include "ldimesh/core/base/timing.hpp"
 
 namespace ldimesh {
 namespace {

@@ -8,7 +8,7 @@
 
 #include <tbb/parallel_for.h>
 
-#include "ldimesh/core/timing.hpp"
+#include "ldimesh/core/base/timing.hpp"
 
 namespace ldimesh {
 namespace {

@@ -22,8 +22,8 @@
 
 #include <CLI/CLI.hpp>
 
-#include "ldimesh/core/mesh.hpp"
-#include "ldimesh/core/mesh_io.hpp"
+#include "ldimesh/core/base/mesh.hpp"
+#include "ldimesh/core/io/mesh_io.hpp"
 #include "ldimesh/transport/glb.hpp"
 #include "ldimesh/transport/http_client.hpp"
 #include "ldimesh/transport/snapshot_store.hpp"

@@ -33,13 +33,13 @@
 
 #include <mpi.h>
 
-#include "ldimesh/core/blocks.hpp"
-#include "ldimesh/core/geometry.hpp"
-#include "ldimesh/core/status.hpp"
+#include "ldimesh/core/field/blocks.hpp"
+#include "ldimesh/core/base/geometry.hpp"
+#include "ldimesh/core/base/status.hpp"
 
 namespace ldimesh {
 
-class FieldSource;  // ldimesh/core/field_source.hpp (needs Embree's headers)
+class FieldSource;  // ldimesh/core/field/field_source.hpp (needs Embree's headers)
 
 // What one step did, for logs and the snapshot metadata.
 struct StepReport {

@@ -10,8 +10,8 @@
 #include <mpi.h>
 
 #include "ldimesh/core/pipeline.hpp"
-#include "ldimesh/core/raycaster.hpp"
-#include "ldimesh/core/sample_source.hpp"
+#include "ldimesh/core/raycast/raycaster.hpp"
+#include "ldimesh/core/raycast/sample_source.hpp"
 #include "ldimesh/transport/fragment_codec.hpp"
 #include "ldimesh/transport/mpi_reduce.hpp"
 

@@ -26,8 +26,8 @@
 #include <span>
 #include <vector>
 
-#include "ldimesh/core/fragment.hpp"
-#include "ldimesh/core/status.hpp"
+#include "ldimesh/core/raycast/fragment.hpp"
+#include "ldimesh/core/base/status.hpp"
 
 namespace ldimesh {
 

@@ -21,9 +21,9 @@
 #include <span>
 #include <vector>
 
-#include "ldimesh/core/mesh.hpp"
-#include "ldimesh/core/status.hpp"
-#include "ldimesh/core/view.hpp"
+#include "ldimesh/core/base/mesh.hpp"
+#include "ldimesh/core/base/status.hpp"
+#include "ldimesh/core/base/view.hpp"
 
 namespace ldimesh {
 

@@ -11,7 +11,7 @@
 #include <string_view>
 #include <vector>
 
-#include "ldimesh/core/status.hpp"
+#include "ldimesh/core/base/status.hpp"
 #include "ldimesh/transport/snapshot_store.hpp"
 
 namespace ldimesh {

@@ -11,7 +11,7 @@
 #include <string>
 #include <string_view>
 
-#include "ldimesh/core/status.hpp"
+#include "ldimesh/core/base/status.hpp"
 #include "ldimesh/transport/snapshot_store.hpp"
 
 namespace ldimesh {

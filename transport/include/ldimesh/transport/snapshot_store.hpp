@@ -24,8 +24,8 @@
 #include <string_view>
 #include <vector>
 
-#include "ldimesh/core/status.hpp"
-#include "ldimesh/core/view.hpp"
+#include "ldimesh/core/base/status.hpp"
+#include "ldimesh/core/base/view.hpp"
 #include "ldimesh/transport/glb.hpp"
 
 namespace ldimesh {

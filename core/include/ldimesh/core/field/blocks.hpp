@@ -1,0 +1,68 @@
+// The solver-side descriptions of rank-local data blocks: pointers into the solver's own arrays
+// and their layout. What the adaptor's API takes; GridSource and HexElementSource
+// (grid_source.hpp, hex_source.hpp) cast them. Needs neither Embree nor TBB.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+
+#include <glm/glm.hpp>
+
+#include "ldimesh/core/base/scalar_type.hpp"
+
+namespace ldimesh {
+
+// One rank-local block of point data. Nothing is copied: `values` (and `coords` for a
+// rectilinear grid) must stay valid, and unchanged during a cast, while a source built on
+// them is used.
+//
+// Ghost layers: the first ghost_lo[a] and last ghost_hi[a] point layers along axis a belong to
+// neighbouring blocks. A cell produces hits only if this block owns its lowest corner point,
+// so ghost points are read for interpolation of the cells between the last owned point and
+// the first ghost point, and blocks whose owned points tile a grid produce every cell exactly
+// once: no duplicate and no missing surface where blocks meet. Blocks that instead share
+// their interface points (no ghosts) tile it as well.
+struct GridBlock {
+  std::array<std::int64_t, 3> dims{0, 0, 0};  // points per axis, ghost layers included
+  const void* values = nullptr;
+  ScalarType type = ScalarType::float32;
+  // Distance in values between neighbouring points along x, y, z; {0, 0, 0} means contiguous
+  // with x fastest: {1, nx, nx·ny}.
+  std::array<std::int64_t, 3> strides{0, 0, 0};
+  // Uniform geometry: point (i, j, k) at origin + (i, j, k)·spacing (ghost points included).
+  glm::dvec3 origin{0.0};
+  glm::dvec3 spacing{1.0};
+  // Rectilinear geometry, used instead when all three are set: dims[a] strictly increasing
+  // coordinates per axis.
+  std::array<const double*, 3> coords{nullptr, nullptr, nullptr};
+  std::array<int, 3> ghost_lo{0, 0, 0};
+  std::array<int, 3> ghost_hi{0, 0, 0};
+};
+
+// Where an element's p + 1 nodes per axis lie.
+enum class NodeSet {
+  gauss_lobatto_legendre,  // both ends and the roots of P'_p (spectral elements, Nek5000)
+  gauss_legendre,          // the roots of P_{p+1}, no ends (DG codes such as FLEXI)
+  equispaced,              // evenly spaced, both ends (Lagrange finite elements)
+};
+
+inline constexpr int kMaxHexOrder = 8;
+
+// One block of hexahedral elements of one polynomial order and node set, described by pointers
+// into the solver's own arrays (nothing is copied).
+struct HexBlock {
+  int order = 0;  // polynomial degree p per axis, 1..kMaxHexOrder
+  NodeSet nodes = NodeSet::gauss_lobatto_legendre;
+  std::size_t element_count = 0;
+  // 8 corners × (x, y, z) per element, element after element. Corner c sits at reference
+  // coordinates (c & 1, (c >> 1) & 1, (c >> 2) & 1) along ξ, η, ζ.
+  const double* corners = nullptr;
+  // (p + 1)³ nodal values per element; node (i, j, k) (along ξ, η, ζ) is value
+  // i + (p + 1)·(j + (p + 1)·k) of its element, and element e starts at value e·element_stride.
+  const void* values = nullptr;
+  ScalarType type = ScalarType::float64;
+  std::size_t element_stride = 0;  // in values, not bytes; 0 means (p + 1)³
+};
+
+}  // namespace ldimesh

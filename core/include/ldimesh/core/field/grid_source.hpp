@@ -1,0 +1,75 @@
+// Structured-grid blocks as ray-caster sources (finite volume / finite difference codes): point
+// data on a uniform or rectilinear grid, read in place from the solver's array, intersected
+// exactly with the trilinear interpolant of each cell.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+
+#include "ldimesh/core/field/blocks.hpp"
+#include "ldimesh/core/field/field_source.hpp"
+
+namespace ldimesh {
+
+class GridSource final : public FieldSource {
+ public:
+  // Validates the block (positive dims, at least one owned cell per axis, non-null values,
+  // non-zero strides, positive spacing or increasing coordinates); throws
+  // std::invalid_argument naming the problem. Bricks of brick_cells³ owned cells are the
+  // ray-caster primitives.
+  explicit GridSource(const GridBlock& block, int brick_cells = 8);
+
+  // The owned region: the cells this block produces hits in.
+  Box bounds() const override;
+  // Computes every brick's value range from the current values (so a new time step in the same
+  // arrays needs only a new bind) and puts the bricks whose range holds `isovalue` into an
+  // Embree user geometry. Runs on all cores.
+  //
+  // Non-finite values (NaN, ±Inf): a cell with such a corner produces no hits; every other cell
+  // produces the same hits as if the field had none. The binding's nonfinite_values() is the
+  // number of points read whose value is non-finite, each point counted once: the corner
+  // points of the owned cells, i.e. indices first_cell()[a] … last_cell()[a] + 1 per axis,
+  // ghost points among them included (ghost points outside that range are not read).
+  std::unique_ptr<GeometryBinding> bind(RTCDevice device, double isovalue) const override;
+  // The same bricks, culled the same way, for rays parallel to an axis: each ray walks the cells
+  // of its column of active bricks, where the interpolant is linear (the same roots as bind()).
+  std::unique_ptr<AxisBinding> bind_axis(double isovalue) const override;
+
+  // Bricks before culling.
+  std::size_t brick_count() const;
+  // The value at point (i, j, k) (ghosts included), as a double.
+  double value(std::int64_t i, std::int64_t j, std::int64_t k) const;
+  // The coordinate of point index i along axis a.
+  double coordinate(int axis, std::int64_t i) const;
+  // Owned cells along each axis: lower corner indices first_cell[a] … last_cell[a].
+  std::array<std::int64_t, 3> first_cell() const { return first_cell_; }
+  std::array<std::int64_t, 3> last_cell() const { return last_cell_; }
+
+ private:
+  GridBlock block_;
+  int brick_cells_;
+  std::array<std::int64_t, 3> first_cell_{}, last_cell_{}, bricks_{};
+};
+
+// Part `index` of `whole` split into blocks[0] × blocks[1] × blocks[2] blocks of cells (as
+// evenly as possible): a block of the same arrays (nothing copied) with its owned points plus
+// the ghost layer of point values above it that its last cells need, and the box its cells
+// cover, computed from `whole`'s coordinates so that neighbouring parts share faces exactly
+// (use it as the part's Subdomain box). The parts' owned cells tile `whole`'s. Throws
+// std::invalid_argument if a part would have no cell.
+struct GridPart {
+  GridBlock block;
+  Box owned;
+};
+GridPart grid_part(const GridBlock& whole, std::array<int, 3> blocks, std::array<int, 3> index);
+
+// The roots of the trilinear interpolant minus `iso` along a segment of one cell, by the cubic
+// it restricts to (Marmitt et al. 2004: split at the cubic's extrema, then one bracketed root
+// per monotone piece); a segment along one axis is a line, solved from its end values. `corner`
+// holds the 8 values minus iso, index = x + 2y + 4z; `a` and `b` are the segment's ends in the
+// cell's local coordinates [0, 1]³. Writes the roots as segment parameters s ∈ [0, 1] in increasing
+// order to `roots` and returns how many (at most 3).
+int trilinear_segment_roots(const double corner[8], glm::dvec3 a, glm::dvec3 b, double roots[3]);
+
+}  // namespace ldimesh

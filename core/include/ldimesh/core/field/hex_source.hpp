@@ -1,0 +1,93 @@
+// High-order hexahedral elements (DG, spectral-element and FEM data) as ray-caster sources.
+//
+// Each element's nodal (Lagrange) values are converted to tensor-product Bernstein coefficients.
+// By the convex hull property of the Bernstein basis the coefficients bound the element's values,
+// so only elements whose coefficient range contains the isovalue become Embree primitives. Along a
+// ray the polynomial restricted to an element is univariate of degree 3p; its Bernstein
+// coefficients are computed exactly and its roots are isolated by subdivision with sign-variation
+// counting (Descartes' rule of signs in the Bernstein basis: Lane & Riesenfeld 1981, Mørken &
+// Reimers 2007), then converged with Newton steps safeguarded by bisection. No fixed step: a root
+// is never skipped, however close to its neighbours.
+//
+// Geometry is affine per element (parallelepipeds, sheared or rotated); non-affine trilinear and
+// curved isoparametric elements are a later step (docs/method.md).
+#pragma once
+
+#include <cstddef>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "ldimesh/core/field/blocks.hpp"
+#include "ldimesh/core/field/field_source.hpp"
+
+namespace ldimesh {
+
+// A polynomial's value and gradient at one point.
+struct PolynomialSample {
+  double value = 0.0;
+  glm::dvec3 gradient{0.0};
+};
+
+// The p + 1 node positions of `nodes` for order p, increasing, on the reference interval [0, 1]
+// (the usual [−1, 1] nodes mapped by x ↦ (x + 1)/2). Throws std::invalid_argument unless
+// 1 ≤ order ≤ kMaxHexOrder.
+std::vector<double> node_positions(int order, NodeSet nodes);
+
+// Converts the (p + 1)³ nodal values of one element (layout as in HexBlock) into the (p + 1)³
+// tensor-product Bernstein coefficients on [0, 1]³ of the same polynomial, same layout. Both
+// spans must hold exactly (p + 1)³ values and must not overlap; throws std::invalid_argument
+// otherwise or for an order outside 1..kMaxHexOrder.
+void lagrange_to_bernstein(int order, NodeSet nodes, std::span<const double> nodal,
+                           std::span<double> bernstein);
+
+// Value and reference-space gradient (∂/∂ξ, ∂/∂η, ∂/∂ζ) at `reference` of the polynomial with
+// the (p + 1)³ tensor-product Bernstein coefficients `bernstein`. Any reference point works;
+// the element is [0, 1]³. Throws std::invalid_argument for a wrong span size or order.
+PolynomialSample evaluate_bernstein(int order, std::span<const double> bernstein,
+                                    glm::dvec3 reference);
+
+// A block of high-order hexahedra as a ray-caster source. Roots that lie on a face shared by two
+// elements are found by both and merged by the caster; data discontinuous across faces (DG) is
+// intersected element by element.
+class HexElementSource final : public FieldSource {
+ public:
+  // Checks the block and computes its bounds. Throws std::invalid_argument for an order outside
+  // 1..kMaxHexOrder, an unknown node set or scalar type, no elements, a null array, an element
+  // stride below (p + 1)³, and for the first element (named by index) that is degenerate or not
+  // a parallelepiped (its trilinear map from the corners is not affine). The arrays must outlive
+  // the source; corners must not change while it lives, values may: every bind() reads them.
+  explicit HexElementSource(const HexBlock& block);
+
+  // The axis-aligned box around all elements.
+  Box bounds() const override;
+  // Reads the current values, converts every element to Bernstein form (in parallel) and keeps
+  // the elements whose coefficient range contains `isovalue`. The binding holds its own copy of
+  // their coefficients: it does not read the solver's arrays after bind() returns.
+  //
+  // Non-finite values (NaN, ±Inf): an element with such a nodal value produces no hits (it is
+  // left out of the scene); the other elements are unaffected. The binding's
+  // nonfinite_values() is the number of non-finite nodal values over all elements (the
+  // (p + 1)³ values of each; padding up to element_stride is not read).
+  std::unique_ptr<GeometryBinding> bind(RTCDevice device, double isovalue) const override;
+  // The same active elements for rays parallel to an axis: object order over the pixels each
+  // element covers (the same roots as bind()).
+  std::unique_ptr<AxisBinding> bind_axis(double isovalue) const override;
+
+  // The block as given, with element_stride 0 replaced by (p + 1)³.
+  const HexBlock& block() const { return block_; }
+  // Reference coordinates in element `element` of the world point `world` (inside the element
+  // iff all three lie in [0, 1]). `element` must be below block().element_count.
+  glm::dvec3 to_reference(std::size_t element, glm::dvec3 world) const;
+  // The Bernstein coefficients of element `element` from the current values (see
+  // lagrange_to_bernstein; `out` holds exactly (p + 1)³ values). Minimum and maximum bound the
+  // element's values; bind() culls with them. A non-finite nodal value makes some
+  // coefficients non-finite.
+  void element_bernstein(std::size_t element, std::span<double> out) const;
+
+ private:
+  HexBlock block_;
+  Box bounds_;
+};
+
+}  // namespace ldimesh

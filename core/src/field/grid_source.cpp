@@ -1,0 +1,1043 @@
+#include "ldimesh/core/field/grid_source.hpp"
+
+#include <algorithm>
+#include <atomic>
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <mutex>
+#include <stdexcept>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+namespace ldimesh {
+namespace {
+
+const char* kAxis[3] = {"x", "y", "z"};
+
+double eval_cubic(const double c[4], double s) {
+  return ((c[3] * s + c[2]) * s + c[1]) * s + c[0];
+}
+
+// The trilinear interpolant at local point p: Σ w_n · corner[n] with w_n = wx·wy·wz, summed in
+// corner order. Where p lies on a face (a coordinate exactly 0 or 1) the other side's weights
+// are exact zeros, and the cell on the other side of that face computes the same sum of the
+// same products: the value on a shared face does not depend on the cell.
+double trilinear_value(const double corner[8], glm::dvec3 p) {
+  double v = 0.0;
+  for (int n = 0; n < 8; ++n) {
+    const double wx = (n & 1) ? p.x : 1.0 - p.x, wy = (n & 2) ? p.y : 1.0 - p.y,
+                 wz = (n & 4) ? p.z : 1.0 - p.z;
+    v += wx * wy * wz * corner[n];
+  }
+  return v;
+}
+
+// The single root of the cubic in [a, b] where it changes sign: Newton steps kept inside the
+// bracket, bisection when a step leaves it.
+double converge_cubic(const double c[4], double a, double b, double fa, double fb) {
+  if (fb == 0.0) return b;  // exactly at the end: keep it exact (the half-open rule needs it)
+  double t = 0.5 * (a + b);
+  for (int iter = 0; iter < 60 && b - a > 1e-15; ++iter) {
+    const double ft = eval_cubic(c, t);
+    if (ft == 0.0) return t;
+    if (positive(ft) == positive(fa)) {
+      a = t;
+      fa = ft;
+    } else {
+      b = t;
+    }
+    const double slope = (3.0 * c[3] * t + 2.0 * c[2]) * t + c[1];
+    double next = t - ft / slope;
+    if (!(next > a && next < b)) next = 0.5 * (a + b);
+    if (std::abs(next - t) < 1e-15) return next;
+    t = next;
+  }
+  return t;
+}
+
+// Grid geometry and values as the casters read them.
+template <class T>
+struct GridView {
+  const T* values;
+  std::array<std::int64_t, 3> strides;
+  glm::dvec3 origin, spacing;
+  std::array<const double*, 3> coords;  // all null: uniform
+  bool rectilinear;
+
+  double coord(int a, std::int64_t i) const {
+    return rectilinear ? coords[a][i] : origin[a] + double(i) * spacing[a];
+  }
+  double value(std::int64_t i, std::int64_t j, std::int64_t k) const {
+    return double(values[i * strides[0] + j * strides[1] + k * strides[2]]);
+  }
+};
+
+// A brick: owned cells lo[a] … hi[a] (lower corner indices) and the box they cover.
+struct Brick {
+  std::array<std::int64_t, 3> lo, hi;
+  glm::dvec3 box_lo, box_hi;
+  // Some corner point of its cells is NaN or ±Inf: its cells check their corners.
+  bool nonfinite = false;
+};
+
+// ∇ of the trilinear interpolant at local point p, per unit length (size: the cell's edges).
+glm::dvec3 trilinear_gradient(const double corner[8], glm::dvec3 p, glm::dvec3 size) {
+  glm::dvec3 grad;
+  for (int axis = 0; axis < 3; ++axis) {
+    const int o1 = (axis + 1) % 3, o2 = (axis + 2) % 3;
+    double sum = 0.0;
+    for (int m = 0; m < 4; ++m) {
+      const int b1 = m & 1, b2 = m >> 1;
+      const int i0 = (b1 << o1) | (b2 << o2), i1 = i0 | (1 << axis);
+      const double w = (b1 ? p[o1] : 1.0 - p[o1]) * (b2 ? p[o2] : 1.0 - p[o2]);
+      sum += w * (corner[i1] - corner[i0]);
+    }
+    grad[axis] = sum / size[axis];
+  }
+  return grad;
+}
+
+// The roots of one cell c on the ray segment [ta, tb], appended to `hits`: the cell's cubic
+// (Marmitt et al.). `entry_face`/`exit_face` say along which axes the segment starts/ends
+// exactly on a cell face (the local coordinate is then exactly 0 or 1, so that a face point is
+// evaluated by the same arithmetic in both cells that share it). With kSkipNonfinite, a cell
+// with a NaN or ±Inf corner produces no hits. Both casters solve cells here (the coherent one
+// where its shortcut does not decide).
+template <bool kSkipNonfinite, class T>
+void solve_cell(const GridView<T>& g, double iso, glm::dvec3 org, glm::dvec3 dir,
+                const std::array<std::int64_t, 3>& c, const std::array<int, 3>& step, double ta,
+                double tb, const std::array<bool, 3>& entry_face,
+                const std::array<bool, 3>& exit_face, std::vector<RayHit>& hits) {
+  double corner[8];
+  bool any_positive = false, any_negative = false;
+  for (int n = 0; n < 8; ++n) {
+    const double v = g.value(c[0] + (n & 1), c[1] + ((n >> 1) & 1), c[2] + ((n >> 2) & 1));
+    if constexpr (kSkipNonfinite) {
+      if (!std::isfinite(v)) return;  // no interpolant in this cell
+    }
+    corner[n] = v - iso;
+    (positive(corner[n]) ? any_positive : any_negative) = true;
+  }
+  if (!any_positive || !any_negative) return;  // the interpolant lies between its corners
+  glm::dvec3 lo, size, a, b;
+  const glm::dvec3 pa = org + ta * dir, pb = org + tb * dir;
+  for (int k = 0; k < 3; ++k) {
+    lo[k] = g.coord(k, c[k]);
+    size[k] = g.coord(k, c[k] + 1) - lo[k];
+    // Exactly 0 or 1 on the face the ray enters or leaves through.
+    a[k] =
+        entry_face[k] ? (step[k] > 0 ? 0.0 : 1.0) : std::clamp((pa[k] - lo[k]) / size[k], 0.0, 1.0);
+    b[k] =
+        exit_face[k] ? (step[k] > 0 ? 1.0 : 0.0) : std::clamp((pb[k] - lo[k]) / size[k], 0.0, 1.0);
+  }
+  double roots[3];
+  const int n = trilinear_segment_roots(corner, a, b, roots);
+
+  for (int r = 0; r < n; ++r) {
+    const glm::dvec3 p = a + roots[r] * (b - a);
+    // A root at the very end of the segment keeps tb exactly (the half-open rule compares it).
+    const double t = roots[r] == 1.0 ? tb : ta + roots[r] * (tb - ta);
+    hits.push_back({t, unit_normal(trilinear_gradient(corner, p, size), dir), 0.0f});
+  }
+}
+
+template <class T>
+class GridBinding final : public GeometryBinding {
+ public:
+  GridBinding(RTCDevice device, const GridView<T>& grid, double iso, std::vector<Brick> bricks,
+              std::array<std::int64_t, 3> last, std::uint64_t nonfinite)
+      : grid_(grid),
+        iso_(iso),
+        bricks_(std::move(bricks)),
+        last_(last),
+        nonfinite_(nonfinite),
+        geometry_(device, bricks_.size(), this, &GridBinding::bounds, &GridBinding::intersect) {}
+  RTCGeometry geometry() const override { return geometry_.get(); }
+  std::size_t primitive_count() const override { return bricks_.size(); }
+  std::uint64_t nonfinite_values() const override { return nonfinite_; }
+
+ private:
+  static void bounds(const RTCBoundsFunctionArguments* args) {
+    const auto* self = static_cast<const GridBinding*>(args->geometryUserPtr);
+    const Brick& b = self->bricks_[args->primID];
+    write_padded_bounds(b.box_lo, b.box_hi, args->bounds_o);
+  }
+
+  static void intersect(const RTCIntersectFunctionNArguments* args) {
+    if (!args->valid[0]) return;
+    const auto* self = static_cast<const GridBinding*>(args->geometryUserPtr);
+    RayQuery& q = *reinterpret_cast<RayQuery*>(args->context);
+    const Brick& b = self->bricks_[args->primID];
+    if (b.nonfinite)
+      self->template intersect_brick<true>(q, b);
+    else
+      self->template intersect_brick<false>(q, b);
+  }
+
+  // Walks the cells of the brick along the ray (3D DDA) and solves each cell's cubic. With
+  // kSkipNonfinite, cells with a NaN or ±Inf corner produce no hits; bricks without such values
+  // take the path without the check.
+  template <bool kSkipNonfinite>
+  void intersect_brick(RayQuery& q, const Brick& b) const {
+    double t0 = q.t_min, t1 = q.t_max;
+    if (!clip_ray_to_box(q.org, q.dir, b.box_lo, b.box_hi, t0, t1)) return;
+    // A ray in the plane of a face between two bricks belongs to the upper one (as a ray in a
+    // cell face plane belongs to the upper cell below): each ray point lies in one cell.
+    for (int a = 0; a < 3; ++a)
+      if (q.dir[a] == 0.0 && q.org[a] == b.box_hi[a] && b.hi[a] != last_[a]) return;
+    const GridView<T>& g = grid_;
+    std::array<std::int64_t, 3> cell;
+    std::array<int, 3> step;
+    std::array<double, 3> t_next, inv;
+    // Axes along which the current cell's entry point lies exactly on a face. A face point is
+    // then evaluated by the same arithmetic in both cells that share the face (and in both
+    // bricks or ranks), so the sign tests at segment ends agree and no root is lost or doubled.
+    std::array<bool, 3> on_entry_face{false, false, false};
+    const glm::dvec3 entry = q.org + t0 * q.dir;
+    for (int a = 0; a < 3; ++a) {
+      std::int64_t i = b.lo[a];
+      while (i < b.hi[a] && g.coord(a, i + 1) <= entry[a])
+        ++i;  // at most brick_cells steps
+      // On a cell face, start in the cell the ray goes into.
+      if (q.dir[a] < 0.0 && i > b.lo[a] && g.coord(a, i) == entry[a]) --i;
+      cell[a] = i;
+      step[a] = q.dir[a] > 0.0 ? 1 : (q.dir[a] < 0.0 ? -1 : 0);
+      // t at a face as clip_ray_to_box computes it: (face − o) · (1 / d).
+      inv[a] = step[a] == 0 ? 0.0 : 1.0 / q.dir[a];
+      t_next[a] =
+          step[a] == 0 ? INFINITY : (g.coord(a, step[a] > 0 ? i + 1 : i) - q.org[a]) * inv[a];
+      on_entry_face[a] =
+          step[a] != 0 && (g.coord(a, step[a] > 0 ? i : i + 1) - q.org[a]) * inv[a] == t0;
+    }
+    double t = t0;
+    while (t < t1) {
+      const double t_exit = std::min({t_next[0], t_next[1], t_next[2], t1});
+      std::array<bool, 3> on_exit_face;
+      for (int a = 0; a < 3; ++a)
+        on_exit_face[a] = t_next[a] == t_exit;
+      if (t_exit > t)
+        solve_cell<kSkipNonfinite>(g, iso_, q.org, q.dir, cell, step, t, t_exit, on_entry_face,
+                                   on_exit_face, *q.hits);
+      t = std::max(t, t_exit);  // a face behind t (rounding at the entry) moves nothing back
+      // Advance along every axis whose face the ray leaves through (several at an edge).
+      bool inside = true;
+      for (int a = 0; a < 3; ++a) {
+        on_entry_face[a] = on_exit_face[a];
+        if (!on_exit_face[a]) continue;
+        cell[a] += step[a];
+        if (cell[a] < b.lo[a] || cell[a] > b.hi[a])
+          inside = false;
+        else
+          t_next[a] = (g.coord(a, step[a] > 0 ? cell[a] + 1 : cell[a]) - q.org[a]) * inv[a];
+      }
+      if (!inside) break;
+    }
+  }
+
+  GridView<T> grid_;
+  double iso_;
+  std::vector<Brick> bricks_;
+  std::array<std::int64_t, 3> last_;
+  std::uint64_t nonfinite_;
+  UserGeometry geometry_;  // last: its callbacks read the members above
+};
+
+// Folds points i0 … i1 (at least two) of row (j, k) into the running minimum, maximum and sum.
+// Two points per step into separate accumulators: a single chain of additions would bound the
+// loop by their latency.
+template <class T>
+void scan_row(const GridView<T>& g, std::int64_t i0, std::int64_t i1, std::int64_t j,
+              std::int64_t k, double& lo, double& hi, double& sum) {
+  double lo1 = lo, hi1 = hi, sum0 = 0.0, sum1 = 0.0;
+  std::int64_t i = i0;
+  for (; i < i1; i += 2) {
+    const double v0 = g.value(i, j, k), v1 = g.value(i + 1, j, k);
+    lo = std::min(lo, v0);
+    hi = std::max(hi, v0);
+    sum0 += v0;
+    lo1 = std::min(lo1, v1);
+    hi1 = std::max(hi1, v1);
+    sum1 += v1;
+  }
+  if (i == i1) {
+    const double v = g.value(i, j, k);
+    lo = std::min(lo, v);
+    hi = std::max(hi, v);
+    sum0 += v;
+  }
+  lo = std::min(lo, lo1);
+  hi = std::max(hi, hi1);
+  sum += sum0 + sum1;
+}
+
+// The bricks of a block, which of them may hold the isosurface, and the non-finite count.
+struct BrickCulling {
+  std::vector<Brick> bricks;         // all, x fastest
+  std::vector<std::uint8_t> active;  // per brick: its value range holds the isovalue
+  std::uint64_t nonfinite = 0;
+  std::size_t active_count = 0;
+};
+
+template <class T>
+BrickCulling cull_bricks(const GridView<T>& grid, double iso,
+                         const std::array<std::int64_t, 3>& first,
+                         const std::array<std::int64_t, 3>& last,
+                         const std::array<std::int64_t, 3>& bricks, int brick_cells) {
+  const std::int64_t total = bricks[0] * bricks[1] * bricks[2];
+  BrickCulling out;
+  out.active.resize(total);
+  out.bricks.resize(total);
+  std::atomic<std::uint64_t> nonfinite{0};
+  tbb::parallel_for(std::int64_t(0), total, [&](std::int64_t n) {
+    const std::array<std::int64_t, 3> idx{n % bricks[0], (n / bricks[0]) % bricks[1],
+                                          n / (bricks[0] * bricks[1])};
+    Brick& b = out.bricks[n];
+    for (int a = 0; a < 3; ++a) {
+      b.lo[a] = first[a] + idx[a] * brick_cells;
+      b.hi[a] = std::min(last[a], b.lo[a] + brick_cells - 1);
+      b.box_lo[a] = grid.coord(a, b.lo[a]);
+      b.box_hi[a] = grid.coord(a, b.hi[a] + 1);
+    }
+    // Range of the trilinear interpolant over the brick = range of its points. The sum of the
+    // values is finite unless one of them is NaN or ±Inf (or the sum overflows): a closer look
+    // only then.
+    double lo = INFINITY, hi = -INFINITY, sum = 0.0;
+    for (std::int64_t k = b.lo[2]; k <= b.hi[2] + 1; ++k)
+      for (std::int64_t j = b.lo[1]; j <= b.hi[1] + 1; ++j)
+        scan_row(grid, b.lo[0], b.hi[0] + 1, j, k, lo, hi, sum);
+    if (!std::isfinite(sum)) [[unlikely]] {
+      // Non-finite points are left out of the range (their cells produce no hits, the others
+      // keep theirs) and counted by the one brick that owns them: a brick owns the points below
+      // its upper layer of points along each axis, which the next brick reads as its lower
+      // layer, and the last brick along an axis owns that layer too. So every point read is
+      // counted exactly once.
+      std::array<std::int64_t, 3> owned_hi;
+      for (int a = 0; a < 3; ++a)
+        owned_hi[a] = b.hi[a] == last[a] ? b.hi[a] + 1 : b.hi[a];
+      lo = INFINITY, hi = -INFINITY;
+      std::uint64_t bad = 0;
+      for (std::int64_t k = b.lo[2]; k <= b.hi[2] + 1; ++k)
+        for (std::int64_t j = b.lo[1]; j <= b.hi[1] + 1; ++j)
+          for (std::int64_t i = b.lo[0]; i <= b.hi[0] + 1; ++i) {
+            const double v = grid.value(i, j, k);
+            if (std::isfinite(v)) {
+              lo = std::min(lo, v);
+              hi = std::max(hi, v);
+            } else {
+              b.nonfinite = true;
+              bad += i <= owned_hi[0] && j <= owned_hi[1] && k <= owned_hi[2];
+            }
+          }
+      if (bad > 0) nonfinite.fetch_add(bad, std::memory_order_relaxed);
+    }
+    out.active[n] = lo <= iso && iso <= hi;
+  });
+  out.nonfinite = nonfinite.load();
+  for (std::uint8_t f : out.active)
+    out.active_count += f;
+  return out;
+}
+
+template <class T>
+std::unique_ptr<GeometryBinding> bind_grid(RTCDevice device, const GridView<T>& grid, double iso,
+                                           const std::array<std::int64_t, 3>& first,
+                                           const std::array<std::int64_t, 3>& last,
+                                           const std::array<std::int64_t, 3>& bricks,
+                                           int brick_cells) {
+  BrickCulling culled = cull_bricks(grid, iso, first, last, bricks, brick_cells);
+  std::vector<Brick> kept;
+  kept.reserve(culled.active_count);
+  for (std::size_t n = 0; n < culled.bricks.size(); ++n)
+    if (culled.active[n]) kept.push_back(culled.bricks[n]);
+  return std::make_unique<GridBinding<T>>(device, grid, iso, std::move(kept), last,
+                                          culled.nonfinite);
+}
+
+// The coherent caster of a grid block for rays parallel to an axis. Along such a ray the
+// trilinear interpolant is linear inside each cell: its value on a cell face the ray crosses
+// is the bilinear interpolation of the face's four points, shared by the two cells, and the
+// root in a cell is one division.
+//
+// Empty space is skipped with bits instead of a walk: at bind time one pass over the points
+// gives each point's sign (v − iso ≥ 0, as solve_cell tests it) and each cell a bit "its
+// corners have both signs" — only such cells can hold a root in either caster (solve_cell
+// returns at once for the others). Per axis, each column of cells gets one bit per 4 cells
+// along the axis (any such cell among them). A ray reads its column's words, and visits only
+// the cells whose bit is set, in ray order. Each of them is solved exactly as the Embree
+// binding's walk would solve it: the same segment ends and face flags (derived from the same
+// brick clipping), the same face values (the same products summed in the same order), and
+// solve_cell itself where the shortcut does not decide (a segment end inside a cell, a face
+// value that is zero or not finite). The Embree binding solves a segment along one axis as a
+// line too (trilinear_segment_roots), so both give the same roots, to the bit, at every
+// degenerate spot as well.
+template <class T>
+class GridAxisBinding final : public AxisBinding {
+ public:
+  GridAxisBinding(const GridView<T>& grid, double iso, std::array<std::int64_t, 3> first,
+                  std::array<std::int64_t, 3> last, std::array<std::int64_t, 3> bricks,
+                  int brick_cells)
+      : g_(grid),
+        iso_(iso),
+        first_(first),
+        last_(last),
+        bricks_(bricks),
+        brick_cells_(brick_cells) {
+    for (int a = 0; a < 3; ++a)
+      cells_[a] = last_[a] - first_[a] + 1;
+    classify();
+  }
+
+  std::size_t primitive_count() const override {
+    // The Embree binding's figure (its bricks after culling), computed when asked.
+    std::call_once(count_once_, [this] {
+      // Isolated: a thread waiting here inside a task must not pick up another of its caller's.
+      tbb::this_task_arena::isolate([this] {
+        active_bricks_ = cull_bricks(g_, iso_, first_, last_, bricks_, brick_cells_).active_count;
+      });
+    });
+    return active_bricks_;
+  }
+  std::uint64_t nonfinite_values() const override { return nonfinite_; }
+
+  void prepare(int a) const override {
+    std::call_once(column_once_[a], [this, a] { build_columns(a); });
+  }
+
+  void cast(const AxisRays& rays, std::vector<AxisHit>& out) const override {
+    const int a = rays.axis;
+    prepare(a);
+    std::vector<RayHit> hits;
+    const auto cast_one = [&](std::size_t k) {
+      const AxisRay& ray = rays.rays[k];
+      if (!(ray.t0 <= ray.t1)) return;
+      hits.clear();
+      cast_ray(a, rays.dir, ray, hits);
+      for (const RayHit& h : hits)
+        out.push_back({std::uint32_t(k), h});
+    };
+    // Rays in the order that keeps the points they read in cache: along the image axis whose
+    // world axis is the block's faster one in memory (neighbouring rays then read the same
+    // cache lines).
+    const View* view = rays.lattice;
+    if (view &&
+        std::abs(g_.strides[exact_axis(view->v)]) < std::abs(g_.strides[exact_axis(view->u)])) {
+      const std::size_t width = std::size_t(view->width), rows = rays.rays.size() / width;
+      for (std::size_t i = 0; i < width; ++i)
+        for (std::size_t j = 0; j < rows; ++j)
+          cast_one(j * width + i);
+      return;
+    }
+    for (std::size_t k = 0; k < rays.rays.size(); ++k)
+      cast_one(k);
+  }
+
+ private:
+  static constexpr int kColumnBlock = 4;  // cells per bit of a column word
+
+  // A brick's cells along the ray axis (lo … hi), the t of its entry face, and its stretch of
+  // the ray [t0, t1] as clip_ray_to_box clips it.
+  struct Stretch {
+    std::int64_t lo, hi;
+    double face_in, t0, t1;
+  };
+
+  std::size_t row_words() const { return std::size_t((cells_[0] + 63) / 64); }
+  // The sign bits of the points and the cells' straddle bits, and the non-finite count.
+  void classify() {
+    const std::int64_t px = cells_[0] + 1, py = cells_[1] + 1, pz = cells_[2] + 1;
+    const std::size_t pw = std::size_t((px + 63) / 64);
+    std::vector<std::uint64_t> sign(pw * std::size_t(py * pz), 0);
+    std::atomic<std::uint64_t> nonfinite{0};
+    // The sign test in T: for a float v, v − iso ≥ 0 in double iff v ≥ the least float whose
+    // double is ≥ iso (NaN fails both), so the rows compare in their own type, in bulk.
+    T threshold = T(iso_);
+    if (double(threshold) < iso_) threshold = std::nextafter(threshold, T(INFINITY));
+    tbb::parallel_for(std::int64_t(0), pz, [&](std::int64_t z) {
+      std::uint64_t bad = 0;
+      T line[64];
+      std::uint8_t flags[64];
+      for (std::int64_t y = 0; y < py; ++y) {
+        std::uint64_t* row = &sign[std::size_t(y + py * z) * pw];
+        const T* v = g_.values + (first_[0]) * g_.strides[0] + (first_[1] + y) * g_.strides[1] +
+                     (first_[2] + z) * g_.strides[2];
+        const std::int64_t sx = g_.strides[0];
+        for (std::int64_t x0 = 0; x0 < px; x0 += 64) {
+          const int n = int(std::min<std::int64_t>(64, px - x0));
+          const T* src = v + x0 * sx;
+          if (sx == 1) {
+            std::copy_n(src, n, line);
+          } else {
+            for (int i = 0; i < n; ++i)
+              line[i] = src[i * sx];
+          }
+          std::fill(line + n, line + 64, T(-INFINITY));  // padding: clear, and not counted
+          std::uint32_t count = 0;
+          for (int i = 0; i < 64; ++i) {
+            flags[i] = line[i] >= threshold;
+            count += !(std::abs(line[i]) <= std::numeric_limits<T>::max());  // NaN or ±Inf
+          }
+          bad += count - std::uint32_t(64 - n);
+          std::uint64_t word = 0;
+          for (int i = 0; i < 64; i += 8) {  // eight 0/1 bytes into eight bits
+            std::uint64_t bytes;
+            std::memcpy(&bytes, flags + i, 8);
+            word |= ((bytes * 0x0102040810204080ull) >> 56) << i;
+          }
+          row[x0 / 64] = word;
+        }
+      }
+      if (bad > 0) nonfinite.fetch_add(bad, std::memory_order_relaxed);
+    });
+    nonfinite_ = nonfinite.load();
+    // A cell straddles iff its 8 corner bits are neither all set nor all clear.
+    const std::size_t cw = row_words();
+    straddle_.assign(cw * std::size_t(cells_[1] * cells_[2]), 0);
+    tbb::parallel_for(std::int64_t(0), cells_[2], [&](std::int64_t z) {
+      for (std::int64_t y = 0; y < cells_[1]; ++y) {
+        const std::uint64_t* r[4] = {&sign[std::size_t(y + py * z) * pw],
+                                     &sign[std::size_t(y + 1 + py * z) * pw],
+                                     &sign[std::size_t(y + py * (z + 1)) * pw],
+                                     &sign[std::size_t(y + 1 + py * (z + 1)) * pw]};
+        std::uint64_t* out = &straddle_[std::size_t(y + cells_[1] * z) * cw];
+        for (std::size_t w = 0; w < cw; ++w) {
+          std::uint64_t any = 0, all = ~std::uint64_t(0);
+          for (const std::uint64_t* row : r) {
+            const std::uint64_t here = row[w];
+            const std::uint64_t next = (here >> 1) | (w + 1 < pw ? row[w + 1] << 63 : 0);
+            any |= here | next;
+            all &= here & next;
+          }
+          std::uint64_t bits = any & ~all;
+          const std::int64_t valid = cells_[0] - std::int64_t(w) * 64;
+          if (valid < 64) bits &= (std::uint64_t(1) << valid) - 1;
+          out[w] = bits;
+        }
+      }
+    });
+  }
+
+  // Axis a's column words: bit q of column (b, c) (the transverse cell indices, relative) is set
+  // iff one of its cells 4q … 4q + 3 along a straddles.
+  std::size_t column_words(int a) const {
+    return std::size_t(((cells_[a] + kColumnBlock - 1) / kColumnBlock + 63) / 64);
+  }
+  void build_columns(int a) const {
+    // Isolated: should a thread get here inside one of the caster's tasks (prepare() not
+    // called), it must not pick up another of them while it waits (they share its buffers).
+    tbb::this_task_arena::isolate([this, a] { build_columns_isolated(a); });
+  }
+  void build_columns_isolated(int a) const {
+    const int b = a == 0 ? 1 : 0, c = a == 2 ? 1 : 2;
+    const std::size_t wpc = column_words(a);
+    std::vector<std::uint64_t>& col = columns_[a];
+    col.assign(wpc * std::size_t(cells_[b] * cells_[c]), 0);
+    const std::size_t cw = row_words();
+    const auto set = [&](std::int64_t cb, std::int64_t cc, std::int64_t q) {
+      col[std::size_t(cb + cells_[b] * cc) * wpc + std::size_t(q / 64)] |= std::uint64_t(1)
+                                                                           << (q % 64);
+    };
+    if (a == 0) {
+      tbb::parallel_for(std::int64_t(0), cells_[2], [&](std::int64_t z) {
+        for (std::int64_t y = 0; y < cells_[1]; ++y) {
+          const std::uint64_t* row = &straddle_[std::size_t(y + cells_[1] * z) * cw];
+          for (std::size_t w = 0; w < cw; ++w)
+            for (std::uint64_t bits = row[w]; bits; bits &= bits - 1)
+              set(y, z, (std::int64_t(w) * 64 + std::countr_zero(bits)) / kColumnBlock);
+        }
+      });
+      return;
+    }
+    // a = y: columns (x, z); a = z: columns (x, y). OR the rows of each block along a, then
+    // set the bit of every x whose cells straddle.
+    const std::int64_t outer = a == 1 ? cells_[2] : cells_[1];
+    tbb::parallel_for(std::int64_t(0), outer, [&](std::int64_t o) {
+      std::vector<std::uint64_t> merged(cw);
+      for (std::int64_t q = 0; q * kColumnBlock < cells_[a]; ++q) {
+        std::fill(merged.begin(), merged.end(), 0);
+        for (std::int64_t k = q * kColumnBlock; k < std::min(cells_[a], (q + 1) * kColumnBlock);
+             ++k) {
+          const std::int64_t y = a == 1 ? k : o, z = a == 1 ? o : k;
+          const std::uint64_t* row = &straddle_[std::size_t(y + cells_[1] * z) * cw];
+          for (std::size_t w = 0; w < cw; ++w)
+            merged[w] |= row[w];
+        }
+        for (std::size_t w = 0; w < cw; ++w)
+          for (std::uint64_t bits = merged[w]; bits; bits &= bits - 1)
+            set(std::int64_t(w) * 64 + std::countr_zero(bits), o, q);
+      }
+    });
+  }
+
+  // The cell along transverse axis b that holds coordinate x ∈ [coord(first), coord(last + 1)]:
+  // the last cell whose lower face is at or below x (the upper cell on a shared face, as the
+  // Embree binding's walk starts).
+  std::int64_t cell_index(int b, double x) const {
+    if (g_.rectilinear) {
+      const double* c = g_.coords[b];
+      return std::int64_t(std::upper_bound(c + first_[b] + 1, c + last_[b] + 1, x) - c) - 1;
+    }
+    const double guess = std::floor((x - g_.origin[b]) / g_.spacing[b]);
+    std::int64_t i = std::clamp(std::int64_t(std::clamp(guess, -1e18, 1e18)), first_[b], last_[b]);
+    while (i < last_[b] && g_.coord(b, i + 1) <= x)
+      ++i;
+    while (i > first_[b] && g_.coord(b, i) > x)
+      --i;
+    return i;
+  }
+
+  void cast_ray(int a, glm::dvec3 dir, const AxisRay& ray, std::vector<RayHit>& hits) const {
+    const int b = a == 0 ? 1 : 0, c = a == 2 ? 1 : 2;  // the transverse axes, b < c
+    const glm::dvec3 o = ray.org;
+    if (o[b] < g_.coord(b, first_[b]) || o[b] > g_.coord(b, last_[b] + 1) ||
+        o[c] < g_.coord(c, first_[c]) || o[c] > g_.coord(c, last_[c] + 1))
+      return;
+    std::array<std::int64_t, 3> cell;
+    cell[b] = cell_index(b, o[b]);
+    cell[c] = cell_index(c, o[c]);
+    const std::uint64_t* column =
+        &columns_[a][std::size_t(cell[b] - first_[b] + cells_[b] * (cell[c] - first_[c])) *
+                     column_words(a)];
+    // No straddling cell in the column: nothing to find (solve_cell finds nothing elsewhere).
+    if (std::all_of(column, column + column_words(a), [](std::uint64_t w) { return w == 0; }))
+      return;
+    // Local coordinates across the ray, as solve_cell computes them.
+    double p[3];
+    glm::dvec3 size;
+    for (int k : {b, c}) {
+      const double lo = g_.coord(k, cell[k]);
+      size[k] = g_.coord(k, cell[k] + 1) - lo;
+      p[k] = std::clamp((o[k] - lo) / size[k], 0.0, 1.0);
+    }
+    // The four face points' weights in trilinear_value's order (b is the lower bit).
+    const double wb[2] = {1.0 - p[b], p[b]}, wc[2] = {1.0 - p[c], p[c]};
+    const double w[4] = {wb[0] * wc[0], wb[1] * wc[0], wb[0] * wc[1], wb[1] * wc[1]};
+    const std::int64_t sa = g_.strides[a], sb = g_.strides[b], sc = g_.strides[c];
+    const T* points = g_.values + cell[b] * sb + cell[c] * sc;
+    const auto face = [&](std::int64_t node) {
+      const T* q = points + node * sa;
+      return ((w[0] * (double(q[0]) - iso_) + w[1] * (double(q[sb]) - iso_)) +
+              w[2] * (double(q[sc]) - iso_)) +
+             w[3] * (double(q[sb + sc]) - iso_);
+    };
+    // Where corner n of a cell (index x + 2y + 4z, as solve_cell has them) lies from the cell's
+    // lowest point.
+    std::int64_t offsets[8];
+    for (int n = 0; n < 8; ++n)
+      offsets[n] = ((n >> a) & 1) * sa + ((n >> b) & 1) * sb + ((n >> c) & 1) * sc;
+    const int step = dir[a] > 0.0 ? 1 : -1;
+    const double inv = 1.0 / dir[a];
+    std::array<int, 3> steps{0, 0, 0};
+    steps[a] = step;
+    const auto t_at = [&](std::int64_t node) { return (g_.coord(a, node) - o[a]) * inv; };
+
+    // The face value last computed, by node index (consecutive cells share a face).
+    std::int64_t cached_node = -1;
+    double cached_value = 0.0;
+    const auto face_cached = [&](std::int64_t node) {
+      if (node != cached_node) {
+        cached_value = face(node);
+        cached_node = node;
+      }
+      return cached_value;
+    };
+    // The hit in cell i on [ta, tb] whose face values fa, fb (finite, nonzero) differ in sign:
+    // the one root of the linear function between the faces (as trilinear_segment_roots
+    // computes it for a segment along one axis), and the gradient there, as solve_cell.
+    const auto emit_root = [&](std::int64_t i, double fa, double fb, double ta, double tb) {
+      const double s = fa / (fa - fb);
+      double corner[8];
+      const T* lower = points + i * sa;
+      for (int n = 0; n < 8; ++n)
+        corner[n] = double(lower[offsets[n]]) - iso_;
+      glm::dvec3 local, cell_size = size;
+      local[b] = p[b];
+      local[c] = p[c];
+      local[a] = step > 0 ? s : 1.0 - s;
+      cell_size[a] = g_.coord(a, i + 1) - g_.coord(a, i);
+      hits.push_back({s == 1.0 ? tb : ta + s * (tb - ta),
+                      unit_normal(trilinear_gradient(corner, local, cell_size), dir), 0.0f});
+    };
+    // The cells whose face values differ in sign, solved (emit_root) in ray order when the
+    // buffer fills, before solve_cell adds a hit and at the end.
+    struct Pending {
+      std::int64_t i;
+      double fa, fb, ta, tb;
+    };
+    constexpr int kPending = 32;
+    Pending pending[kPending];
+    int n_pending = 0;
+    const auto flush = [&] {
+      for (int k = 0; k < n_pending; ++k)
+        emit_root(pending[k].i, pending[k].fa, pending[k].fb, pending[k].ta, pending[k].tb);
+      n_pending = 0;
+    };
+    // Cell i on [ta, tb], entered / left exactly on its faces or not: the shortcut where it
+    // decides, solve_cell (the Embree binding's) where it does not.
+    const auto solve = [&](std::int64_t i, double ta, double tb, bool on_entry,
+                           bool on_exit) [[gnu::always_inline]] {
+      if (on_entry && on_exit) {
+        const double fa = face_cached(step > 0 ? i : i + 1);
+        const double fb = face_cached(step > 0 ? i + 1 : i);
+        if (std::isfinite(fa) && std::isfinite(fb) && fa != 0.0 && fb != 0.0) {
+          // A candidate whatever the signs, kept only where they differ: no branch on the
+          // outcome, which is near random.
+          pending[n_pending] = {i, fa, fb, ta, tb};
+          n_pending += positive(fa) != positive(fb);
+          if (n_pending == kPending) flush();
+          return;
+        }
+      }
+      flush();
+      cell[a] = i;
+      std::array<bool, 3> entry_face{false, false, false}, exit_face{false, false, false};
+      entry_face[a] = on_entry;
+      exit_face[a] = on_exit;
+      // Checking corners for NaN and ±Inf changes nothing for a cell without them.
+      solve_cell<true>(g_, iso_, o, dir, cell, steps, ta, tb, entry_face, exit_face, hits);
+    };
+
+    // The brick (the Embree binding's primitive) of cell i along a, and its stretch of the ray
+    // clipped as clip_ray_to_box clips it.
+    const auto stretch_of = [&](std::int64_t i) {
+      Stretch st;
+      st.lo = first_[a] + (i - first_[a]) / brick_cells_ * brick_cells_;
+      st.hi = std::min(last_[a], st.lo + brick_cells_ - 1);
+      double ta = t_at(st.lo), tb = t_at(st.hi + 1);
+      if (ta > tb) std::swap(ta, tb);
+      st.face_in = ta;
+      st.t0 = std::max(ray.t0, ta);
+      st.t1 = std::min(ray.t1, tb);
+      return st;
+    };
+
+    // The column's straddle bits: word and bit of its cell at relative index k along a.
+    const std::size_t cw = row_words();
+    const std::int64_t rb = cell[b] - first_[b], rc = cell[c] - first_[c];
+    std::size_t base = 0, along = 0;  // word of cell 0 along a, words between cells along a
+    unsigned bit0 = 0;
+    if (a == 0) {
+      base = std::size_t(rb + cells_[1] * rc) * cw;
+    } else {
+      base = (a == 1 ? std::size_t(cells_[1]) * std::size_t(rc) : std::size_t(rc)) * cw +
+             std::size_t(rb) / 64;
+      along = a == 1 ? cw : std::size_t(cells_[1]) * cw;
+      bit0 = unsigned(rb % 64);
+    }
+    const auto straddling = [&](std::int64_t k) {
+      if (a == 0) return bool((straddle_[base + std::size_t(k) / 64] >> (k % 64)) & 1u);
+      return bool((straddle_[base + std::size_t(k) * along] >> bit0) & 1u);
+    };
+
+    // The brick the ray's segment starts inside (not on its face): the Embree binding walks it
+    // from the segment's start point; so does this caster, cell by cell.
+    std::int64_t start_lo = -1, start_hi = -2;
+    {
+      const double t_first = std::min(t_at(first_[a]), t_at(last_[a] + 1));
+      if (ray.t0 > t_first) {
+        const double e = o[a] + ray.t0 * dir[a];
+        std::int64_t guess = first_[a];
+        if (e >= g_.coord(a, last_[a] + 1)) {
+          guess = last_[a];
+        } else if (e > g_.coord(a, first_[a])) {
+          guess = cell_index(a, e);
+        }
+        for (std::int64_t i : {guess, guess - step, guess + step}) {
+          if (i < first_[a] || i > last_[a]) continue;
+          const Stretch st = stretch_of(i);
+          if (st.t0 > st.face_in && st.t0 < st.t1) {
+            start_lo = st.lo;
+            start_hi = st.hi;
+            // solve_cell finds nothing in a cell that does not straddle: only those are solved.
+            walk(a, st, o, dir, step, inv,
+                 [&](std::int64_t k, double ta, double tb, bool on_entry, bool on_exit) {
+                   if (straddling(k - first_[a])) solve(k, ta, tb, on_entry, on_exit);
+                 });
+            break;
+          }
+        }
+      }
+    }
+
+    // Whether the segment covers the block's whole stretch along a: then every brick is entered
+    // and left on its faces, and so is every cell (no clipping to compute).
+    const bool whole = ray.t0 <= std::min(t_at(first_[a]), t_at(last_[a] + 1)) &&
+                       ray.t1 >= std::max(t_at(first_[a]), t_at(last_[a] + 1));
+    // The straddling cells, in ray order.
+    const std::int64_t n_blocks = (cells_[a] + kColumnBlock - 1) / kColumnBlock;
+    const std::size_t wpc = column_words(a);
+    for (std::size_t wi = 0; wi < wpc; ++wi) {
+      const std::size_t w = step > 0 ? wi : wpc - 1 - wi;
+      std::uint64_t bits = column[w];
+      while (bits) {
+        const int bit = step > 0 ? std::countr_zero(bits) : 63 - std::countl_zero(bits);
+        bits &= ~(std::uint64_t(1) << bit);
+        const std::int64_t q = std::int64_t(w) * 64 + bit;
+        if (q >= n_blocks) continue;
+        const std::int64_t k0 = first_[a] + q * kColumnBlock;
+        const std::int64_t k1 = std::min(last_[a], k0 + kColumnBlock - 1);
+        for (std::int64_t m = 0; m <= k1 - k0; ++m) {
+          const std::int64_t i = step > 0 ? k0 + m : k1 - m;
+          if (i >= start_lo && i <= start_hi) continue;  // walked above
+          if (!straddling(i - first_[a])) continue;
+          const double t_in = t_at(step > 0 ? i : i + 1), t_out = t_at(step > 0 ? i + 1 : i);
+          if (whole) {
+            if (t_out > t_in) solve(i, t_in, t_out, true, true);
+            continue;
+          }
+          const Stretch st = stretch_of(i);
+          if (!(st.t0 < st.t1)) continue;  // the Embree binding skips the brick
+          const double ta = std::max(st.t0, t_in), tb = std::min(st.t1, t_out);
+          if (tb > ta) solve(i, ta, tb, t_in == ta, t_out <= st.t1);
+        }
+      }
+    }
+    flush();
+  }
+
+  // The Embree binding's walk through the cells of one brick's stretch of the ray, step by
+  // step (GridBinding::intersect_brick, here along axis a only).
+  template <class Solve>
+  void walk(int a, const Stretch& st, glm::dvec3 o, glm::dvec3 dir, int step, double inv,
+            const Solve& solve) const {
+    const double entry = o[a] + st.t0 * dir[a];
+    std::int64_t i = st.lo;
+    if (g_.coord(a, st.hi) <= entry) {
+      i = st.hi;
+    } else {
+      while (i < st.hi && g_.coord(a, i + 1) <= entry)
+        ++i;
+    }
+    if (step < 0 && i > st.lo && g_.coord(a, i) == entry) --i;
+    double t_next = (g_.coord(a, step > 0 ? i + 1 : i) - o[a]) * inv;
+    bool on_entry = (g_.coord(a, step > 0 ? i : i + 1) - o[a]) * inv == st.t0;
+    double t = st.t0;
+    while (t < st.t1) {
+      const double t_exit = std::min(t_next, st.t1);
+      const bool on_exit = t_next == t_exit;
+      if (t_exit > t) solve(i, t, t_exit, on_entry, on_exit);
+      t = std::max(t, t_exit);
+      on_entry = on_exit;
+      if (!on_exit) break;
+      i += step;
+      if (i < st.lo || i > st.hi) break;
+      t_next = (g_.coord(a, step > 0 ? i + 1 : i) - o[a]) * inv;
+    }
+  }
+
+  GridView<T> g_;
+  double iso_;
+  std::array<std::int64_t, 3> first_, last_, bricks_, cells_;
+  int brick_cells_;
+  std::uint64_t nonfinite_ = 0;
+  std::vector<std::uint64_t> straddle_;  // per cell row along x, 64 cells per word
+  mutable std::array<std::vector<std::uint64_t>, 3> columns_;
+  mutable std::array<std::once_flag, 3> column_once_;
+  mutable std::once_flag count_once_;
+  mutable std::size_t active_bricks_ = 0;
+};
+
+}  // namespace
+
+int trilinear_segment_roots(const double corner[8], glm::dvec3 a, glm::dvec3 b, double roots[3]) {
+  const glm::dvec3 d = b - a;
+  if (int(d.x != 0.0) + int(d.y != 0.0) + int(d.z != 0.0) == 1) {
+    // Along one axis the interpolant is linear: its root from the end values, evaluated as on a
+    // face (see trilinear_value), with no rounding of cubic coefficients in between. This is
+    // what the coherent caster of axis rays computes, to the bit.
+    const double fa = trilinear_value(corner, a), fb = trilinear_value(corner, b);
+    if (fa == 0.0) {
+      roots[0] = 0.0;  // a root exactly at the start belongs to this segment (see below)
+      return 1;
+    }
+    if (positive(fa) == positive(fb)) return 0;
+    roots[0] = fa / (fa - fb);
+    return 1;
+  }
+  // Each local coordinate is linear in s: x(s) = a + (b − a)s, and 1 − x(s) likewise; the
+  // interpolant Σ corner · X·Y·Z is their product, a cubic in s (power basis, c[k] of s^k).
+  const double L[3][2][2] = {{{1.0 - a.x, -d.x}, {a.x, d.x}},
+                             {{1.0 - a.y, -d.y}, {a.y, d.y}},
+                             {{1.0 - a.z, -d.z}, {a.z, d.z}}};
+  double c[4] = {0.0, 0.0, 0.0, 0.0};
+  for (int z = 0; z < 2; ++z)
+    for (int y = 0; y < 2; ++y) {
+      const double* Y = L[1][y];
+      const double* Z = L[2][z];
+      const double q0 = Y[0] * Z[0], q1 = Y[0] * Z[1] + Y[1] * Z[0], q2 = Y[1] * Z[1];
+      for (int x = 0; x < 2; ++x) {
+        const double v = corner[x + 2 * y + 4 * z];
+        const double* X = L[0][x];
+        c[0] += v * X[0] * q0;
+        c[1] += v * (X[0] * q1 + X[1] * q0);
+        c[2] += v * (X[0] * q2 + X[1] * q1);
+        c[3] += v * X[1] * q2;
+      }
+    }
+  // Split [0, 1] at the extrema (roots of 3c3 s² + 2c2 s + c1) into monotone pieces.
+  double cuts[4] = {0.0, 0.0, 0.0, 0.0};
+  int n_cuts = 0;
+  cuts[n_cuts++] = 0.0;
+  const double A = 3.0 * c[3], B = 2.0 * c[2], C = c[1];
+  double ext[2];
+  int n_ext = 0;
+  if (A != 0.0) {
+    const double disc = B * B - 4.0 * A * C;
+    if (disc > 0.0) {
+      // Stable quadratic roots.
+      const double qd = -0.5 * (B + std::copysign(std::sqrt(disc), B));
+      ext[n_ext++] = qd / A;
+      if (qd != 0.0) ext[n_ext++] = C / qd;
+    }
+  } else if (B != 0.0) {
+    ext[n_ext++] = -C / B;
+  }
+  if (n_ext == 2 && ext[0] > ext[1]) std::swap(ext[0], ext[1]);
+  for (int e = 0; e < n_ext; ++e)
+    if (ext[e] > 0.0 && ext[e] < 1.0) cuts[n_cuts++] = ext[e];
+  cuts[n_cuts++] = 1.0;
+
+  int n = 0;
+  // The end values by direct interpolation, not from the cubic: on a shared face both cells
+  // compute them with the same arithmetic (see trilinear_value).
+  double fa = trilinear_value(corner, a);
+  if (fa == 0.0) {
+    // A root exactly at the start belongs to this segment (the caster's half-open rule drops
+    // one exactly at a shared end). Continue with the sign just after it, so that it is not
+    // found again by the first piece.
+    roots[n++] = 0.0;
+    fa = c[1] != 0.0 ? c[1] : (c[2] != 0.0 ? c[2] : c[3]);
+  }
+  const double f_end = trilinear_value(corner, b);
+  for (int k = 0; k + 1 < n_cuts; ++k) {
+    const double fb = k + 2 == n_cuts ? f_end : eval_cubic(c, cuts[k + 1]);
+    if (positive(fa) != positive(fb)) roots[n++] = converge_cubic(c, cuts[k], cuts[k + 1], fa, fb);
+    fa = fb;
+  }
+  return n;
+}
+
+GridPart grid_part(const GridBlock& whole, std::array<int, 3> blocks, std::array<int, 3> index) {
+  const GridSource source(whole);  // validates `whole`; its coordinates define the faces
+  GridPart part{whole, {}};
+  GridBlock& b = part.block;
+  if (b.strides == std::array<std::int64_t, 3>{0, 0, 0})
+    b.strides = {1, whole.dims[0], whole.dims[0] * whole.dims[1]};
+  std::int64_t offset = 0;
+  for (int a = 0; a < 3; ++a) {
+    const std::int64_t first = source.first_cell()[a];
+    const std::int64_t cells = source.last_cell()[a] - first + 1;
+    const std::int64_t c0 = first + cells * index[a] / blocks[a];
+    const std::int64_t c1 = first + cells * (index[a] + 1) / blocks[a];  // one past the last cell
+    if (c1 <= c0) throw std::invalid_argument("grid block: more parts than cells along an axis");
+    const bool last_part = index[a] + 1 == blocks[a];
+    // Points c0 … c1, where c1 belongs to the next part (a ghost here); the last part keeps
+    // whatever `whole` has above.
+    b.dims[a] = last_part ? whole.dims[a] - c0 : c1 - c0 + 1;
+    b.ghost_lo[a] = 0;
+    b.ghost_hi[a] = last_part ? whole.ghost_hi[a] : 1;
+    offset += c0 * b.strides[a];
+    if (whole.coords[0]) {
+      b.coords[a] = whole.coords[a] + c0;
+    } else {
+      b.origin[a] = whole.origin[a] + double(c0) * whole.spacing[a];
+    }
+    part.owned.lo[a] = source.coordinate(a, c0);
+    part.owned.hi[a] = source.coordinate(a, c1);
+  }
+  b.values =
+      static_cast<const char*>(whole.values) + offset * std::int64_t(scalar_size(whole.type));
+  return part;
+}
+
+GridSource::GridSource(const GridBlock& block, int brick_cells)
+    : block_(block), brick_cells_(brick_cells) {
+  if (brick_cells < 1)
+    throw std::invalid_argument("grid block: brick size must be at least one cell");
+  if (!block_.values) throw std::invalid_argument("grid block: values pointer is null");
+  if (block_.strides == std::array<std::int64_t, 3>{0, 0, 0})
+    block_.strides = {1, block_.dims[0], block_.dims[0] * block_.dims[1]};
+  const bool rectilinear = block_.coords[0] && block_.coords[1] && block_.coords[2];
+  if (!rectilinear && (block_.coords[0] || block_.coords[1] || block_.coords[2]))
+    throw std::invalid_argument(
+        "grid block: rectilinear coordinates must be given for all three axes");
+  for (int a = 0; a < 3; ++a) {
+    const std::string axis = kAxis[a];
+    const std::int64_t n = block_.dims[a];
+    if (n < 2) throw std::invalid_argument("grid block: need at least 2 points along " + axis);
+    if (block_.strides[a] == 0)
+      throw std::invalid_argument("grid block: stride along " + axis + " is 0");
+    if (block_.ghost_lo[a] < 0 || block_.ghost_hi[a] < 0)
+      throw std::invalid_argument("grid block: negative ghost layer count along " + axis);
+    first_cell_[a] = block_.ghost_lo[a];
+    last_cell_[a] = std::min(n - 1 - block_.ghost_hi[a], n - 2);
+    if (last_cell_[a] < first_cell_[a])
+      throw std::invalid_argument("grid block: ghost layers leave no owned cell along " + axis);
+    if (rectilinear) {
+      for (std::int64_t i = 0; i + 1 < n; ++i)
+        if (!(block_.coords[a][i] < block_.coords[a][i + 1]))
+          throw std::invalid_argument("grid block: coordinates along " + axis +
+                                      " are not increasing");
+    } else if (!(block_.spacing[a] > 0.0) || !std::isfinite(block_.spacing[a])) {
+      throw std::invalid_argument("grid block: spacing along " + axis + " must be positive");
+    }
+    const std::int64_t cells = last_cell_[a] - first_cell_[a] + 1;
+    bricks_[a] = (cells + brick_cells - 1) / brick_cells;
+  }
+}
+
+double GridSource::coordinate(int axis, std::int64_t i) const {
+  if (block_.coords[0]) return block_.coords[axis][i];
+  return block_.origin[axis] + double(i) * block_.spacing[axis];
+}
+
+double GridSource::value(std::int64_t i, std::int64_t j, std::int64_t k) const {
+  const std::int64_t at = i * block_.strides[0] + j * block_.strides[1] + k * block_.strides[2];
+  return block_.type == ScalarType::float32 ? double(static_cast<const float*>(block_.values)[at])
+                                            : static_cast<const double*>(block_.values)[at];
+}
+
+Box GridSource::bounds() const {
+  Box box;
+  for (int a = 0; a < 3; ++a) {
+    box.lo[a] = coordinate(a, first_cell_[a]);
+    box.hi[a] = coordinate(a, last_cell_[a] + 1);
+  }
+  return box;
+}
+
+std::size_t GridSource::brick_count() const {
+  return std::size_t(bricks_[0] * bricks_[1] * bricks_[2]);
+}
+
+std::unique_ptr<AxisBinding> GridSource::bind_axis(double isovalue) const {
+  auto bind_typed = [&](const auto* values) -> std::unique_ptr<AxisBinding> {
+    using T = std::remove_cv_t<std::remove_pointer_t<decltype(values)>>;
+    const GridView<T> g{values,         block_.strides, block_.origin,
+                        block_.spacing, block_.coords,  block_.coords[0] != nullptr};
+    return std::make_unique<GridAxisBinding<T>>(g, isovalue, first_cell_, last_cell_, bricks_,
+                                                brick_cells_);
+  };
+  if (block_.type == ScalarType::float32)
+    return bind_typed(static_cast<const float*>(block_.values));
+  return bind_typed(static_cast<const double*>(block_.values));
+}
+
+std::unique_ptr<GeometryBinding> GridSource::bind(RTCDevice device, double isovalue) const {
+  auto bind_typed = [&](const auto* values) {
+    using T = std::remove_cv_t<std::remove_pointer_t<decltype(values)>>;
+    const GridView<T> g{values,         block_.strides, block_.origin,
+                        block_.spacing, block_.coords,  block_.coords[0] != nullptr};
+    return bind_grid(device, g, isovalue, first_cell_, last_cell_, bricks_, brick_cells_);
+  };
+  if (block_.type == ScalarType::float32)
+    return bind_typed(static_cast<const float*>(block_.values));
+  return bind_typed(static_cast<const double*>(block_.values));
+}
+
+}  // namespace ldimesh

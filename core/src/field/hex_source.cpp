@@ -1,0 +1,1184 @@
+#include "ldimesh/core/field/hex_source.hpp"
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <mutex>
+#include <numbers>
+#include <stdexcept>
+#include <string>
+#include <type_traits>
+#include <utility>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+namespace ldimesh {
+namespace {
+
+constexpr int kMaxNodes = kMaxHexOrder + 1;
+constexpr int kMaxElementValues = kMaxNodes * kMaxNodes * kMaxNodes;
+constexpr int kMaxRayDegree = 3 * kMaxHexOrder;  // f along a ray: degree p in each of ξ, η, ζ
+
+// Below this width (in the ray parameter s ∈ [0, 1]) an interval that still has several sign
+// variations is decided by its end values alone: a touching double root is dropped.
+constexpr double kMinWidth = 1e-12;
+// Roots are converged to this width in s, i.e. to 1e-13 of the segment, at most of the element.
+constexpr double kConverged = 1e-13;
+// Bound on the intervals one element-ray search visits. Only a polynomial that is zero up to
+// rounding over a stretch (a plateau at the isovalue) comes near it: its coefficients are noise
+// whose sign variations would otherwise be split down to kMinWidth everywhere.
+constexpr int kMaxIntervals = 4096;
+
+constexpr std::array<std::array<double, kMaxRayDegree + 1>, kMaxRayDegree + 1> kBinomial = [] {
+  std::array<std::array<double, kMaxRayDegree + 1>, kMaxRayDegree + 1> c{};
+  for (int n = 0; n <= kMaxRayDegree; ++n) {
+    c[n][0] = c[n][n] = 1.0;
+    for (int k = 1; k < n; ++k)
+      c[n][k] = c[n - 1][k - 1] + c[n - 1][k];
+  }
+  return c;
+}();
+
+int nodes_per_element(int order) {
+  return (order + 1) * (order + 1) * (order + 1);
+}
+
+void check_order(int order) {
+  if (order < 1 || order > kMaxHexOrder)
+    throw std::invalid_argument("hex source: order " + std::to_string(order) + " outside 1.." +
+                                std::to_string(kMaxHexOrder));
+}
+
+// Enums cast from a host code's integers may hold anything; they index tables here.
+void check_node_set(NodeSet nodes) {
+  if (nodes != NodeSet::gauss_lobatto_legendre && nodes != NodeSet::gauss_legendre &&
+      nodes != NodeSet::equispaced)
+    throw std::invalid_argument("hex source: unknown node set " + std::to_string(int(nodes)));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Nodes and the Lagrange → Bernstein conversion
+
+// Legendre P_n(x) and P'_n(x) by the three-term recurrence; |x| < 1 for the derivative.
+void legendre(int n, double x, double& p, double& dp) {
+  double p0 = 1.0, p1 = x;
+  if (n == 0) {
+    p = 1.0, dp = 0.0;
+    return;
+  }
+  for (int k = 1; k < n; ++k) {
+    const double p2 = ((2 * k + 1) * x * p1 - k * p0) / (k + 1);
+    p0 = p1;
+    p1 = p2;
+  }
+  p = p1;
+  dp = n * (x * p1 - p0) / (x * x - 1.0);
+}
+
+// Newton's method from a Chebyshev guess; the guesses are close enough to converge to the
+// intended root for the orders used here (≤ 9 nodes).
+template <class Residual>
+double newton_root(double x, Residual residual) {
+  for (int iter = 0; iter < 100; ++iter) {
+    double r, dr;
+    residual(x, r, dr);
+    const double step = r / dr;
+    x -= step;
+    if (std::abs(step) < 1e-16) break;
+  }
+  return x;
+}
+
+// Nodes on [−1, 1], increasing, exactly antisymmetric.
+std::vector<double> nodes_on_symmetric_interval(int order, NodeSet set) {
+  const int n = order + 1;
+  std::vector<double> x(n);
+  const double pi = std::numbers::pi;
+  switch (set) {
+    case NodeSet::equispaced:
+      for (int i = 0; i < n; ++i)
+        x[i] = -1.0 + 2.0 * i / order;
+      break;
+    case NodeSet::gauss_legendre:  // roots of P_{p+1}
+      for (int i = 0; i < n; ++i)
+        x[i] = newton_root(-std::cos(pi * (i + 0.75) / (n + 0.5)),
+                           [n](double t, double& r, double& dr) { legendre(n, t, r, dr); });
+      break;
+    case NodeSet::gauss_lobatto_legendre:  // ±1 and the roots of P'_p
+      x[0] = -1.0, x[n - 1] = 1.0;
+      for (int i = 1; i < order; ++i)
+        x[i] = newton_root(-std::cos(pi * i / order), [order](double t, double& r, double& dr) {
+          double p;
+          legendre(order, t, p, r);
+          dr = (2.0 * t * r - order * (order + 1) * p) / (1.0 - t * t);  // Legendre's equation
+        });
+      break;
+  }
+  for (int i = 0; i < n / 2; ++i) {
+    const double h = 0.5 * (x[n - 1 - i] - x[i]);
+    x[i] = -h, x[n - 1 - i] = h;
+  }
+  if (n % 2 == 1) x[n / 2] = 0.0;
+  return x;
+}
+
+// Bernstein coefficients from nodal values, per axis: b = V⁻¹ u with V[m][n] = B_n^p(x_m).
+using ConversionMatrix = std::array<double, kMaxNodes * kMaxNodes>;  // row-major, (p+1)²
+
+ConversionMatrix bernstein_from_nodal(int order, NodeSet set) {
+  const int n = order + 1;
+  const std::vector<double> x = node_positions(order, set);
+  // [V | I], reduced to [I | V⁻¹] by Gauss–Jordan elimination with partial pivoting.
+  std::vector<double> a(std::size_t(n) * 2 * n, 0.0);
+  auto at = [&](int r, int c) -> double& { return a[std::size_t(r) * 2 * n + c]; };
+  for (int m = 0; m < n; ++m) {
+    for (int k = 0; k <= order; ++k)
+      at(m, k) = kBinomial[order][k] * std::pow(x[m], k) * std::pow(1.0 - x[m], order - k);
+    at(m, n + m) = 1.0;
+  }
+  for (int col = 0; col < n; ++col) {
+    int pivot = col;
+    for (int r = col + 1; r < n; ++r)
+      if (std::abs(at(r, col)) > std::abs(at(pivot, col))) pivot = r;
+    for (int c = 0; c < 2 * n; ++c)
+      std::swap(at(col, c), at(pivot, c));
+    const double inv = 1.0 / at(col, col);
+    for (int c = 0; c < 2 * n; ++c)
+      at(col, c) *= inv;
+    for (int r = 0; r < n; ++r) {
+      if (r == col) continue;
+      const double factor = at(r, col);
+      for (int c = 0; c < 2 * n; ++c)
+        at(r, c) -= factor * at(col, c);
+    }
+  }
+  ConversionMatrix inverse{};
+  for (int r = 0; r < n; ++r)
+    for (int c = 0; c < n; ++c)
+      inverse[r * n + c] = at(r, n + c);
+  return inverse;
+}
+
+// All (order, node set) matrices, built once on first use (thread-safe static initialisation).
+const ConversionMatrix& conversion_matrix(int order, NodeSet set) {
+  static const auto table = [] {
+    std::array<std::array<ConversionMatrix, 3>, kMaxHexOrder + 1> t{};
+    for (int p = 1; p <= kMaxHexOrder; ++p)
+      for (NodeSet s :
+           {NodeSet::gauss_lobatto_legendre, NodeSet::gauss_legendre, NodeSet::equispaced})
+        t[p][int(s)] = bernstein_from_nodal(p, s);
+    return t;
+  }();
+  return table[order][int(set)];
+}
+
+// Calls fn(std::integral_constant<int, v>{}) for the runtime value v, one of Vs (the last one
+// for any other value): a kernel instantiated per value, chosen at run time.
+template <int V, int... Vs, class Fn>
+[[gnu::always_inline]] inline decltype(auto) with_one_of(int v, Fn&& fn) {
+  if constexpr (sizeof...(Vs) == 0) {
+    return fn(std::integral_constant<int, V>{});
+  } else {
+    if (v == V) return fn(std::integral_constant<int, V>{});
+    return with_one_of<Vs...>(v, std::forward<Fn>(fn));
+  }
+}
+// The order p = 1..kMaxHexOrder as a constant.
+template <class Fn>
+[[gnu::always_inline]] inline decltype(auto) with_order(int p, Fn&& fn) {
+  static_assert(kMaxHexOrder == 8);
+  return with_one_of<1, 2, 3, 4, 5, 6, 7, 8>(p, std::forward<Fn>(fn));
+}
+// Sum factorisation: the 1-D conversion applied along ξ, then η, then ζ ((p + 1)⁴ operations
+// instead of (p + 1)⁶). `in` and `out` hold (p + 1)³ values and may not overlap.
+template <int P>
+void convert_element_fixed(const ConversionMatrix& m, const double* in, double* out) {
+  constexpr int n = P + 1;
+  double work[2][kMaxElementValues];
+  const double* src = in;
+  for (int axis = 0; axis < 3; ++axis) {
+    double* dst = axis == 2 ? out : work[axis];
+    const int s = axis == 0 ? 1 : (axis == 1 ? n : n * n);
+    // The lines along `axis`: indices a + b·s·n with a < s, each with its n values s apart.
+    for (int b = 0; b < n * n * n / (s * n); ++b)
+      for (int a = 0; a < s; ++a) {
+        const int base = a + b * s * n;
+        for (int r = 0; r < n; ++r) {
+          double sum = 0.0;
+          for (int c = 0; c < n; ++c)
+            sum += m[r * n + c] * src[base + c * s];
+          dst[base + r * s] = sum;
+        }
+      }
+    src = dst;
+  }
+}
+void convert_element(int order, const ConversionMatrix& m, const double* in, double* out) {
+  with_order(order, [&](auto p) { convert_element_fixed<p>(m, in, out); });
+}
+
+// Copies the (p + 1)³ = n nodal values of `element` as doubles into `nodal`; returns how many
+// are NaN or ±Inf.
+std::size_t read_nodal(const HexBlock& block, std::size_t element, std::size_t n, double* nodal) {
+  const std::size_t first = element * block.element_stride;
+  // One branch per element on the scalar type, none per value.
+  if (block.type == ScalarType::float32)
+    std::copy_n(static_cast<const float*>(block.values) + first, n, nodal);
+  else
+    std::copy_n(static_cast<const double*>(block.values) + first, n, nodal);
+  std::size_t nonfinite = 0;
+  for (std::size_t i = 0; i < n; ++i)
+    nonfinite += !std::isfinite(nodal[i]);
+  return nonfinite;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Element geometry
+
+// x = origin + axes · ξ for ξ ∈ [0, 1]³ (axes' columns are the edges from corner 0).
+struct AffineFrame {
+  glm::dvec3 origin;
+  glm::dmat3 axes;
+};
+
+glm::dvec3 corner(const double* corners, int c) {
+  return {corners[3 * c], corners[3 * c + 1], corners[3 * c + 2]};
+}
+
+AffineFrame frame_of(const double* corners) {
+  const glm::dvec3 o = corner(corners, 0);
+  return {o, glm::dmat3(corner(corners, 1) - o, corner(corners, 2) - o, corner(corners, 4) - o)};
+}
+
+// The axis-aligned box around the parallelepiped.
+Box bounding_box(const AffineFrame& f) {
+  Box box{f.origin, f.origin};
+  for (int edge = 0; edge < 3; ++edge) {
+    box.lo += glm::min(f.axes[edge], 0.0);
+    box.hi += glm::max(f.axes[edge], 0.0);
+  }
+  return box;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Evaluation. The kernels take the order p (and the degrees along a segment) as constants, so
+// that their loops unroll and their sums stay in registers; with_order and with_degree turn a
+// runtime value into one. The operations and their order do not depend on how a kernel is
+// instantiated: every caller gets the same values, to the bit.
+
+// A degree along a segment as a constant: P per reference axis the segment moves along, so
+// d ∈ {0, P, 2P, 3P}.
+template <int P, class Fn>
+[[gnu::always_inline]] inline decltype(auto) with_degree(int d, Fn&& fn) {
+  return with_one_of<0, P, 2 * P, 3 * P>(d, std::forward<Fn>(fn));
+}
+
+// B_i^P(x) and dB_i^P/dx for i = 0..P, from the triangle B_i^r = (1 − x) B_i^{r−1} + x
+// B_{i−1}^{r−1} and dB_i^P/dx = P (B_{i−1}^{P−1} − B_i^{P−1}).
+template <int P>
+[[gnu::always_inline]] inline void bernstein_basis(double x, double* value, double* derivative) {
+  double b[kMaxNodes] = {1.0};
+  for (int r = 1; r < P; ++r) {
+    b[r] = x * b[r - 1];
+    for (int i = r - 1; i > 0; --i)
+      b[i] = (1.0 - x) * b[i] + x * b[i - 1];
+    b[0] *= 1.0 - x;
+  }
+  for (int i = 0; i <= P; ++i) {
+    const double left = i > 0 ? b[i - 1] : 0.0, right = i < P ? b[i] : 0.0;
+    derivative[i] = P * (left - right);
+    value[i] = (1.0 - x) * right + x * left;
+  }
+}
+
+template <int P>
+PolynomialSample evaluate_tensor(const double* coefficients, glm::dvec3 r) {
+  constexpr int n = P + 1;
+  double bx[kMaxNodes], dx[kMaxNodes], by[kMaxNodes], dy[kMaxNodes], bz[kMaxNodes], dz[kMaxNodes];
+  bernstein_basis<P>(r.x, bx, dx);
+  bernstein_basis<P>(r.y, by, dy);
+  bernstein_basis<P>(r.z, bz, dz);
+  PolynomialSample out;
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j) {
+      const double* row = coefficients + n * (j + n * k);
+      double v = 0.0, dv = 0.0;
+      for (int i = 0; i < n; ++i) {
+        v += row[i] * bx[i];
+        dv += row[i] * dx[i];
+      }
+      out.value += bz[k] * by[j] * v;
+      out.gradient.x += bz[k] * by[j] * dv;
+      out.gradient.y += bz[k] * dy[j] * v;
+      out.gradient.z += dz[k] * by[j] * v;
+    }
+  return out;
+}
+
+// ---------------------------------------------------------------------------------------------
+// The polynomial along a ray segment. Products are convolutions in the scaled Bernstein basis
+// s^i (1 − s)^(n−i); coefficient i of a standard Bernstein polynomial is the scaled one divided
+// by C(n, i) (Farouki & Rajan 1988, "Algorithms for polynomials in Bernstein form").
+
+// out[0..M+N] = a[0..M] ⊛ b[0..N], accumulated (a factor of degree 0 is a scaling).
+template <int M, int N>
+[[gnu::always_inline]] inline void convolve_add(const double* a, const double* b, double* out) {
+  for (int i = 0; i <= M; ++i)
+    for (int j = 0; j <= N; ++j)
+      out[i + j] += a[i] * b[j];
+}
+
+// Scaled coefficients in s of B_i^P(x(s)), i = 0..P, for x(s) = xa (1 − s) + xb s. Returns their
+// degree in s: P, or 0 where the segment does not move along this axis (xa == xb, as for an
+// axis-aligned ray through an axis-aligned element), which keeps the degree along the ray low.
+template <int P>
+[[gnu::always_inline]] inline int basis_along_segment(double xa, double xb,
+                                                      double (*basis)[kMaxNodes]) {
+  if (xa == xb) {
+    double value[kMaxNodes], derivative[kMaxNodes];
+    bernstein_basis<P>(xa, value, derivative);
+    for (int i = 0; i <= P; ++i)
+      basis[i][0] = value[i];
+    return 0;
+  }
+  double x_pow[kMaxNodes][kMaxNodes] = {}, y_pow[kMaxNodes][kMaxNodes] = {};  // X^i, (1 − X)^i
+  x_pow[0][0] = y_pow[0][0] = 1.0;
+  for (int i = 1; i <= P; ++i)
+    for (int l = 0; l <= i; ++l) {
+      const double lo = l < i ? x_pow[i - 1][l] : 0.0, hi = l > 0 ? x_pow[i - 1][l - 1] : 0.0;
+      x_pow[i][l] = xa * lo + xb * hi;
+      const double ylo = l < i ? y_pow[i - 1][l] : 0.0, yhi = l > 0 ? y_pow[i - 1][l - 1] : 0.0;
+      y_pow[i][l] = (1.0 - xa) * ylo + (1.0 - xb) * yhi;
+    }
+  for (int i = 0; i <= P; ++i) {
+    std::fill(basis[i], basis[i] + P + 1, 0.0);
+    for (int l = 0; l <= i; ++l)  // x_pow[i] ⊛ y_pow[P − i]
+      for (int m = 0; m <= P - i; ++m)
+        basis[i][l + m] += x_pow[i][l] * y_pow[P - i][m];
+    for (int l = 0; l <= P; ++l)
+      basis[i][l] *= kBinomial[P][i];
+  }
+  return P;
+}
+
+// The restriction to a segment in stages, one reference axis after the other (ξ, then η, then
+// ζ): each stage contracts the coefficients with the basis of one axis along the segment. A
+// stage's result depends only on the segment's coordinates along the axes contracted so far,
+// so the coherent caster keeps it while those do not change (along a row of pixels).
+
+// The basis of one axis along a segment from xa (s = 0) to xb (s = 1): scaled coefficients in
+// s of B_i^p(x(s)), degree p, or degree 0 where xa == xb.
+struct AxisBasis {
+  int degree = 0;
+  double b[kMaxNodes][kMaxNodes];
+};
+template <int P>
+[[gnu::always_inline]] inline void segment_basis(double xa, double xb, AxisBasis& out) {
+  out.degree = basis_along_segment<P>(xa, xb, out.b);
+}
+// dB_i^P/dx at x, as a degree-0 basis (a derivative across the segment).
+template <int P>
+[[gnu::always_inline]] inline void derivative_basis(double x, AxisBasis& out) {
+  double value[kMaxNodes], derivative[kMaxNodes];
+  bernstein_basis<P>(x, value, derivative);
+  out.degree = 0;
+  for (int i = 0; i <= P; ++i)
+    out.b[i][0] = derivative[i];
+}
+
+// After the ξ stage: g[k][j][l] = Σ_i c_ijk · bx_i[l], l ≤ bx.degree.
+struct StageX {
+  double g[kMaxNodes][kMaxNodes][kMaxNodes];
+};
+template <int P>
+[[gnu::always_inline]] inline void contract_x(const double* c, const AxisBasis& bx, StageX& out) {
+  with_degree<P>(bx.degree, [&](auto dx) {
+    constexpr int n = P + 1, D = dx;
+    if constexpr (D <= P)
+      for (int k = 0; k < n; ++k)
+        for (int j = 0; j < n; ++j) {
+          double g[D + 1] = {};
+          const double* row = c + n * (j + n * k);
+          for (int i = 0; i < n; ++i)
+            for (int l = 0; l <= D; ++l)
+              g[l] += row[i] * bx.b[i][l];
+          std::copy(g, g + D + 1, out.g[k][j]);
+        }
+  });
+}
+// After the η stage: h[k][l] = Σ_j g[k][j] ⊛ by_j, degree dx + by.degree.
+struct StageY {
+  double h[kMaxNodes][2 * kMaxHexOrder + 1];
+};
+template <int P>
+[[gnu::always_inline]] inline void contract_y(const StageX& x, int dx, const AxisBasis& by,
+                                              StageY& out) {
+  with_degree<P>(dx, [&](auto dxc) {
+    with_degree<P>(by.degree, [&](auto dyc) {
+      constexpr int n = P + 1, DX = dxc, DY = dyc;
+      if constexpr (DX <= P && DY <= P)
+        for (int k = 0; k < n; ++k) {
+          double h[DX + DY + 1] = {};
+          for (int j = 0; j < n; ++j)
+            convolve_add<DX, DY>(x.g[k][j], by.b[j], h);
+          std::copy(h, h + DX + DY + 1, out.h[k]);
+        }
+    });
+  });
+}
+// The ζ stage in the scaled basis (before the division by the binomials); returns the degree
+// dxy + bz.degree.
+template <int P>
+[[gnu::always_inline]] inline int contract_z_scaled(const StageY& y, int dxy, const AxisBasis& bz,
+                                                    double* f) {
+  return with_degree<P>(dxy, [&](auto dxyc) {
+    return with_degree<P>(bz.degree, [&](auto dzc) {
+      constexpr int n = P + 1, DXY = dxyc, DZ = dzc;
+      if constexpr (DXY <= 2 * P && DZ <= P) {
+        double s[DXY + DZ + 1] = {};
+        for (int k = 0; k < n; ++k)
+          convolve_add<DXY, DZ>(y.h[k], bz.b[k], s);
+        std::copy(s, s + DXY + DZ + 1, f);
+      }
+      return DXY + DZ;
+    });
+  });
+}
+[[gnu::always_inline]] inline void scaled_to_standard(int degree, double* f) {
+  for (int l = 0; l <= degree; ++l)
+    f[l] /= kBinomial[degree][l];
+}
+// The ζ stage: the standard Bernstein coefficients f[0..degree] along the segment.
+template <int P>
+int contract_z(const StageY& y, int dxy, const AxisBasis& bz, double* f) {
+  const int degree = contract_z_scaled<P>(y, dxy, bz, f);
+  scaled_to_standard(degree, f);
+  return degree;
+}
+
+// Standard Bernstein coefficients f[0..n] on s ∈ [0, 1] of the tensor polynomial with
+// coefficients `c` along the straight segment from reference point a (s = 0) to b (s = 1);
+// returns the degree n ≤ 3P (P per reference axis the segment moves along).
+template <int P>
+int restrict_to_segment(const double* c, glm::dvec3 a, glm::dvec3 b, double* f) {
+  AxisBasis bx, by, bz;
+  segment_basis<P>(a.x, b.x, bx);
+  segment_basis<P>(a.y, b.y, by);
+  segment_basis<P>(a.z, b.z, bz);
+  StageX x;
+  StageY y;
+  contract_x<P>(c, bx, x);
+  contract_y<P>(x, bx.degree, by, y);
+  return contract_z<P>(y, bx.degree + by.degree, bz, f);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Roots of a univariate Bernstein polynomial on [0, 1]
+
+// Value and derivative at u of the Bernstein polynomial c[0..n] on [0, 1] by Horner's rule in
+// r = u / (1 − u) (or (1 − u) / u from the other end, for u > 1/2, so that |r| ≤ 1):
+// Σ C(n, i) c_i u^i (1 − u)^(n−i) = (1 − u)^n Σ C(n, i) c_i r^i. O(n) per evaluation where
+// de Casteljau's is O(n²).
+[[gnu::always_inline]] inline void bernstein_horner(const double* c, int n, double u, double& value,
+                                                    double& derivative) {
+  const bool low = u <= 0.5;
+  const double near = low ? 1.0 - u : u, r = (low ? u : 1.0 - u) / near;
+  // From the far end: coefficient i of the sum is c[low ? i : n − i].
+  const auto at = [&](int i) { return c[low ? i : n - i]; };
+  // f: Σ C(n, i) e_i r^i; d: Σ C(n − 1, i) (e_{i+1} − e_i) r^i (the derivative's); near^(n−1).
+  double f = at(n), d = at(n) - at(n - 1), power = 1.0;
+  for (int i = n - 1; i >= 0; --i) {
+    f = f * r + kBinomial[n][i] * at(i);
+    if (i > 0) {
+      d = d * r + kBinomial[n - 1][i - 1] * (at(i) - at(i - 1));
+      power *= near;
+    }
+  }
+  value = f * power * near;
+  derivative = (low ? n : -n) * d * power;  // d/du = −d/d(1 − u) from the far end
+}
+
+// Splits c[0..n] at 1/2 into the coefficients of the left and right halves (de Casteljau). The
+// halves share their middle coefficient exactly, so sign tests at the split agree.
+[[gnu::always_inline]] inline void split_in_half(const double* c, int n, double* left,
+                                                 double* right) {
+  double w[kMaxRayDegree + 1];
+  std::copy(c, c + n + 1, w);
+  left[0] = w[0];
+  right[n] = w[n];
+  for (int r = 1; r <= n; ++r) {
+    for (int i = 0; i <= n - r; ++i)
+      w[i] = 0.5 * (w[i] + w[i + 1]);
+    left[r] = w[0];
+    right[n - r] = w[n - r];
+  }
+}
+
+[[gnu::always_inline]] inline int sign_variations(const double* c, int n) {
+  int v = 0;
+  for (int i = 0; i < n; ++i)
+    v += positive(c[i]) != positive(c[i + 1]);
+  return v;
+}
+
+// The single root in [0, 1] of c[0..n], whose end values c[0] and c[n] differ in sign: Newton
+// steps from a regula falsi start, falling back to bisection whenever they leave the bracket.
+[[gnu::always_inline]] inline double converge(const double* c, int n, double tol) {
+  if (c[n] == 0.0) return 1.0;  // exactly at the end: keep it exact (the half-open rule needs it)
+  double a = 0.0, b = 1.0, ga = c[0];
+  // Start where the control polygon crosses zero (its one sign change): far closer than the
+  // chord from c[0] to c[n] when the polynomial bends.
+  double u = 0.5;
+  for (int i = 0; i < n; ++i)
+    if (positive(c[i]) != positive(c[i + 1])) {
+      u = (i + c[i] / (c[i] - c[i + 1])) / n;
+      break;
+    }
+  if (!(u > a && u < b)) u = 0.5;
+  // A value within the evaluation's rounding error (about 2n operations, each within an ulp or
+  // two of the coefficients' magnitude) is a root as far as the coefficients can tell: further
+  // steps would chase rounding noise (slowly, near a double root).
+  double magnitude = 0.0;
+  for (int i = 0; i <= n; ++i)
+    magnitude = std::max(magnitude, std::abs(c[i]));
+  const double noise = 4.0 * (n + 1) * std::numeric_limits<double>::epsilon() * magnitude;
+  for (int iter = 0; iter < 64 && b - a > tol; ++iter) {
+    double g, dg;
+    bernstein_horner(c, n, u, g, dg);
+    if (g == 0.0 || std::abs(g) <= noise) return u;
+    if (positive(g) == positive(ga)) {
+      a = u;
+      ga = g;
+    } else {
+      b = u;
+    }
+    double next = u - g / dg;
+    if (!(next > a && next < b)) next = 0.5 * (a + b);
+    if (std::abs(next - u) < tol) return next;
+    u = next;
+  }
+  return u;
+}
+
+// Calls found(s) for every s ∈ [0, 1] where f = c[0..n] changes sign (zero counts as positive),
+// in increasing order. Bernstein subdivision: by Descartes' rule of signs for the Bernstein
+// basis, f has at most as many roots in a piece as its coefficients have sign variations. None:
+// no sign change. One: the end coefficients (the end values) differ in sign, so exactly one
+// simple root. More: split in half and look again.
+template <class Found>
+[[gnu::always_inline]] inline void bernstein_roots(const double* c, int n, Found found) {
+  struct Piece {
+    double s0, s1;
+    double c[kMaxRayDegree + 1];
+  };
+  // Depth-first with the right half pushed first: at most one pending interval per level, and
+  // kMinWidth = 1e-12 > 2^-40 bounds the levels.
+  // A root exactly at the start belongs to this segment (the caster's half-open rule drops one
+  // exactly at a shared end); the caster merges it with the same root found by subdivision.
+  if (c[0] == 0.0) found(0.0);
+  Piece stack[64];
+  int top = 0;
+  stack[top].s0 = 0.0, stack[top].s1 = 1.0;
+  std::copy(c, c + n + 1, stack[top].c);
+  ++top;
+  int visited = 0;
+  while (top > 0) {
+    const Piece& iv = stack[--top];
+    const int variations = sign_variations(iv.c, n);
+    if (variations == 0) continue;
+    const double w = iv.s1 - iv.s0;
+    if (variations > 1 && w >= kMinWidth && top + 2 <= int(std::size(stack)) &&
+        ++visited < kMaxIntervals) {
+      // Copy out before the pushes overwrite this slot.
+      double parent[kMaxRayDegree + 1];
+      std::copy(iv.c, iv.c + n + 1, parent);
+      const double s0 = iv.s0, s1 = iv.s1, sm = 0.5 * (s0 + s1);
+      Piece& right = stack[top++];
+      Piece& left = stack[top++];
+      split_in_half(parent, n, left.c, right.c);
+      left.s0 = s0, left.s1 = sm;
+      right.s0 = sm, right.s1 = s1;
+      continue;
+    }
+    // One variation: one root. Too small (or out of budget): a root only where the ends differ
+    // in sign, so a touching double root without a sign change is dropped.
+    if (positive(iv.c[0]) == positive(iv.c[n])) continue;
+    const double u = converge(iv.c, n, kConverged / w);
+    found(u == 1.0 ? iv.s1 : iv.s0 + w * u);
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The active elements of a bind: those whose coefficient range holds the isovalue.
+
+// What the casters need of one active element.
+struct ActiveElement {
+  glm::dvec3 origin;        // corner 0
+  glm::dmat3 to_reference;  // inverse of the affine frame's axes
+  glm::dvec3 lo, hi;        // axis-aligned bounds
+};
+
+struct Activation {
+  int order = 1;
+  std::size_t values_per_element = 0;
+  std::vector<ActiveElement> elements;
+  std::vector<double> coefficients;  // iso subtracted, values_per_element per active element
+  std::uint64_t nonfinite = 0;
+  const double* coefficients_of(std::size_t k) const {
+    return &coefficients[k * values_per_element];
+  }
+};
+
+// Every root in [t_min, t_max] of the ray o + t·d in element e (coefficients c), appended to
+// `hits` with its normal: the ray in reference coordinates, clipped to the unit cube, the
+// polynomial along the clipped segment, its roots by Bernstein subdivision. Both casters call
+// this for a ray through an element (the coherent one where it has no shortcut).
+template <int P>
+void intersect_element(const ActiveElement& e, const double* c, glm::dvec3 org, glm::dvec3 dir,
+                       double t_min, double t_max, std::vector<RayHit>& hits) {
+  const glm::dvec3 ro = e.to_reference * (org - e.origin), rd = e.to_reference * dir;
+  double t0 = t_min, t1 = t_max;
+  if (!clip_ray_to_box(ro, rd, glm::dvec3(0.0), glm::dvec3(1.0), t0, t1)) return;
+  const glm::dvec3 a = glm::clamp(ro + t0 * rd, 0.0, 1.0), b = glm::clamp(ro + t1 * rd, 0.0, 1.0);
+
+  double f[kMaxRayDegree + 1];
+  const int degree = restrict_to_segment<P>(c, a, b, f);
+  const glm::dmat3 to_world_gradient = glm::transpose(e.to_reference);  // ∇x f = A⁻ᵀ ∇ξ f
+  if (degree == 0) return;  // constant along the ray: no crossing
+  bernstein_roots(f, degree, [&](double s) {
+    const glm::dvec3 g = to_world_gradient * evaluate_tensor<P>(c, a + s * (b - a)).gradient;
+    hits.push_back({s == 1.0 ? t1 : t0 + s * (t1 - t0), unit_normal(g, dir), 0.0f});
+  });
+}
+
+// ---------------------------------------------------------------------------------------------
+// The Embree binding
+
+class HexBinding final : public GeometryBinding {
+ public:
+  HexBinding(RTCDevice device, Activation active)
+      : active_(std::move(active)),
+        geometry_(device, active_.elements.size(), this, &HexBinding::bounds,
+                  &HexBinding::intersect) {}
+
+  RTCGeometry geometry() const override { return geometry_.get(); }
+  std::size_t primitive_count() const override { return active_.elements.size(); }
+  std::uint64_t nonfinite_values() const override { return active_.nonfinite; }
+
+ private:
+  static void bounds(const RTCBoundsFunctionArguments* args) {
+    const auto* self = static_cast<const HexBinding*>(args->geometryUserPtr);
+    const ActiveElement& e = self->active_.elements[args->primID];
+    write_padded_bounds(e.lo, e.hi, args->bounds_o);
+  }
+
+  static void intersect(const RTCIntersectFunctionNArguments* args) {
+    if (!args->valid[0]) return;
+    const auto* self = static_cast<const HexBinding*>(args->geometryUserPtr);
+    auto* q = reinterpret_cast<RayQuery*>(args->context);
+    const Activation& act = self->active_;
+    with_order(act.order, [&](auto p) {
+      intersect_element<p>(act.elements[args->primID], act.coefficients_of(args->primID), q->org,
+                           q->dir, q->t_min, q->t_max, *q->hits);
+    });
+  }
+
+  Activation active_;
+  UserGeometry geometry_;  // last: its callbacks read the members above
+};
+
+// ---------------------------------------------------------------------------------------------
+// The coherent caster of axis-parallel rays
+
+// The active elements binned by their boxes across one ray axis: a uniform grid over the two
+// other world axes (b < c), about one element wide, each element listed in every bin its box
+// touches.
+struct ElementBins {
+  int b = 0, c = 1;
+  double lo_b = 0.0, lo_c = 0.0, size_b = 1.0, size_c = 1.0;
+  int nb = 1, nc = 1;
+  std::vector<std::uint32_t> first;  // CSR over bins (b fastest)
+  std::vector<std::uint32_t> elements;
+
+  int bin_b(double x) const { return std::clamp(int(std::floor((x - lo_b) / size_b)), 0, nb - 1); }
+  int bin_c(double x) const { return std::clamp(int(std::floor((x - lo_c) / size_c)), 0, nc - 1); }
+};
+
+ElementBins bin_elements(const std::vector<ActiveElement>& elements, int axis) {
+  ElementBins bins;
+  bins.b = axis == 0 ? 1 : 0;
+  bins.c = axis == 2 ? 1 : 2;
+  const std::size_t n = elements.size();
+  if (n == 0) {
+    bins.first.assign(2, 0);
+    return bins;
+  }
+  double lo_b = INFINITY, hi_b = -INFINITY, lo_c = INFINITY, hi_c = -INFINITY;
+  std::vector<double> eb(n), ec(n);
+  for (std::size_t e = 0; e < n; ++e) {
+    const ActiveElement& el = elements[e];
+    lo_b = std::min(lo_b, el.lo[bins.b]), hi_b = std::max(hi_b, el.hi[bins.b]);
+    lo_c = std::min(lo_c, el.lo[bins.c]), hi_c = std::max(hi_c, el.hi[bins.c]);
+    eb[e] = el.hi[bins.b] - el.lo[bins.b];
+    ec[e] = el.hi[bins.c] - el.lo[bins.c];
+  }
+  // Bins as wide as the median element, at most 2048 per axis.
+  std::nth_element(eb.begin(), eb.begin() + n / 2, eb.end());
+  std::nth_element(ec.begin(), ec.begin() + n / 2, ec.end());
+  const auto layout = [](double lo, double hi, double median, double& size, int& count) {
+    const double extent = std::max(hi - lo, 1e-300);
+    count = int(std::clamp(std::ceil(extent / std::max(median, extent / 2048.0)), 1.0, 2048.0));
+    size = extent / count;
+  };
+  bins.lo_b = lo_b, bins.lo_c = lo_c;
+  layout(lo_b, hi_b, eb[n / 2], bins.size_b, bins.nb);
+  layout(lo_c, hi_c, ec[n / 2], bins.size_c, bins.nc);
+  const std::size_t cells = std::size_t(bins.nb) * std::size_t(bins.nc);
+  bins.first.assign(cells + 1, 0);
+  for (int pass = 0; pass < 2; ++pass) {
+    std::vector<std::uint32_t> next;
+    if (pass == 1) {
+      for (std::size_t k = 0; k < cells; ++k)
+        bins.first[k + 1] += bins.first[k];
+      bins.elements.resize(bins.first[cells]);
+      next.assign(bins.first.begin(), bins.first.end() - 1);
+    }
+    for (std::size_t e = 0; e < n; ++e) {
+      const ActiveElement& el = elements[e];
+      const int b0 = bins.bin_b(el.lo[bins.b]), b1 = bins.bin_b(el.hi[bins.b]);
+      const int c0 = bins.bin_c(el.lo[bins.c]), c1 = bins.bin_c(el.hi[bins.c]);
+      for (int cc = c0; cc <= c1; ++cc)
+        for (int bb = b0; bb <= b1; ++bb) {
+          const std::size_t k = std::size_t(bb) + std::size_t(bins.nb) * std::size_t(cc);
+          if (pass == 0)
+            ++bins.first[k + 1];
+          else
+            bins.elements[next[k]++] = std::uint32_t(e);
+        }
+    }
+  }
+  return bins;
+}
+
+// The polynomial along axis rays through one element, stage by stage (contract_x, _y, _z),
+// each stage kept while the segment's coordinates it depends on do not change: over a row of
+// pixels only the last stage is redone. The same arithmetic as restrict_to_segment, so the
+// same coefficients, to the bit. Where ξ is fixed along the ray, the gradient at a root reuses
+// the ξ stage and contracts the rest with the 1-D bases and derivatives at the point: (p + 1)²
+// work instead of the full tensor evaluation's (p + 1)³.
+template <int P>
+class StagedRestriction {
+ public:
+  explicit StagedRestriction(const double* c) : c_(c) {}
+
+  // Standard Bernstein coefficients along the segment a → b; returns the degree, or −1 when
+  // a stage's values all have one strict sign: the bases that follow are nonnegative and sum to
+  // one, so every coefficient of the polynomial has that sign, and it has no root (nor any
+  // coefficient that is exactly zero: the values are far above underflow).
+  int restrict(glm::dvec3 a, glm::dvec3 b, double* f) {
+    if (!x_valid_ || a.x != ax_ || b.x != bx_) {
+      segment_basis<P>(a.x, b.x, basis_x_);
+      contract_x<P>(c_, basis_x_, x_);
+      ax_ = a.x, bx_ = b.x;
+      x_valid_ = true;
+      y_valid_ = dx_valid_ = false;
+      constexpr int n = P + 1;
+      x_uniform_ =
+          one_sign(&x_.g[0][0][0], n, n, kMaxNodes * kMaxNodes, kMaxNodes, basis_x_.degree + 1);
+    }
+    if (x_uniform_) return -1;
+    if (!y_valid_ || a.y != ay_ || b.y != by_) {
+      segment_basis<P>(a.y, b.y, basis_y_);
+      contract_y<P>(x_, basis_x_.degree, basis_y_, y_);
+      ay_ = a.y, by_ = b.y;
+      y_valid_ = true;
+      y_uniform_ = one_sign(&y_.h[0][0], P + 1, 1, 2 * kMaxHexOrder + 1, 0,
+                            basis_x_.degree + basis_y_.degree + 1);
+    }
+    if (y_uniform_) return -1;
+    if (!z_valid_ || a.z != az_ || b.z != bz_) {
+      segment_basis<P>(a.z, b.z, basis_z_);
+      az_ = a.z, bz_ = b.z;
+      z_valid_ = true;
+    }
+    a_ = a, b_ = b;
+    const int degree = contract_z_scaled<P>(y_, basis_x_.degree + basis_y_.degree, basis_z_, f);
+    // Scaled and standard coefficients differ by positive factors: one strict sign in the
+    // scaled ones (far above underflow) means no root, and the divisions can wait.
+    if (degree > 0 && one_sign(f, 1, 1, 0, 0, degree + 1)) return -1;
+    scaled_to_standard(degree, f);
+    return degree;
+  }
+
+  // ∇ξ at parameter s of the last restrict()'s segment; false where ξ moves along it (then
+  // evaluate the tensor).
+  bool gradient(double s, glm::dvec3& g) {
+    // G_kj = Σ_i c_ijk B_i(ξ) and its ξ-derivative are the ξ stage itself where ξ is fixed along
+    // the ray (kept over the row). Otherwise nothing is kept: evaluate_tensor does the same work.
+    if (a_.x != b_.x) return false;
+    // The hit's reference point, as evaluate_tensor would be given it, and the 1-D bases and
+    // their derivatives there.
+    const glm::dvec3 q = a_ + s * (b_ - a_);
+    double vy[kMaxNodes], dy[kMaxNodes], vz[kMaxNodes], dz[kMaxNodes];
+    bernstein_basis<P>(q.y, vy, dy);
+    bernstein_basis<P>(q.z, vz, dz);
+    if (!dx_valid_) {
+      AxisBasis d;
+      derivative_basis<P>(a_.x, d);
+      contract_x<P>(c_, d, dx_);
+      dx_valid_ = true;
+    }
+    constexpr int n = P + 1;
+    g = glm::dvec3(0.0);
+    for (int k = 0; k < n; ++k) {
+      double sx = 0.0, sy = 0.0, sz = 0.0;
+      for (int j = 0; j < n; ++j) {
+        const double v = x_.g[k][j][0], d = dx_.g[k][j][0];
+        sx += d * vy[j];
+        sy += v * dy[j];
+        sz += v * vy[j];
+      }
+      g.x += sx * vz[k];
+      g.y += sy * vz[k];
+      g.z += sz * dz[k];
+    }
+    return true;
+  }
+
+ private:
+  // Whether values v[i·si + j·sj + l] (i < ni, j < nj, l < nl) all have one strict sign, none
+  // near underflow.
+  static bool one_sign(const double* v, int ni, int nj, int si, int sj, int nl) {
+    constexpr double kTiny = 1e-250;
+    bool all_positive = true, all_negative = true;
+    for (int i = 0; i < ni; ++i)
+      for (int j = 0; j < nj; ++j)
+        for (int l = 0; l < nl; ++l) {
+          const double x = v[i * si + j * sj + l];
+          all_positive = all_positive && x > kTiny;
+          all_negative = all_negative && x < -kTiny;
+        }
+    return all_positive || all_negative;
+  }
+
+  const double* c_;
+  bool x_uniform_ = false, y_uniform_ = false;
+  AxisBasis basis_x_, basis_y_, basis_z_;
+  StageX x_, dx_;
+  StageY y_;
+  double ax_ = 0, bx_ = 0, ay_ = 0, by_ = 0, az_ = 0, bz_ = 0;
+  bool x_valid_ = false, y_valid_ = false, z_valid_ = false, dx_valid_ = false;
+  glm::dvec3 a_{0.0}, b_{0.0};
+};
+
+// Object order for the pixel rays of axis views: each active element loops over the pixels its
+// box covers, each pixel's ray clipped to the element exactly as intersect_element clips it,
+// the polynomial along it from the staged restriction (rows of pixels share its first stages),
+// the roots by the same subdivision. Rays of other queries (single points) find their elements
+// through the bins. Both give the roots of the Embree binding, to the bit.
+class HexAxisBinding final : public AxisBinding {
+ public:
+  explicit HexAxisBinding(Activation active) : active_(std::move(active)) {}
+
+  std::size_t primitive_count() const override { return active_.elements.size(); }
+  std::uint64_t nonfinite_values() const override { return active_.nonfinite; }
+
+  void prepare(int axis) const override {
+    std::call_once(bins_once_[axis], [&] { bins_[axis] = bin_elements(active_.elements, axis); });
+  }
+
+  void cast(const AxisRays& rays, std::vector<AxisHit>& out) const override {
+    if (active_.elements.empty() || rays.rays.empty()) return;
+    const int axis = rays.axis;
+    prepare(axis);
+    const ElementBins& bins = bins_[axis];
+    std::vector<RayHit> hits;
+    if (!rays.lattice) {
+      for (std::size_t k = 0; k < rays.rays.size(); ++k) {
+        const AxisRay& ray = rays.rays[k];
+        if (!(ray.t0 <= ray.t1)) continue;
+        const std::size_t bin = std::size_t(bins.bin_b(ray.org[bins.b])) +
+                                std::size_t(bins.nb) * std::size_t(bins.bin_c(ray.org[bins.c]));
+        hits.clear();
+        with_order(active_.order, [&](auto p) {
+          for (std::uint32_t m = bins.first[bin]; m < bins.first[bin + 1]; ++m) {
+            const std::uint32_t e = bins.elements[m];
+            intersect_element<p>(active_.elements[e], active_.coefficients_of(e), ray.org, rays.dir,
+                                 ray.t0, ray.t1, hits);
+          }
+        });
+        for (const RayHit& h : hits)
+          out.push_back({std::uint32_t(k), h});
+      }
+      return;
+    }
+    // The rectangle the rays cover, in bins; each element once, from the first of its bins in
+    // the rectangle.
+    double lo_b = INFINITY, hi_b = -INFINITY, lo_c = INFINITY, hi_c = -INFINITY;
+    for (const AxisRay& ray : rays.rays) {
+      lo_b = std::min(lo_b, ray.org[bins.b]), hi_b = std::max(hi_b, ray.org[bins.b]);
+      lo_c = std::min(lo_c, ray.org[bins.c]), hi_c = std::max(hi_c, ray.org[bins.c]);
+    }
+    const int qb0 = bins.bin_b(lo_b), qb1 = bins.bin_b(hi_b);
+    const int qc0 = bins.bin_c(lo_c), qc1 = bins.bin_c(hi_c);
+    for (int cc = qc0; cc <= qc1; ++cc)
+      for (int bb = qb0; bb <= qb1; ++bb) {
+        const std::size_t bin = std::size_t(bb) + std::size_t(bins.nb) * std::size_t(cc);
+        for (std::uint32_t m = bins.first[bin]; m < bins.first[bin + 1]; ++m) {
+          const std::uint32_t e = bins.elements[m];
+          const ActiveElement& el = active_.elements[e];
+          if (std::max(bins.bin_b(el.lo[bins.b]), qb0) != bb ||
+              std::max(bins.bin_c(el.lo[bins.c]), qc0) != cc)
+            continue;
+          cast_element(e, rays, out);
+        }
+      }
+  }
+
+ private:
+  // The pixels of the lattice query `rays` whose centres element e's box covers,
+  // in the order that keeps the staged restriction's first stages: rows of the image axis
+  // whose world axis maps to the lower of the two reference axes across the ray.
+  void cast_element(std::uint32_t e, const AxisRays& rays, std::vector<AxisHit>& out) const {
+    with_order(active_.order, [&](auto p) { cast_element_order<p>(e, rays, out); });
+  }
+
+  template <int P>
+  void cast_element_order(std::uint32_t e, const AxisRays& rays, std::vector<AxisHit>& out) const {
+    const View& view = *rays.lattice;
+    const ActiveElement& el = active_.elements[e];
+    const int ua = exact_axis(view.u), va = exact_axis(view.v);
+    const int rows = int(rays.rays.size() / std::size_t(view.width));
+    // Pixels whose centres lie in the box (an affine element lies in its box), with a margin
+    // far above rounding: the exact test is the clip below.
+    const auto pixel_range = [&](int axis, double sign, int count, int& first, int& last) {
+      const double x0 = (el.lo[axis] - view.origin[axis]) / (view.spacing * sign),
+                   x1 = (el.hi[axis] - view.origin[axis]) / (view.spacing * sign);
+      first = int(std::max(0.0, std::ceil(std::min(x0, x1) - 0.5 - 1e-6)));
+      last = int(std::min(double(count - 1), std::floor(std::max(x0, x1) - 0.5 + 1e-6)));
+    };
+    int i0, i1, j0, j1;
+    pixel_range(ua, view.u[ua], view.width, i0, i1);
+    pixel_range(va, view.v[va], view.height, j0, j1);
+    j0 = std::max(j0, rays.row_begin);
+    j1 = std::min(j1, rays.row_begin + rows - 1);
+    if (i0 > i1 || j0 > j1) return;
+
+    // The reference axis that moves along the ray, and which image axis holds the lower of the
+    // other two (keep it fixed in the outer loop).
+    const glm::dmat3& m = el.to_reference;
+    const auto reference_of = [&](int world) {  // the one reference axis a world axis maps to
+      int r = -1;
+      for (int k = 0; k < 3; ++k)
+        if (m[world][k] != 0.0) r = r < 0 ? k : 3;
+      return r;
+    };
+    const int ru = reference_of(ua), rv = reference_of(va);
+    const bool columns_outer = ru >= 0 && ru < 3 && rv >= 0 && rv < 3 && ru < rv;
+
+    const double* c = active_.coefficients_of(e);
+    const glm::dvec3 rd = el.to_reference * rays.dir;
+    const glm::dmat3 to_world_gradient = glm::transpose(el.to_reference);
+    StagedRestriction<P> staged(c);
+    double f[kMaxRayDegree + 1];
+    const int outer0 = columns_outer ? i0 : j0, outer1 = columns_outer ? i1 : j1;
+    const int inner0 = columns_outer ? j0 : i0, inner1 = columns_outer ? j1 : i1;
+    for (int outer = outer0; outer <= outer1; ++outer)
+      for (int inner = inner0; inner <= inner1; ++inner) {
+        const int i = columns_outer ? outer : inner, j = columns_outer ? inner : outer;
+        const std::size_t k = std::size_t(j - rays.row_begin) * std::size_t(view.width) + i;
+        const AxisRay& ray = rays.rays[k];
+        if (!(ray.t0 <= ray.t1)) continue;
+        // As intersect_element does it.
+        const glm::dvec3 ro = el.to_reference * (ray.org - el.origin);
+        double t0 = ray.t0, t1 = ray.t1;
+        if (!clip_ray_to_box(ro, rd, glm::dvec3(0.0), glm::dvec3(1.0), t0, t1)) continue;
+        const glm::dvec3 a = glm::clamp(ro + t0 * rd, 0.0, 1.0),
+                         b = glm::clamp(ro + t1 * rd, 0.0, 1.0);
+        const int degree = staged.restrict(a, b, f);
+        if (degree <= 0) continue;  // constant along the ray, or no root possible
+        const auto found = [&](double s) {
+          glm::dvec3 g;
+          if (!staged.gradient(s, g)) g = evaluate_tensor<P>(c, a + s * (b - a)).gradient;
+          out.push_back({std::uint32_t(k),
+                         {s == 1.0 ? t1 : t0 + s * (t1 - t0),
+                          unit_normal(to_world_gradient * g, rays.dir), 0.0f}});
+        };
+        if (degree == P)  // one reference axis along the ray: the degree as a constant
+          bernstein_roots(f, P, found);
+        else
+          bernstein_roots(f, degree, found);
+      }
+  }
+
+  Activation active_;
+  mutable std::array<ElementBins, 3> bins_;
+  mutable std::array<std::once_flag, 3> bins_once_;
+};
+
+}  // namespace
+
+std::vector<double> node_positions(int order, NodeSet nodes) {
+  check_order(order);
+  check_node_set(nodes);
+  std::vector<double> x = nodes_on_symmetric_interval(order, nodes);
+  for (double& v : x)
+    v = 0.5 * (v + 1.0);
+  return x;
+}
+
+void lagrange_to_bernstein(int order, NodeSet nodes, std::span<const double> nodal,
+                           std::span<double> bernstein) {
+  check_order(order);
+  check_node_set(nodes);
+  const std::size_t n = nodes_per_element(order);
+  if (nodal.size() != n || bernstein.size() != n)
+    throw std::invalid_argument("lagrange_to_bernstein: spans must hold (order + 1)^3 values");
+  convert_element(order, conversion_matrix(order, nodes), nodal.data(), bernstein.data());
+}
+
+PolynomialSample evaluate_bernstein(int order, std::span<const double> bernstein,
+                                    glm::dvec3 reference) {
+  check_order(order);
+  if (bernstein.size() != std::size_t(nodes_per_element(order)))
+    throw std::invalid_argument("evaluate_bernstein: span must hold (order + 1)^3 values");
+  return with_order(order, [&](auto p) { return evaluate_tensor<p>(bernstein.data(), reference); });
+}
+
+HexElementSource::HexElementSource(const HexBlock& block) : block_(block) {
+  check_order(block.order);
+  check_node_set(block.nodes);
+  const std::size_t n = nodes_per_element(block.order);
+  if (block.element_count == 0) throw std::invalid_argument("hex source: no elements");
+  if (!block.corners) throw std::invalid_argument("hex source: null corner array");
+  if (!block.values) throw std::invalid_argument("hex source: null value array");
+  if (block.type != ScalarType::float32 && block.type != ScalarType::float64)
+    throw std::invalid_argument("hex source: unknown scalar type");
+  if (block_.element_stride == 0) block_.element_stride = n;
+  if (block_.element_stride < n)
+    throw std::invalid_argument("hex source: element stride " +
+                                std::to_string(block_.element_stride) +
+                                " below (order + 1)^3 = " + std::to_string(n));
+
+  constexpr double inf = std::numeric_limits<double>::infinity();
+  bounds_ = {glm::dvec3(inf), glm::dvec3(-inf)};
+  for (std::size_t e = 0; e < block.element_count; ++e) {
+    const double* corners = block.corners + 24 * e;
+    const AffineFrame f = frame_of(corners);
+    const glm::dvec3 e1 = f.axes[0], e2 = f.axes[1], e3 = f.axes[2];
+    const double size = glm::length(e1) + glm::length(e2) + glm::length(e3);
+    for (int c = 0; c < 8; ++c) {
+      const glm::dvec3 affine =
+          f.origin + double(c & 1) * e1 + double((c >> 1) & 1) * e2 + double((c >> 2) & 1) * e3;
+      // Written so that NaN corners fail too.
+      if (!(glm::length(corner(corners, c) - affine) <= 1e-9 * size))
+        throw std::invalid_argument(
+            "hex source: element " + std::to_string(e) + " is not a parallelepiped (corner " +
+            std::to_string(c) +
+            " is off the affine map of corners 0, 1, 2, 4); non-parallelepiped (non-affine "
+            "trilinear) and curved isoparametric elements are a documented later step");
+    }
+    if (!(std::abs(glm::determinant(f.axes)) >
+          1e-12 * glm::length(e1) * glm::length(e2) * glm::length(e3)))
+      throw std::invalid_argument("hex source: element " + std::to_string(e) +
+                                  " is degenerate (zero volume)");
+    const Box box = bounding_box(f);
+    bounds_.lo = glm::min(bounds_.lo, box.lo);
+    bounds_.hi = glm::max(bounds_.hi, box.hi);
+  }
+}
+
+Box HexElementSource::bounds() const {
+  return bounds_;
+}
+
+glm::dvec3 HexElementSource::to_reference(std::size_t element, glm::dvec3 world) const {
+  const AffineFrame f = frame_of(block_.corners + 24 * element);
+  return glm::inverse(f.axes) * (world - f.origin);
+}
+
+void HexElementSource::element_bernstein(std::size_t element, std::span<double> out) const {
+  const int p = block_.order;
+  const std::size_t n = nodes_per_element(p);
+  if (out.size() != n)
+    throw std::invalid_argument("element_bernstein: span must hold (order + 1)^3 values");
+  double nodal[kMaxElementValues];
+  read_nodal(block_, element, n, nodal);
+  convert_element(p, conversion_matrix(p, block_.nodes), nodal, out.data());
+}
+
+namespace {
+
+// The elements of `source` whose Bernstein coefficient range holds `isovalue`, with their
+// coefficients (iso subtracted) and frames, in element order (the same for any thread count).
+Activation activate(const HexElementSource& source, double isovalue) {
+  const HexBlock& block = source.block();
+  const int p = block.order;
+  const std::size_t n = nodes_per_element(p);
+  const std::size_t count = block.element_count;
+
+  // Pass 1: which elements may hold the isosurface (convex hull of the Bernstein coefficients).
+  // Flags only, so memory does not grow with the block. An element with a non-finite nodal
+  // value has no polynomial to intersect: it is left out.
+  std::vector<std::uint8_t> active(count);
+  std::atomic<std::uint64_t> nonfinite{0};
+  const ConversionMatrix& matrix = conversion_matrix(p, block.nodes);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 64),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      double nodal[kMaxElementValues], b[kMaxElementValues];
+                      std::uint64_t bad = 0;
+                      for (std::size_t e = range.begin(); e != range.end(); ++e) {
+                        if (const std::size_t k = read_nodal(block, e, n, nodal); k > 0) {
+                          bad += k;
+                          active[e] = 0;
+                          continue;
+                        }
+                        convert_element(p, matrix, nodal, b);
+                        const auto [lo, hi] = std::minmax_element(b, b + n);
+                        active[e] = *lo <= isovalue && isovalue <= *hi;
+                      }
+                      if (bad > 0) nonfinite.fetch_add(bad, std::memory_order_relaxed);
+                    });
+  std::vector<std::size_t> kept;
+  for (std::size_t e = 0; e < count; ++e)
+    if (active[e]) kept.push_back(e);
+
+  // Pass 2: the kept elements' coefficients (converted again: usually few are kept) and frames.
+  Activation out;
+  out.order = p;
+  out.values_per_element = n;
+  out.nonfinite = nonfinite.load();
+  out.elements.resize(kept.size());
+  out.coefficients.resize(kept.size() * n);
+  tbb::parallel_for(std::size_t(0), kept.size(), [&](std::size_t k) {
+    const std::size_t e = kept[k];
+    const std::span<double> b(&out.coefficients[k * n], n);
+    source.element_bernstein(e, b);
+    for (double& v : b)
+      v -= isovalue;
+    const AffineFrame f = frame_of(block.corners + 24 * e);
+    ActiveElement& el = out.elements[k];
+    el.origin = f.origin;
+    el.to_reference = glm::inverse(f.axes);
+    const Box box = bounding_box(f);
+    el.lo = box.lo;
+    el.hi = box.hi;
+  });
+  return out;
+}
+
+}  // namespace
+
+std::unique_ptr<GeometryBinding> HexElementSource::bind(RTCDevice device, double isovalue) const {
+  return std::make_unique<HexBinding>(device, activate(*this, isovalue));
+}
+
+std::unique_ptr<AxisBinding> HexElementSource::bind_axis(double isovalue) const {
+  return std::make_unique<HexAxisBinding>(activate(*this, isovalue));
+}
+
+}  // namespace ldimesh

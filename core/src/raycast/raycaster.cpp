@@ -1,0 +1,502 @@
+#include "ldimesh/core/raycast/raycaster.hpp"
+#include "ldimesh/core/base/timing.hpp"
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+namespace ldimesh {
+namespace {
+
+// Sorts one ray's hits by depth and merges hits closer than `tolerance` (a root found by both
+// primitives that share a face, or two roots closer than rounding can tell apart): each run of
+// hits within `tolerance` of its first becomes one hit, the one whose normal faces the viewer
+// most (smallest normal · dir; then the smaller normal, component by component). Where a
+// gradient jumps at a cell face, the duplicates' normals differ in their component along the
+// ray, so the choice does not hang on rounding, and the result does not depend on the order in
+// which the primitives were visited.
+std::size_t sort_and_merge(std::span<RayHit> hits, double tolerance, glm::dvec3 dir) {
+  const auto normal_less = [](const glm::vec3& a, const glm::vec3& b) {
+    if (a.x != b.x) return a.x < b.x;
+    if (a.y != b.y) return a.y < b.y;
+    return a.z < b.z;
+  };
+  const auto less = [&](const RayHit& a, const RayHit& b) {
+    if (a.t != b.t) return a.t < b.t;
+    return normal_less(a.normal, b.normal);
+  };
+  if (hits.size() <= 16) {  // a ray's few hits, often in order already
+    for (std::size_t k = 1; k < hits.size(); ++k)
+      for (std::size_t m = k; m > 0 && less(hits[m], hits[m - 1]); --m)
+        std::swap(hits[m], hits[m - 1]);
+  } else {
+    std::sort(hits.begin(), hits.end(), less);
+  }
+  const glm::vec3 d(dir);
+  std::size_t kept = 0;
+  for (std::size_t k = 0; k < hits.size();) {
+    const double first = hits[k].t;
+    std::size_t best = k;
+    float best_dot = glm::dot(hits[k].normal, d);
+    for (++k; k < hits.size() && hits[k].t - first <= tolerance; ++k) {
+      const float dot = glm::dot(hits[k].normal, d);
+      if (dot < best_dot || (dot == best_dot && normal_less(hits[k].normal, hits[best].normal))) {
+        best = k;
+        best_dot = dot;
+      }
+    }
+    hits[kept++] = hits[best];
+  }
+  return kept;
+}
+
+// Per-thread buffers of the axis casts, kept between tasks: a task's arrays are large enough
+// that allocating them afresh each time costs page faults.
+struct AxisScratch {
+  std::vector<AxisRay> rays;
+  std::vector<RaySegment> segments;
+  std::vector<AxisHit> hits;
+  std::vector<RayHit> by_ray, ray_hits;
+  std::vector<std::uint32_t> first, next;
+};
+AxisScratch& axis_scratch() {
+  thread_local AxisScratch scratch;
+  return scratch;
+}
+
+// Rows per task of an axis view's cast: about 4096 rays, so that sources that loop over their
+// primitives' pixels (elements) see each primitive in few tasks.
+int rows_per_task(const View& view) {
+  return std::clamp(4096 / std::max(view.width, 1), 1, std::max(view.height, 1));
+}
+
+}  // namespace
+
+RayCaster::RayCaster(const FieldSource& source, double isovalue, RayCasterOptions options)
+    : RayCaster(std::span<const FieldSource* const>(std::array{&source}), isovalue, options) {}
+
+RayCaster::RayCaster(std::span<const FieldSource* const> sources, double isovalue,
+                     RayCasterOptions options)
+    : sources_(sources.begin(), sources.end()), isovalue_(isovalue) {
+  if (sources.empty()) throw std::invalid_argument("ray caster needs at least one field source");
+  const auto start = std::chrono::steady_clock::now();
+  for (const FieldSource* source : sources_)
+    duplicate_tolerance_ = std::max(duplicate_tolerance_, source->duplicate_tolerance());
+  if (options.path == CastPath::automatic) {
+    for (const FieldSource* source : sources_) {
+      std::unique_ptr<AxisBinding> binding = source->bind_axis(isovalue);
+      if (!binding) {  // one source without: Embree for all, so that roots merge alike
+        axis_bindings_.clear();
+        break;
+      }
+      has_scalar_ = has_scalar_ || binding->has_scalar();
+      axis_bindings_.push_back(std::move(binding));
+    }
+  }
+  axis_seconds_ = seconds_since(start);
+  if (axis_bindings_.empty()) {
+    ensure_scene();
+    for (const auto& binding : bindings_)
+      has_scalar_ = has_scalar_ || binding->has_scalar();
+  }
+}
+
+void RayCaster::ensure_scene() const {
+  std::call_once(scene_once_, [this] {
+    const auto start = std::chrono::steady_clock::now();
+    device_ = make_embree_device();
+    scene_ = rtcNewScene(device_);
+    if (!scene_) {
+      rtcReleaseDevice(device_);
+      device_ = nullptr;
+      throw std::runtime_error("Embree: cannot create a scene");
+    }
+    rtcSetSceneBuildQuality(scene_, RTC_BUILD_QUALITY_HIGH);
+    try {
+      for (const FieldSource* source : sources_) {
+        bindings_.push_back(source->bind(device_, isovalue_));
+        rtcAttachGeometry(scene_, bindings_.back()->geometry());
+      }
+      rtcCommitScene(scene_);
+      if (const std::string failure = embree_failure(device_, "building the scene");
+          !failure.empty())
+        throw std::runtime_error(failure);
+    } catch (...) {
+      rtcReleaseScene(scene_);
+      bindings_.clear();
+      rtcReleaseDevice(device_);
+      scene_ = nullptr;
+      device_ = nullptr;
+      throw;
+    }
+    scene_seconds_ = seconds_since(start);
+  });
+}
+
+RayCaster::~RayCaster() {
+  if (scene_) rtcReleaseScene(scene_);
+  bindings_.clear();
+  if (device_) rtcReleaseDevice(device_);
+}
+
+double RayCaster::build_seconds() const {
+  return axis_seconds_ + scene_seconds_;
+}
+
+void RayCaster::prepare_axis_casters(const View& view) const {
+  for (const auto& binding : axis_bindings_)
+    binding->prepare(exact_axis(view.dir));
+}
+
+bool RayCaster::uses_axis_casters(const View& view) const {
+  return !axis_bindings_.empty() && exact_axis(view.dir) >= 0 && exact_axis(view.u) >= 0 &&
+         exact_axis(view.v) >= 0;
+}
+
+std::size_t RayCaster::primitive_count() const {
+  std::size_t n = 0;
+  if (!axis_bindings_.empty()) {
+    for (const auto& b : axis_bindings_)
+      n += b->primitive_count();
+    return n;
+  }
+  for (const auto& b : bindings_)
+    n += b->primitive_count();
+  return n;
+}
+
+std::uint64_t RayCaster::nonfinite_values() const {
+  std::uint64_t n = 0;
+  if (!axis_bindings_.empty()) {
+    for (const auto& b : axis_bindings_)
+      n += b->nonfinite_values();
+    return n;
+  }
+  for (const auto& b : bindings_)
+    n += b->nonfinite_values();
+  return n;
+}
+
+bool subdomain_segment(const Subdomain& sub, glm::dvec3 o, glm::dvec3 d, RaySegment& segment) {
+  // Where the ray leaves the global box: the end of the last segment is closed there.
+  double g0 = -INFINITY, g1 = INFINITY;
+  if (!clip_ray_to_box(o, d, sub.global.lo, sub.global.hi, g0, g1)) return false;
+  double t0 = -INFINITY, t1 = INFINITY;
+  for (int a = 0; a < 3; ++a) {
+    const bool closed_hi = sub.box.hi[a] >= sub.global.hi[a];
+    if (d[a] == 0.0) {
+      // A ray in a face plane: the spatial rule decides.
+      if (o[a] < sub.box.lo[a] || o[a] > sub.box.hi[a] || (o[a] == sub.box.hi[a] && !closed_hi))
+        return false;
+      continue;
+    }
+    // The same expression as clip_ray_to_box, so that the value at a shared face is the same
+    // double in both subdomains.
+    const double inv = 1.0 / d[a];
+    double ta = (sub.box.lo[a] - o[a]) * inv, tb = (sub.box.hi[a] - o[a]) * inv;
+    if (ta > tb) std::swap(ta, tb);
+    t0 = std::max(t0, ta);
+    t1 = std::min(t1, tb);
+  }
+  segment.t0 = std::max(t0, g0);
+  segment.t1 = std::min(t1, g1);
+  segment.closed_end = segment.t1 >= g1;
+  return segment.t0 < segment.t1 || (segment.closed_end && segment.t0 == segment.t1);
+}
+
+void RayCaster::trace(const View& view, glm::dvec2 image_position, const RaySegment& segment,
+                      std::vector<RayHit>& hits) const {
+  hits.clear();
+  ensure_scene();
+  RayQuery q;
+  rtcInitIntersectContext(&q.context);
+  q.context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+  q.org = view.point(image_position.x, image_position.y, 0.0);
+  q.dir = view.dir;
+  q.t_min = segment.t0;
+  q.t_max = segment.t1;
+  q.hits = &hits;
+
+  RTCRayHit rh;
+  rh.ray.org_x = float(q.org.x), rh.ray.org_y = float(q.org.y), rh.ray.org_z = float(q.org.z);
+  rh.ray.dir_x = float(q.dir.x), rh.ray.dir_y = float(q.dir.y), rh.ray.dir_z = float(q.dir.z);
+  // Embree traverses in float: widen its segment a little; the callbacks clip in double.
+  const float pad = float(1e-6 * (1.0 + view.depth_extent));
+  rh.ray.tnear = std::max(0.0f, float(segment.t0) - pad);
+  rh.ray.tfar = float(segment.t1) + pad;
+  rh.ray.time = 0.0f;
+  rh.ray.mask = 0xFFFFFFFFu;  // Debian's Embree is built with ray masks: 0 would hit nothing
+  rh.ray.id = 0;
+  rh.ray.flags = 0;
+  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  rtcIntersect1(scene_, &q.context, &rh);
+  hits.resize(finish_ray(segment, view.dir, hits));
+}
+
+std::size_t RayCaster::finish_ray(const RaySegment& segment, glm::dvec3 dir,
+                                  std::span<RayHit> hits) const {
+  const std::size_t n = sort_and_merge(hits, duplicate_tolerance_, dir);
+  // Sources report roots on the closed segment; the half-open rule keeps a root on the face
+  // two subdomains share in exactly one of them.
+  std::size_t kept = 0;
+  for (std::size_t k = 0; k < n; ++k) {
+    const RayHit& h = hits[k];
+    if (h.t < segment.t0 || h.t > segment.t1 || (h.t == segment.t1 && !segment.closed_end))
+      continue;
+    hits[kept++] = h;
+  }
+  return kept;
+}
+
+void RayCaster::cast_axis_rays(const AxisRays& rays, std::span<const RaySegment> segments,
+                               HitRun& run) const {
+  AxisScratch& x = axis_scratch();
+  x.hits.clear();
+  for (const auto& binding : axis_bindings_)
+    binding->cast(rays, x.hits);
+  const std::size_t n = rays.rays.size();
+  run.counts.reserve(run.counts.size() + n);
+  run.depth.reserve(run.depth.size() + x.hits.size());
+  run.normal.reserve(run.normal.size() + x.hits.size());
+  if (has_scalar_) run.scalar.reserve(run.scalar.size() + x.hits.size());
+  // Each ray's hits are sorted by depth below, so the order in which the sources reported them
+  // does not matter; grouped by ray first (counting sort) unless they came so.
+  const bool grouped =
+      std::is_sorted(x.hits.begin(), x.hits.end(),
+                     [](const AxisHit& a, const AxisHit& b) { return a.ray < b.ray; });
+  if (!grouped) {
+    x.first.assign(n + 1, 0);
+    for (const AxisHit& h : x.hits)
+      ++x.first[h.ray + 1];
+    for (std::size_t k = 0; k < n; ++k)
+      x.first[k + 1] += x.first[k];
+    x.by_ray.resize(x.hits.size());
+    x.next.assign(x.first.begin(), x.first.end() - 1);
+    for (const AxisHit& h : x.hits)
+      x.by_ray[x.next[h.ray]++] = h.hit;
+    for (std::size_t k = 0; k < n; ++k) {
+      const std::span<RayHit> hits(x.by_ray.data() + x.first[k], x.first[k + 1] - x.first[k]);
+      run.append(hits.first(hits.empty() ? 0 : finish_ray(segments[k], rays.dir, hits)),
+                 has_scalar_);
+    }
+    return;
+  }
+  std::size_t h = 0;
+  for (std::size_t k = 0; k < n; ++k) {
+    x.ray_hits.clear();
+    for (; h < x.hits.size() && x.hits[h].ray == k; ++h)
+      x.ray_hits.push_back(x.hits[h].hit);
+    const std::span<RayHit> hits(x.ray_hits);
+    run.append(hits.first(hits.empty() ? 0 : finish_ray(segments[k], rays.dir, hits)), has_scalar_);
+  }
+}
+
+template <class Segment>
+std::vector<RayCaster::HitRun> RayCaster::cast_rows(const View& view, Segment segment_of) const {
+  if (uses_axis_casters(view)) {
+    prepare_axis_casters(view);
+    // Tasks of several rows, each cast by the axis casters as one lattice of pixel rays.
+    const int rows = rows_per_task(view);
+    const int tasks = (view.height + rows - 1) / rows;
+    std::vector<RayCaster::HitRun> runs(tasks);
+    tbb::parallel_for(0, tasks, [&](int task) {
+      const int j0 = task * rows, j1 = std::min(view.height, j0 + rows);
+      const std::size_t n = std::size_t(j1 - j0) * view.width;
+      AxisScratch& x = axis_scratch();
+      std::vector<AxisRay>& rays = x.rays;
+      std::vector<RaySegment>& segments = x.segments;
+      rays.assign(n, AxisRay{});
+      segments.resize(n);
+      for (int j = j0; j < j1; ++j)
+        for (int i = 0; i < view.width; ++i) {
+          const std::size_t k = std::size_t(j - j0) * view.width + i;
+          const glm::dvec2 position{i + 0.5, j + 0.5};
+          AxisRay& ray = rays[k];
+          ray.org = view.point(position.x, position.y, 0.0);
+          if (segment_of(position, segments[k])) {
+            ray.t0 = segments[k].t0;
+            ray.t1 = segments[k].t1;
+          } else {
+            segments[k] = {0.0, -1.0, false};
+          }
+        }
+      AxisRays query;
+      query.axis = exact_axis(view.dir);
+      query.dir = view.dir;
+      query.rays = rays;
+      query.lattice = &view;
+      query.row_begin = j0;
+      cast_axis_rays(query, segments, runs[task]);
+    });
+    return runs;
+  }
+  ensure_scene();
+  std::vector<RayCaster::HitRun> rows(view.height);
+  tbb::parallel_for(tbb::blocked_range<int>(0, view.height),
+                    [&](const tbb::blocked_range<int>& range) {
+                      std::vector<RayHit> hits;
+                      for (int j = range.begin(); j != range.end(); ++j)
+                        for (int i = 0; i < view.width; ++i) {
+                          const glm::dvec2 position{i + 0.5, j + 0.5};
+                          RaySegment segment;
+                          if (segment_of(position, segment)) {
+                            trace(view, position, segment, hits);
+                          } else {
+                            hits.clear();
+                          }
+                          rows[j].append(hits, has_scalar_);
+                        }
+                    });
+  return rows;
+}
+
+Ldi RayCaster::cast(const View& view) const {
+  const std::vector<RayCaster::HitRun> runs = cast_rows(view, [&](glm::dvec2, RaySegment& segment) {
+    segment = {0.0, view.depth_extent, true};
+    return true;
+  });
+  // Concatenate the runs (consecutive rows) in order: the LDI is the same whatever the thread
+  // count.
+  Ldi ldi = make_empty_ldi(view);
+  std::size_t total = 0;
+  for (const RayCaster::HitRun& run : runs)
+    total += run.depth.size();
+  if (total > UINT32_MAX) throw std::runtime_error("LDI has more than 2^32 samples");
+  ldi.depth.reserve(total);
+  ldi.normal.reserve(total);
+  if (has_scalar_) ldi.scalar.reserve(total);
+  std::uint32_t offset = 0;
+  std::size_t pixel = 0;
+  for (const RayCaster::HitRun& run : runs) {
+    for (std::uint32_t c : run.counts) {
+      ldi.offsets[pixel++] = offset;
+      offset += c;
+    }
+    ldi.depth.insert(ldi.depth.end(), run.depth.begin(), run.depth.end());
+    ldi.normal.insert(ldi.normal.end(), run.normal.begin(), run.normal.end());
+    ldi.scalar.insert(ldi.scalar.end(), run.scalar.begin(), run.scalar.end());
+  }
+  ldi.offsets[view.pixel_count()] = offset;
+  return ldi;
+}
+
+LdiFragment RayCaster::cast_fragment(const View& view, std::uint32_t view_index,
+                                     const Subdomain& sub) const {
+  const std::vector<RayCaster::HitRun> runs =
+      cast_rows(view, [&](glm::dvec2 position, RaySegment& segment) {
+        return subdomain_segment(sub, view.point(position.x, position.y, 0.0), view.dir, segment);
+      });
+  LdiFragment fragment = make_empty_fragment(view, view_index);
+  // Sized once (pixels: at most all of them; untouched capacity costs no pages): growing these
+  // by doubling costs more than the copy (fresh pages, each time).
+  std::size_t samples = 0, pixels = 0;
+  for (const RayCaster::HitRun& run : runs) {
+    samples += run.depth.size();
+    pixels += run.counts.size();
+  }
+  fragment.pixels.reserve(pixels);
+  fragment.counts.reserve(pixels);
+  fragment.depth.reserve(samples);
+  fragment.normal.reserve(samples);
+  if (has_scalar_) fragment.scalar.reserve(samples);
+  std::uint32_t pixel = 0;
+  for (const RayCaster::HitRun& run : runs) {
+    for (std::uint32_t c : run.counts) {
+      if (c > 0) {
+        fragment.pixels.push_back(pixel);
+        fragment.counts.push_back(c);
+      }
+      ++pixel;
+    }
+    fragment.depth.insert(fragment.depth.end(), run.depth.begin(), run.depth.end());
+    fragment.normal.insert(fragment.normal.end(), run.normal.begin(), run.normal.end());
+    fragment.scalar.insert(fragment.scalar.end(), run.scalar.begin(), run.scalar.end());
+  }
+  return fragment;
+}
+
+RayHitList RayCaster::cast_points(const View& view, std::span<const glm::dvec2> image_positions,
+                                  const Subdomain* sub,
+                                  std::span<const glm::dvec2> depth_ranges) const {
+  const std::size_t n = image_positions.size();
+  if (!depth_ranges.empty() && depth_ranges.size() != n)
+    throw std::invalid_argument("cast_points: one depth range per ray, or none");
+  // The segment of ray k; false if it has none.
+  const auto segment_of = [&](std::size_t k, RaySegment& segment) {
+    const glm::dvec2 position = image_positions[k];
+    segment = {0.0, view.depth_extent, true};
+    bool crosses =
+        !sub || subdomain_segment(*sub, view.point(position.x, position.y, 0.0), view.dir, segment);
+    if (crosses && !depth_ranges.empty()) {
+      // The range is closed at both ends. Where it ends before the segment, the end is
+      // closed; otherwise the segment's own rule (half-open at a shared face) stays.
+      const glm::dvec2 range = depth_ranges[k];
+      if (range.y < segment.t1) segment = {segment.t0, range.y, true};
+      segment.t0 = std::max(segment.t0, range.x);
+      crosses = segment.t0 < segment.t1 || (segment.closed_end && segment.t0 == segment.t1);
+    }
+    return crosses;
+  };
+  const bool axis = uses_axis_casters(view);
+  if (!axis && n > 0) ensure_scene();
+  if (axis) prepare_axis_casters(view);
+  constexpr std::size_t kChunk = 256;
+  std::vector<RayCaster::HitRun> chunks((n + kChunk - 1) / kChunk);
+  tbb::parallel_for(std::size_t(0), chunks.size(), [&](std::size_t c) {
+    std::vector<RayHit> hits;
+    const std::size_t k0 = c * kChunk, k1 = std::min(n, (c + 1) * kChunk);
+    if (axis) {
+      AxisScratch& x = axis_scratch();
+      std::vector<AxisRay>& rays = x.rays;
+      std::vector<RaySegment>& segments = x.segments;
+      rays.assign(k1 - k0, AxisRay{});
+      segments.resize(k1 - k0);
+      for (std::size_t k = k0; k < k1; ++k) {
+        AxisRay& ray = rays[k - k0];
+        ray.org = view.point(image_positions[k].x, image_positions[k].y, 0.0);
+        if (segment_of(k, segments[k - k0])) {
+          ray.t0 = segments[k - k0].t0;
+          ray.t1 = segments[k - k0].t1;
+        } else {
+          segments[k - k0] = {0.0, -1.0, false};
+        }
+      }
+      AxisRays query;
+      query.axis = exact_axis(view.dir);
+      query.dir = view.dir;
+      query.rays = rays;
+      cast_axis_rays(query, segments, chunks[c]);
+      return;
+    }
+    for (std::size_t k = k0; k < k1; ++k) {
+      RaySegment segment;
+      if (segment_of(k, segment)) {
+        trace(view, image_positions[k], segment, hits);
+      } else {
+        hits.clear();
+      }
+      chunks[c].append(hits, has_scalar_);
+    }
+  });
+  RayHitList out;
+  out.offsets.reserve(n + 1);
+  out.offsets.push_back(0);
+  for (const RayCaster::HitRun& run : chunks) {
+    for (std::uint32_t c : run.counts)
+      out.offsets.push_back(out.offsets.back() + c);
+    out.depth.insert(out.depth.end(), run.depth.begin(), run.depth.end());
+    out.normal.insert(out.normal.end(), run.normal.begin(), run.normal.end());
+    out.scalar.insert(out.scalar.end(), run.scalar.begin(), run.scalar.end());
+  }
+  return out;
+}
+
+}  // namespace ldimesh
