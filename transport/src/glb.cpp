@@ -183,33 +183,14 @@ Status check_options(const GlbOptions& o) {
   return Status::ok();
 }
 
-bool all_finite(const std::vector<glm::vec3>& v) {
-  return std::all_of(v.begin(), v.end(), [](const glm::vec3& p) {
-    return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
-  });
-}
-
-Status check_mesh(const Mesh& m) {
+// What the encoder needs beyond check_mesh: glTF's 31-bit index counts.
+Status check_encodable(const Mesh& m) {
   const std::size_t n = m.vertex_count();
   if (n > kMaxIndex) return Status::invalid_argument("glb: more than 2^31 - 1 vertices");
-  if (m.normals.size() != n)
-    return Status::invalid_argument("glb: normals and positions differ in count");
-  if (!m.scalars.empty() && m.scalars.size() != n)
-    return Status::invalid_argument("glb: scalars and positions differ in count");
-  if (m.quads.size() % 4 != 0 || m.triangles.size() % 3 != 0)
-    return Status::invalid_argument("glb: quads or triangles not a multiple of 4 or 3 indices");
-  if (m.quad_view.size() != m.quad_count() || m.triangle_view.size() != m.triangle_count())
-    return Status::invalid_argument("glb: quad_view or triangle_view differ from the face counts");
+  LDIMESH_RETURN_IF_ERROR(
+      check_mesh(m, {.views_per_face = true, .finite = true}).prefixed("glb: "));
   if (2 * m.quad_count() + m.triangle_count() > kMaxIndex)
     return Status::invalid_argument("glb: more than 2^31 - 1 triangles");
-  const auto in_range = [n](std::uint32_t i) { return i < n; };
-  if (!std::all_of(m.quads.begin(), m.quads.end(), in_range) ||
-      !std::all_of(m.triangles.begin(), m.triangles.end(), in_range))
-    return Status::invalid_argument("glb: a face index is out of range");
-  if (!all_finite(m.positions) || !all_finite(m.normals))
-    return Status::invalid_argument("glb: a position or normal is not finite");
-  if (!std::all_of(m.scalars.begin(), m.scalars.end(), [](float s) { return std::isfinite(s); }))
-    return Status::invalid_argument("glb: a scalar is not finite");
   return Status::ok();
 }
 
@@ -327,7 +308,7 @@ void primitive_counts(const Json& json, GlbInfo& info) {
 Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
                             std::vector<std::uint8_t>& out, GlbInfo* info) {
   if (Status s = check_options(options); !s) return s;
-  if (Status s = check_mesh(mesh); !s) return s;
+  if (Status s = check_encodable(mesh); !s) return s;
   GlbInfo result;
   result.position_bits = glb_position_bits(mesh, options);
   result.position_error_bound = glb_position_error_bound(mesh, options);

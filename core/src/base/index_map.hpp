@@ -7,6 +7,8 @@
 #include <utility>
 #include <vector>
 
+#include "mesh_util.hpp"
+
 namespace ldimesh {
 
 // A 64-bit mix (MurmurHash3's finaliser): IndexMap takes the low bits, and the keys (vertex
@@ -30,8 +32,6 @@ struct MixHash {
 template <class Key, class Hash>
 class IndexMap {
  public:
-  static constexpr std::uint32_t kNone = UINT32_MAX;
-
   // The index stored under `key`, or kNone.
   std::uint32_t find(const Key& key) const {
     if (slots_.empty()) return kNone;

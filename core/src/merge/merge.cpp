@@ -17,9 +17,11 @@
 #include <OpenMesh/Core/System/omstream.hh>
 
 #include "../base/in_place.hpp"
-#include "ldimesh/core/merge/crossings.hpp"
+#include "../base/mesh_util.hpp"
+#include "face_rings.hpp"
 #include "ldimesh/core/base/geometry.hpp"
 #include "ldimesh/core/base/timing.hpp"
+#include "ldimesh/core/merge/crossings.hpp"
 
 namespace ldimesh {
 namespace {
@@ -62,7 +64,6 @@ struct UnionFind {
   }
 };
 
-constexpr std::uint32_t kNone = UINT32_MAX;
 // The boundary layer's faces touch the region's seeds, their neighbours one ring further out:
 // with fewer rings, removing the layer would open edges the region's mesh does not have.
 constexpr int kMinRegionRings = 2;
@@ -83,13 +84,6 @@ struct InputRegion {
   std::vector<std::uint8_t> vertex_view;  // per input vertex: the view of the last face using it
   std::size_t faces = 0;                  // in the region
 };
-
-// The corners of input face `face` (quads first, then triangles).
-inline std::span<const std::uint32_t> face_corners(const Mesh& m, std::size_t face) {
-  const std::size_t nq = m.quad_count();
-  return face < nq ? std::span<const std::uint32_t>(&m.quads[4 * face], 4)
-                   : std::span<const std::uint32_t>(&m.triangles[3 * (face - nq)], 3);
-}
 
 // Every face and vertex, numbered as in the input (no vertex pinned).
 void make_whole(InputRegion& r, std::size_t faces) {
@@ -120,26 +114,8 @@ InputRegion select_input_region(const Mesh& m, int rings) {
     make_whole(r, nf);
     return r;
   }
-  // Vertex → corners (corner c of face f: 4 f + k for quads, 4 nq + 3 (f − nq) + k for triangles).
-  std::vector<std::uint32_t> start(nv + 1, 0);
-  for (std::uint32_t v : m.quads)
-    ++start[v + 1];
-  for (std::uint32_t v : m.triangles)
-    ++start[v + 1];
-  for (std::size_t v = 0; v < nv; ++v)
-    start[v + 1] += start[v];
-  std::vector<std::uint32_t> corners(start[nv]);
-  {
-    std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
-    for (std::uint32_t c = 0; c < m.quads.size(); ++c)
-      corners[fill[m.quads[c]]++] = c;
-    for (std::uint32_t c = 0; c < m.triangles.size(); ++c)
-      corners[fill[m.triangles[c]]++] = std::uint32_t(m.quads.size()) + c;
-  }
-  const std::uint32_t quad_corners = std::uint32_t(m.quads.size());
-  auto face_of = [&](std::uint32_t c) {
-    return c < quad_corners ? c / 4 : std::uint32_t(nq) + (c - quad_corners) / 3;
-  };
+  const VertexCorners at(m);
+  const std::uint32_t quad_corners = at.quad_corners;
   // The corners after and before corner c in its face.
   auto around = [&](std::uint32_t c) {
     if (c < quad_corners) {
@@ -156,11 +132,12 @@ InputRegion select_input_region(const Mesh& m, int rings) {
   std::vector<std::uint8_t> in_vertex(nv, 0);
   std::vector<std::uint32_t> frontier;
   for (std::uint32_t v = 0; v < nv; ++v) {
-    const std::uint32_t first = start[v], n = start[v + 1] - first;
+    const std::span<const std::uint32_t> corners = at.at(v);
+    const std::uint32_t n = std::uint32_t(corners.size());
     if (n == 0) continue;
     bool disk = n >= 3 && n <= 32;
     for (std::uint32_t i = 0; disk && i < n; ++i) {
-      const auto [out, in] = around(corners[first + i]);
+      const auto [out, in] = around(corners[i]);
       if (out == v || in == v || out == in) disk = false;
     }
     if (disk) {
@@ -168,10 +145,10 @@ InputRegion select_input_region(const Mesh& m, int rings) {
       // incoming edge; exactly one must, and the walk must visit all n faces.
       std::uint32_t i = 0, visited = 0, seen = 0;
       do {
-        const std::uint32_t in = around(corners[first + i]).second;
+        const std::uint32_t in = around(corners[i]).second;
         std::uint32_t next = kNone, matches = 0;
         for (std::uint32_t j = 0; j < n; ++j)
-          if (around(corners[first + j]).first == in) next = j, ++matches;
+          if (around(corners[j]).first == in) next = j, ++matches;
         if (matches != 1 || (seen >> next & 1u)) break;
         seen |= 1u << next;
         ++visited;
@@ -185,20 +162,7 @@ InputRegion select_input_region(const Mesh& m, int rings) {
     }
   }
   r.inside.assign(nf, 0);
-  std::vector<std::uint32_t> next;
-  for (int ring = 0; ring <= rings && !frontier.empty(); ++ring) {
-    next.clear();
-    for (std::uint32_t v : frontier)
-      for (std::uint32_t k = start[v]; k < start[v + 1]; ++k) {
-        const std::uint32_t f = face_of(corners[k]);
-        if (r.inside[f]) continue;
-        r.inside[f] = 1;
-        ++r.faces;
-        for (std::uint32_t u : face_corners(m, f))
-          if (!in_vertex[u]) in_vertex[u] = 1, next.push_back(u);
-      }
-    frontier.swap(next);
-  }
+  r.faces = grow_face_rings(m, at, rings + 1, std::move(frontier), in_vertex, r.inside);
   if (r.faces == nf) {
     make_whole(r, nf);
     return r;
@@ -279,10 +243,7 @@ class Merger {
     if (!(scale_ > 0.0))
       for (const auto& e : mesh_.edges())
         lengths.push_back(length(e.halfedge(0)));
-    if (!lengths.empty()) {
-      std::nth_element(lengths.begin(), lengths.begin() + lengths.size() / 2, lengths.end());
-      scale_ = lengths[lengths.size() / 2];
-    }
+    scale_ = median_of(lengths, scale_);
   }
 
   void remove_boundary_layer() {
@@ -998,24 +959,6 @@ class Merger {
   std::size_t cut_touched_ = 0;  // steps refused at the region's edge (see insert)
 };
 
-// Bad input gets a clear error: sizes that disagree or a face index out of range.
-void validate(const Mesh& m) {
-  const std::size_t nv = m.positions.size();
-  auto fail = [](const char* what) {
-    throw std::invalid_argument(std::string("merge_views: ") + what);
-  };
-  if (m.normals.size() != nv) fail("normals and positions differ in number");
-  if (!m.scalars.empty() && m.scalars.size() != nv) fail("scalars and positions differ in number");
-  if (m.quads.size() % 4 != 0 || m.triangles.size() % 3 != 0) fail("partial face");
-  if (!m.quad_view.empty() && m.quad_view.size() != m.quad_count()) fail("quad_view size");
-  if (!m.triangle_view.empty() && m.triangle_view.size() != m.triangle_count())
-    fail("triangle_view size");
-  for (std::uint32_t v : m.quads)
-    if (v >= nv) fail("face index out of range");
-  for (std::uint32_t v : m.triangles)
-    if (v >= nv) fail("face index out of range");
-}
-
 }  // namespace
 
 namespace {
@@ -1025,7 +968,8 @@ namespace {
 Mesh merge_mesh(const Mesh& mesh, Mesh* writable, FaceType faces, const MergeOptions& options,
                 MergeStats& stats, const SurfaceProjection& project) {
   stats = {};
-  validate(mesh);
+  if (const Status s = check_mesh(mesh); !s)  // bad input gets a clear error
+    throw std::invalid_argument("merge_views: " + s.message());
   const QuietOpenMesh quiet;
   const SurfaceProjection none;
   const SurfaceProjection& onto_surface = options.project ? project : none;

@@ -17,14 +17,14 @@
 #include <tbb/parallel_for.h>
 
 #include "../base/in_place.hpp"
-#include "ldimesh/core/merge/crossings.hpp"
+#include "../base/mesh_util.hpp"
+#include "face_rings.hpp"
 #include "ldimesh/core/base/geometry.hpp"
 #include "ldimesh/core/base/timing.hpp"
+#include "ldimesh/core/merge/crossings.hpp"
 
 namespace ldimesh {
 namespace {
-
-constexpr std::uint32_t kNone = UINT32_MAX;
 
 // Shortest over longest edge of the quad p[0..3] if it is convex seen along its (Newell) normal
 // and that normal points the way of `normals` (the sum of its vertex normals); 0 otherwise.
@@ -39,29 +39,6 @@ double quad_quality(const std::array<glm::dvec3, 4>& p, const glm::dvec3& normal
     longest = std::max(longest, glm::length(out));
   }
   return longest > 0.0 ? shortest / longest : 0.0;
-}
-
-void validate(const Mesh& m) {
-  const std::size_t nv = m.positions.size();
-  auto fail = [](const std::string& what) {
-    throw std::invalid_argument("quadrangulate: " + what);
-  };
-  if (m.normals.size() != nv) fail("normals and positions differ in number");
-  if (!m.scalars.empty() && m.scalars.size() != nv) fail("scalars and positions differ");
-  if (m.quads.size() % 4 != 0 || m.triangles.size() % 3 != 0) fail("partial face");
-  if (!m.quad_view.empty() && m.quad_view.size() != m.quad_count()) fail("quad_view size");
-  if (!m.triangle_view.empty() && m.triangle_view.size() != m.triangle_count())
-    fail("triangle_view size");
-  auto check = [&](const std::vector<std::uint32_t>& faces, std::size_t arity) {
-    for (std::size_t f = 0; f < faces.size(); f += arity)
-      for (std::size_t i = 0; i < arity; ++i) {
-        if (faces[f + i] >= nv) fail("face index out of range");
-        for (std::size_t j = i + 1; j < arity; ++j)
-          if (faces[f + i] == faces[f + j]) fail("face with a repeated vertex");
-      }
-  };
-  check(m.quads, 4);
-  check(m.triangles, 3);
 }
 
 // The faces the conversion rewrites (QuadOptions::region_rings), numbered on their own: region
@@ -84,10 +61,6 @@ struct Region {
   std::uint32_t from_input(std::uint32_t v) const { return whole ? v : local[v]; }
 };
 
-std::uint64_t edge_key(std::uint32_t from, std::uint32_t to) {
-  return std::uint64_t(from) << 32 | to;
-}
-
 // The triangles and the quads within `rings` rings of them (sharing a vertex); the whole mesh
 // for negative `rings` or when that is every quad.
 Region select_region(const Mesh& m, int rings) {
@@ -95,26 +68,15 @@ Region select_region(const Mesh& m, int rings) {
   r.input = &m;
   if (rings < 0) return r;
   const std::size_t nv = m.positions.size(), nq = m.quad_count();
+  // The triangles' corners seed the rings (the triangles themselves add no vertex).
   std::vector<std::uint8_t> in(nv, 0);
+  std::vector<std::uint32_t> seeds;
   for (std::uint32_t v : m.triangles)
-    in[v] = 1;
-  r.inside.assign(nq, 0);
-  std::size_t inside = 0;
-  std::vector<std::uint32_t> added;
-  for (int ring = 0; ring < rings; ++ring) {
-    added.clear();
-    for (std::uint32_t q = 0; q < nq; ++q) {
-      const std::uint32_t* c = &m.quads[4 * std::size_t(q)];
-      if (!r.inside[q] && (in[c[0]] | in[c[1]] | in[c[2]] | in[c[3]])) added.push_back(q);
-    }
-    if (added.empty()) break;
-    for (std::uint32_t q : added) {
-      r.inside[q] = 1;
-      for (int k = 0; k < 4; ++k)
-        in[m.quads[4 * std::size_t(q) + k]] = 1;
-    }
-    inside += added.size();
-  }
+    if (!in[v]) in[v] = 1, seeds.push_back(v);
+  r.inside.assign(m.face_count(), 0);
+  grow_face_rings(m, VertexCorners(m), rings, std::move(seeds), in, r.inside);
+  r.inside.resize(nq);  // per quad
+  const std::size_t inside = std::size_t(std::count(r.inside.begin(), r.inside.end(), 1));
   if (inside == nq) {
     r.inside.clear();
     return r;
@@ -149,7 +111,7 @@ Region select_region(const Mesh& m, int rings) {
     for (int k = 0; k < 4; ++k) {
       const std::uint32_t a = r.local[c[k]], b = r.local[c[(k + 1) % 4]];
       if (a != kNone) r.pinned[a] = 1;
-      if (a != kNone && b != kNone) r.cut.push_back(edge_key(b, a));
+      if (a != kNone && b != kNone) r.cut.push_back(directed_edge_key(b, a));
     }
   }
   std::sort(r.cut.begin(), r.cut.end());
@@ -217,16 +179,13 @@ class Quadrangulator {
       for (std::uint32_t h = 0; h < to_.size(); ++h)
         if (opp_[h] == kNone)
           cut_[h] = std::binary_search(region_.cut.begin(), region_.cut.end(),
-                                       edge_key(from_[h], to_[h]));
+                                       directed_edge_key(from_[h], to_[h]));
     }
     // The length unit of the limits: the median edge.
     std::vector<double> lengths;
     for (std::uint32_t h = 0; h < to_.size(); ++h)
       if (opp_[h] == kNone || h < opp_[h]) lengths.push_back(length(h));
-    if (!lengths.empty()) {
-      std::nth_element(lengths.begin(), lengths.begin() + lengths.size() / 2, lengths.end());
-      median_edge_ = lengths[lengths.size() / 2];
-    }
+    median_edge_ = median_of(lengths, median_edge_);
     stats_.median_edge = median_edge_;
   }
 
@@ -1012,7 +971,8 @@ Mesh quadrangulate(Mesh&& mesh, const QuadOptions& options, QuadStats& stats,
                    const SurfaceProjection& project) {
   stats = {};
   const auto start = std::chrono::steady_clock::now();
-  validate(mesh);
+  if (const Status s = check_mesh(mesh, {.distinct_corners = true}); !s)
+    throw std::invalid_argument("quadrangulate: " + s.message());
   const std::size_t input_quads = mesh.quad_count(), input_triangles = mesh.triangle_count();
   // Converts the region; false (nothing written) when a part of a region that is not the whole
   // mesh keeps an odd number of triangles with no open edge to take the last one.

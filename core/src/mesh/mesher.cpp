@@ -10,7 +10,7 @@
 namespace ldimesh {
 namespace {
 
-constexpr std::int32_t kNone = -1;
+constexpr std::int32_t kNoSample = -1;
 
 // Depth change of a sample's tangent plane per pixel step along u and along v (world units).
 std::vector<glm::vec2> depth_slopes(const Ldi& ldi, double min_facing) {
@@ -42,7 +42,7 @@ inline Match best_match(const Ldi& ldi, const glm::vec2* slope, std::uint32_t s0
                         float a, float b, float max_cost) {
   const float d0 = ldi.depth[s0];
   const float e0 = d0 + a * slope[s0].x + b * slope[s0].y;  // s0's prediction at the neighbour
-  Match best{kNone, max_cost};
+  Match best{kNoSample, max_cost};
   for (std::uint32_t s = ldi.begin(pixel); s < ldi.end(pixel); ++s) {
     const float ds = ldi.depth[s];
     const float es = ds - a * slope[s].x - b * slope[s].y;  // s's prediction back at (x, y)
@@ -55,14 +55,14 @@ inline Match best_match(const Ldi& ldi, const glm::vec2* slope, std::uint32_t s0
 // No two samples of one pixel keep the same match: the cheaper keeps it (ties: the nearer).
 void keep_cheapest_per_target(std::span<Match> matches) {
   for (std::size_t k = 0; k < matches.size(); ++k) {
-    if (matches[k].sample == kNone) continue;
+    if (matches[k].sample == kNoSample) continue;
     for (std::size_t m = k + 1; m < matches.size(); ++m) {
       if (matches[m].sample != matches[k].sample) continue;
       if (matches[m].cost < matches[k].cost) {
-        matches[k].sample = kNone;
+        matches[k].sample = kNoSample;
         break;
       }
-      matches[m].sample = kNone;
+      matches[m].sample = kNoSample;
     }
   }
 }
@@ -78,7 +78,7 @@ std::vector<std::uint32_t> build_quads(const Ldi& ldi, const MatchOptions& optio
   const std::vector<glm::vec2> slope = depth_slopes(ldi, options.min_facing);
   const float max_cost = float(options.max_cost * view.spacing);
   // Best match of every sample to the right (x+1, y), top (x, y+1) and top-right (x+1, y+1).
-  std::vector<std::int32_t> right(N, kNone), top(N, kNone), diag(N, kNone);
+  std::vector<std::int32_t> right(N, kNoSample), top(N, kNoSample), diag(N, kNoSample);
 
   tbb::parallel_for(tbb::blocked_range<int>(0, H), [&](const tbb::blocked_range<int>& rows) {
     std::vector<Match> r, t, g;
@@ -88,9 +88,9 @@ std::vector<std::uint32_t> build_quads(const Ldi& ldi, const MatchOptions& optio
         const std::uint32_t b = ldi.begin(p), e = ldi.end(p);
         if (b == e) continue;
         const bool has_right = i + 1 < W, has_top = j + 1 < H;
-        r.assign(e - b, {kNone, 0.0f});
-        t.assign(e - b, {kNone, 0.0f});
-        g.assign(e - b, {kNone, 0.0f});
+        r.assign(e - b, {kNoSample, 0.0f});
+        t.assign(e - b, {kNoSample, 0.0f});
+        g.assign(e - b, {kNoSample, 0.0f});
         for (std::uint32_t s = b; s < e; ++s) {
           if (has_right) r[s - b] = best_match(ldi, slope.data(), s, p + 1, 1, 0, max_cost);
           if (has_top) t[s - b] = best_match(ldi, slope.data(), s, p + W, 0, 1, max_cost);
@@ -121,7 +121,7 @@ std::vector<std::uint32_t> build_quads(const Ldi& ldi, const MatchOptions& optio
                           e = ldi.end(std::size_t(j) * W + W - 2);
       for (std::uint32_t s0 = b; s0 < e; ++s0) {
         const std::int32_t sr = right[s0], st = top[s0], sg = diag[s0];
-        if (sr == kNone || st == kNone || sg == kNone) continue;
+        if (sr == kNoSample || st == kNoSample || sg == kNoSample) continue;
         if (top[sr] != sg || right[st] != sg) continue;
         const float facing =
             glm::dot(ldi.normal[s0] + ldi.normal[sr] + ldi.normal[sg] + ldi.normal[st], d);

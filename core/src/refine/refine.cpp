@@ -11,18 +11,13 @@
 #include <tbb/parallel_for.h>
 
 #include "../base/index_map.hpp"
+#include "../base/mesh_util.hpp"
 #include "ldimesh/core/base/mesh.hpp"
 #include "ldimesh/core/base/timing.hpp"
 #include "ldimesh/core/mesh/trim.hpp"
 
 namespace ldimesh {
 namespace {
-
-constexpr std::uint32_t kNone = UINT32_MAX;
-
-std::uint64_t edge_key(std::uint32_t a, std::uint32_t b) {
-  return a < b ? (std::uint64_t(a) << 32 | b) : (std::uint64_t(b) << 32 | a);
-}
 
 struct PositionHash {
   std::uint64_t operator()(const glm::dvec2& p) const {

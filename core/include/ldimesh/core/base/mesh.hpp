@@ -6,6 +6,8 @@
 
 #include <glm/glm.hpp>
 
+#include "ldimesh/core/base/status.hpp"
+
 namespace ldimesh {
 
 // Vertices with a unit normal each; faces as quads and/or triangles, wound counter-clockwise
@@ -26,6 +28,20 @@ struct Mesh {
   std::size_t triangle_count() const { return triangles.size() / 3; }
   std::size_t face_count() const { return quad_count() + triangle_count(); }
 };
+
+// What check_mesh tests beyond the structure every stage needs.
+struct MeshChecks {
+  bool views_per_face = false;    // quad_view and triangle_view one per face (else also empty)
+  bool distinct_corners = false;  // no face with a repeated vertex
+  bool finite = false;            // positions, normals and scalars finite
+};
+
+// Whether `m` is well formed, the one check of meshes a stage is given (merging, quad
+// conversion, the GLB encoder): normals, and scalars if any, one per vertex; whole quads and
+// triangles; quad_view and triangle_view empty or one per face; face indices below the vertex
+// count; and what `checks` asks for. An invalid_argument Status saying what is wrong (callers
+// prefix their name), else ok. O(vertices + faces); no allocation.
+Status check_mesh(const Mesh& m, const MeshChecks& checks = {});
 
 // Appends the two triangles of quad v[0..3] to `triangles`: split along the shorter diagonal
 // (ties take v0–v2), which cuts the obtuse corners of a skewed quad. The one rule of the mesher's
