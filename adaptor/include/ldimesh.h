@@ -10,10 +10,13 @@
  *   for (step = 1; ...; ++step) { solve(); ldimesh_execute(a, step, t); }
  *   ldimesh_destroy(a);                                      // drains pending work
  *
- * Every function returns a status code; on an error the message is kept for
- * ldimesh_last_error(). No function throws, aborts, exits or calls MPI_Abort; a failed in situ
- * step is skipped and the next one is tried. Every function accepts a NULL adaptor (and then
- * returns LDIMESH_ERROR_ARGUMENT), so a solver may keep calling after a failed create.
+ * Every function that can fail returns a status code (its cause: see the codes below); the
+ * message is kept for ldimesh_last_error(). No function throws, aborts, exits or calls
+ * MPI_Abort; a failed in situ step is skipped and the next one is tried. Every function accepts
+ * a NULL adaptor, so a solver may keep calling after a failed create: those returning a code
+ * return LDIMESH_ERROR_ARGUMENT, ldimesh_url gives "", ldimesh_published_steps 0,
+ * ldimesh_last_error(NULL) the message of this thread's last failed create, and ldimesh_destroy
+ * does nothing. Call an adaptor's functions from one thread at a time (the solver's).
  *
  * MPI must be initialised. With MPI_THREAD_MULTIPLE (MPI_Init_thread) a due step copies the
  * blocks' arrays and returns; the ray casting and the reduction run on a thread of every rank

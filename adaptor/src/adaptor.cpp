@@ -462,7 +462,7 @@ class AdaptorImpl final : public Adaptor {
 
   std::string url() const override { return server_ ? server_->url() : std::string(); }
   const StepReport& last_report() const override { return report_; }
-  const std::string& last_error() const override {
+  std::string last_error() const override {
     std::lock_guard lock(mutex_);
     return last_error_;
   }

@@ -24,6 +24,9 @@
 // MPI_Abort or exit; an error is returned as a Status (also kept as last_error()) and the step
 // is skipped. A step that fails in the background is reported by last_error(), the root's log
 // and finalize().
+//
+// Threads: one thread (the solver's) calls an Adaptor's methods; the adaptor's own threads are
+// described above and in docs/adaptor.md.
 #pragma once
 
 #include <cstdint>
@@ -91,8 +94,11 @@ class Adaptor {
 
   // Root: the viewer's URL with the token ("" elsewhere or without a server).
   virtual std::string url() const = 0;
+  // The report of this rank's last execute().
   virtual const StepReport& last_report() const = 0;
-  virtual const std::string& last_error() const = 0;
+  // The last failure's message on this rank ("" if none), a copy: the caster and worker threads
+  // may replace it at any time.
+  virtual std::string last_error() const = 0;
   // Root: the number of steps published so far.
   virtual std::uint64_t published_steps() const = 0;
 };

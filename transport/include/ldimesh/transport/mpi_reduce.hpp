@@ -28,6 +28,12 @@ struct PendingMerge {
   double tolerance = 0.0;
 };
 
+// Faults a reduction injects on purpose, to test its receivers' validation on real damaged
+// messages (the adaptor's `testing.fault` option). Off by default.
+struct ReductionFaults {
+  bool damage_sent_message = false;  // this rank's message leaves with its magic number broken
+};
+
 // Collective over `comm`. Every rank passes its fragments, one per view, in the same view
 // order on all ranks. On `root` the result is the merged fragment of every view (samples of
 // all ranks per pixel, sorted, duplicates closer than `tolerance` merged); on the other ranks
@@ -46,18 +52,18 @@ struct PendingMerge {
 // fragment's frame and checksums, views equal to the root's: check_fragment), so what the merge
 // would reject fails the reduction as without `deferred`; finish_merge can then fail only on a
 // payload its encoder wrote inconsistently under a valid checksum.
-// Faults a reduction injects on purpose, to test its receivers' validation on real damaged
-// messages (the adaptor's `testing.fault` option). Off by default.
-struct ReductionFaults {
-  bool damage_sent_message = false;  // this rank's message leaves with its magic number broken
-};
-
+//
+// Errors: corrupt_input (a message that fails its checks or does not decode), invalid_argument
+// (ranks disagree about the views, a message over 2 GiB), other_rank on the root for a failure
+// below it. Threads: MPI is called from the calling thread only (MPI_THREAD_FUNNELED suffices);
+// quantizing runs on TBB; the result is the same for any thread count.
 Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragments,
                         const FragmentEncoding& encoding, double tolerance, ReductionStats& stats,
                         PendingMerge* deferred = nullptr, const ReductionFaults& faults = {});
 
 // Decodes and merges the messages reduce_fragments deferred into `fragments` (the root's own,
-// as it returned them); leaves `pending` empty. Not collective. Errors as reduce_fragments's.
+// as it returned them); leaves `pending` empty. Not collective; any one thread (the root's
+// worker), not concurrently on the same `pending` or `fragments`. Errors as reduce_fragments's.
 Status finish_merge(PendingMerge& pending, std::vector<LdiFragment>& fragments,
                     ReductionStats& stats);
 

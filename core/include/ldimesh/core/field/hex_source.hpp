@@ -9,8 +9,8 @@
 // Reimers 2007), then converged with Newton steps safeguarded by bisection. No fixed step: a root
 // is never skipped, however close to its neighbours.
 //
-// Geometry is affine per element (parallelepipeds, sheared or rotated); non-affine trilinear and
-// curved isoparametric elements are a later step (docs/method.md).
+// Geometry is affine per element (parallelepipeds, sheared or rotated); the constructor refuses
+// other elements (std::invalid_argument naming the element).
 #pragma once
 
 #include <cstddef>

@@ -38,18 +38,17 @@ struct VertexMove {
 };
 
 // Keeps the moves of the vertices `index` keeps (old → new vertex index; UINT32_MAX: dropped),
-// in order, with their new indices: a mesh builder's moves for its output mesh (in place: they
-// can be a few megabytes).
+// in order, with their new indices: a mesh builder's moves for its output mesh. In place; never
+// throws; moves whose vertex lies beyond `index` are dropped too. Deterministic.
 void renumber_moves(std::vector<VertexMove>& moves, std::span<const std::uint32_t> index);
 
 // Puts moved vertices back where they were when one of their faces crosses another face of the
 // mesh (a vertex listed more than once goes back to its first entry). Moves shorter than `min_move`
 // are left alone (their faces sweep no farther than that: they can only meet a face that was
-// already that close; this keeps the check cheap where most moves are tiny, as merging's on
-// Marschner–Lobb at 512², median 0.002 cells; where faces are that close, as a smoothed face and
-// its neighbour, even tiny moves matter). The faces around the vertices to check (at first every
-// moved one checked) go into a hash grid of `cell`-sized cells (about an edge is fastest; any size
-// finds the same crossings), every face is tested against those in the cells of its box, and each
+// already that close; where faces are that close, as a smoothed face and its neighbour, even
+// tiny moves matter; docs/method.md has the figures). The faces around the vertices to check (at
+// first every moved one checked) go into a hash grid of `cell`-sized cells (any size finds the
+// same crossings; about an edge is the cheapest), every face is tested against those in the cells of its box, and each
 // still-moved vertex of a crossing pair is put back. Rounds repeat with the faces of the vertices
 // put back (in their old places they can meet a face a moved neighbour made) while any is put back,
 // at most `max_rounds`. Returns the number of vertices put back. Throws std::invalid_argument for a

@@ -27,9 +27,8 @@ struct MergeOptions {
   // Remove the faces that have an open edge before bridging (§5: the ragged "boundary layer"
   // the r = 1 trim leaves).
   bool remove_boundary_layer = true;
-  // (i) A bridge is kept if neither connecting edge exceeds bridge_limit · (|e_a| + |e_b|). The
-  // paper's l is factor 1; after the r = 1 trim and the boundary layer removal our gaps between
-  // patches are about three cells wide, which l = two edges does not span (docs/method.md).
+  // (i) A bridge is kept if neither connecting edge exceeds bridge_limit · (|e_a| + |e_b|) (the
+  // paper's l is factor 1; why ours is larger: docs/method.md).
   double bridge_limit = 1.5;
   // Bridges and fill triangles must face the way their vertices' normals do: the cosine between
   // the face normal and the mean vertex normal is at least this.

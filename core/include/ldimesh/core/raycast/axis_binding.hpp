@@ -1,7 +1,7 @@
 // Coherent casting of rays parallel to a coordinate axis. Every ray this project casts — the
 // pixel rays of the axis views and the extra samples of §4 and §5 along them — is such a ray, and
 // sources whose primitives are axis-aligned in some way (grid cells, elements) find their roots
-// far faster without a BVH walk per ray: a grid walks the cells along the ray axis, where the
+// without a BVH walk per ray: a grid walks the cells along the ray axis, where the
 // trilinear interpolant is linear; elements loop over the pixels they cover (object order).
 // The results are those of the source's Embree binding (docs/method.md, "Two casters").
 #pragma once
