@@ -15,8 +15,8 @@
 #include <CLI/CLI.hpp>
 
 #include "bench_util.hpp"
-#include "ldimesh/core/raycast/raycaster.hpp"
 #include "ldimesh/core/field/surfaces.hpp"
+#include "ldimesh/core/raycast/raycaster.hpp"
 #include "ldimesh/transport/fragment_codec.hpp"
 
 namespace {

@@ -17,10 +17,10 @@
 #include <CLI/CLI.hpp>
 
 #include "bench_util.hpp"
+#include "ldimesh/core/field/surfaces.hpp"
 #include "ldimesh/core/io/mesh_io.hpp"
 #include "ldimesh/core/pipeline.hpp"
 #include "ldimesh/core/raycast/raycaster.hpp"
-#include "ldimesh/core/field/surfaces.hpp"
 #include "ldimesh/transport/glb.hpp"
 
 namespace {

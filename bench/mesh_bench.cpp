@@ -20,9 +20,9 @@
 #include "bench_util.hpp"
 #include "ldimesh/core/field/analytic_fields.hpp"
 #include "ldimesh/core/field/analytic_source.hpp"
+#include "ldimesh/core/field/surfaces.hpp"
 #include "ldimesh/core/pipeline.hpp"
 #include "ldimesh/core/raycast/raycaster.hpp"
-#include "ldimesh/core/field/surfaces.hpp"
 
 namespace {
 

@@ -12,8 +12,8 @@
 #include <tbb/info.h>
 #include <CLI/CLI.hpp>
 
-#include "ldimesh/core/raycast/decomposition.hpp"
 #include "ldimesh/core/field/surfaces.hpp"
+#include "ldimesh/core/raycast/decomposition.hpp"
 #include "ldimesh/transport/distributed.hpp"
 
 int main(int argc, char** argv) {

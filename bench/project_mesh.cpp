@@ -26,8 +26,8 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
-#include "ldimesh/core/io/mesh_io.hpp"
 #include "ldimesh/core/field/surfaces.hpp"
+#include "ldimesh/core/io/mesh_io.hpp"
 
 int main(int argc, char** argv) {
   CLI::App app{"project a mesh's vertices onto a built-in analytic surface (Newton steps)"};

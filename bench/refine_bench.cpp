@@ -26,11 +26,11 @@
 
 #include "bench_util.hpp"
 #include "ldimesh/core/field/hex_source.hpp"
+#include "ldimesh/core/field/surfaces.hpp"
 #include "ldimesh/core/io/mesh_io.hpp"
 #include "ldimesh/core/pipeline.hpp"
 #include "ldimesh/core/raycast/raycaster.hpp"
 #include "ldimesh/core/raycast/sample_source.hpp"
-#include "ldimesh/core/field/surfaces.hpp"
 
 namespace {
 

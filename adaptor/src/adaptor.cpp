@@ -18,11 +18,11 @@
 
 #include <nlohmann/json.hpp>
 
+#include "ldimesh/core/base/timing.hpp"
 #include "ldimesh/core/field/grid_source.hpp"
 #include "ldimesh/core/field/hex_source.hpp"
 #include "ldimesh/core/pipeline.hpp"
 #include "ldimesh/core/raycast/raycaster.hpp"
-#include "ldimesh/core/base/timing.hpp"
 #include "ldimesh/transport/distributed.hpp"
 #include "ldimesh/transport/glb.hpp"
 #include "ldimesh/transport/http_server.hpp"
@@ -686,12 +686,8 @@ class AdaptorImpl final : public Adaptor {
       });
       std::lock_guard lock(mutex_);
       casting_ = false;
-      if (!failed) {
-        worker_status_ = failed.prefixed("step " + std::to_string(step) + " skipped: ");
-        last_error_ = worker_status_.message();
-        if (options_.log && rank_ == 0)
-          std::fprintf(stderr, "ldimesh: error: %s\n", last_error_.c_str());
-      }
+      if (!failed)
+        background_failure(failed, "step " + std::to_string(step) + " skipped: ", rank_ == 0);
       caster_idle_.notify_all();
     }
   }
@@ -699,7 +695,7 @@ class AdaptorImpl final : public Adaptor {
   // A block whose hits belong to its own bounds (the owned region of a grid block).
   template <class Source, class Description>
   Status add_block(const Description& block, const char* what) {
-    try {
+    return fail_if(guard(std::string(what) + ": ", [&] {
       auto source = std::make_shared<Source>(block);
       const Box owned = source->bounds();
       Block b{std::move(source), owned, std::nullopt, std::nullopt};
@@ -709,9 +705,7 @@ class AdaptorImpl final : public Adaptor {
         b.hex = block;
       blocks_.push_back(std::move(b));
       return Status::ok();
-    } catch (...) {
-      return fail(status_from_current_exception(std::string(what) + ": "));
-    }
+    }));
   }
 
   std::optional<Box> domain() const {
@@ -723,6 +717,15 @@ class AdaptorImpl final : public Adaptor {
     std::lock_guard lock(mutex_);
     last_error_ = failure.message();
     return failure;
+  }
+  Status fail_if(Status s) { return s ? s : fail(std::move(s)); }
+
+  // A failure of this rank's background work (caster or worker thread; `mutex_` held): kept
+  // for finalize() and last_error(), and logged where `log_it`.
+  void background_failure(const Status& failed, const std::string& prefix, bool log_it) {
+    worker_status_ = failed.prefixed(prefix);
+    last_error_ = worker_status_.message();
+    if (options_.log && log_it) std::fprintf(stderr, "ldimesh: error: %s\n", last_error_.c_str());
   }
 
   void finish_report(Clock::time_point start) {
@@ -747,11 +750,7 @@ class AdaptorImpl final : public Adaptor {
       const Status failed = guard("", [&] { return publish(job); });
       std::lock_guard lock(mutex_);
       working_ = false;
-      if (!failed) {
-        worker_status_ = failed.prefixed("step " + std::to_string(job.step) + ": ");
-        last_error_ = worker_status_.message();
-        if (options_.log) std::fprintf(stderr, "ldimesh: error: %s\n", last_error_.c_str());
-      }
+      if (!failed) background_failure(failed, "step " + std::to_string(job.step) + ": ", true);
       idle_.notify_all();
     }
   }

@@ -19,8 +19,8 @@
 #include "ldimesh/adaptor.hpp"
 #include "ldimesh/core/field/analytic_fields.hpp"
 #include "ldimesh/core/field/analytic_source.hpp"
-#include "ldimesh/core/raycast/decomposition.hpp"
 #include "ldimesh/core/field/surfaces.hpp"
+#include "ldimesh/core/raycast/decomposition.hpp"
 #include "miniapp.hpp"
 
 namespace {

@@ -20,8 +20,8 @@
 #include <glm/glm.hpp>
 
 #include "ldimesh/adaptor.hpp"
-#include "ldimesh/core/raycast/decomposition.hpp"
 #include "ldimesh/core/field/hex_source.hpp"
+#include "ldimesh/core/raycast/decomposition.hpp"
 #include "miniapp.hpp"
 
 namespace {

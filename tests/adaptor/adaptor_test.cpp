@@ -11,10 +11,10 @@
 
 #include "../mpi/mpi_gtest.hpp"
 #include "ldimesh/adaptor.hpp"
-#include "ldimesh/core/raycast/decomposition.hpp"
 #include "ldimesh/core/field/grid_source.hpp"
-#include "ldimesh/core/raycast/raycaster.hpp"
 #include "ldimesh/core/field/surfaces.hpp"
+#include "ldimesh/core/raycast/decomposition.hpp"
+#include "ldimesh/core/raycast/raycaster.hpp"
 #include "ldimesh/transport/distributed.hpp"
 #include "ldimesh/transport/glb.hpp"
 #include "ldimesh/transport/snapshot_store.hpp"

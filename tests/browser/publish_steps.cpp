@@ -10,9 +10,9 @@
 #include <memory>
 #include <string>
 
+#include "ldimesh/core/field/surfaces.hpp"
 #include "ldimesh/core/pipeline.hpp"
 #include "ldimesh/core/raycast/raycaster.hpp"
-#include "ldimesh/core/field/surfaces.hpp"
 #include "ldimesh/transport/glb.hpp"
 #include "ldimesh/transport/http_server.hpp"
 #include "ldimesh/transport/snapshot_store.hpp"

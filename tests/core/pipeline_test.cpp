@@ -12,9 +12,9 @@
 
 #include "ldimesh/core/field/analytic_fields.hpp"
 #include "ldimesh/core/field/analytic_source.hpp"
+#include "ldimesh/core/field/surfaces.hpp"
 #include "ldimesh/core/io/mesh_io.hpp"
 #include "ldimesh/core/raycast/raycaster.hpp"
-#include "ldimesh/core/field/surfaces.hpp"
 #include "test_helpers.hpp"
 
 namespace ldimesh {

@@ -10,9 +10,9 @@
 
 #include <gtest/gtest.h>
 
-#include "ldimesh/core/raycast/ldi.hpp"
 #include "ldimesh/core/base/mesh.hpp"
 #include "ldimesh/core/base/view.hpp"
+#include "ldimesh/core/raycast/ldi.hpp"
 
 namespace ldimesh::testing {
 

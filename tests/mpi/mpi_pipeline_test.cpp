@@ -18,9 +18,9 @@
 
 #include "ldimesh/core/field/analytic_fields.hpp"
 #include "ldimesh/core/field/analytic_source.hpp"
-#include "ldimesh/core/raycast/decomposition.hpp"
 #include "ldimesh/core/field/grid_source.hpp"
 #include "ldimesh/core/field/surfaces.hpp"
+#include "ldimesh/core/raycast/decomposition.hpp"
 #include "ldimesh/transport/distributed.hpp"
 #include "ldimesh/transport/mpi_reduce.hpp"
 #include "mpi_gtest.hpp"

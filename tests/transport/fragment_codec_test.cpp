@@ -12,8 +12,8 @@
 
 #include <gtest/gtest.h>
 
-#include "ldimesh/core/raycast/raycaster.hpp"
 #include "ldimesh/core/field/surfaces.hpp"
+#include "ldimesh/core/raycast/raycaster.hpp"
 
 // The largest single allocation through operator new, so that a test can tell that a hostile
 // header was rejected before the decoder allocated what it claims.

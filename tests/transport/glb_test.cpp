@@ -20,9 +20,9 @@
 #include <unistd.h>
 #include <nlohmann/json.hpp>
 
+#include "ldimesh/core/field/surfaces.hpp"
 #include "ldimesh/core/pipeline.hpp"
 #include "ldimesh/core/raycast/raycaster.hpp"
-#include "ldimesh/core/field/surfaces.hpp"
 
 namespace ldimesh {
 namespace {

@@ -36,9 +36,9 @@
 
 #include <mpi.h>
 
-#include "ldimesh/core/field/blocks.hpp"
 #include "ldimesh/core/base/geometry.hpp"
 #include "ldimesh/core/base/status.hpp"
+#include "ldimesh/core/field/blocks.hpp"
 
 namespace ldimesh {
 

@@ -13,6 +13,8 @@
 #include <unordered_map>
 #include <vector>
 
+#include <OpenMesh/Core/System/omstream.hh>
+
 #include "../base/in_place.hpp"
 #include "../base/mesh_util.hpp"
 #include "face_rings.hpp"
@@ -135,6 +137,23 @@ Mesh output(MergeState& ms, FaceType faces, Mesh* in_place) {
 namespace {
 
 using namespace merge_detail;
+
+// The boundary layer's faces touch the region's seeds, their neighbours one ring further out:
+// with fewer rings, removing the layer would open edges the region's mesh does not have.
+constexpr int kMinRegionRings = 2;
+
+// OpenMesh reports refused faces on its error stream; merging tests before adding and treats a
+// refusal as "not added", so the stream is quiet while merging runs.
+class QuietOpenMesh {
+ public:
+  QuietOpenMesh() : was_enabled_(omerr().is_enabled()) { omerr().disable(); }
+  ~QuietOpenMesh() {
+    if (was_enabled_) omerr().enable();
+  }
+
+ private:
+  bool was_enabled_;
+};
 
 // Every face and vertex, numbered as in the input (no vertex pinned).
 void make_whole(InputRegion& r, std::size_t faces) {

@@ -16,7 +16,6 @@
 #include <vector>
 
 #include <OpenMesh/Core/Mesh/PolyMesh_ArrayKernelT.hh>
-#include <OpenMesh/Core/System/omstream.hh>
 
 #include "ldimesh/core/base/mesh.hpp"
 #include "ldimesh/core/merge/crossings.hpp"
@@ -63,10 +62,6 @@ struct UnionFind {
   }
 };
 
-// The boundary layer's faces touch the region's seeds, their neighbours one ring further out:
-// with fewer rings, removing the layer would open edges the region's mesh does not have.
-constexpr int kMinRegionRings = 2;
-
 // The part of the input that merging builds as a half-edge mesh (MergeOptions::region_rings):
 // the faces within `rings` rings (faces sharing a vertex) of the vertices that are not inside a
 // closed disk of faces: open-boundary vertices and any vertex where OpenMesh could refuse a face.
@@ -82,19 +77,6 @@ struct InputRegion {
   std::vector<std::uint8_t> used;         // per input vertex: a corner of some face
   std::vector<std::uint8_t> vertex_view;  // per input vertex: the view of the last face using it
   std::size_t faces = 0;                  // in the region
-};
-
-// OpenMesh reports refused faces on its error stream; merging tests before adding and treats a
-// refusal as "not added", so the stream is quiet while merging runs.
-class QuietOpenMesh {
- public:
-  QuietOpenMesh() : was_enabled_(omerr().is_enabled()) { omerr().disable(); }
-  ~QuietOpenMesh() {
-    if (was_enabled_) omerr().enable();
-  }
-
- private:
-  bool was_enabled_;
 };
 
 struct MergeState {

@@ -10,8 +10,8 @@
 #include <tbb/info.h>
 #include <tbb/task_arena.h>
 
-#include "ldimesh/core/raycast/raycaster.hpp"
 #include "../test_helpers.hpp"
+#include "ldimesh/core/raycast/raycaster.hpp"
 
 namespace ldimesh {
 namespace {

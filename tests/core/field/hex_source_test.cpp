@@ -11,9 +11,9 @@
 #include <gtest/gtest.h>
 #include <tbb/task_arena.h>
 
-#include "ldimesh/core/raycast/raycaster.hpp"
-#include "ldimesh/core/base/view.hpp"
 #include "../test_helpers.hpp"
+#include "ldimesh/core/base/view.hpp"
+#include "ldimesh/core/raycast/raycaster.hpp"
 
 namespace ldimesh {
 namespace {

@@ -14,14 +14,14 @@
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
-#include "ldimesh/core/metrics/distance.hpp"
-#include "ldimesh/core/pipeline.hpp"
-#include "ldimesh/core/merge/projection.hpp"
-#include "ldimesh/core/raycast/raycaster.hpp"
-#include "ldimesh/core/raycast/sample_source.hpp"
-#include "ldimesh/core/field/surfaces.hpp"
 #include "../mesh_topology.hpp"
 #include "../test_helpers.hpp"
+#include "ldimesh/core/field/surfaces.hpp"
+#include "ldimesh/core/merge/projection.hpp"
+#include "ldimesh/core/metrics/distance.hpp"
+#include "ldimesh/core/pipeline.hpp"
+#include "ldimesh/core/raycast/raycaster.hpp"
+#include "ldimesh/core/raycast/sample_source.hpp"
 
 namespace ldimesh {
 namespace {

@@ -13,12 +13,12 @@
 
 #include <gtest/gtest.h>
 
+#include "../mesh_topology.hpp"
+#include "../test_helpers.hpp"
+#include "ldimesh/core/field/surfaces.hpp"
 #include "ldimesh/core/merge/merge.hpp"
 #include "ldimesh/core/pipeline.hpp"
 #include "ldimesh/core/raycast/raycaster.hpp"
-#include "ldimesh/core/field/surfaces.hpp"
-#include "../mesh_topology.hpp"
-#include "../test_helpers.hpp"
 
 namespace ldimesh {
 namespace {

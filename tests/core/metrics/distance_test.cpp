@@ -11,9 +11,9 @@
 #include <tbb/info.h>
 
 #include "ldimesh/core/field/analytic_fields.hpp"
+#include "ldimesh/core/field/surfaces.hpp"
 #include "ldimesh/core/pipeline.hpp"
 #include "ldimesh/core/raycast/raycaster.hpp"
-#include "ldimesh/core/field/surfaces.hpp"
 
 namespace ldimesh {
 namespace {

@@ -11,9 +11,9 @@
 #include <gtest/gtest.h>
 #include <tbb/task_arena.h>
 
-#include "ldimesh/core/raycast/decomposition.hpp"
 #include "ldimesh/core/field/grid_source.hpp"
 #include "ldimesh/core/field/hex_source.hpp"
+#include "ldimesh/core/raycast/decomposition.hpp"
 #include "ldimesh/core/raycast/raycaster.hpp"
 
 namespace ldimesh {

@@ -2,8 +2,8 @@
 
 #include <gtest/gtest.h>
 
-#include "ldimesh/core/raycast/raycaster.hpp"
 #include "ldimesh/core/field/surfaces.hpp"
+#include "ldimesh/core/raycast/raycaster.hpp"
 
 namespace ldimesh {
 namespace {

@@ -4,10 +4,10 @@
 
 #include <gtest/gtest.h>
 
+#include "../test_helpers.hpp"
 #include "ldimesh/core/field/analytic_fields.hpp"
 #include "ldimesh/core/field/analytic_source.hpp"
 #include "ldimesh/core/field/surfaces.hpp"
-#include "../test_helpers.hpp"
 
 namespace ldimesh {
 namespace {

@@ -6,10 +6,10 @@
 
 #include "ldimesh/core/field/analytic_fields.hpp"
 #include "ldimesh/core/field/analytic_source.hpp"
-#include "ldimesh/core/raycast/decomposition.hpp"
 #include "ldimesh/core/field/grid_source.hpp"
-#include "ldimesh/core/raycast/raycaster.hpp"
 #include "ldimesh/core/field/surfaces.hpp"
+#include "ldimesh/core/raycast/decomposition.hpp"
+#include "ldimesh/core/raycast/raycaster.hpp"
 
 namespace ldimesh {
 namespace {

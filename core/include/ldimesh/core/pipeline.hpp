@@ -3,12 +3,12 @@
 
 #include <span>
 
-#include "ldimesh/core/raycast/ldi.hpp"
-#include "ldimesh/core/merge/merge.hpp"
 #include "ldimesh/core/base/mesh.hpp"
+#include "ldimesh/core/merge/merge.hpp"
 #include "ldimesh/core/mesh/mesher.hpp"
-#include "ldimesh/core/refine/refine.hpp"
+#include "ldimesh/core/raycast/ldi.hpp"
 #include "ldimesh/core/raycast/sample_source.hpp"
+#include "ldimesh/core/refine/refine.hpp"
 
 namespace ldimesh {
 

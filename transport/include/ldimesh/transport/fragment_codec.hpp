@@ -26,8 +26,8 @@
 #include <span>
 #include <vector>
 
-#include "ldimesh/core/raycast/fragment.hpp"
 #include "ldimesh/core/base/status.hpp"
+#include "ldimesh/core/raycast/fragment.hpp"
 
 namespace ldimesh {
 

@@ -6,8 +6,8 @@
 
 #include <mpi.h>
 
-#include "ldimesh/core/raycast/fragment.hpp"
 #include "ldimesh/core/base/status.hpp"
+#include "ldimesh/core/raycast/fragment.hpp"
 #include "ldimesh/transport/fragment_codec.hpp"
 
 namespace ldimesh {

@@ -18,8 +18,8 @@
 #include <embree3/rtcore.h>
 #include <glm/glm.hpp>
 
-#include "ldimesh/core/raycast/axis_binding.hpp"
 #include "ldimesh/core/base/geometry.hpp"
+#include "ldimesh/core/raycast/axis_binding.hpp"
 
 namespace ldimesh {
 

@@ -7,8 +7,8 @@
 #include <string>
 #include <vector>
 
-#include "ldimesh/core/field/grid_source.hpp"
 #include "ldimesh/core/base/status.hpp"
+#include "ldimesh/core/field/grid_source.hpp"
 
 namespace ldimesh {
 

@@ -48,12 +48,12 @@ void renumber_moves(std::vector<VertexMove>& moves, std::span<const std::uint32_
 // already that close; where faces are that close, as a smoothed face and its neighbour, even
 // tiny moves matter; docs/method.md has the figures). The faces around the vertices to check (at
 // first every moved one checked) go into a hash grid of `cell`-sized cells (any size finds the
-// same crossings; about an edge is the cheapest), every face is tested against those in the cells of its box, and each
-// still-moved vertex of a crossing pair is put back. Rounds repeat with the faces of the vertices
-// put back (in their old places they can meet a face a moved neighbour made) while any is put back,
-// at most `max_rounds`. Returns the number of vertices put back. Throws std::invalid_argument for a
-// vertex index out of range or a cell size that is not positive. Deterministic: the faces are
-// tested in parallel, with the same result for any number of threads.
+// same crossings; about an edge is the cheapest), every face is tested against those in the cells
+// of its box, and each still-moved vertex of a crossing pair is put back. Rounds repeat with the
+// faces of the vertices put back (in their old places they can meet a face a moved neighbour made)
+// while any is put back, at most `max_rounds`. Returns the number of vertices put back. Throws
+// std::invalid_argument for a vertex index out of range or a cell size that is not positive.
+// Deterministic: the faces are tested in parallel, with the same result for any number of threads.
 std::size_t undo_crossing_moves(Mesh& mesh, std::span<const VertexMove> moves, double cell,
                                 double min_move = 0.0, int max_rounds = 4);
 

@@ -10,8 +10,8 @@
 #include <span>
 #include <vector>
 
-#include "ldimesh/core/raycast/sample_source.hpp"
 #include "ldimesh/core/base/view.hpp"
+#include "ldimesh/core/raycast/sample_source.hpp"
 
 namespace ldimesh {
 

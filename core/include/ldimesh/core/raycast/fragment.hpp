@@ -8,8 +8,8 @@
 
 #include <glm/glm.hpp>
 
-#include "ldimesh/core/raycast/ldi.hpp"
 #include "ldimesh/core/base/status.hpp"
+#include "ldimesh/core/raycast/ldi.hpp"
 
 namespace ldimesh {
 

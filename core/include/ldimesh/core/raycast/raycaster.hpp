@@ -9,10 +9,10 @@
 
 #include <embree3/rtcore.h>
 
+#include "ldimesh/core/base/view.hpp"
 #include "ldimesh/core/field/field_source.hpp"
 #include "ldimesh/core/raycast/fragment.hpp"
 #include "ldimesh/core/raycast/ldi.hpp"
-#include "ldimesh/core/base/view.hpp"
 
 namespace ldimesh {
 

@@ -8,8 +8,8 @@
 
 #include <glm/glm.hpp>
 
-#include "ldimesh/core/raycast/ldi.hpp"
 #include "ldimesh/core/mesh/mesher.hpp"
+#include "ldimesh/core/raycast/ldi.hpp"
 #include "ldimesh/core/raycast/sample_source.hpp"
 
 namespace ldimesh {
