@@ -118,6 +118,8 @@ struct QuadState {
   bool adjacent(std::uint32_t a, std::uint32_t b) const;
   int ideal(std::uint32_t v) const { return boundary_[v] ? 3 : 4; }
   int energy(std::uint32_t v, int change) const;
+
+  // The region, the options and the statistics filled in.
   const QuadRegion& region_;
   QuadOptions options_;
   QuadStats& stats_;
