@@ -650,7 +650,7 @@ Status decode_fragment(std::span<const std::uint8_t> bytes, LdiFragment& out) {
   try {
     return decode(bytes, out);
   } catch (const std::bad_alloc&) {
-    return fail("out of memory");
+    return Status::out_of_memory("fragment: out of memory while decoding");
   } catch (const std::exception& e) {
     return Status::corrupt_input(std::string("fragment: ") + e.what());
   }

@@ -5,6 +5,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <mutex>
 #include <numbers>
@@ -1038,6 +1039,9 @@ void lagrange_to_bernstein(int order, NodeSet nodes, std::span<const double> nod
   const std::size_t n = nodes_per_element(order);
   if (nodal.size() != n || bernstein.size() != n)
     throw std::invalid_argument("lagrange_to_bernstein: spans must hold (order + 1)^3 values");
+  if (std::less<const double*>()(nodal.data(), bernstein.data() + n) &&
+      std::less<const double*>()(bernstein.data(), nodal.data() + n))
+    throw std::invalid_argument("lagrange_to_bernstein: the spans overlap");
   convert_element(order, conversion_matrix(order, nodes), nodal.data(), bernstein.data());
 }
 

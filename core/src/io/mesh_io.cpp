@@ -500,6 +500,8 @@ Status parse_ply_body(const PlyHeader& h, std::string_view body, Mesh& m) {
 }  // namespace
 
 Status write_ply(const std::string& path, const Mesh& mesh) {
+  if (const Status s = check_mesh(mesh); !s)
+    return Status::invalid_argument("write_ply: " + s.message());
   File file;
   if (Status s = open_for_writing(path, file); !s) return s;
   {
@@ -520,18 +522,20 @@ Status write_ply(const std::string& path, const Mesh& mesh) {
     for (std::size_t f = 0; f < mesh.quad_count(); ++f) {
       w.pod(std::uint8_t(4));
       w.bytes(&mesh.quads[4 * f], 4 * sizeof(std::uint32_t));
-      w.pod(mesh.quad_view[f]);
+      w.pod(mesh.quad_view.empty() ? std::uint8_t(0) : mesh.quad_view[f]);
     }
     for (std::size_t f = 0; f < mesh.triangle_count(); ++f) {
       w.pod(std::uint8_t(3));
       w.bytes(&mesh.triangles[3 * f], 3 * sizeof(std::uint32_t));
-      w.pod(mesh.triangle_view[f]);
+      w.pod(mesh.triangle_view.empty() ? std::uint8_t(0) : mesh.triangle_view[f]);
     }
   }
   return finish(path, file);
 }
 
 Status write_obj(const std::string& path, const Mesh& mesh) {
+  if (const Status s = check_mesh(mesh); !s)
+    return Status::invalid_argument("write_obj: " + s.message());
   File file;
   if (Status s = open_for_writing(path, file); !s) return s;
   {
@@ -569,9 +573,10 @@ Status write_obj(const std::string& path, const Mesh& mesh) {
       w.text("\n");
     };
     for (std::size_t f = 0; f < mesh.quad_count(); ++f)
-      face(&mesh.quads[4 * f], 4, mesh.quad_view[f]);
+      face(&mesh.quads[4 * f], 4, mesh.quad_view.empty() ? std::uint8_t(0) : mesh.quad_view[f]);
     for (std::size_t f = 0; f < mesh.triangle_count(); ++f)
-      face(&mesh.triangles[3 * f], 3, mesh.triangle_view[f]);
+      face(&mesh.triangles[3 * f], 3,
+           mesh.triangle_view.empty() ? std::uint8_t(0) : mesh.triangle_view[f]);
   }
   return finish(path, file);
 }

@@ -372,6 +372,28 @@ TEST(HexElementSource, CullingNeverDropsAnElementThatHoldsARoot) {
     }
 }
 
+TEST(HexElementSource, BernsteinConversionChecksItsSpans) {
+  const int n = values_per_element(2);
+  std::vector<double> nodal(2 * n, 1.0), out(n);
+  EXPECT_NO_THROW(
+      lagrange_to_bernstein(2, NodeSet::gauss_lobatto_legendre, std::span(nodal).first(n), out));
+  for (double b : out)
+    EXPECT_NEAR(b, 1.0, 1e-14);  // a constant's coefficients are the constant
+  EXPECT_THROW(
+      lagrange_to_bernstein(2, NodeSet::gauss_lobatto_legendre, std::span(nodal).first(n - 1), out),
+      std::invalid_argument);
+  // In place, or shifted by one value: the output would overwrite nodal values not yet read.
+  for (std::size_t shift : {0, 1})
+    EXPECT_THROW(
+        lagrange_to_bernstein(2, NodeSet::gauss_lobatto_legendre, std::span(nodal).first(n),
+                              std::span(nodal).subspan(shift, n)),
+        std::invalid_argument)
+        << shift;
+  // Adjacent, not overlapping.
+  EXPECT_NO_THROW(lagrange_to_bernstein(2, NodeSet::gauss_lobatto_legendre,
+                                        std::span(nodal).first(n), std::span(nodal).subspan(n)));
+}
+
 TEST(HexElementSource, Float32ValuesWithAStrideReadTheSameField) {
   const int order = 4, n = values_per_element(order);
   const NodeSet nodes = NodeSet::gauss_legendre;

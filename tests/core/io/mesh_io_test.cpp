@@ -79,6 +79,34 @@ TEST_F(MeshIo, UnwritablePathsAndUnknownFormatsAreErrors) {
   EXPECT_NE(format.message().find(".ply or .obj"), std::string::npos);
 }
 
+TEST_F(MeshIo, MalformedMeshesAreRefusedBeforeAnyFileIsWritten) {
+  Mesh bad = two_faces();
+  bad.triangles[1] = 7;  // beyond the 5 vertices
+  Mesh short_normals = two_faces();
+  short_normals.normals.pop_back();
+  for (const Mesh* m : {&bad, &short_normals})
+    for (const char* name : {"bad.ply", "bad.obj"}) {
+      const Status s = write_mesh(path(name), *m);
+      EXPECT_EQ(s.code(), StatusCode::invalid_argument) << name;
+      EXPECT_FALSE(std::filesystem::exists(path(name))) << name;
+    }
+  EXPECT_NE(write_ply(path("bad.ply"), bad).message().find("write_ply: "), std::string::npos);
+}
+
+TEST_F(MeshIo, MeshesWithoutViewsAreWrittenAsView0) {
+  Mesh m = two_faces();
+  m.quad_view.clear();
+  m.triangle_view.clear();
+  ASSERT_TRUE(write_ply(path("m.ply"), m));
+  ASSERT_TRUE(write_obj(path("m.obj"), m));
+  Mesh r;
+  ASSERT_TRUE(read_ply(path("m.ply"), r));
+  EXPECT_EQ(r.quad_view, std::vector<std::uint8_t>{0});
+  EXPECT_EQ(r.triangle_view, std::vector<std::uint8_t>{0});
+  const std::string text = slurp(path("m.obj"));
+  EXPECT_NE(text.find("g view_0\nf 1//1 2//2 3//3 4//4\nf 2//2 5//5 3//3\n"), std::string::npos);
+}
+
 // ---- Reading PLY ----
 
 TEST_F(MeshIo, PlyRoundTripsThroughReadPly) {

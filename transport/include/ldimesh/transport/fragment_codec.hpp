@@ -20,6 +20,9 @@
 //       68    4  CRC-32 of the compressed payload
 //       72    4  CRC-32 of bytes 0..71
 //       76       one zstd frame: pixel ids, counts, depths, normals, scalars (separate streams)
+//
+// Threads: every function is reentrant (no shared state; each call has its own zstd context),
+// so ranks' threads may encode and decode at once.
 #pragma once
 
 #include <cstdint>
@@ -46,7 +49,8 @@ struct FragmentEncoding {
 
 // Encodes `fragment`. It must satisfy validate_fragment, have finite non-zero normals, a depth
 // interval within ±1e30, at most 65536 samples per pixel and at most 2³¹ samples; throws
-// std::invalid_argument otherwise or for out-of-range encoding settings. Lossy encoding clamps
+// std::invalid_argument otherwise or for out-of-range encoding settings (std::runtime_error
+// should zstd itself fail, std::bad_alloc without memory). Lossy encoding clamps
 // depths outside [depth_lo, depth_hi] to the interval. Scalars are always stored bit-exactly.
 // Deterministic, and idempotent: encoding the decoded fragment again with the same `encoding`
 // gives the same bytes (so a rank may decode, merge and re-encode without drift).
@@ -61,7 +65,8 @@ void quantize_fragment(LdiFragment& fragment, const FragmentEncoding& encoding =
 
 // Decodes `bytes` into `out`. Validates the header, every size and count, the checksum and the
 // decoded fragment's invariants before use: truncated, corrupted or hostile input returns an
-// error Status ("fragment: ...") and never reads out of bounds, never throws, and allocates
+// error Status ("fragment: ...": corrupt_input; out_of_memory should an allocation fail) and
+// never reads out of bounds, never throws, and allocates
 // at most a small multiple of what the zstd frame really holds, never what a header claims
 // (zstd's own window buffer stays within its default limit of 2²⁷ bytes). On error `out` is
 // left unchanged. Every fragment it accepts is accepted by encode_fragment.
@@ -76,7 +81,8 @@ Status check_fragment(std::span<const std::uint8_t> bytes, LdiFragment& shape);
 // The largest depth error of `encoding` for a depth in [lo, hi]:
 // (hi − lo) / (2·(2^b − 1)) + u, with b the depth bits the encoder uses and u the float
 // spacing at max(|lo|, |hi|) (the decoded depth is a float); (hi − lo) + u when b = 0
-// (hi − lo below two float spacings); 0 for lossless encoding.
+// (hi − lo below two float spacings); 0 for lossless encoding. lo ≤ hi, both finite (a
+// fragment's depth interval); other arguments give no meaningful bound.
 double depth_error_bound(const FragmentEncoding& encoding, double lo, double hi);
 // The largest angle (radians) between a unit normal and its decoded value:
 // 3·√2 / (2^n − 2) + 2⁻²², with n the normal bits; 0 for lossless encoding. The axes are

@@ -4,6 +4,11 @@
 // Embree scene, and finds *all* roots of one ray inside one primitive in its intersect callback.
 // Sources may also offer a coherent caster for rays parallel to an axis (bind_axis), which the
 // ray caster prefers for such rays.
+//
+// Threads and determinism, for every source: a source does not change after construction, bind
+// and bind_axis may run on several threads at once, and the roots a binding reports for a ray
+// depend on that ray only (not on the thread, the other rays or their order). The solver's
+// arrays a source reads must not change while a bind or a cast runs.
 #pragma once
 
 #include <algorithm>

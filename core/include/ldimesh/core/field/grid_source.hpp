@@ -14,10 +14,11 @@ namespace ldimesh {
 
 class GridSource final : public FieldSource {
  public:
-  // Validates the block (positive dims, at least one owned cell per axis, non-null values,
-  // non-zero strides, positive spacing or increasing coordinates); throws
-  // std::invalid_argument naming the problem. Bricks of brick_cells³ owned cells are the
-  // ray-caster primitives.
+  // Validates the block (at least 2 points and one owned cell per axis, non-null values,
+  // non-zero strides, non-negative ghost layers, positive spacing or increasing coordinates) and
+  // brick_cells ≥ 1; throws std::invalid_argument naming the problem. Bricks of brick_cells³
+  // owned cells are the ray-caster primitives. The arrays are read in place: they must outlive
+  // the source (threads: see field_source.hpp).
   explicit GridSource(const GridBlock& block, int brick_cells = 8);
 
   // The owned region: the cells this block produces hits in.
@@ -38,9 +39,10 @@ class GridSource final : public FieldSource {
 
   // Bricks before culling.
   std::size_t brick_count() const;
-  // The value at point (i, j, k) (ghosts included), as a double.
+  // The value at point (i, j, k) (ghosts included), as a double. The indices must lie within the
+  // block's points (0 … dims[a] − 1; not checked).
   double value(std::int64_t i, std::int64_t j, std::int64_t k) const;
-  // The coordinate of point index i along axis a.
+  // The coordinate of point index i along axis a (0 ≤ i < dims[a], 0 ≤ a < 3; not checked).
   double coordinate(int axis, std::int64_t i) const;
   // Owned cells along each axis: lower corner indices first_cell[a] … last_cell[a].
   std::array<std::int64_t, 3> first_cell() const { return first_cell_; }

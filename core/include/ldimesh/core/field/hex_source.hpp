@@ -37,7 +37,7 @@ std::vector<double> node_positions(int order, NodeSet nodes);
 // Converts the (p + 1)³ nodal values of one element (layout as in HexBlock) into the (p + 1)³
 // tensor-product Bernstein coefficients on [0, 1]³ of the same polynomial, same layout. Both
 // spans must hold exactly (p + 1)³ values and must not overlap; throws std::invalid_argument
-// otherwise or for an order outside 1..kMaxHexOrder.
+// otherwise or for an order outside 1..kMaxHexOrder. Reentrant.
 void lagrange_to_bernstein(int order, NodeSet nodes, std::span<const double> nodal,
                            std::span<double> bernstein);
 
@@ -74,13 +74,16 @@ class HexElementSource final : public FieldSource {
   // element covers (the same roots as bind()).
   std::unique_ptr<AxisBinding> bind_axis(double isovalue) const override;
 
+  // Threads: see field_source.hpp; to_reference and element_bernstein are const and reentrant.
+
   // The block as given, with element_stride 0 replaced by (p + 1)³.
   const HexBlock& block() const { return block_; }
   // Reference coordinates in element `element` of the world point `world` (inside the element
   // iff all three lie in [0, 1]). `element` must be below block().element_count.
   glm::dvec3 to_reference(std::size_t element, glm::dvec3 world) const;
   // The Bernstein coefficients of element `element` from the current values (see
-  // lagrange_to_bernstein; `out` holds exactly (p + 1)³ values). Minimum and maximum bound the
+  // lagrange_to_bernstein; `out` holds exactly (p + 1)³ values, else std::invalid_argument;
+  // `element` must be below block().element_count, not checked). Minimum and maximum bound the
   // element's values; bind() culls with them. A non-finite nodal value makes some
   // coefficients non-finite.
   void element_bernstein(std::size_t element, std::span<double> out) const;

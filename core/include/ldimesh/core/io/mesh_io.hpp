@@ -1,4 +1,9 @@
 // Writing meshes for other tools (binary PLY, Wavefront OBJ) and reading PLY back.
+//
+// Errors (Status codes): a mesh that fails check_mesh is invalid_argument (nothing is written);
+// a file that cannot be opened, written or read is io; a PLY that is malformed, truncated or
+// inconsistent is corrupt_input; an unknown extension is invalid_argument. Every function is
+// reentrant (no shared state): calls on different files may run on any threads at once.
 #pragma once
 
 #include <string>
@@ -10,8 +15,8 @@
 namespace ldimesh {
 
 // Binary little-endian PLY: vertex x y z nx ny nz (float), face vertex_indices (uchar count,
-// uint indices) and view (uchar); one `comment view k dir x y z` line per view. Quads first,
-// then triangles. Same mesh, same bytes.
+// uint indices) and view (uchar, 0 where the mesh has no views); one `comment view k dir x y z`
+// line per view. Quads first, then triangles. Same mesh, same bytes.
 Status write_ply(const std::string& path, const Mesh& mesh);
 
 // OBJ with `v`, `vn` and `f a//a …` lines and one group `view_k` per run of faces of view k.

@@ -64,11 +64,13 @@ struct RayCasterOptions {
 // threads. The sources, and the values they read, must stay unchanged while the caster lives.
 class RayCaster {
  public:
-  // Throws std::runtime_error when Embree cannot create a device or scene (where every source has
-  // an axis caster, the first cast of a ray that is not along an axis throws it instead).
+  // Errors: std::runtime_error with Embree's own message (its device error callback) when Embree
+  // cannot create a device or scene; where every source has an axis caster, the first cast of a
+  // ray that is not along an axis throws it instead. Whatever a source's bind throws passes on.
   RayCaster(const FieldSource& source, double isovalue, RayCasterOptions options = {});
   // One caster of several sources (e.g. the blocks of one rank); a root that two sources both
-  // report (on a face they share) counts once. `sources` must not be empty.
+  // report (on a face they share) counts once. Throws std::invalid_argument when `sources` is
+  // empty; the sources are not owned.
   RayCaster(std::span<const FieldSource* const> sources, double isovalue,
             RayCasterOptions options = {});
   ~RayCaster();
@@ -76,7 +78,8 @@ class RayCaster {
   RayCaster& operator=(const RayCaster&) = delete;
 
   // The LDI of `view`: every root of the field along the ray through each pixel centre,
-  // sorted by depth, with roots found twice where primitives touch merged.
+  // sorted by depth, with roots found twice where primitives touch merged. Throws
+  // std::runtime_error when the LDI would hold more than 2³² samples (its offsets are 32-bit).
   Ldi cast(const View& view) const;
 
   // The part of the LDI of `view` that `sub` owns: only the pixels whose rays cross it, each ray
