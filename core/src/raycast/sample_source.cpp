@@ -31,7 +31,8 @@ RayHitList cast_sample_points(const RayCaster& caster, std::span<const View> vie
   for (std::size_t k = 0; k < points.size(); ++k) {
     const RayHitList& h = hits[points[k].view];
     const std::uint32_t b = h.offsets[slot[k]], e = h.offsets[slot[k] + 1];
-    // Hit by hit: a range insert of the few hits of a ray was a memmove call each.
+    // Hit by hit: for the few hits of a ray this is cheaper than a range insert (a memmove call
+    // each).
     for (std::uint32_t i = b; i < e; ++i) {
       out.depth.push_back(h.depth[i]);
       out.normal.push_back(h.normal[i]);

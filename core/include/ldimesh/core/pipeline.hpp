@@ -1,4 +1,9 @@
-// The §3 pipeline on a set of LDIs: match, trim, assemble one mesh.
+// One isovalue's LDIs to one mesh: §3 match and trim, §4 refinement, §5 merging and quad
+// conversion, as options ask (the root half of a step, transport/distributed.hpp).
+//
+// Threads: mesh_ldis runs its stages on the calling thread's TBB arena; several calls may run
+// at once on different LDIs (no shared state). Determinism: the same LDIs and options give the
+// same mesh, byte for byte, for any thread count.
 #pragma once
 
 #include <span>
@@ -55,7 +60,8 @@ inline double trim_r(const MeshingOptions& options) {
 // the views are trimmed with r = 1 and merged into one mesh (§5, merge_views; all quads for
 // FaceType::quads); with `samples` the new vertices of its sewing region are moved onto the
 // surface. Throws std::invalid_argument if r is outside [0, 1], more than 255 views, or
-// refinement is asked for without a sample source.
+// refinement is asked for without a sample source, and passes on what the stages throw (their
+// option checks: std::invalid_argument; the sample source's errors as it throws them).
 MeshingResult mesh_ldis(std::span<const Ldi> ldis, const MeshingOptions& options = {},
                         SampleSource* samples = nullptr);
 

@@ -1,6 +1,14 @@
 // The distributed pipeline: every rank ray casts its own subdomain, the fragments travel
 // compressed to the root, the root meshes them (paper §3) and refines the meshes with extra
 // samples that every rank casts in its subdomain (§4).
+//
+// Threads: every MPI call is made by the thread that calls the function (MPI_THREAD_FUNNELED is
+// enough), and a rank runs one collective of `comm` at a time; casting and meshing use the
+// TBB arena of the calling thread. Determinism: the root's mesh is the same for any number of
+// ranks, any split of the domain into blocks and any thread count (each rank's samples are
+// quantized as if received, hits are sorted with a total order). Errors are Status values,
+// the same on every rank where a function is collective; nothing throws out of them but the
+// MpiSampleSource calls named below.
 #pragma once
 
 #include <cstdint>

@@ -13,6 +13,9 @@
 //               when the mesh has scalars; quantized to `scalar_bits`.
 // and meshes[0].extras.ldimesh = {"view_dirs": [[x,y,z], …], "scalar_range": [min, max]}
 // (scalar_range only with scalars), so that a client can recover views and scalar units.
+//
+// Threads: encode_glb and decode_glb are reentrant (each call has its own Draco objects) and
+// deterministic (the same mesh and options give the same bytes).
 #pragma once
 
 #include <array>

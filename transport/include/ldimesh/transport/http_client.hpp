@@ -1,5 +1,10 @@
 // The client side of docs/api.md: list, metadata, GLB and long polls against a job's server
 // (or `ldimesh-serve`), each call returning a Status whose message a person can act on.
+//
+// Status codes: a bad URL and a step the server does not have are invalid_argument; a server
+// that cannot be reached, refuses the token, times out or closes the connection is io; what a
+// server sends that is not what docs/api.md says (bad JSON, a GLB larger than the limit, shorter
+// or longer than announced, or not a glTF binary) is corrupt_input. Only the constructor throws.
 #pragma once
 
 #include <chrono>

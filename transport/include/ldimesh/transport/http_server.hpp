@@ -84,7 +84,8 @@ class HttpServer {
   std::unique_ptr<Impl> impl_;
 };
 
-// A random 128-bit token as 32 lowercase hex digits, from std::random_device.
+// A random 128-bit token as 32 lowercase hex digits, from std::random_device (throws
+// std::runtime_error, as std::random_device does, where the system has no entropy source).
 std::string random_token();
 
 // Whether `given` equals `expected`, in a time that depends only on expected.size() (no early

@@ -5,6 +5,11 @@
 // a mutex for a few pointer moves: it never waits for a reader, a download or the network.
 // Readers get shared_ptrs to immutable snapshots, so a download in progress keeps its snapshot
 // alive after the store has evicted it and no reader ever sees a half-written one.
+//
+// Errors (Status codes): bytes or JSON that do not hold what they should (a metadata object, a
+// GLB header, a snapshot whose parts disagree) are corrupt_input; a step that breaks the
+// store's order or has no GLB is invalid_argument; a file or folder that cannot be read,
+// written or listed is io. Nothing here throws but std::bad_alloc.
 #pragma once
 
 #include <array>
@@ -84,7 +89,6 @@ struct Snapshot {
   std::size_t memory_bytes() const;
 };
 
-// A snapshot of `metadata` (its `bytes` field set to glb.size()) and `glb`, moved in.
 // The metadata of a step meshed from `views` at `isovalues` with trimming parameter `r`:
 // counts from the meshing (`samples`, `quads`) and from the encoded GLB (`glb`), the views'
 // directions and resolution (their longer side); `seconds` and `bytes` are left to the caller
@@ -93,6 +97,7 @@ StepMetadata describe_step(std::uint64_t step, double time, std::vector<double> 
                            std::span<const View> views, double r, std::size_t samples,
                            std::size_t quads, const GlbInfo& glb);
 
+// A snapshot of `metadata` (its `bytes` field set to glb.size()) and `glb`, moved in.
 Snapshot make_snapshot(StepMetadata metadata, std::vector<std::uint8_t> glb);
 
 struct SnapshotStoreLimits {
@@ -115,8 +120,9 @@ class SnapshotStore {
 
   // Adds `snapshot` as the newest step, then evicts the oldest ones beyond the limits, and
   // wakes every waiter. Errors (the store is unchanged): a step number not greater than the
-  // newest one's; no GLB or one that fails check_glb_header; metadata that does not parse or
-  // whose "step" (or "bytes", when present) disagrees with the snapshot. Holds the store's lock
+  // newest one's (invalid_argument); no GLB or one that fails check_glb_header, metadata that
+  // does not parse or whose "step" (or "bytes", when present) disagrees with the snapshot
+  // (corrupt_input). Holds the store's lock
   // only to move pointers; evicted snapshots are freed after it is released, or later by the
   // last reader still holding them.
   Status publish(Snapshot snapshot);
@@ -166,7 +172,8 @@ Status write_step_files(const std::filesystem::path& dir, const Snapshot& snapsh
 // checks a snapshot (GLB header, metadata step and bytes).
 Status read_step_files(const std::filesystem::path& dir, std::uint64_t step, Snapshot& out);
 
-// Loads step files that appear in a directory into a store (`ldimesh-serve --dir`).
+// Loads step files that appear in a directory into a store (`ldimesh-serve --dir`). Not
+// thread-safe: one thread scans (the store it publishes into is).
 class DirectoryWatcher {
  public:
   explicit DirectoryWatcher(std::filesystem::path dir);

@@ -25,7 +25,8 @@ using SurfaceProjection = std::function<std::size_t(
 // A SurfaceProjection from extension samples: each point is moved along the axis of the view
 // whose direction is closest to its normal, to the nearest hit of that view's ray through it
 // within ± reach whose normal faces the same way as the estimate (positive dot product).
-// `samples` and `views` must outlive the returned function.
+// `samples` and `views` must outlive the returned function; it calls samples.sample() once per
+// call, so it is used one call at a time (as the source is) and passes on what sample() throws.
 SurfaceProjection sample_projection(SampleSource& samples, std::span<const View> views);
 
 }  // namespace ldimesh

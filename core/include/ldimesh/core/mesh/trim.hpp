@@ -1,4 +1,5 @@
-// Trimming the overlap between views (paper §3).
+// Trimming the overlap between views (paper §3). Pure functions: reentrant, no errors (bad
+// indices are the caller's; the mesher only passes its own quads).
 #pragma once
 
 #include <algorithm>

@@ -4,6 +4,9 @@
 // process and by an MPI round trip to the ranks that own the rays in a parallel run. One call is
 // one round trip: a refinement pass (or a merging batch) asks for all its samples, of all views,
 // in one call.
+//
+// Threads: one sample() call at a time per source (an MPI source's calls are collective round
+// trips); the hits of a call depend on its points only, not on threads or earlier calls.
 #pragma once
 
 #include <cmath>
