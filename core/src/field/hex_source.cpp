@@ -780,13 +780,13 @@ class StagedRestriction {
   // a stage's values all have one strict sign: the bases that follow are nonnegative and sum to
   // one, so every coefficient of the polynomial has that sign, and it has no root (nor any
   // coefficient that is exactly zero: the values are far above underflow).
-  int restrict(glm::dvec3 a, glm::dvec3 b, double* f) {
+  [[gnu::always_inline]] int restrict(glm::dvec3 a, glm::dvec3 b, double* f) {
     if (!x_valid_ || a.x != ax_ || b.x != bx_) {
       segment_basis<P>(a.x, b.x, basis_x_);
       contract_x<P>(c_, basis_x_, x_);
       ax_ = a.x, bx_ = b.x;
       x_valid_ = true;
-      y_valid_ = dx_valid_ = false;
+      y_valid_ = dx_valid_ = dy_valid_ = false;
       constexpr int n = P + 1;
       x_uniform_ =
           one_sign(&x_.g[0][0][0], n, n, kMaxNodes * kMaxNodes, kMaxNodes, basis_x_.degree + 1);
@@ -815,12 +815,12 @@ class StagedRestriction {
     return degree;
   }
 
-  // ∇ξ at parameter s of the last restrict()'s segment; false where ξ moves along it (then
-  // evaluate the tensor).
+  // ∇ξ at parameter s of the last restrict()'s segment; false where the segment moves along ξ
+  // and another axis (then evaluate the tensor).
   bool gradient(double s, glm::dvec3& g) {
+    if (a_.x != b_.x) return a_.y == b_.y && a_.z == b_.z && gradient_along_x(s, g);
     // G_kj = Σ_i c_ijk B_i(ξ) and its ξ-derivative are the ξ stage itself where ξ is fixed along
-    // the ray (kept over the row). Otherwise nothing is kept: evaluate_tensor does the same work.
-    if (a_.x != b_.x) return false;
+    // the ray (kept over the row).
     // The hit's reference point, as evaluate_tensor would be given it, and the 1-D bases and
     // their derivatives there.
     const glm::dvec3 q = a_ + s * (b_ - a_);
@@ -850,6 +850,57 @@ class StagedRestriction {
     return true;
   }
 
+  // ∇ξ where the segment moves along ξ only (η, ζ fixed): the ξ and η stages of the last
+  // restrict() hold g_kj(s) = Σ_i c_ijk B_i(ξ(s)) and h_k(s) = Σ_j g_kj(s) B_j(η) in the scaled
+  // basis S_l(s) = s^l (1 − s)^(P−l). ∂/∂ξ is dh/ds / (dξ/ds) summed with B_k(ζ); ∂/∂η and ∂/∂ζ
+  // take B_j'(η) and B_k'(ζ) instead: (p + 1)³ multiply-adds for ∂/∂η once per row (η fixed),
+  // (p + 1)² per hit for the rest, where the tensor evaluation takes 2 (p + 1)³ per hit.
+  bool gradient_along_x(double s, glm::dvec3& g) {
+    if (basis_x_.degree != P || basis_y_.degree != 0) return false;
+    double vy[kMaxNodes], dy[kMaxNodes], vz[kMaxNodes], dz[kMaxNodes];
+    bernstein_basis<P>(a_.y, vy, dy);
+    bernstein_basis<P>(a_.z, vz, dz);
+    // S_l(s) and dS_l/ds.
+    double sp[P + 1], tp[P + 1], basis[P + 1], slope[P + 1];
+    sp[0] = tp[0] = 1.0;
+    for (int l = 1; l <= P; ++l) {
+      sp[l] = sp[l - 1] * s;
+      tp[l] = tp[l - 1] * (1.0 - s);
+    }
+    for (int l = 0; l <= P; ++l) {
+      basis[l] = sp[l] * tp[P - l];
+      slope[l] = (l > 0 ? l * sp[l - 1] * tp[P - l] : 0.0) -
+                 (l < P ? (P - l) * sp[l] * tp[P - l - 1] : 0.0);
+    }
+    constexpr int n = P + 1;
+    if (!dy_valid_ || dy_at_ != a_.y) {  // Σ_j g_kjl B_j'(η), kept while η stays (a row)
+      for (int k = 0; k < n; ++k)
+        for (int l = 0; l <= P; ++l) {
+          double dh = 0.0;
+          for (int j = 0; j < n; ++j)
+            dh += x_.g[k][j][l] * dy[j];
+          dy_.h[k][l] = dh;
+        }
+      dy_at_ = a_.y;
+      dy_valid_ = true;
+    }
+    double gs = 0.0, gy = 0.0, gz = 0.0;
+    for (int k = 0; k < n; ++k) {
+      double hs = 0.0, hv = 0.0, hy = 0.0;
+      for (int l = 0; l <= P; ++l) {
+        const double h = y_.h[k][l];
+        hs += h * slope[l];
+        hv += h * basis[l];
+        hy += dy_.h[k][l] * basis[l];
+      }
+      gs += hs * vz[k];
+      gy += hy * vz[k];
+      gz += hv * dz[k];
+    }
+    g = glm::dvec3(gs / (b_.x - a_.x), gy, gz);
+    return true;
+  }
+
  private:
   // Whether values v[i·si + j·sj + l] (i < ni, j < nj, l < nl) all have one strict sign, none
   // near underflow.
@@ -870,7 +921,9 @@ class StagedRestriction {
   bool x_uniform_ = false, y_uniform_ = false;
   AxisBasis basis_x_, basis_y_, basis_z_;
   StageX x_, dx_;
-  StageY y_;
+  StageY y_, dy_;  // dy_: the η stage with B_j'(η) at η = dy_at_ (gradient_along_x)
+  double dy_at_ = 0.0;
+  bool dy_valid_ = false;
   double ax_ = 0, bx_ = 0, ay_ = 0, by_ = 0, az_ = 0, bz_ = 0;
   bool x_valid_ = false, y_valid_ = false, z_valid_ = false, dx_valid_ = false;
   glm::dvec3 a_{0.0}, b_{0.0};
