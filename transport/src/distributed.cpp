@@ -244,13 +244,19 @@ constexpr std::size_t kMaxRays = INT_MAX / kDoublesPerRay;  // one MPI_Bcast for
 // An answer starts with its kind: hits, or the error that kept the rank from answering.
 constexpr std::uint64_t kHits = 0, kError = 1;
 
+// memcpy of n bytes that allows an empty vector's data() (null) when n is 0: memcpy itself
+// must not be given a null pointer even then.
+void copy_bytes(void* to, const void* from, std::size_t n) {
+  if (n > 0) std::memcpy(to, from, n);
+}
+
 std::vector<std::uint8_t> serialize(const RayHitList& hits) {
   const std::uint64_t rays = hits.offsets.size() - 1, samples = hits.depth.size();
   const std::uint64_t scalar = hits.scalar.empty() ? 0 : 1;
   std::vector<std::uint8_t> out(32 + 4 * (rays + 1) + samples * (4 + 12 + 4 * scalar));
   std::uint8_t* p = out.data();
   auto put = [&](const void* src, std::size_t n) {
-    std::memcpy(p, src, n);
+    copy_bytes(p, src, n);
     p += n;
   };
   put(&kHits, 8);
@@ -267,7 +273,7 @@ std::vector<std::uint8_t> serialize(const RayHitList& hits) {
 std::vector<std::uint8_t> serialize_error(const std::string& message) {
   std::vector<std::uint8_t> out(8 + message.size());
   std::memcpy(out.data(), &kError, 8);
-  std::memcpy(out.data() + 8, message.data(), message.size());
+  copy_bytes(out.data() + 8, message.data(), message.size());
   return out;
 }
 
@@ -299,13 +305,13 @@ bool deserialize(std::span<const std::uint8_t> in, std::uint64_t rays, RayHitLis
   for (std::uint64_t k = 0; k < rays; ++k)
     if (hits.offsets[k] > hits.offsets[k + 1]) return false;
   hits.depth.resize(samples);
-  std::memcpy(hits.depth.data(), p, 4 * samples);
+  copy_bytes(hits.depth.data(), p, 4 * samples);
   p += 4 * samples;
   hits.normal.resize(samples);
-  std::memcpy(hits.normal.data(), p, 12 * samples);
+  copy_bytes(hits.normal.data(), p, 12 * samples);
   p += 12 * samples;
   hits.scalar.resize(scalar ? samples : 0);
-  if (scalar) std::memcpy(hits.scalar.data(), p, 4 * samples);
+  if (scalar) copy_bytes(hits.scalar.data(), p, 4 * samples);
   return true;
 }
 
