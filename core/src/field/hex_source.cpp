@@ -786,7 +786,7 @@ class StagedRestriction {
       contract_x<P>(c_, basis_x_, x_);
       ax_ = a.x, bx_ = b.x;
       x_valid_ = true;
-      y_valid_ = dx_valid_ = dy_valid_ = false;
+      y_valid_ = dx_valid_ = along_x_valid_ = false;
       constexpr int n = P + 1;
       x_uniform_ =
           one_sign(&x_.g[0][0][0], n, n, kMaxNodes * kMaxNodes, kMaxNodes, basis_x_.degree + 1);
@@ -851,47 +851,37 @@ class StagedRestriction {
   }
 
   // ∇ξ where the segment moves along ξ only (η, ζ fixed): the ξ and η stages of the last
-  // restrict() hold g_kj(s) = Σ_i c_ijk B_i(ξ(s)) and h_k(s) = Σ_j g_kj(s) B_j(η) in the scaled
-  // basis S_l(s) = s^l (1 − s)^(P−l). ∂/∂ξ is dh/ds / (dξ/ds) summed with B_k(ζ); ∂/∂η and ∂/∂ζ
-  // take B_j'(η) and B_k'(ζ) instead: (p + 1)³ multiply-adds for ∂/∂η once per row (η fixed),
-  // (p + 1)² per hit for the rest, where the tensor evaluation takes 2 (p + 1)³ per hit.
+  // restrict() hold h_kl, the polynomial in s along the ray per ζ-node k (scaled basis), and
+  // with B_j'(η) in place of B_j(η) the same for ∂/∂η. Both are kept in standard Bernstein form
+  // while η stays (a row: (p + 1)³ multiply-adds); per hit, the Bernstein basis at s and at ζ
+  // give ∂/∂ξ (the derivative along s over dξ/ds), ∂/∂η and ∂/∂ζ in (p + 1)² each, where the
+  // tensor evaluation takes 2 (p + 1)³.
   bool gradient_along_x(double s, glm::dvec3& g) {
-    if (basis_x_.degree != P || basis_y_.degree != 0) return false;
-    double vy[kMaxNodes], dy[kMaxNodes], vz[kMaxNodes], dz[kMaxNodes];
-    bernstein_basis<P>(a_.y, vy, dy);
-    bernstein_basis<P>(a_.z, vz, dz);
-    // S_l(s) and dS_l/ds.
-    double sp[P + 1], tp[P + 1], basis[P + 1], slope[P + 1];
-    sp[0] = tp[0] = 1.0;
-    for (int l = 1; l <= P; ++l) {
-      sp[l] = sp[l - 1] * s;
-      tp[l] = tp[l - 1] * (1.0 - s);
-    }
-    for (int l = 0; l <= P; ++l) {
-      basis[l] = sp[l] * tp[P - l];
-      slope[l] = (l > 0 ? l * sp[l - 1] * tp[P - l] : 0.0) -
-                 (l < P ? (P - l) * sp[l] * tp[P - l - 1] : 0.0);
-    }
     constexpr int n = P + 1;
-    if (!dy_valid_ || dy_at_ != a_.y) {  // Σ_j g_kjl B_j'(η), kept while η stays (a row)
+    if (!along_x_valid_ || along_x_at_ != a_.y) {
+      double vy[kMaxNodes], dy[kMaxNodes];
+      bernstein_basis<P>(a_.y, vy, dy);
       for (int k = 0; k < n; ++k)
         for (int l = 0; l <= P; ++l) {
           double dh = 0.0;
           for (int j = 0; j < n; ++j)
             dh += x_.g[k][j][l] * dy[j];
-          dy_.h[k][l] = dh;
+          along_x_h_.h[k][l] = y_.h[k][l] / kBinomial[P][l];
+          along_x_dh_.h[k][l] = dh / kBinomial[P][l];
         }
-      dy_at_ = a_.y;
-      dy_valid_ = true;
+      along_x_at_ = a_.y;
+      along_x_valid_ = true;
     }
+    double bs[kMaxNodes], ds[kMaxNodes], vz[kMaxNodes], dz[kMaxNodes];
+    bernstein_basis<P>(s, bs, ds);
+    bernstein_basis<P>(a_.z, vz, dz);
     double gs = 0.0, gy = 0.0, gz = 0.0;
     for (int k = 0; k < n; ++k) {
       double hs = 0.0, hv = 0.0, hy = 0.0;
       for (int l = 0; l <= P; ++l) {
-        const double h = y_.h[k][l];
-        hs += h * slope[l];
-        hv += h * basis[l];
-        hy += dy_.h[k][l] * basis[l];
+        hs += along_x_h_.h[k][l] * ds[l];
+        hv += along_x_h_.h[k][l] * bs[l];
+        hy += along_x_dh_.h[k][l] * bs[l];
       }
       gs += hs * vz[k];
       gy += hy * vz[k];
@@ -921,9 +911,11 @@ class StagedRestriction {
   bool x_uniform_ = false, y_uniform_ = false;
   AxisBasis basis_x_, basis_y_, basis_z_;
   StageX x_, dx_;
-  StageY y_, dy_;  // dy_: the η stage with B_j'(η) at η = dy_at_ (gradient_along_x)
-  double dy_at_ = 0.0;
-  bool dy_valid_ = false;
+  StageY y_;
+  // gradient_along_x's η stage (standard form) with B_j(η) and B_j'(η), at η = along_x_at_.
+  StageY along_x_h_, along_x_dh_;
+  double along_x_at_ = 0.0;
+  bool along_x_valid_ = false;
   double ax_ = 0, bx_ = 0, ay_ = 0, by_ = 0, az_ = 0, bz_ = 0;
   bool x_valid_ = false, y_valid_ = false, z_valid_ = false, dx_valid_ = false;
   glm::dvec3 a_{0.0}, b_{0.0};

@@ -73,6 +73,11 @@ class Writer {
   std::vector<char> buffer_;
 };
 
+// Face f's view: 0 for a mesh without views (check_mesh allows empty view arrays).
+std::uint8_t view_at(const std::vector<std::uint8_t>& views, std::size_t f) {
+  return views.empty() ? 0 : views[f];
+}
+
 std::string view_comment(const glm::dvec3& d, std::size_t k) {
   char line[160];
   std::snprintf(line, sizeof(line), "comment view %zu dir %.17g %.17g %.17g\n", k, d.x, d.y, d.z);
@@ -522,12 +527,12 @@ Status write_ply(const std::string& path, const Mesh& mesh) {
     for (std::size_t f = 0; f < mesh.quad_count(); ++f) {
       w.pod(std::uint8_t(4));
       w.bytes(&mesh.quads[4 * f], 4 * sizeof(std::uint32_t));
-      w.pod(mesh.quad_view.empty() ? std::uint8_t(0) : mesh.quad_view[f]);
+      w.pod(view_at(mesh.quad_view, f));
     }
     for (std::size_t f = 0; f < mesh.triangle_count(); ++f) {
       w.pod(std::uint8_t(3));
       w.bytes(&mesh.triangles[3 * f], 3 * sizeof(std::uint32_t));
-      w.pod(mesh.triangle_view.empty() ? std::uint8_t(0) : mesh.triangle_view[f]);
+      w.pod(view_at(mesh.triangle_view, f));
     }
   }
   return finish(path, file);
@@ -573,10 +578,9 @@ Status write_obj(const std::string& path, const Mesh& mesh) {
       w.text("\n");
     };
     for (std::size_t f = 0; f < mesh.quad_count(); ++f)
-      face(&mesh.quads[4 * f], 4, mesh.quad_view.empty() ? std::uint8_t(0) : mesh.quad_view[f]);
+      face(&mesh.quads[4 * f], 4, view_at(mesh.quad_view, f));
     for (std::size_t f = 0; f < mesh.triangle_count(); ++f)
-      face(&mesh.triangles[3 * f], 3,
-           mesh.triangle_view.empty() ? std::uint8_t(0) : mesh.triangle_view[f]);
+      face(&mesh.triangles[3 * f], 3, view_at(mesh.triangle_view, f));
   }
   return finish(path, file);
 }
