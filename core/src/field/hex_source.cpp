@@ -27,7 +27,8 @@ constexpr int kMaxRayDegree = 3 * kMaxHexOrder;  // f along a ray: degree p in e
 // Below this width (in the ray parameter s ∈ [0, 1]) an interval that still has several sign
 // variations is decided by its end values alone: a touching double root is dropped.
 constexpr double kMinWidth = 1e-12;
-// Roots are converged to this width in s, i.e. to 1e-13 of the segment, at most of the element.
+// Roots are converged to this width in s, i.e. to 1e-13 of the segment, at most of the element
+// (Newton's last step predicted rather than taken: see converge).
 constexpr double kConverged = 1e-13;
 // Bound on the intervals one element-ray search visits. Only a polynomial that is zero up to
 // rounding over a stretch (a plateau at the isovalue) comes near it: its coefficients are noise
@@ -381,16 +382,6 @@ template <int P>
 [[gnu::always_inline]] inline void segment_basis(double xa, double xb, AxisBasis& out) {
   out.degree = basis_along_segment<P>(xa, xb, out.b);
 }
-// dB_i^P/dx at x, as a degree-0 basis (a derivative across the segment).
-template <int P>
-[[gnu::always_inline]] inline void derivative_basis(double x, AxisBasis& out) {
-  double value[kMaxNodes], derivative[kMaxNodes];
-  bernstein_basis<P>(x, value, derivative);
-  out.degree = 0;
-  for (int i = 0; i <= P; ++i)
-    out.b[i][0] = derivative[i];
-}
-
 // After the ξ stage: g[k][j][l] = Σ_i c_ijk · bx_i[l], l ≤ bx.degree.
 struct StageX {
   double g[kMaxNodes][kMaxNodes][kMaxNodes];
@@ -483,8 +474,10 @@ int restrict_to_segment(const double* c, glm::dvec3 a, glm::dvec3 b, double* f) 
 // Value and derivative at u of the Bernstein polynomial c[0..n] on [0, 1] by Horner's rule in
 // r = u / (1 − u) (or (1 − u) / u from the other end, for u > 1/2, so that |r| ≤ 1):
 // Σ C(n, i) c_i u^i (1 − u)^(n−i) = (1 − u)^n Σ C(n, i) c_i r^i. O(n) per evaluation where
-// de Casteljau's is O(n²).
-[[gnu::always_inline]] inline void bernstein_horner(const double* c, int n, double u, double& value,
+// de Casteljau's is O(n²). The degree n is a constant in these kernels, so that their loops
+// unroll and their arrays stay in registers.
+template <int n>
+[[gnu::always_inline]] inline void bernstein_horner(const double* c, double u, double& value,
                                                     double& derivative) {
   const bool low = u <= 0.5;
   const double near = low ? 1.0 - u : u, r = (low ? u : 1.0 - u) / near;
@@ -505,9 +498,9 @@ int restrict_to_segment(const double* c, glm::dvec3 a, glm::dvec3 b, double* f) 
 
 // Splits c[0..n] at 1/2 into the coefficients of the left and right halves (de Casteljau). The
 // halves share their middle coefficient exactly, so sign tests at the split agree.
-[[gnu::always_inline]] inline void split_in_half(const double* c, int n, double* left,
-                                                 double* right) {
-  double w[kMaxRayDegree + 1];
+template <int n>
+[[gnu::always_inline]] inline void split_in_half(const double* c, double* left, double* right) {
+  double w[n + 1];
   std::copy(c, c + n + 1, w);
   left[0] = w[0];
   right[n] = w[n];
@@ -519,7 +512,8 @@ int restrict_to_segment(const double* c, glm::dvec3 a, glm::dvec3 b, double* f) 
   }
 }
 
-[[gnu::always_inline]] inline int sign_variations(const double* c, int n) {
+template <int n>
+[[gnu::always_inline]] inline int sign_variations(const double* c) {
   int v = 0;
   for (int i = 0; i < n; ++i)
     v += positive(c[i]) != positive(c[i + 1]);
@@ -528,7 +522,8 @@ int restrict_to_segment(const double* c, glm::dvec3 a, glm::dvec3 b, double* f) 
 
 // The single root in [0, 1] of c[0..n], whose end values c[0] and c[n] differ in sign: Newton
 // steps from a regula falsi start, falling back to bisection whenever they leave the bracket.
-[[gnu::always_inline]] inline double converge(const double* c, int n, double tol) {
+template <int n>
+[[gnu::always_inline]] inline double converge(const double* c, double tol) {
   if (c[n] == 0.0) return 1.0;  // exactly at the end: keep it exact (the half-open rule needs it)
   double a = 0.0, b = 1.0, ga = c[0];
   // Start where the control polygon crosses zero (its one sign change): far closer than the
@@ -547,19 +542,26 @@ int restrict_to_segment(const double* c, glm::dvec3 a, glm::dvec3 b, double* f) 
   for (int i = 0; i <= n; ++i)
     magnitude = std::max(magnitude, std::abs(c[i]));
   const double noise = 4.0 * (n + 1) * std::numeric_limits<double>::epsilon() * magnitude;
+  double last_step = 0.0;  // none yet: no prediction
   for (int iter = 0; iter < 64 && b - a > tol; ++iter) {
     double g, dg;
-    bernstein_horner(c, n, u, g, dg);
+    bernstein_horner<n>(c, u, g, dg);
     if (g == 0.0 || std::abs(g) <= noise) return u;
-    if (positive(g) == positive(ga)) {
-      a = u;
-      ga = g;
-    } else {
-      b = u;
-    }
+    // The bracket's update without a branch: which side u falls on is a coin toss.
+    const bool same_side = positive(g) == positive(ga);
+    a = same_side ? u : a;
+    ga = same_side ? g : ga;
+    b = same_side ? b : u;
     double next = u - g / dg;
     if (!(next > a && next < b)) next = 0.5 * (a + b);
-    if (std::abs(next - u) < tol) return next;
+    // Newton's error after a step δ_k is about K δ_k², with K ≈ |δ_k| / δ_{k−1}² from the last
+    // two steps: stop when that predicted error is below tol instead of taking one more step
+    // to see it. Where convergence is only linear (steps shrinking by ρ), the prediction is
+    // ρ (1 − ρ) times the true error: Newton's ρ = (m − 1) / m at a root of multiplicity m
+    // leaves at most 4.5 tol for m ≤ 3, far below what depths need.
+    const double step = std::abs(next - u);
+    if (step < tol || step * step * step < tol * last_step * last_step) return next;
+    last_step = step;
     u = next;
   }
   return u;
@@ -570,11 +572,11 @@ int restrict_to_segment(const double* c, glm::dvec3 a, glm::dvec3 b, double* f) 
 // basis, f has at most as many roots in a piece as its coefficients have sign variations. None:
 // no sign change. One: the end coefficients (the end values) differ in sign, so exactly one
 // simple root. More: split in half and look again.
-template <class Found>
-[[gnu::always_inline]] inline void bernstein_roots(const double* c, int n, Found found) {
+template <int n, class Found>
+[[gnu::always_inline]] inline void bernstein_roots(const double* c, Found found) {
   struct Piece {
     double s0, s1;
-    double c[kMaxRayDegree + 1];
+    double c[n + 1];
   };
   // Depth-first with the right half pushed first: at most one pending interval per level, and
   // kMinWidth = 1e-12 > 2^-40 bounds the levels.
@@ -589,18 +591,18 @@ template <class Found>
   int visited = 0;
   while (top > 0) {
     const Piece& iv = stack[--top];
-    const int variations = sign_variations(iv.c, n);
+    const int variations = sign_variations<n>(iv.c);
     if (variations == 0) continue;
     const double w = iv.s1 - iv.s0;
     if (variations > 1 && w >= kMinWidth && top + 2 <= int(std::size(stack)) &&
         ++visited < kMaxIntervals) {
       // Copy out before the pushes overwrite this slot.
-      double parent[kMaxRayDegree + 1];
+      double parent[n + 1];
       std::copy(iv.c, iv.c + n + 1, parent);
       const double s0 = iv.s0, s1 = iv.s1, sm = 0.5 * (s0 + s1);
       Piece& right = stack[top++];
       Piece& left = stack[top++];
-      split_in_half(parent, n, left.c, right.c);
+      split_in_half<n>(parent, left.c, right.c);
       left.s0 = s0, left.s1 = sm;
       right.s0 = sm, right.s1 = s1;
       continue;
@@ -608,7 +610,7 @@ template <class Found>
     // One variation: one root. Too small (or out of budget): a root only where the ends differ
     // in sign, so a touching double root without a sign change is dropped.
     if (positive(iv.c[0]) == positive(iv.c[n])) continue;
-    const double u = converge(iv.c, n, kConverged / w);
+    const double u = converge<n>(iv.c, kConverged / w);
     found(u == 1.0 ? iv.s1 : iv.s0 + w * u);
   }
 }
@@ -649,10 +651,12 @@ void intersect_element(const ActiveElement& e, const double* c, glm::dvec3 org, 
   double f[kMaxRayDegree + 1];
   const int degree = restrict_to_segment<P>(c, a, b, f);
   const glm::dmat3 to_world_gradient = glm::transpose(e.to_reference);  // ∇x f = A⁻ᵀ ∇ξ f
-  if (degree == 0) return;  // constant along the ray: no crossing
-  bernstein_roots(f, degree, [&](double s) {
-    const glm::dvec3 g = to_world_gradient * evaluate_tensor<P>(c, a + s * (b - a)).gradient;
-    hits.push_back({s == 1.0 ? t1 : t0 + s * (t1 - t0), unit_normal(g, dir), 0.0f});
+  with_degree<P>(degree, [&](auto n) {
+    if constexpr (n > 0)  // else constant along the ray: no crossing
+      bernstein_roots<n>(f, [&](double s) {
+        const glm::dvec3 g = to_world_gradient * evaluate_tensor<P>(c, a + s * (b - a)).gradient;
+        hits.push_back({s == 1.0 ? t1 : t0 + s * (t1 - t0), unit_normal(g, dir), 0.0f});
+      });
   });
 }
 
@@ -765,6 +769,19 @@ ElementBins bin_elements(const std::vector<ActiveElement>& elements, int axis) {
   return bins;
 }
 
+// B_i^P and dB_i^P/dx at one coordinate x: the basis of a reference axis a segment does not move
+// along (then x is its coordinate at both ends). The coherent caster tabulates them per pixel
+// column and row of an element; the staged restriction computes those it is not given.
+struct PointBasis {
+  double x = 0.0;
+  double value[kMaxNodes] = {}, derivative[kMaxNodes] = {};
+};
+template <int P>
+[[gnu::always_inline]] inline void point_basis(double x, PointBasis& out) {
+  out.x = x;
+  bernstein_basis<P>(x, out.value, out.derivative);
+}
+
 // The polynomial along axis rays through one element, stage by stage (contract_x, _y, _z),
 // each stage kept while the segment's coordinates it depends on do not change: over a row of
 // pixels only the last stage is redone. The same arithmetic as restrict_to_segment, so the
@@ -779,10 +796,12 @@ class StagedRestriction {
   // Standard Bernstein coefficients along the segment a → b; returns the degree, or −1 when
   // a stage's values all have one strict sign: the bases that follow are nonnegative and sum to
   // one, so every coefficient of the polynomial has that sign, and it has no root (nor any
-  // coefficient that is exactly zero: the values are far above underflow).
-  [[gnu::always_inline]] int restrict(glm::dvec3 a, glm::dvec3 b, double* f) {
+  // coefficient that is exactly zero: the values are far above underflow). `given[r]`, where
+  // not null, is the basis at a[r] == b[r] (used when its x equals a[r]); the rest is computed.
+  [[gnu::always_inline]] int restrict(glm::dvec3 a, glm::dvec3 b, double* f,
+                                      const PointBasis* const* given = nullptr) {
     if (!x_valid_ || a.x != ax_ || b.x != bx_) {
-      segment_basis<P>(a.x, b.x, basis_x_);
+      axis_basis(0, a.x, b.x, given, basis_x_);
       contract_x<P>(c_, basis_x_, x_);
       ax_ = a.x, bx_ = b.x;
       x_valid_ = true;
@@ -793,7 +812,7 @@ class StagedRestriction {
     }
     if (x_uniform_) return -1;
     if (!y_valid_ || a.y != ay_ || b.y != by_) {
-      segment_basis<P>(a.y, b.y, basis_y_);
+      axis_basis(1, a.y, b.y, given, basis_y_);
       contract_y<P>(x_, basis_x_.degree, basis_y_, y_);
       ay_ = a.y, by_ = b.y;
       y_valid_ = true;
@@ -802,7 +821,7 @@ class StagedRestriction {
     }
     if (y_uniform_) return -1;
     if (!z_valid_ || a.z != az_ || b.z != bz_) {
-      segment_basis<P>(a.z, b.z, basis_z_);
+      axis_basis(2, a.z, b.z, given, basis_z_);
       az_ = a.z, bz_ = b.z;
       z_valid_ = true;
     }
@@ -822,14 +841,13 @@ class StagedRestriction {
     // G_kj = Σ_i c_ijk B_i(ξ) and its ξ-derivative are the ξ stage itself where ξ is fixed along
     // the ray (kept over the row).
     // The hit's reference point, as evaluate_tensor would be given it, and the 1-D bases and
-    // their derivatives there.
+    // their derivatives there (those of a fixed axis from the restriction).
     const glm::dvec3 q = a_ + s * (b_ - a_);
-    double vy[kMaxNodes], dy[kMaxNodes], vz[kMaxNodes], dz[kMaxNodes];
-    bernstein_basis<P>(q.y, vy, dy);
-    bernstein_basis<P>(q.z, vz, dz);
+    const PointBasis& y = point_at(1, a_.y == b_.y, q.y, hit_[1]);
+    const PointBasis& z = point_at(2, a_.z == b_.z, q.z, hit_[2]);
     if (!dx_valid_) {
       AxisBasis d;
-      derivative_basis<P>(a_.x, d);
+      derivative_basis(*at_[0], d);
       contract_x<P>(c_, d, dx_);
       dx_valid_ = true;
     }
@@ -839,13 +857,13 @@ class StagedRestriction {
       double sx = 0.0, sy = 0.0, sz = 0.0;
       for (int j = 0; j < n; ++j) {
         const double v = x_.g[k][j][0], d = dx_.g[k][j][0];
-        sx += d * vy[j];
-        sy += v * dy[j];
-        sz += v * vy[j];
+        sx += d * y.value[j];
+        sy += v * y.derivative[j];
+        sz += v * y.value[j];
       }
-      g.x += sx * vz[k];
-      g.y += sy * vz[k];
-      g.z += sz * dz[k];
+      g.x += sx * z.value[k];
+      g.y += sy * z.value[k];
+      g.z += sz * z.derivative[k];
     }
     return true;
   }
@@ -859,8 +877,7 @@ class StagedRestriction {
   bool gradient_along_x(double s, glm::dvec3& g) {
     constexpr int n = P + 1;
     if (!along_x_valid_ || along_x_at_ != a_.y) {
-      double vy[kMaxNodes], dy[kMaxNodes];
-      bernstein_basis<P>(a_.y, vy, dy);
+      const double* dy = at_[1]->derivative;
       for (int k = 0; k < n; ++k)
         for (int l = 0; l <= P; ++l) {
           double dh = 0.0;
@@ -872,9 +889,9 @@ class StagedRestriction {
       along_x_at_ = a_.y;
       along_x_valid_ = true;
     }
-    double bs[kMaxNodes], ds[kMaxNodes], vz[kMaxNodes], dz[kMaxNodes];
+    double bs[kMaxNodes], ds[kMaxNodes];
     bernstein_basis<P>(s, bs, ds);
-    bernstein_basis<P>(a_.z, vz, dz);
+    const PointBasis& z = *at_[2];
     double gs = 0.0, gy = 0.0, gz = 0.0;
     for (int k = 0; k < n; ++k) {
       double hs = 0.0, hv = 0.0, hy = 0.0;
@@ -883,33 +900,68 @@ class StagedRestriction {
         hv += along_x_h_.h[k][l] * bs[l];
         hy += along_x_dh_.h[k][l] * bs[l];
       }
-      gs += hs * vz[k];
-      gy += hy * vz[k];
-      gz += hv * dz[k];
+      gs += hs * z.value[k];
+      gy += hy * z.value[k];
+      gz += hv * z.derivative[k];
     }
     g = glm::dvec3(gs / (b_.x - a_.x), gy, gz);
     return true;
   }
 
  private:
-  // Whether values v[i·si + j·sj + l] (i < ni, j < nj, l < nl) all have one strict sign, none
-  // near underflow.
-  static bool one_sign(const double* v, int ni, int nj, int si, int sj, int nl) {
+  // The basis of reference axis r along the segment xa → xb; where the axis is fixed, the given
+  // point basis or one computed here, kept in at_[r] for the gradient.
+  [[gnu::always_inline]] void axis_basis(int r, double xa, double xb,
+                                         const PointBasis* const* given, AxisBasis& out) {
+    if (xa != xb) {
+      segment_basis<P>(xa, xb, out);
+      return;
+    }
+    const PointBasis* basis = given ? given[r] : nullptr;
+    if (!basis || basis->x != xa) {
+      point_basis<P>(xa, own_[r]);
+      basis = &own_[r];
+    }
+    at_[r] = basis;
+    out.degree = 0;
+    for (int i = 0; i <= P; ++i)
+      out.b[i][0] = basis->value[i];
+  }
+
+  // The point basis of axis r at the hit: the restriction's where the axis is fixed, else
+  // computed at x into `scratch`.
+  const PointBasis& point_at(int r, bool fixed, double x, PointBasis& scratch) const {
+    if (fixed) return *at_[r];
+    point_basis<P>(x, scratch);
+    return scratch;
+  }
+
+  static void derivative_basis(const PointBasis& at, AxisBasis& out) {
+    out.degree = 0;
+    for (int i = 0; i <= P; ++i)
+      out.b[i][0] = at.derivative[i];
+  }
+
+  // Whether values v[i·si + j·sj + l] (i < ni, j < nj, l < nl) all have the strict sign of
+  // the first, none near underflow (nor NaN); stops at the first that differs.
+  [[gnu::always_inline]] static bool one_sign(const double* v, int ni, int nj, int si, int sj,
+                                              int nl) {
     constexpr double kTiny = 1e-250;
-    bool all_positive = true, all_negative = true;
+    const double sign = v[0] > 0.0 ? 1.0 : -1.0;
     for (int i = 0; i < ni; ++i)
       for (int j = 0; j < nj; ++j)
-        for (int l = 0; l < nl; ++l) {
-          const double x = v[i * si + j * sj + l];
-          all_positive = all_positive && x > kTiny;
-          all_negative = all_negative && x < -kTiny;
-        }
-    return all_positive || all_negative;
+        for (int l = 0; l < nl; ++l)
+          if (!(sign * v[i * si + j * sj + l] > kTiny)) return false;
+    return true;
   }
 
   const double* c_;
   bool x_uniform_ = false, y_uniform_ = false;
   AxisBasis basis_x_, basis_y_, basis_z_;
+  // The point bases of the fixed axes (at_[r] points into own_ or a caller's table), and of the
+  // moving ones at the last hit.
+  PointBasis own_[3], hit_[3];
+  const PointBasis* at_[3] = {nullptr, nullptr, nullptr};
   StageX x_, dx_;
   StageY y_;
   // gradient_along_x's η stage (standard form) with B_j(η) and B_j'(η), at η = along_x_at_.
@@ -971,6 +1023,7 @@ class HexAxisBinding final : public AxisBinding {
     }
     const int qb0 = bins.bin_b(lo_b), qb1 = bins.bin_b(hi_b);
     const int qc0 = bins.bin_c(lo_c), qc1 = bins.bin_c(hi_c);
+    LatticeTables tables;
     for (int cc = qc0; cc <= qc1; ++cc)
       for (int bb = qb0; bb <= qb1; ++bb) {
         const std::size_t bin = std::size_t(bb) + std::size_t(bins.nb) * std::size_t(cc);
@@ -980,24 +1033,35 @@ class HexAxisBinding final : public AxisBinding {
           if (std::max(bins.bin_b(el.lo[bins.b]), qb0) != bb ||
               std::max(bins.bin_c(el.lo[bins.c]), qc0) != cc)
             continue;
-          cast_element(e, rays, out);
+          with_order(active_.order, [&](auto p) { cast_element<p>(e, rays, tables, out); });
         }
       }
   }
 
  private:
-  // The pixels of the lattice query `rays` whose centres element e's box covers,
-  // in the order that keeps the staged restriction's first stages: rows of the image axis
-  // whose world axis maps to the lower of the two reference axes across the ray.
-  void cast_element(std::uint32_t e, const AxisRays& rays, std::vector<AxisHit>& out) const {
-    with_order(active_.order, [&](auto p) { cast_element_order<p>(e, rays, out); });
-  }
+  // One pixel column (or row) of a lattice query through an axis-aligned element: the rays'
+  // coordinate along that image axis, whether the rays there lie in the element across it (the
+  // clip's test), and the Bernstein basis at their reference coordinate along it.
+  struct LatticeLine {
+    double org = 0.0;
+    bool inside = false;
+    PointBasis basis;
+  };
+  struct LatticeTables {
+    std::vector<LatticeLine> columns, rows;
+  };
 
+  // The pixels of the lattice query `rays` whose centres element e's box covers, in the order
+  // that keeps the staged restriction's first stages: rows of the image axis whose world axis
+  // maps to the lower of the two reference axes across the ray. Where the element is
+  // axis-aligned (each world axis maps to one reference axis), what a pixel's clip and bases
+  // depend on is tabulated per column and row; the values are those of the general path.
   template <int P>
-  void cast_element_order(std::uint32_t e, const AxisRays& rays, std::vector<AxisHit>& out) const {
+  void cast_element(std::uint32_t e, const AxisRays& rays, LatticeTables& tables,
+                    std::vector<AxisHit>& out) const {
     const View& view = *rays.lattice;
     const ActiveElement& el = active_.elements[e];
-    const int ua = exact_axis(view.u), va = exact_axis(view.v);
+    const int ua = exact_axis(view.u), va = exact_axis(view.v), wa = rays.axis;
     const int rows = int(rays.rays.size() / std::size_t(view.width));
     // Pixels whose centres lie in the box (an affine element lies in its box), with a margin
     // far above rounding: the exact test is the clip below.
@@ -1013,17 +1077,22 @@ class HexAxisBinding final : public AxisBinding {
     j0 = std::max(j0, rays.row_begin);
     j1 = std::min(j1, rays.row_begin + rows - 1);
     if (i0 > i1 || j0 > j1) return;
+    const auto ray_index = [&](int i, int j) {
+      return std::size_t(j - rays.row_begin) * std::size_t(view.width) + std::size_t(i);
+    };
 
-    // The reference axis that moves along the ray, and which image axis holds the lower of the
-    // other two (keep it fixed in the outer loop).
+    // The reference axis each world axis maps to (3: several), and which image axis holds the
+    // lower of the two across the ray (keep it fixed in the outer loop).
     const glm::dmat3& m = el.to_reference;
-    const auto reference_of = [&](int world) {  // the one reference axis a world axis maps to
+    const auto reference_of = [&](int world) {
       int r = -1;
       for (int k = 0; k < 3; ++k)
         if (m[world][k] != 0.0) r = r < 0 ? k : 3;
       return r;
     };
-    const int ru = reference_of(ua), rv = reference_of(va);
+    const int ru = reference_of(ua), rv = reference_of(va), rw = reference_of(wa);
+    const bool aligned = ru >= 0 && ru < 3 && rv >= 0 && rv < 3 && rw >= 0 && rw < 3 && ru != rv &&
+                         rv != rw && rw != ru;
     const bool columns_outer = ru >= 0 && ru < 3 && rv >= 0 && rv < 3 && ru < rv;
 
     const double* c = active_.coefficients_of(e);
@@ -1031,34 +1100,90 @@ class HexAxisBinding final : public AxisBinding {
     const glm::dmat3 to_world_gradient = glm::transpose(el.to_reference);
     StagedRestriction<P> staged(c);
     double f[kMaxRayDegree + 1];
+    // The roots of ray k on its clipped segment a → b (t0 → t1).
+    const auto solve = [&](std::size_t k, glm::dvec3 a, glm::dvec3 b, double t0, double t1,
+                           const PointBasis* const* given) [[gnu::always_inline]] {
+      const int degree = staged.restrict(a, b, f, given);
+      if (degree <= 0) return;  // constant along the ray, or no root possible
+      const auto found = [&](double s) {
+        glm::dvec3 g;
+        if (!staged.gradient(s, g)) g = evaluate_tensor<P>(c, a + s * (b - a)).gradient;
+        out.push_back({std::uint32_t(k),
+                       {s == 1.0 ? t1 : t0 + s * (t1 - t0),
+                        unit_normal(to_world_gradient * g, rays.dir), 0.0f}});
+      };
+      with_degree<P>(degree, [&](auto n) {
+        if constexpr (n > 0) bernstein_roots<n>(f, found);
+      });
+    };
+    // Any ray, as intersect_element clips it.
+    const auto general = [&](std::size_t k, const AxisRay& ray) {
+      const glm::dvec3 ro = el.to_reference * (ray.org - el.origin);
+      double t0 = ray.t0, t1 = ray.t1;
+      if (!clip_ray_to_box(ro, rd, glm::dvec3(0.0), glm::dvec3(1.0), t0, t1)) return;
+      solve(k, glm::clamp(ro + t0 * rd, 0.0, 1.0), glm::clamp(ro + t1 * rd, 0.0, 1.0), t0, t1,
+            nullptr);
+    };
     const int outer0 = columns_outer ? i0 : j0, outer1 = columns_outer ? i1 : j1;
     const int inner0 = columns_outer ? j0 : i0, inner1 = columns_outer ? j1 : i1;
-    for (int outer = outer0; outer <= outer1; ++outer)
-      for (int inner = inner0; inner <= inner1; ++inner) {
-        const int i = columns_outer ? outer : inner, j = columns_outer ? inner : outer;
-        const std::size_t k = std::size_t(j - rays.row_begin) * std::size_t(view.width) + i;
-        const AxisRay& ray = rays.rays[k];
-        if (!(ray.t0 <= ray.t1)) continue;
-        // As intersect_element does it.
-        const glm::dvec3 ro = el.to_reference * (ray.org - el.origin);
-        double t0 = ray.t0, t1 = ray.t1;
-        if (!clip_ray_to_box(ro, rd, glm::dvec3(0.0), glm::dvec3(1.0), t0, t1)) continue;
-        const glm::dvec3 a = glm::clamp(ro + t0 * rd, 0.0, 1.0),
-                         b = glm::clamp(ro + t1 * rd, 0.0, 1.0);
-        const int degree = staged.restrict(a, b, f);
-        if (degree <= 0) continue;  // constant along the ray, or no root possible
-        const auto found = [&](double s) {
-          glm::dvec3 g;
-          if (!staged.gradient(s, g)) g = evaluate_tensor<P>(c, a + s * (b - a)).gradient;
-          out.push_back({std::uint32_t(k),
-                         {s == 1.0 ? t1 : t0 + s * (t1 - t0),
-                          unit_normal(to_world_gradient * g, rays.dir), 0.0f}});
-        };
-        if (degree == P)  // one reference axis along the ray: the degree as a constant
-          bernstein_roots(f, P, found);
-        else
-          bernstein_roots(f, degree, found);
+    const auto for_each_pixel = [&](auto&& visit) {
+      for (int outer = outer0; outer <= outer1; ++outer)
+        for (int inner = inner0; inner <= inner1; ++inner) {
+          const int i = columns_outer ? outer : inner, j = columns_outer ? inner : outer;
+          const std::size_t k = ray_index(i, j);
+          const AxisRay& ray = rays.rays[k];
+          if (ray.t0 <= ray.t1) visit(i, j, k, ray);
+        }
+    };
+    if (!aligned) {
+      for_each_pixel([&](int, int, std::size_t k, const AxisRay& ray) { general(k, ray); });
+      return;
+    }
+
+    // Axis-aligned: ro[ru] depends on the ray's world coordinate along u only (the other
+    // products are zeros), ro[rv] on v's, ro[rw] on the ray axis'; rd is zero but along rw.
+    // Each table entry is computed from one ray of its column or row; a ray whose coordinates
+    // differ from its column's and row's takes the general path.
+    const auto tabulate = [&](std::vector<LatticeLine>& lines, int first, int last, auto ray_at,
+                              int world, int reference) {
+      lines.resize(std::size_t(last - first + 1));
+      for (int n = first; n <= last; ++n) {
+        const glm::dvec3 org = rays.rays[ray_at(n)].org;
+        const double ro = (el.to_reference * (org - el.origin))[reference];
+        LatticeLine& line = lines[std::size_t(n - first)];
+        line.org = org[world];
+        line.inside = !(ro < 0.0 || ro > 1.0);
+        point_basis<P>(glm::clamp(ro, 0.0, 1.0), line.basis);
       }
+    };
+    tabulate(
+        tables.columns, i0, i1, [&](int i) { return ray_index(i, j0); }, ua, ru);
+    tabulate(
+        tables.rows, j0, j1, [&](int j) { return ray_index(i0, j); }, va, rv);
+    const glm::dvec3 org0 = rays.rays[ray_index(i0, j0)].org;
+    const double org_w = org0[wa], ro_w = (el.to_reference * (org0 - el.origin))[rw];
+    const double rd_w = rd[rw], inv = 1.0 / rd_w;
+    double ta = (0.0 - ro_w) * inv, tb = (1.0 - ro_w) * inv;
+    if (ta > tb) std::swap(ta, tb);
+    for_each_pixel([&](int i, int j, std::size_t k, const AxisRay& ray) {
+      const LatticeLine& column = tables.columns[std::size_t(i - i0)];
+      const LatticeLine& row = tables.rows[std::size_t(j - j0)];
+      if (ray.org[ua] != column.org || ray.org[va] != row.org || ray.org[wa] != org_w) {
+        general(k, ray);
+        return;
+      }
+      if (!column.inside || !row.inside) return;
+      const double t0 = std::max(ray.t0, ta), t1 = std::min(ray.t1, tb);
+      if (!(t0 < t1)) return;
+      glm::dvec3 a, b;
+      a[ru] = b[ru] = column.basis.x;
+      a[rv] = b[rv] = row.basis.x;
+      a[rw] = glm::clamp(ro_w + t0 * rd_w, 0.0, 1.0);
+      b[rw] = glm::clamp(ro_w + t1 * rd_w, 0.0, 1.0);
+      const PointBasis* given[3];
+      given[ru] = &column.basis, given[rv] = &row.basis, given[rw] = nullptr;
+      solve(k, a, b, t0, t1, given);
+    });
   }
 
   Activation active_;
