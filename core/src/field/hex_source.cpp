@@ -1165,24 +1165,26 @@ class HexAxisBinding final : public AxisBinding {
     const double rd_w = rd[rw], inv = 1.0 / rd_w;
     double ta = (0.0 - ro_w) * inv, tb = (1.0 - ro_w) * inv;
     if (ta > tb) std::swap(ta, tb);
+    // (Coordinates by index through plain arrays: glm's operator[] is a switch.)
     for_each_pixel([&](int i, int j, std::size_t k, const AxisRay& ray) {
       const LatticeLine& column = tables.columns[std::size_t(i - i0)];
       const LatticeLine& row = tables.rows[std::size_t(j - j0)];
-      if (ray.org[ua] != column.org || ray.org[va] != row.org || ray.org[wa] != org_w) {
+      const double* org = &ray.org.x;
+      if (org[ua] != column.org || org[va] != row.org || org[wa] != org_w) {
         general(k, ray);
         return;
       }
       if (!column.inside || !row.inside) return;
       const double t0 = std::max(ray.t0, ta), t1 = std::min(ray.t1, tb);
       if (!(t0 < t1)) return;
-      glm::dvec3 a, b;
+      double a[3], b[3];
       a[ru] = b[ru] = column.basis.x;
       a[rv] = b[rv] = row.basis.x;
       a[rw] = glm::clamp(ro_w + t0 * rd_w, 0.0, 1.0);
       b[rw] = glm::clamp(ro_w + t1 * rd_w, 0.0, 1.0);
       const PointBasis* given[3];
       given[ru] = &column.basis, given[rv] = &row.basis, given[rw] = nullptr;
-      solve(k, a, b, t0, t1, given);
+      solve(k, glm::dvec3(a[0], a[1], a[2]), glm::dvec3(b[0], b[1], b[2]), t0, t1, given);
     });
   }
 
