@@ -574,44 +574,44 @@ template <int n>
 // simple root. More: split in half and look again.
 template <int n, class Found>
 [[gnu::always_inline]] inline void bernstein_roots(const double* c, Found found) {
+  // Depth-first: the left half is looked at next (kept in registers), the right one waits on a
+  // stack; at most one pending interval per level, and kMinWidth = 1e-12 > 2^-40 bounds the
+  // levels.
+  // A root exactly at the start belongs to this segment (the caster's half-open rule drops one
+  // exactly at a shared end); the caster merges it with the same root found by subdivision.
+  if (c[0] == 0.0) found(0.0);
   struct Piece {
     double s0, s1;
     double c[n + 1];
   };
-  // Depth-first with the right half pushed first: at most one pending interval per level, and
-  // kMinWidth = 1e-12 > 2^-40 bounds the levels.
-  // A root exactly at the start belongs to this segment (the caster's half-open rule drops one
-  // exactly at a shared end); the caster merges it with the same root found by subdivision.
-  if (c[0] == 0.0) found(0.0);
-  Piece stack[64];
-  int top = 0;
-  stack[top].s0 = 0.0, stack[top].s1 = 1.0;
-  std::copy(c, c + n + 1, stack[top].c);
-  ++top;
-  int visited = 0;
-  while (top > 0) {
-    const Piece& iv = stack[--top];
-    const int variations = sign_variations<n>(iv.c);
-    if (variations == 0) continue;
-    const double w = iv.s1 - iv.s0;
-    if (variations > 1 && w >= kMinWidth && top + 2 <= int(std::size(stack)) &&
-        ++visited < kMaxIntervals) {
-      // Copy out before the pushes overwrite this slot.
-      double parent[n + 1];
-      std::copy(iv.c, iv.c + n + 1, parent);
-      const double s0 = iv.s0, s1 = iv.s1, sm = 0.5 * (s0 + s1);
+  constexpr int kStack = 64;
+  Piece stack[kStack];
+  int top = 0, visited = 0;
+  double piece[n + 1], s0 = 0.0, s1 = 1.0;
+  std::copy(c, c + n + 1, piece);
+  for (;;) {
+    const int variations = sign_variations<n>(piece);
+    const double w = s1 - s0;
+    if (variations > 1 && w >= kMinWidth && top + 2 <= kStack && ++visited < kMaxIntervals) {
+      const double sm = 0.5 * (s0 + s1);
       Piece& right = stack[top++];
-      Piece& left = stack[top++];
-      split_in_half<n>(parent, left.c, right.c);
-      left.s0 = s0, left.s1 = sm;
+      double left[n + 1];
+      split_in_half<n>(piece, left, right.c);
       right.s0 = sm, right.s1 = s1;
+      std::copy(left, left + n + 1, piece);
+      s1 = sm;
       continue;
     }
     // One variation: one root. Too small (or out of budget): a root only where the ends differ
     // in sign, so a touching double root without a sign change is dropped.
-    if (positive(iv.c[0]) == positive(iv.c[n])) continue;
-    const double u = converge<n>(iv.c, kConverged / w);
-    found(u == 1.0 ? iv.s1 : iv.s0 + w * u);
+    if (variations > 0 && positive(piece[0]) != positive(piece[n])) {
+      const double u = converge<n>(piece, kConverged / w);
+      found(u == 1.0 ? s1 : s0 + w * u);
+    }
+    if (top == 0) break;
+    const Piece& next = stack[--top];
+    std::copy(next.c, next.c + n + 1, piece);
+    s0 = next.s0, s1 = next.s1;
   }
 }
 
