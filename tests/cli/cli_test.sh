@@ -42,7 +42,10 @@ python3 - "$tmp/merged.json" <<'PY' || fail "merge: implausible summary"
 import json, sys
 j = json.load(open(sys.argv[1]))
 m = j["merging"]
-assert m["enabled"] and m["patches"] == 6 and m["bridges"] == 12, m
+# The sphere's trimmed views are six caps laid out like the faces of a cube (one per view and
+# side: ±x, ±y, ±z); each cap borders the four that are not opposite it, and merging bridges
+# every pair of close patches once (docs/method.md, §5 (i)): the cube's 12 edges.
+assert m["enabled"] and m["patches"] == 6 and m["bridges"] == 6 * 4 // 2, m
 assert j["r"] == 1, j["r"]  # merging trims with r = 1
 assert m["unfilled_holes"] == 0 and m["components"] == 1, m
 assert j["triangles"] == 2 * (j["vertices"] - 2), (j["triangles"], j["vertices"])  # closed, genus 0

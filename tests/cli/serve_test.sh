@@ -34,8 +34,9 @@ done
 
 timeout 30 "$fetch" --url "$url" --latest --ply -o "$tmp/got" >"$tmp/fetch.out" || fail "ldimesh-fetch --latest --ply"
 cmp -s "$tmp/steps/step_000007.glb" "$tmp/got/step_000007.glb" || fail "the fetched GLB differs from the served one"
-grep -aq "element face $triangles" "$tmp/got/step_000007.ply" || fail "the decoded PLY does not have $triangles faces"
-grep -q "7" "$tmp/fetch.out" || fail "ldimesh-fetch printed no line for step 7"
+grep -aqx "element face $triangles" "$tmp/got/step_000007.ply" || fail "the decoded PLY does not have $triangles faces"
+grep -Eq "^step 7 +time 0\.5 +triangles $triangles " "$tmp/fetch.out" \
+  || fail "ldimesh-fetch printed no line for step 7 at time 0.5 with $triangles triangles"
 
 # The viewer's page is served without a token; the API is not.
 if command -v curl >/dev/null 2>&1; then

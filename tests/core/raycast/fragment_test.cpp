@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include "ldimesh/core/field/surfaces.hpp"
 #include "ldimesh/core/raycast/raycaster.hpp"
 
@@ -36,14 +38,19 @@ TEST(Fragment, LdiRoundTripKeepsEverySample) {
 }
 
 TEST(Fragment, MergeConcatenatesSortsAndDropsDuplicates) {
-  const LdiFragment a = fragment({1, 5}, {2, 1}, {0.1f, 0.5f, 0.3f});
-  const LdiFragment b = fragment({0, 5, 9}, {1, 2, 1}, {0.2f, 0.1f, 0.3f + 1e-9f, 0.7f});
+  // Pixel 5 gets 0.3 from a and the next float above it from b: closer than the tolerance, one
+  // is dropped. Pixel 9 gets two samples 1e-5 apart: farther than the tolerance, both stay.
+  const float near_duplicate = std::nextafter(0.3f, 1.0f);
+  ASSERT_NE(near_duplicate, 0.3f);
+  ASSERT_LT(double(near_duplicate) - double(0.3f), 1e-6);
+  const LdiFragment a = fragment({1, 5, 9}, {2, 1, 1}, {0.1f, 0.5f, 0.3f, 0.7f + 1e-5f});
+  const LdiFragment b = fragment({0, 5, 9}, {1, 2, 1}, {0.2f, 0.1f, near_duplicate, 0.7f});
   const std::vector<LdiFragment> ab{a, b}, ba{b, a};
   const LdiFragment m = merge_fragments(ab, 1e-6);
   ASSERT_TRUE(validate_fragment(m)) << validate_fragment(m).message();
   EXPECT_EQ(m.pixels, (std::vector<std::uint32_t>{0, 1, 5, 9}));
-  EXPECT_EQ(m.counts, (std::vector<std::uint32_t>{1, 2, 2, 1}));  // pixel 5: 0.1, 0.3 (twice)
-  EXPECT_EQ(m.depth, (std::vector<float>{0.2f, 0.1f, 0.5f, 0.1f, 0.3f, 0.7f}));
+  EXPECT_EQ(m.counts, (std::vector<std::uint32_t>{1, 2, 2, 2}));
+  EXPECT_EQ(m.depth, (std::vector<float>{0.2f, 0.1f, 0.5f, 0.1f, 0.3f, 0.7f, 0.7f + 1e-5f}));
   const LdiFragment n = merge_fragments(ba, 1e-6);  // order of fragments does not matter
   EXPECT_EQ(n.depth, m.depth);
   EXPECT_EQ(n.pixels, m.pixels);
