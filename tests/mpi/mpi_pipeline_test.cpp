@@ -24,6 +24,7 @@
 #include "ldimesh/transport/distributed.hpp"
 #include "ldimesh/transport/mpi_reduce.hpp"
 #include "mpi_gtest.hpp"
+#include "support/quantization_caps.hpp"
 
 namespace ldimesh {
 namespace {
@@ -91,12 +92,12 @@ void expect_distributed_equals_one_process(const FieldSource& mine, const Subdom
         for (std::size_t k = 0; k < got.sample_count(); ++k) {
           worst_depth =
               std::max(worst_depth, std::abs(double(got.depth[k]) - double(ldis[v].depth[k])));
-          const double c =
-              std::clamp(double(glm::dot(got.normal[k], ldis[v].normal[k])), -1.0, 1.0);
-          worst_angle = std::max(worst_angle, std::acos(c));
+          worst_angle =
+              std::max(worst_angle, test_support::angle_between(got.normal[k], ldis[v].normal[k]));
         }
         EXPECT_LE(worst_depth, depth_bound + 1e-6);
-        EXPECT_LE(worst_angle, angle_bound + 1e-3);
+        EXPECT_LE(worst_angle, angle_bound);
+        EXPECT_LE(angle_bound, test_support::octahedral_angle_cap(options.encoding.normal_bits));
       }
       // The mesh itself may differ where a match sits at the rejection threshold.
       const MeshingResult exact = mesh_ldis(ldis, options.meshing);

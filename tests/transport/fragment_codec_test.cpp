@@ -14,6 +14,7 @@
 
 #include "ldimesh/core/field/surfaces.hpp"
 #include "ldimesh/core/raycast/raycaster.hpp"
+#include "support/quantization_caps.hpp"
 
 // The largest single allocation through operator new, so that a test can tell that a hostile
 // header was rejected before the decoder allocated what it claims.
@@ -153,10 +154,9 @@ bool same_bits(const std::vector<T>& a, const std::vector<T>& b) {
          (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
 }
 
-double angle(glm::vec3 a, glm::vec3 b) {
-  const glm::dvec3 u = glm::normalize(glm::dvec3(a)), v = glm::normalize(glm::dvec3(b));
-  return std::atan2(glm::length(glm::cross(u, v)), glm::dot(u, v));
-}
+using test_support::angle_between;
+using test_support::octahedral_angle_cap;
+using test_support::unit_interval_cap;
 
 void expect_same_layout(const LdiFragment& a, const LdiFragment& b) {
   EXPECT_EQ(a.view, b.view);
@@ -183,11 +183,15 @@ void expect_within_bounds(const LdiFragment& a, const LdiFragment& b, const Frag
   double depth_err = 0.0, normal_err = 0.0;
   for (std::size_t s = 0; s < a.sample_count(); ++s) {
     depth_err = std::max(depth_err, std::abs(double(a.depth[s]) - double(b.depth[s])));
-    normal_err = std::max(normal_err, angle(a.normal[s], b.normal[s]));
+    normal_err = std::max(normal_err, angle_between(a.normal[s], b.normal[s]));
     EXPECT_NEAR(glm::length(b.normal[s]), 1.0f, 1e-6f);
   }
   EXPECT_LE(depth_err, depth_bound);
   EXPECT_LE(normal_err, normal_bound);
+  if (!e.lossless) {  // the stated bound itself, against the bit budget
+    EXPECT_LE(normal_bound, octahedral_angle_cap(e.normal_bits));
+    EXPECT_LE(normal_err, octahedral_angle_cap(e.normal_bits));
+  }
 }
 
 void expect_idempotent(const LdiFragment& f, const FragmentEncoding& e) {

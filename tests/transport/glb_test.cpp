@@ -23,6 +23,7 @@
 #include "ldimesh/core/field/surfaces.hpp"
 #include "ldimesh/core/pipeline.hpp"
 #include "ldimesh/core/raycast/raycaster.hpp"
+#include "support/quantization_caps.hpp"
 
 namespace ldimesh {
 namespace {
@@ -95,10 +96,9 @@ Bytes draco_payload(const Bytes& glb) {
 
 // ---- Matching decoded vertices to the originals ---------------------------------------------
 
-double angle(glm::vec3 a, glm::vec3 b) {
-  const glm::dvec3 u = glm::normalize(glm::dvec3(a)), v = glm::normalize(glm::dvec3(b));
-  return std::atan2(glm::length(glm::cross(u, v)), glm::dot(u, v));
-}
+using test_support::angle_between;
+using test_support::octahedral_angle_cap;
+using test_support::unit_interval_cap;
 
 // For every decoded vertex, the original vertex it came from: the nearest original within
 // `bound` (a hash grid of cell `bound`), preferring one whose normal agrees. -1 when none.
@@ -127,7 +127,7 @@ std::vector<std::int64_t> match_vertices(const Mesh& original, const Mesh& decod
             const double d = glm::length(glm::dvec3(p) - glm::dvec3(original.positions[j]));
             // A wrong normal costs more than any distance within the bound.
             const double cost =
-                d + (angle(original.normals[j], decoded.normals[i]) > 0.1 ? 1.0 : 0);
+                d + (angle_between(original.normals[j], decoded.normals[i]) > 0.1 ? 1.0 : 0);
             if (d <= bound && cost < best) {
               best = cost;
               match[i] = j;
@@ -164,12 +164,14 @@ void expect_same_mesh(const Mesh& original, const Mesh& decoded, const GlbInfo& 
     worst_position = std::max(
         worst_position,
         glm::length(glm::dvec3(decoded.positions[i]) - glm::dvec3(original.positions[match[i]])));
-    worst_normal = std::max(worst_normal, angle(decoded.normals[i], original.normals[match[i]]));
+    worst_normal =
+        std::max(worst_normal, angle_between(decoded.normals[i], original.normals[match[i]]));
   }
   EXPECT_TRUE(std::all_of(used.begin(), used.end(), [](int u) { return u == 1; }))
       << "the correspondence is not one to one";
   EXPECT_LE(worst_position, info.position_error_bound);
   EXPECT_LE(worst_normal, glb_normal_error_bound(options));
+  EXPECT_LE(glb_normal_error_bound(options), octahedral_angle_cap(options.normal_bits));
 
   std::map<std::array<std::uint32_t, 3>, std::uint8_t> faces;
   for (std::size_t f = 0; f < original.triangle_count(); ++f) {
@@ -424,6 +426,7 @@ TEST(Glb, ScalarsTravelAsTexcoordUNormalizedToTheirRange) {
     worst = std::max(worst, std::abs(double(back.scalars[i]) - u));
   }
   EXPECT_LE(worst, glb_scalar_error_bound(options));
+  EXPECT_LE(glb_scalar_error_bound(options), unit_interval_cap(options.scalar_bits));
   EXPECT_GT(worst, 0.0);  // quantized, as documented
   EXPECT_EQ(*std::min_element(back.scalars.begin(), back.scalars.end()), 0.0f);
   EXPECT_EQ(*std::max_element(back.scalars.begin(), back.scalars.end()), 1.0f);
