@@ -93,11 +93,11 @@ void expect_distributed_equals_one_process(const FieldSource& mine, const Subdom
           worst_depth =
               std::max(worst_depth, std::abs(double(got.depth[k]) - double(ldis[v].depth[k])));
           worst_angle =
-              std::max(worst_angle, test_support::angle_between(got.normal[k], ldis[v].normal[k]));
+              std::max(worst_angle, testing::angle_between(got.normal[k], ldis[v].normal[k]));
         }
         EXPECT_LE(worst_depth, depth_bound + 1e-6);
         EXPECT_LE(worst_angle, angle_bound);
-        EXPECT_LE(angle_bound, test_support::octahedral_angle_cap(options.encoding.normal_bits));
+        EXPECT_LE(angle_bound, testing::octahedral_angle_cap(options.encoding.normal_bits));
       }
       // The mesh itself may differ where a match sits at the rejection threshold.
       const MeshingResult exact = mesh_ldis(ldis, options.meshing);

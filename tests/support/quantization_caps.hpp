@@ -10,7 +10,7 @@
 
 #include <glm/glm.hpp>
 
-namespace ldimesh::test_support {
+namespace ldimesh::testing {
 
 // The angle between two (not necessarily unit) vectors, accurate near 0 (acos of the dot
 // product is not: for float vectors it is off by ~5e-4 rad there).
@@ -31,4 +31,4 @@ inline double unit_interval_cap(int bits) {
   return 1.0 / double((std::uint64_t(1) << bits) - 1);
 }
 
-}  // namespace ldimesh::test_support
+}  // namespace ldimesh::testing

@@ -154,9 +154,9 @@ bool same_bits(const std::vector<T>& a, const std::vector<T>& b) {
          (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
 }
 
-using test_support::angle_between;
-using test_support::octahedral_angle_cap;
-using test_support::unit_interval_cap;
+using testing::angle_between;
+using testing::octahedral_angle_cap;
+using testing::unit_interval_cap;
 
 void expect_same_layout(const LdiFragment& a, const LdiFragment& b) {
   EXPECT_EQ(a.view, b.view);

@@ -96,9 +96,9 @@ Bytes draco_payload(const Bytes& glb) {
 
 // ---- Matching decoded vertices to the originals ---------------------------------------------
 
-using test_support::angle_between;
-using test_support::octahedral_angle_cap;
-using test_support::unit_interval_cap;
+using testing::angle_between;
+using testing::octahedral_angle_cap;
+using testing::unit_interval_cap;
 
 // For every decoded vertex, the original vertex it came from: the nearest original within
 // `bound` (a hash grid of cell `bound`), preferring one whose normal agrees. -1 when none.
