@@ -6,6 +6,8 @@
 
 #include <gtest/gtest.h>
 
+#include "ldimesh/core/base/mesh.hpp"
+#include "ldimesh/transport/glb.hpp"
 #include "ldimesh/transport/snapshot_store.hpp"
 
 namespace ldimesh::testing {
@@ -22,6 +24,20 @@ inline StepMetadata published_step(const std::string& dir, std::uint64_t step) {
   if (Status s = metadata_from_json(snapshot.metadata_json, meta); !s)
     ADD_FAILURE() << "step " << step << ": " << s.message();
   return meta;
+}
+
+// The mesh of step `step` in `dir`, decoded from its GLB; a test failure and an empty mesh when
+// the files are missing or the GLB does not decode.
+inline Mesh published_mesh(const std::string& dir, std::uint64_t step) {
+  Snapshot snapshot;
+  Mesh mesh;
+  if (Status s = read_step_files(dir, step, snapshot); !s || !snapshot.glb) {
+    ADD_FAILURE() << "step " << step << " in " << dir << ": " << s.message();
+    return mesh;
+  }
+  if (Status s = decode_glb(*snapshot.glb, mesh); !s)
+    ADD_FAILURE() << "step " << step << ": " << s.message();
+  return mesh;
 }
 
 }  // namespace ldimesh::testing
