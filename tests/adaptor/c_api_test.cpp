@@ -21,6 +21,7 @@
 namespace ldimesh {
 namespace {
 
+using testing::published_mesh;
 using testing::published_step;
 using testing::rank_of;
 using testing::ranks;
@@ -74,6 +75,11 @@ std::string temp_dir(const std::string& name) {
 }
 
 // Options writing every step into `dir`, no server, quiet, the sphere of radius 0.6.
+// The slab's sphere at the options' default isovalue and resolution, from a published step.
+void expect_on_sphere(const Mesh& mesh) {
+  testing::expect_on_grid_sphere(mesh, 0.36, 2.0 / (kN - 1), 48);
+}
+
 std::string options(const std::string& dir, const std::string& isovalue = "0.36") {
   return R"({"server": {"enabled": false}, "log": false, "resolution": 48, "busy": "coalesce",
              "isovalues": [)" +
@@ -198,6 +204,7 @@ TEST(CApi, AWrongSizeArrayIsRejectedAndTheAdaptorKeepsWorking) {
   if (rank_of() == 0) {
     EXPECT_EQ(ldimesh_published_steps(a), 1u);
     EXPECT_GT(published_step(dir, 1).triangles, 1000u);
+    expect_on_sphere(published_mesh(dir, 1));
   }
   ldimesh_destroy(a);
 }
@@ -238,6 +245,7 @@ TEST(CApi, NaNsInTheFieldAreCountedAndTheirCellsLeftOut) {
     EXPECT_LT(holed, clean);
     EXPECT_GT(holed, clean * 8 / 10);
     EXPECT_EQ(published_step(dir, 3).triangles, clean);
+    expect_on_sphere(published_mesh(dir, 2));  // what is left of it lies where it should
     EXPECT_EQ(published_step(dir, 1).nonfinite_values, 0u);
     EXPECT_EQ(published_step(dir, 2).nonfinite_values, 2u * std::uint64_t(ranks()));
   }
@@ -266,6 +274,7 @@ TEST(CApi, TheReportSaysWhetherTheStepRanInTheBackground) {
   if (rank_of() == 0) {
     EXPECT_EQ(ldimesh_published_steps(a), 1u);
     EXPECT_GT(published_step(dir, 1).triangles, 1000u);
+    expect_on_sphere(published_mesh(dir, 1));
   }
   ldimesh_destroy(a);
 }

@@ -1,6 +1,8 @@
 // What the adaptor tests read back: a published step's metadata from its output_dir files.
 #pragma once
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <string>
 
@@ -38,6 +40,21 @@ inline Mesh published_mesh(const std::string& dir, std::uint64_t step) {
   if (Status s = decode_glb(*snapshot.glb, mesh); !s)
     ADD_FAILURE() << "step " << step << ": " << s.message();
   return mesh;
+}
+
+// The mesh of a grid's field f = |x|² over [−1, 1]³ at isovalue `iso`, as a viewer gets it:
+// every vertex on the sphere |x| = √iso within what the grid and the GLB allow — the trilinear
+// interpolant of |x|² on cells of width h differs from it by at most 3h²/4 (h²/4 per axis), the
+// radius by 3h²/(8r), and Draco's positions are quantized to a tenth of a pixel (the domain's
+// side 2 over `resolution` pixels).
+inline void expect_on_grid_sphere(const Mesh& mesh, double iso, double h, int resolution) {
+  const double r = std::sqrt(iso);
+  const double tolerance = 3.0 * h * h / (8.0 * r) + 0.1 * 2.0 / resolution;
+  ASSERT_GT(mesh.vertex_count(), 500u);
+  double worst = 0.0;
+  for (const glm::vec3& p : mesh.positions)
+    worst = std::max(worst, std::abs(glm::length(glm::dvec3(p)) - r));
+  EXPECT_LE(worst, tolerance) << "a published vertex is off the sphere |x| = " << r;
 }
 
 }  // namespace ldimesh::testing
