@@ -461,12 +461,22 @@ struct DistanceArgs {
   bool json = false;
 };
 
+// A PLY mesh, or a GLB as ldimesh writes and publishes it (a step's .glb: Draco, decoded and
+// checked by decode_glb).
 ldimesh::Mesh read_mesh_file(const std::string& path) {
-  if (!has_extension(path, ".ply"))
-    throw std::runtime_error("cannot read '" + path + "': only PLY meshes can be read");
   ldimesh::Mesh mesh;
-  if (const ldimesh::Status s = ldimesh::read_ply(path, mesh); !s)
-    throw std::runtime_error(s.message());
+  if (has_extension(path, ".glb")) {
+    std::vector<std::uint8_t> bytes;
+    if (ldimesh::Status s = ldimesh::read_file(path, bytes); !s)
+      throw std::runtime_error(s.message());
+    if (ldimesh::Status s = ldimesh::decode_glb(bytes, mesh); !s)
+      throw std::runtime_error("'" + path + "': " + s.message());
+  } else if (has_extension(path, ".ply")) {
+    if (const ldimesh::Status s = ldimesh::read_ply(path, mesh); !s)
+      throw std::runtime_error(s.message());
+  } else {
+    throw std::runtime_error("cannot read '" + path + "': give a PLY or GLB mesh");
+  }
   if (mesh.face_count() == 0) throw std::runtime_error("'" + path + "' has no faces");
   return mesh;
 }
@@ -500,8 +510,8 @@ std::string describe_mesh(const std::string& path, const ldimesh::Mesh& m) {
          std::to_string(m.face_count()) + " faces)";
 }
 
-// `ldimesh distance`: Metro-style distances between two PLY meshes, or from one to a built-in
-// surface (core/distance.hpp, docs/method.md "Distances").
+// `ldimesh distance`: Metro-style distances between two meshes (PLY or GLB), or from one to a
+// built-in surface (core/distance.hpp, docs/method.md "Distances").
 int run_distance(const DistanceArgs& args) {
   const bool to_surface = !args.surface.empty();
   if (to_surface && args.files.size() != 1)
@@ -611,9 +621,12 @@ int main(int argc, char** argv) {
   ldimesh::ServeArgs serve_args;
   ldimesh::add_serve_options(*serve, serve_args);
   CLI::App* distance = app.add_subcommand(
-      "distance", "Metro-style distances between two PLY meshes, or from one to a surface");
+      "distance",
+      "Metro-style distances between two meshes (PLY or GLB), or from one to a surface");
   DistanceArgs distance_args;
-  distance->add_option("meshes", distance_args.files, "A.ply [B.ply]")->required()->expected(1, 2);
+  distance->add_option("meshes", distance_args.files, "A [B]: .ply or .glb (a published step) each")
+      ->required()
+      ->expected(1, 2);
   CLI::Option* distance_surface = distance->add_option(
       "--surface", distance_args.surface, "measure A against this built-in surface instead of B");
   distance

@@ -166,6 +166,19 @@ expect_error "distance: missing file" distance "$tmp/none.ply" "$tmp/s32.ply"
 expect_error "distance: truncated PLY" distance "$tmp/s32.ply" "$tmp/cut.ply"
 expect_error "distance: one mesh only" distance "$tmp/s32.ply"
 expect_error "distance: unknown surface" distance "$tmp/s32.ply" --surface teapot
+# A GLB (as published) reads like the PLY of the same mesh; a truncated one, or a format it
+# does not know, is a one-line error.
+"$ldimesh" mesh --surface sphere --res 32 --out "$tmp/s32.glb" >/dev/null || fail "mesh --out GLB"
+"$ldimesh" distance "$tmp/s32.glb" "$tmp/s32.ply" --json >"$tmp/dg.json" || fail "distance GLB PLY"
+python3 - "$tmp/dg.json" <<'PY' || fail "distance: the GLB is not the PLY's mesh"
+import json, sys
+d = json.load(open(sys.argv[1]))
+# Draco quantizes positions to a tenth of a pixel (2.5/32 here): far below 1e-3 of the diagonal.
+assert d["max"] < 1e-3 * d["diagonal"], d
+PY
+head -c 200 "$tmp/s32.glb" >"$tmp/cut.glb"
+expect_error "distance: truncated GLB" distance "$tmp/cut.glb" --surface sphere
+expect_error "distance: unknown format" distance "$tmp/s32.obj" --surface sphere
 
 if [ "$failures" -ne 0 ]; then echo "$failures check(s) failed"; exit 1; fi
 echo "all CLI checks passed"

@@ -7,10 +7,11 @@
 #
 # The heat solver written against the C API and against the Fortran module: the same meshes on
 # 1 and 3 ranks, and the same meshes from C and from Fortran (byte for byte); a NaN in the
-# field is reported in the log and the metadata and the run goes on.
+# field is reported in the log and the metadata and the run goes on. One analytic step is decoded
+# and measured against its exact surface.
 #
-# Usage: miniapps_test.sh MPIEXEC BIN_DIR   (BIN_DIR holds ldimesh-grayscott, -analytic, -dg,
-#        -heat-c and, when built with Fortran, -heat-fortran)
+# Usage: miniapps_test.sh MPIEXEC BIN_DIR   (BIN_DIR holds ldimesh, ldimesh-grayscott, -analytic,
+#        -dg, -heat-c and, when built with Fortran, -heat-fortran)
 set -euo pipefail
 mpiexec=$1
 bin=$2
@@ -85,6 +86,20 @@ grep -q '^viewer: ' "$tmp/grayscott-n1.log" || fail "grayscott prints no viewer 
 run analytic 1 "$tmp/analytic-n1" --surface torus --steps $steps
 run analytic 3 "$tmp/analytic-n3" --surface torus --steps $steps
 same_meshes analytic $steps
+# What a viewer gets, decoded: without breathing (--period 0) the published GLB is the torus
+# itself, so `ldimesh distance` from it to the exact surface must stay below a tenth of a percent
+# of the diagonal (about a fifth of a pixel at resolution 128; measured: 0.035 %), every sample
+# projected. A wrong isovalue, a shifted rank or a broken decoder lands far outside.
+run analytic 3 "$tmp/analytic-still" --surface torus --steps 1 --period 0
+"$bin/ldimesh" distance "$tmp/analytic-still/step_000001.glb" --surface torus --json \
+  >"$tmp/analytic-still.distance.json" || fail "ldimesh distance on the published GLB"
+python3 - "$tmp/analytic-still.distance.json" <<'PY' || fail "analytic: the published torus is off"
+import json, sys
+d = json.load(open(sys.argv[1]))
+assert d["forward"]["samples"] > 100000, d["forward"]
+assert d["not_converged"] == 0 and d["outside_clip"] == 0, d
+assert d["forward"]["max_relative"] < 1e-3, d["forward"]
+PY
 
 run dg 1 "$tmp/dg-n1" --elements 4 --order 3 --steps $steps
 run dg 3 "$tmp/dg-n3" --elements 4 --order 3 --steps $steps

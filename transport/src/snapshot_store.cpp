@@ -167,19 +167,6 @@ Status write_atomically(const fs::path& path, const void* bytes, std::size_t siz
   return Status::ok();
 }
 
-Status read_file(const fs::path& path, std::vector<std::uint8_t>& out) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return Status::io("cannot read '" + path.string() + "'");
-  in.seekg(0, std::ios::end);
-  const std::streamoff size = in.tellg();
-  if (size < 0) return Status::io("cannot read '" + path.string() + "'");
-  in.seekg(0);
-  out.resize(static_cast<std::size_t>(size));
-  if (!in.read(reinterpret_cast<char*>(out.data()), size))
-    return Status::io("cannot read '" + path.string() + "' (changed while reading?)");
-  return Status::ok();
-}
-
 // The step of "step_<digits>.glb" / ".json", with which extension; nullopt for other names.
 std::optional<std::uint64_t> parse_step_file_name(const std::string& name, bool& is_glb) {
   constexpr std::string_view prefix = "step_";
@@ -206,6 +193,19 @@ std::optional<std::uint64_t> parse_step_file_name(const std::string& name, bool&
 }
 
 }  // namespace
+
+Status read_file(const fs::path& path, std::vector<std::uint8_t>& out) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return Status::io("cannot read '" + path.string() + "'");
+  in.seekg(0, std::ios::end);
+  const std::streamoff size = in.tellg();
+  if (size < 0) return Status::io("cannot read '" + path.string() + "'");
+  in.seekg(0);
+  out.resize(static_cast<std::size_t>(size));
+  if (!in.read(reinterpret_cast<char*>(out.data()), size))
+    return Status::io("cannot read '" + path.string() + "' (changed while reading?)");
+  return Status::ok();
+}
 
 std::string metadata_to_json(const StepMetadata& m) {
   ordered_json j;

@@ -172,6 +172,9 @@ Status write_step_files(const std::filesystem::path& dir, const Snapshot& snapsh
 // checks a snapshot (GLB header, metadata step and bytes).
 Status read_step_files(const std::filesystem::path& dir, std::uint64_t step, Snapshot& out);
 
+// The whole file at `path` into `out` (an io error naming the file when it cannot be read).
+Status read_file(const std::filesystem::path& path, std::vector<std::uint8_t>& out);
+
 // Loads step files that appear in a directory into a store (`ldimesh-serve --dir`). Not
 // thread-safe: one thread scans (the store it publishes into is).
 class DirectoryWatcher {
