@@ -74,12 +74,12 @@ std::string temp_dir(const std::string& name) {
   return testing::fresh_temp_dir("ldimesh_c_api", name);
 }
 
-// Options writing every step into `dir`, no server, quiet, the sphere of radius 0.6.
 // The slab's sphere at the options' default isovalue and resolution, from a published step.
 void expect_on_sphere(const Mesh& mesh) {
   testing::expect_on_grid_sphere(mesh, 0.36, 2.0 / (kN - 1), 48);
 }
 
+// Options writing every step into `dir`, no server, quiet, the sphere of radius 0.6.
 std::string options(const std::string& dir, const std::string& isovalue = "0.36") {
   return R"({"server": {"enabled": false}, "log": false, "resolution": 48, "busy": "coalesce",
              "isovalues": [)" +

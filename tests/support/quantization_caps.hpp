@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdint>
 
+#include <gtest/gtest.h>
 #include <glm/glm.hpp>
 
 namespace ldimesh::testing {
@@ -22,12 +23,15 @@ inline double angle_between(glm::vec3 a, glm::vec3 b) {
 // Octahedral normals with `bits` per coordinate: the octahedron's square [−1, 1]² is cut into
 // steps of 2 / (2^bits − 2); three steps of angle (in radians) cap any rounding of it.
 inline double octahedral_angle_cap(int bits) {
+  EXPECT_TRUE(bits >= 2 && bits <= 30) << bits << " normal bits";
   return 3.0 * 2.0 / double((std::uint64_t(1) << bits) - 2);
 }
 
-// A value in [0, 1] quantized to `bits`: one full step caps the rounding (half a step) and the
-// float arithmetic around it.
+// A value in [0, 1] quantized to `bits` (at most 20: beyond, float arithmetic, not the step,
+// bounds the error): one full step caps the rounding (half a step) and the float arithmetic
+// around it.
 inline double unit_interval_cap(int bits) {
+  EXPECT_TRUE(bits >= 1 && bits <= 20) << bits << " scalar bits";
   return 1.0 / double((std::uint64_t(1) << bits) - 1);
 }
 

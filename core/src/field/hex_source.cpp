@@ -28,7 +28,7 @@ constexpr int kMaxRayDegree = 3 * kMaxHexOrder;  // f along a ray: degree p in e
 // variations is decided by its end values alone: a touching double root is dropped.
 constexpr double kMinWidth = 1e-12;
 // Roots are converged to this width in s, i.e. to 1e-13 of the segment, at most of the element
-// (Newton's last step predicted rather than taken: see converge).
+// (Newton's last step bounded rather than taken: see converge).
 constexpr double kConverged = 1e-13;
 // Bound on the intervals one element-ray search visits. Only a polynomial that is zero up to
 // rounding over a stretch (a plateau at the isovalue) comes near it: its coefficients are noise
@@ -542,7 +542,11 @@ template <int n>
   for (int i = 0; i <= n; ++i)
     magnitude = std::max(magnitude, std::abs(c[i]));
   const double noise = 4.0 * (n + 1) * std::numeric_limits<double>::epsilon() * magnitude;
-  double last_step = 0.0;  // none yet: no prediction
+  // |f''| ≤ n (n − 1) max |Δ²c| on [0, 1] (the second derivative's Bernstein coefficients).
+  double curvature = 0.0;
+  for (int i = 0; i + 2 <= n; ++i)
+    curvature = std::max(curvature, std::abs(c[i + 2] - 2.0 * c[i + 1] + c[i]));
+  curvature *= n * (n - 1);
   for (int iter = 0; iter < 64 && b - a > tol; ++iter) {
     double g, dg;
     bernstein_horner<n>(c, u, g, dg);
@@ -553,15 +557,13 @@ template <int n>
     ga = same_side ? g : ga;
     b = same_side ? b : u;
     double next = u - g / dg;
-    if (!(next > a && next < b)) next = 0.5 * (a + b);
-    // Newton's error after a step δ_k is about K δ_k², with K ≈ |δ_k| / δ_{k−1}² from the last
-    // two steps: stop when that predicted error is below tol instead of taking one more step
-    // to see it. Where convergence is only linear (steps shrinking by ρ), the prediction is
-    // ρ (1 − ρ) times the true error: Newton's ρ = (m − 1) / m at a root of multiplicity m
-    // leaves at most 4.5 tol for m ≤ 3, far below what depths need.
+    const bool newton = next > a && next < b;
+    if (!newton) next = 0.5 * (a + b);
+    // After a Newton step δ the error is at most about |f''| δ² / (2 |f'|): stop once that bound
+    // (with the coefficients' bound on f'') is below tol instead of taking one more step to see
+    // it.
     const double step = std::abs(next - u);
-    if (step < tol || step * step * step < tol * last_step * last_step) return next;
-    last_step = step;
+    if (step < tol || (newton && step * step * curvature < 2.0 * tol * std::abs(dg))) return next;
     u = next;
   }
   return u;
@@ -574,7 +576,7 @@ template <int n>
 // simple root. More: split in half and look again.
 template <int n, class Found>
 [[gnu::always_inline]] inline void bernstein_roots(const double* c, Found found) {
-  // Depth-first: the left half is looked at next (kept in registers), the right one waits on a
+  // Depth-first: the left half is looked at next (in local arrays), the right one waits on a
   // stack; at most one pending interval per level, and kMinWidth = 1e-12 > 2^-40 bounds the
   // levels.
   // A root exactly at the start belongs to this segment (the caster's half-open rule drops one
@@ -798,6 +800,8 @@ class StagedRestriction {
   // one, so every coefficient of the polynomial has that sign, and it has no root (nor any
   // coefficient that is exactly zero: the values are far above underflow). `given[r]`, where
   // not null, is the basis at a[r] == b[r] (used when its x equals a[r]); the rest is computed.
+  // The restriction keeps pointers to given bases for gradient(): they must stay unchanged
+  // while it lives.
   [[gnu::always_inline]] int restrict(glm::dvec3 a, glm::dvec3 b, double* f,
                                       const PointBasis* const* given = nullptr) {
     if (!x_valid_ || a.x != ax_ || b.x != bx_) {
