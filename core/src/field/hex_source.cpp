@@ -497,7 +497,8 @@ template <int n>
 }
 
 // Splits c[0..n] at 1/2 into the coefficients of the left and right halves (de Casteljau). The
-// halves share their middle coefficient exactly, so sign tests at the split agree.
+// halves share their middle coefficient exactly, so sign tests at the split agree. `left` (not
+// `right`) may be `c`: c is read before the halves are written.
 template <int n>
 [[gnu::always_inline]] inline void split_in_half(const double* c, double* left, double* right) {
   double w[n + 1];
@@ -597,10 +598,8 @@ template <int n, class Found>
     if (variations > 1 && w >= kMinWidth && top + 2 <= kStack && ++visited < kMaxIntervals) {
       const double sm = 0.5 * (s0 + s1);
       Piece& right = stack[top++];
-      double left[n + 1];
-      split_in_half<n>(piece, left, right.c);
+      split_in_half<n>(piece, piece, right.c);
       right.s0 = sm, right.s1 = s1;
-      std::copy(left, left + n + 1, piece);
       s1 = sm;
       continue;
     }
