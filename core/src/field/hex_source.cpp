@@ -770,18 +770,11 @@ ElementBins bin_elements(const std::vector<ActiveElement>& elements, int axis) {
   return bins;
 }
 
-// B_i^P and dB_i^P/dx at one coordinate x: the basis of a reference axis a segment does not move
-// along (then x is its coordinate at both ends). The coherent caster tabulates them per pixel
-// column and row of an element; the staged restriction computes those it is not given.
+// B_i^P and dB_i^P/dx at one coordinate: the basis of a reference axis a segment does not move
+// along, kept by the staged restriction for the gradient at its hits.
 struct PointBasis {
-  double x = 0.0;
   double value[kMaxNodes] = {}, derivative[kMaxNodes] = {};
 };
-template <int P>
-[[gnu::always_inline]] inline void point_basis(double x, PointBasis& out) {
-  out.x = x;
-  bernstein_basis<P>(x, out.value, out.derivative);
-}
 
 // The polynomial along axis rays through one element, stage by stage (contract_x, _y, _z),
 // each stage kept while the segment's coordinates it depends on do not change: over a row of
@@ -797,14 +790,10 @@ class StagedRestriction {
   // Standard Bernstein coefficients along the segment a → b; returns the degree, or −1 when
   // a stage's values all have one strict sign: the bases that follow are nonnegative and sum to
   // one, so every coefficient of the polynomial has that sign, and it has no root (nor any
-  // coefficient that is exactly zero: the values are far above underflow). `given[r]`, where
-  // not null, is the basis at a[r] == b[r] (used when its x equals a[r]); the rest is computed.
-  // The restriction keeps pointers to given bases for gradient(): they must stay unchanged
-  // while it lives.
-  [[gnu::always_inline]] int restrict(glm::dvec3 a, glm::dvec3 b, double* f,
-                                      const PointBasis* const* given = nullptr) {
+  // coefficient that is exactly zero: the values are far above underflow).
+  [[gnu::always_inline]] int restrict(glm::dvec3 a, glm::dvec3 b, double* f) {
     if (!x_valid_ || a.x != ax_ || b.x != bx_) {
-      axis_basis(0, a.x, b.x, given, basis_x_);
+      axis_basis(0, a.x, b.x, basis_x_);
       contract_x<P>(c_, basis_x_, x_);
       ax_ = a.x, bx_ = b.x;
       x_valid_ = true;
@@ -815,7 +804,7 @@ class StagedRestriction {
     }
     if (x_uniform_) return -1;
     if (!y_valid_ || a.y != ay_ || b.y != by_) {
-      axis_basis(1, a.y, b.y, given, basis_y_);
+      axis_basis(1, a.y, b.y, basis_y_);
       contract_y<P>(x_, basis_x_.degree, basis_y_, y_);
       ay_ = a.y, by_ = b.y;
       y_valid_ = true;
@@ -824,7 +813,7 @@ class StagedRestriction {
     }
     if (y_uniform_) return -1;
     if (!z_valid_ || a.z != az_ || b.z != bz_) {
-      axis_basis(2, a.z, b.z, given, basis_z_);
+      axis_basis(2, a.z, b.z, basis_z_);
       az_ = a.z, bz_ = b.z;
       z_valid_ = true;
     }
@@ -846,11 +835,11 @@ class StagedRestriction {
     // The hit's reference point, as evaluate_tensor would be given it, and the 1-D bases and
     // their derivatives there (those of a fixed axis from the restriction).
     const glm::dvec3 q = a_ + s * (b_ - a_);
-    const PointBasis& y = point_at(1, a_.y == b_.y, q.y, hit_[1]);
-    const PointBasis& z = point_at(2, a_.z == b_.z, q.z, hit_[2]);
+    const PointBasis& y = point_at(1, a_.y == b_.y, q.y);
+    const PointBasis& z = point_at(2, a_.z == b_.z, q.z);
     if (!dx_valid_) {
       AxisBasis d;
-      derivative_basis(*at_[0], d);
+      derivative_basis(fixed_[0], d);
       contract_x<P>(c_, d, dx_);
       dx_valid_ = true;
     }
@@ -880,7 +869,7 @@ class StagedRestriction {
   bool gradient_along_x(double s, glm::dvec3& g) {
     constexpr int n = P + 1;
     if (!along_x_valid_ || along_x_at_ != a_.y) {
-      const double* dy = at_[1]->derivative;
+      const double* dy = fixed_[1].derivative;
       for (int k = 0; k < n; ++k)
         for (int l = 0; l <= P; ++l) {
           double dh = 0.0;
@@ -894,7 +883,7 @@ class StagedRestriction {
     }
     double bs[kMaxNodes], ds[kMaxNodes];
     bernstein_basis<P>(s, bs, ds);
-    const PointBasis& z = *at_[2];
+    const PointBasis& z = fixed_[2];
     double gs = 0.0, gy = 0.0, gz = 0.0;
     for (int k = 0; k < n; ++k) {
       double hs = 0.0, hv = 0.0, hy = 0.0;
@@ -912,31 +901,25 @@ class StagedRestriction {
   }
 
  private:
-  // The basis of reference axis r along the segment xa → xb; where the axis is fixed, the given
-  // point basis or one computed here, kept in at_[r] for the gradient.
-  [[gnu::always_inline]] void axis_basis(int r, double xa, double xb,
-                                         const PointBasis* const* given, AxisBasis& out) {
+  // The basis of reference axis r along the segment xa → xb; where the axis is fixed, with its
+  // derivative kept in fixed_[r] for the gradient.
+  [[gnu::always_inline]] void axis_basis(int r, double xa, double xb, AxisBasis& out) {
     if (xa != xb) {
       segment_basis<P>(xa, xb, out);
       return;
     }
-    const PointBasis* basis = given ? given[r] : nullptr;
-    if (!basis || basis->x != xa) {
-      point_basis<P>(xa, own_[r]);
-      basis = &own_[r];
-    }
-    at_[r] = basis;
+    bernstein_basis<P>(xa, fixed_[r].value, fixed_[r].derivative);
     out.degree = 0;
     for (int i = 0; i <= P; ++i)
-      out.b[i][0] = basis->value[i];
+      out.b[i][0] = fixed_[r].value[i];
   }
 
   // The point basis of axis r at the hit: the restriction's where the axis is fixed, else
-  // computed at x into `scratch`.
-  const PointBasis& point_at(int r, bool fixed, double x, PointBasis& scratch) const {
-    if (fixed) return *at_[r];
-    point_basis<P>(x, scratch);
-    return scratch;
+  // computed at x.
+  const PointBasis& point_at(int r, bool fixed, double x) {
+    if (fixed) return fixed_[r];
+    bernstein_basis<P>(x, at_hit_[r].value, at_hit_[r].derivative);
+    return at_hit_[r];
   }
 
   static void derivative_basis(const PointBasis& at, AxisBasis& out) {
@@ -961,10 +944,8 @@ class StagedRestriction {
   const double* c_;
   bool x_uniform_ = false, y_uniform_ = false;
   AxisBasis basis_x_, basis_y_, basis_z_;
-  // The point bases of the fixed axes (at_[r] points into own_ or a caller's table), and of the
-  // moving ones at the last hit.
-  PointBasis own_[3], hit_[3];
-  const PointBasis* at_[3] = {nullptr, nullptr, nullptr};
+  // The point bases of the fixed axes at the segment, and of the moving ones at a hit.
+  PointBasis fixed_[3], at_hit_[3];
   StageX x_, dx_;
   StageY y_;
   // gradient_along_x's η stage (standard form) with B_j(η) and B_j'(η), at η = along_x_at_.
@@ -1026,7 +1007,6 @@ class HexAxisBinding final : public AxisBinding {
     }
     const int qb0 = bins.bin_b(lo_b), qb1 = bins.bin_b(hi_b);
     const int qc0 = bins.bin_c(lo_c), qc1 = bins.bin_c(hi_c);
-    LatticeTables tables;
     for (int cc = qc0; cc <= qc1; ++cc)
       for (int bb = qb0; bb <= qb1; ++bb) {
         const std::size_t bin = std::size_t(bb) + std::size_t(bins.nb) * std::size_t(cc);
@@ -1036,35 +1016,24 @@ class HexAxisBinding final : public AxisBinding {
           if (std::max(bins.bin_b(el.lo[bins.b]), qb0) != bb ||
               std::max(bins.bin_c(el.lo[bins.c]), qc0) != cc)
             continue;
-          with_order(active_.order, [&](auto p) { cast_element<p>(e, rays, tables, out); });
+          cast_element(e, rays, out);
         }
       }
   }
 
  private:
-  // One pixel column (or row) of a lattice query through an axis-aligned element: the rays'
-  // coordinate along that image axis, whether the rays there lie in the element across it (the
-  // clip's test), and the Bernstein basis at their reference coordinate along it.
-  struct LatticeLine {
-    double org = 0.0;
-    bool inside = false;
-    PointBasis basis;
-  };
-  struct LatticeTables {
-    std::vector<LatticeLine> columns, rows;
-  };
+  // The pixels of the lattice query `rays` whose centres element e's box covers,
+  // in the order that keeps the staged restriction's first stages: rows of the image axis
+  // whose world axis maps to the lower of the two reference axes across the ray.
+  void cast_element(std::uint32_t e, const AxisRays& rays, std::vector<AxisHit>& out) const {
+    with_order(active_.order, [&](auto p) { cast_element_order<p>(e, rays, out); });
+  }
 
-  // The pixels of the lattice query `rays` whose centres element e's box covers, in the order
-  // that keeps the staged restriction's first stages: rows of the image axis whose world axis
-  // maps to the lower of the two reference axes across the ray. Where the element is
-  // axis-aligned (each world axis maps to one reference axis), what a pixel's clip and bases
-  // depend on is tabulated per column and row; the values are those of the general path.
   template <int P>
-  void cast_element(std::uint32_t e, const AxisRays& rays, LatticeTables& tables,
-                    std::vector<AxisHit>& out) const {
+  void cast_element_order(std::uint32_t e, const AxisRays& rays, std::vector<AxisHit>& out) const {
     const View& view = *rays.lattice;
     const ActiveElement& el = active_.elements[e];
-    const int ua = exact_axis(view.u), va = exact_axis(view.v), wa = rays.axis;
+    const int ua = exact_axis(view.u), va = exact_axis(view.v);
     const int rows = int(rays.rays.size() / std::size_t(view.width));
     // Pixels whose centres lie in the box (an affine element lies in its box), with a margin
     // far above rounding: the exact test is the clip below.
@@ -1080,22 +1049,17 @@ class HexAxisBinding final : public AxisBinding {
     j0 = std::max(j0, rays.row_begin);
     j1 = std::min(j1, rays.row_begin + rows - 1);
     if (i0 > i1 || j0 > j1) return;
-    const auto ray_index = [&](int i, int j) {
-      return std::size_t(j - rays.row_begin) * std::size_t(view.width) + std::size_t(i);
-    };
 
-    // The reference axis each world axis maps to (3: several), and which image axis holds the
-    // lower of the two across the ray (keep it fixed in the outer loop).
+    // The reference axis that moves along the ray, and which image axis holds the lower of the
+    // other two (keep it fixed in the outer loop).
     const glm::dmat3& m = el.to_reference;
-    const auto reference_of = [&](int world) {
+    const auto reference_of = [&](int world) {  // the one reference axis a world axis maps to
       int r = -1;
       for (int k = 0; k < 3; ++k)
         if (m[world][k] != 0.0) r = r < 0 ? k : 3;
       return r;
     };
-    const int ru = reference_of(ua), rv = reference_of(va), rw = reference_of(wa);
-    const bool aligned = ru >= 0 && ru < 3 && rv >= 0 && rv < 3 && rw >= 0 && rw < 3 && ru != rv &&
-                         rv != rw && rw != ru;
+    const int ru = reference_of(ua), rv = reference_of(va);
     const bool columns_outer = ru >= 0 && ru < 3 && rv >= 0 && rv < 3 && ru < rv;
 
     const double* c = active_.coefficients_of(e);
@@ -1103,92 +1067,33 @@ class HexAxisBinding final : public AxisBinding {
     const glm::dmat3 to_world_gradient = glm::transpose(el.to_reference);
     StagedRestriction<P> staged(c);
     double f[kMaxRayDegree + 1];
-    // The roots of ray k on its clipped segment a → b (t0 → t1).
-    const auto solve = [&](std::size_t k, glm::dvec3 a, glm::dvec3 b, double t0, double t1,
-                           const PointBasis* const* given) [[gnu::always_inline]] {
-      const int degree = staged.restrict(a, b, f, given);
-      if (degree <= 0) return;  // constant along the ray, or no root possible
-      const auto found = [&](double s) {
-        glm::dvec3 g;
-        if (!staged.gradient(s, g)) g = evaluate_tensor<P>(c, a + s * (b - a)).gradient;
-        out.push_back({std::uint32_t(k),
-                       {s == 1.0 ? t1 : t0 + s * (t1 - t0),
-                        unit_normal(to_world_gradient * g, rays.dir), 0.0f}});
-      };
-      with_degree<P>(degree, [&](auto n) {
-        if constexpr (n > 0) bernstein_roots<n>(f, found);
-      });
-    };
-    // Any ray, as intersect_element clips it.
-    const auto general = [&](std::size_t k, const AxisRay& ray) {
-      const glm::dvec3 ro = el.to_reference * (ray.org - el.origin);
-      double t0 = ray.t0, t1 = ray.t1;
-      if (!clip_ray_to_box(ro, rd, glm::dvec3(0.0), glm::dvec3(1.0), t0, t1)) return;
-      solve(k, glm::clamp(ro + t0 * rd, 0.0, 1.0), glm::clamp(ro + t1 * rd, 0.0, 1.0), t0, t1,
-            nullptr);
-    };
     const int outer0 = columns_outer ? i0 : j0, outer1 = columns_outer ? i1 : j1;
     const int inner0 = columns_outer ? j0 : i0, inner1 = columns_outer ? j1 : i1;
-    const auto for_each_pixel = [&](auto&& visit) {
-      for (int outer = outer0; outer <= outer1; ++outer)
-        for (int inner = inner0; inner <= inner1; ++inner) {
-          const int i = columns_outer ? outer : inner, j = columns_outer ? inner : outer;
-          const std::size_t k = ray_index(i, j);
-          const AxisRay& ray = rays.rays[k];
-          if (ray.t0 <= ray.t1) visit(i, j, k, ray);
-        }
-    };
-    if (!aligned) {
-      for_each_pixel([&](int, int, std::size_t k, const AxisRay& ray) { general(k, ray); });
-      return;
-    }
-
-    // Axis-aligned: ro[ru] depends on the ray's world coordinate along u only (the other
-    // products are zeros), ro[rv] on v's, ro[rw] on the ray axis'; rd is zero but along rw.
-    // Each table entry is computed from one ray of its column or row; a ray whose coordinates
-    // differ from its column's and row's takes the general path.
-    const auto tabulate = [&](std::vector<LatticeLine>& lines, int first, int last, auto ray_at,
-                              int world, int reference) {
-      lines.resize(std::size_t(last - first + 1));
-      for (int n = first; n <= last; ++n) {
-        const glm::dvec3 org = rays.rays[ray_at(n)].org;
-        const double ro = (el.to_reference * (org - el.origin))[reference];
-        LatticeLine& line = lines[std::size_t(n - first)];
-        line.org = org[world];
-        line.inside = !(ro < 0.0 || ro > 1.0);
-        point_basis<P>(glm::clamp(ro, 0.0, 1.0), line.basis);
+    for (int outer = outer0; outer <= outer1; ++outer)
+      for (int inner = inner0; inner <= inner1; ++inner) {
+        const int i = columns_outer ? outer : inner, j = columns_outer ? inner : outer;
+        const std::size_t k = std::size_t(j - rays.row_begin) * std::size_t(view.width) + i;
+        const AxisRay& ray = rays.rays[k];
+        if (!(ray.t0 <= ray.t1)) continue;
+        // As intersect_element does it.
+        const glm::dvec3 ro = el.to_reference * (ray.org - el.origin);
+        double t0 = ray.t0, t1 = ray.t1;
+        if (!clip_ray_to_box(ro, rd, glm::dvec3(0.0), glm::dvec3(1.0), t0, t1)) continue;
+        const glm::dvec3 a = glm::clamp(ro + t0 * rd, 0.0, 1.0),
+                         b = glm::clamp(ro + t1 * rd, 0.0, 1.0);
+        const int degree = staged.restrict(a, b, f);
+        if (degree <= 0) continue;  // constant along the ray, or no root possible
+        const auto found = [&](double s) {
+          glm::dvec3 g;
+          if (!staged.gradient(s, g)) g = evaluate_tensor<P>(c, a + s * (b - a)).gradient;
+          out.push_back({std::uint32_t(k),
+                         {s == 1.0 ? t1 : t0 + s * (t1 - t0),
+                          unit_normal(to_world_gradient * g, rays.dir), 0.0f}});
+        };
+        with_degree<P>(degree, [&](auto n) {
+          if constexpr (n > 0) bernstein_roots<n>(f, found);
+        });
       }
-    };
-    tabulate(
-        tables.columns, i0, i1, [&](int i) { return ray_index(i, j0); }, ua, ru);
-    tabulate(
-        tables.rows, j0, j1, [&](int j) { return ray_index(i0, j); }, va, rv);
-    const glm::dvec3 org0 = rays.rays[ray_index(i0, j0)].org;
-    const double org_w = org0[wa], ro_w = (el.to_reference * (org0 - el.origin))[rw];
-    const double rd_w = rd[rw], inv = 1.0 / rd_w;
-    double ta = (0.0 - ro_w) * inv, tb = (1.0 - ro_w) * inv;
-    if (ta > tb) std::swap(ta, tb);
-    // (Coordinates by index through plain arrays: glm's operator[] is a switch.)
-    for_each_pixel([&](int i, int j, std::size_t k, const AxisRay& ray) {
-      const LatticeLine& column = tables.columns[std::size_t(i - i0)];
-      const LatticeLine& row = tables.rows[std::size_t(j - j0)];
-      const double* org = &ray.org.x;
-      if (org[ua] != column.org || org[va] != row.org || org[wa] != org_w) {
-        general(k, ray);
-        return;
-      }
-      if (!column.inside || !row.inside) return;
-      const double t0 = std::max(ray.t0, ta), t1 = std::min(ray.t1, tb);
-      if (!(t0 < t1)) return;
-      double a[3], b[3];
-      a[ru] = b[ru] = column.basis.x;
-      a[rv] = b[rv] = row.basis.x;
-      a[rw] = glm::clamp(ro_w + t0 * rd_w, 0.0, 1.0);
-      b[rw] = glm::clamp(ro_w + t1 * rd_w, 0.0, 1.0);
-      const PointBasis* given[3];
-      given[ru] = &column.basis, given[rv] = &row.basis, given[rw] = nullptr;
-      solve(k, glm::dvec3(a[0], a[1], a[2]), glm::dvec3(b[0], b[1], b[2]), t0, t1, given);
-    });
   }
 
   Activation active_;
