@@ -1,16 +1,36 @@
 #!/usr/bin/env bash
-# Fuzzes the LDI fragment decoder (decode_fragment) with libFuzzer, AddressSanitizer and
-# UndefinedBehaviorSanitizer for a bounded time. Builds with clang++ straight from the sources
-# into build-fuzz/ (no CMake), writes a seed corpus of valid fragments into build-fuzz/corpus
-# (which keeps what the fuzzer finds between runs), and exits non-zero on any finding; the
-# input that triggered it is left in build-fuzz/artifacts/. The fuzzing build skips the
-# checksum comparisons (FUZZING_BUILD_MODE_UNSAFE_FOR_PRODUCTION) so that mutations reach the
-# zstd frame and the streams; the unit tests cover the checksums.
+# Fuzzes one decoder of untrusted input with libFuzzer, AddressSanitizer and
+# UndefinedBehaviorSanitizer for a bounded time. Targets (tests/fuzz/*_fuzz.cpp):
+#   fragment  decode_fragment: LDI fragments between ranks
+#   ply       parse_ply: meshes given to `ldimesh distance`
+#   glb       decode_glb: what ldimesh-fetch and `ldimesh distance` read from a server or disk
+# Builds with clang++ straight from the sources into build-fuzz/TARGET/ (no CMake), writes a
+# seed corpus of valid inputs (the target's own encoder's output and hand-written files) into
+# build-fuzz/TARGET/corpus (which keeps what the fuzzer finds between runs), and exits non-zero
+# on any finding; the input that triggered it is left in build-fuzz/TARGET/artifacts/. The
+# fragment build skips the checksum comparisons (FUZZING_BUILD_MODE_UNSAFE_FOR_PRODUCTION) so
+# that mutations reach the zstd frame and the streams; the unit tests cover the checksums.
 #
-# Usage: scripts/fuzz.sh [SECONDS (default 30)] [more libFuzzer flags...]
+# Usage: scripts/fuzz.sh TARGET [SECONDS (default 30)] [more libFuzzer flags...]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
+target=${1:-}
+shift || true
+case $target in
+  fragment)
+    sources=(core/src/raycast/fragment.cpp core/src/raycast/ldi.cpp transport/src/fragment_codec.cpp)
+    libs=(-lzstd) ;;
+  ply)
+    sources=(core/src/io/mesh_io.cpp core/src/base/mesh.cpp core/src/base/status.cpp)
+    libs=() ;;
+  glb)
+    sources=(transport/src/glb.cpp core/src/base/mesh.cpp core/src/base/status.cpp)
+    libs=(-I/usr/include/eigen3 -ldraco) ;;
+  *)
+    echo "fuzz: unknown target '$target' (one of: fragment, ply, glb)" >&2
+    exit 2 ;;
+esac
 seconds=${1:-30}
 shift || true
 if ! [[ $seconds =~ ^[0-9]+$ ]] || [ "$seconds" -lt 1 ]; then
@@ -23,11 +43,13 @@ if ! command -v "$cxx" >/dev/null 2>&1; then
   exit 1
 fi
 
-out=build-fuzz
-bin=$out/fragment_decoder_fuzz
-sources=(core/src/raycast/fragment.cpp core/src/raycast/ldi.cpp transport/src/fragment_codec.cpp
-         tests/fuzz/fragment_decoder_fuzz.cpp)
-headers=(core/include/ldimesh/core/*.hpp transport/include/ldimesh/transport/*.hpp)
+declare -A harness=([fragment]=fragment_decoder [ply]=ply_reader [glb]=glb_decoder)
+name=${harness[$target]}_fuzz
+out=build-fuzz/$target
+bin=$out/$name
+sources+=(tests/fuzz/$name.cpp)
+headers=(core/include/ldimesh/core/*.hpp core/include/ldimesh/core/*/*.hpp
+         transport/include/ldimesh/transport/*.hpp)
 mkdir -p "$out/corpus" "$out/artifacts"
 
 # Rebuild when the binary is missing or older than any source or header.
@@ -39,14 +61,15 @@ if [ ! -x "$bin" ]; then stale=1; else
 fi
 if [ "$stale" -eq 1 ]; then
   echo "fuzz: building $bin with $cxx (ASan, UBSan, libFuzzer)"
-  # FUZZING_BUILD_MODE_UNSAFE_FOR_PRODUCTION: the decoder skips its checksum comparisons here.
+  # FUZZING_BUILD_MODE_UNSAFE_FOR_PRODUCTION: the fragment decoder skips its checksums here.
   "$cxx" -std=c++20 -O1 -g -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=all \
-    -DFUZZING_BUILD_MODE_UNSAFE_FOR_PRODUCTION -Wall -Wextra -Icore/include -Itransport/include "${sources[@]}" -lzstd -o "$bin"
+    -DFUZZING_BUILD_MODE_UNSAFE_FOR_PRODUCTION -Wall -Wextra -Icore/include -Itransport/include \
+    "${sources[@]}" "${libs[@]}" -o "$bin"
 fi
 
 LDIMESH_FUZZ_WRITE_SEEDS=$out/corpus "$bin"
 
-echo "fuzz: decode_fragment for $seconds s, corpus $out/corpus ($(ls "$out/corpus" | wc -l) inputs)"
+echo "fuzz: $target for $seconds s, corpus $out/corpus ($(ls "$out/corpus" | wc -l) inputs)"
 status=0
 "$bin" -max_total_time="$seconds" -timeout=10 -print_final_stats=1 \
   -artifact_prefix="$out/artifacts/" "$@" "$out/corpus" >"$out/fuzz.log" 2>&1 || status=$?

@@ -1,0 +1,81 @@
+// libFuzzer target for decode_glb (scripts/fuzz.sh glb builds and runs it with ASan and UBSan):
+// what ldimesh-fetch and `ldimesh distance` read may come from anywhere. Any input must be
+// decoded or refused without a crash, an out-of-bounds read or undefined behaviour; refused,
+// the output mesh is unchanged; accepted, the mesh is well formed (check_mesh with finite
+// values, one view per face) and encode_glb takes it (its contract for any well-formed mesh).
+//
+// With LDIMESH_FUZZ_WRITE_SEEDS=DIR set, the binary writes a seed corpus of encode_glb's output
+// into DIR and exits: with and without scalars and views, sequential and Edgebreaker
+// connectivity, and an empty mesh.
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+#include <vector>
+
+#include "ldimesh/core/base/mesh.hpp"
+#include "ldimesh/transport/glb.hpp"
+
+namespace {
+
+// An octahedron of unit normals; with views, each face in the view of its z sign (else all in
+// view 0: encode_glb takes one view per face).
+ldimesh::Mesh octahedron(bool scalars, bool views) {
+  ldimesh::Mesh m;
+  m.positions = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  m.normals = m.positions;
+  m.triangles = {0, 2, 4, 2, 1, 4, 1, 3, 4, 3, 0, 4, 2, 0, 5, 1, 2, 5, 3, 1, 5, 0, 3, 5};
+  if (scalars) m.scalars = {0.0f, 0.2f, 0.4f, 0.6f, 0.8f, 1.0f};
+  m.triangle_view.assign(8, 0);
+  if (views) {
+    m.view_dirs = {{0, 0, 1}, {0, 0, -1}};
+    m.triangle_view = {0, 0, 0, 0, 1, 1, 1, 1};
+  }
+  return m;
+}
+
+void write_seed(const std::string& path, const ldimesh::Mesh& mesh,
+                const ldimesh::GlbOptions& options) {
+  std::vector<std::uint8_t> glb;
+  if (ldimesh::Status s = ldimesh::encode_glb(mesh, options, glb); !s) {
+    std::fprintf(stderr, "fuzz: encode_glb failed: %s\n", s.message().c_str());
+    std::exit(1);
+  }
+  std::FILE* out = std::fopen(path.c_str(), "wb");
+  if (!out || std::fwrite(glb.data(), 1, glb.size(), out) != glb.size()) {
+    std::fprintf(stderr, "fuzz: cannot write %s\n", path.c_str());
+    std::exit(1);
+  }
+  std::fclose(out);
+}
+
+void write_seeds(const std::string& dir) {
+  ldimesh::GlbOptions sequential;
+  sequential.compression_level = 0;
+  write_seed(dir + "/seed-plain.glb", octahedron(false, false), {});
+  write_seed(dir + "/seed-scalar-views.glb", octahedron(true, true), {});
+  write_seed(dir + "/seed-sequential.glb", octahedron(true, true), sequential);
+  write_seed(dir + "/seed-empty.glb", ldimesh::Mesh{}, {});
+}
+
+}  // namespace
+
+extern "C" int LLVMFuzzerInitialize(int*, char***) {
+  if (const char* dir = std::getenv("LDIMESH_FUZZ_WRITE_SEEDS")) {
+    write_seeds(dir);
+    std::exit(0);
+  }
+  return 0;
+}
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  ldimesh::Mesh mesh;
+  mesh.positions = {{7, 7, 7}};  // a marker: refused input must leave it
+  if (!ldimesh::decode_glb({data, size}, mesh)) {
+    if (mesh.positions.size() != 1 || mesh.positions[0].x != 7.0f) __builtin_trap();
+    return 0;
+  }
+  if (!ldimesh::check_mesh(mesh, {.views_per_face = true, .finite = true})) __builtin_trap();
+  std::vector<std::uint8_t> again;
+  if (!ldimesh::encode_glb(mesh, {}, again)) __builtin_trap();
+  return 0;
+}
