@@ -4,6 +4,7 @@
 #   fragment  decode_fragment: LDI fragments between ranks
 #   ply       parse_ply: meshes given to `ldimesh distance`
 #   glb       decode_glb: what ldimesh-fetch and `ldimesh distance` read from a server or disk
+#   options   parse_adaptor_options: the adaptor's JSON options document
 # Builds with clang++ straight from the sources into build-fuzz/TARGET/ (no CMake), writes a
 # seed corpus of valid inputs (the target's own encoder's output and hand-written files) into
 # build-fuzz/TARGET/corpus (which keeps what the fuzzer finds between runs), and exits non-zero
@@ -27,8 +28,11 @@ case $target in
   glb)
     sources=(transport/src/glb.cpp core/src/base/mesh.cpp core/src/base/status.cpp)
     libs=(-I/usr/include/eigen3 -ldraco) ;;
+  options)
+    sources=(adaptor/src/options.cpp core/src/base/status.cpp)
+    libs=() ;;
   *)
-    echo "fuzz: unknown target '$target' (one of: fragment, ply, glb)" >&2
+    echo "fuzz: unknown target '$target' (one of: fragment, ply, glb, options)" >&2
     exit 2 ;;
 esac
 seconds=${1:-30}
@@ -43,13 +47,13 @@ if ! command -v "$cxx" >/dev/null 2>&1; then
   exit 1
 fi
 
-declare -A harness=([fragment]=fragment_decoder [ply]=ply_reader [glb]=glb_decoder)
+declare -A harness=([fragment]=fragment_decoder [ply]=ply_reader [glb]=glb_decoder [options]=options)
 name=${harness[$target]}_fuzz
 out=build-fuzz/$target
 bin=$out/$name
 sources+=(tests/fuzz/$name.cpp)
 headers=(core/include/ldimesh/core/*.hpp core/include/ldimesh/core/*/*.hpp
-         transport/include/ldimesh/transport/*.hpp)
+         transport/include/ldimesh/transport/*.hpp adaptor/src/*.hpp)
 mkdir -p "$out/corpus" "$out/artifacts"
 
 # Rebuild when the binary is missing or older than any source or header.

@@ -9,14 +9,11 @@
 #include <mutex>
 #include <new>
 #include <optional>
-#include <set>
 #include <sstream>
 #include <stdexcept>
 #include <thread>
 #include <type_traits>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "ldimesh/core/base/timing.hpp"
 #include "ldimesh/core/field/grid_source.hpp"
@@ -28,184 +25,12 @@
 #include "ldimesh/transport/http_server.hpp"
 #include "ldimesh/transport/mpi_reduce.hpp"
 #include "ldimesh/transport/snapshot_store.hpp"
+#include "options.hpp"
 
 namespace ldimesh {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-struct Options {
-  std::vector<double> isovalues{0.5};
-  std::string views = "xyz";
-  int resolution = 256;
-  double r = 0.5;
-  bool merging = false;  // §5: one merged mesh per isovalue (trimmed with r = 1)
-  std::uint64_t every_steps = 1;
-  double every_seconds = 0.0;
-  bool coalesce = false;
-  bool server = true;
-  std::string bind = "127.0.0.1";
-  int port = 0;
-  std::string token;
-  std::string output_dir;
-  std::size_t keep = 16;
-  std::size_t memory_mb = 512;
-  FragmentEncoding encoding;
-  int compression_level = 7;
-  bool log = true;
-  bool background = true;          // with MPI_THREAD_MULTIPLE: the solver waits for a snapshot only
-  double slow_root_seconds = 0.0;  // testing only: the worker sleeps this long per step
-  // Testing only: a fault injected into step `fault_step` on rank `fault_rank`.
-  std::string fault;  // "", "out_of_memory", "exception" or "corrupt_message"
-  std::uint64_t fault_step = 0;
-  int fault_rank = 0;
-};
-
-// Reads `j` into `o`, naming the first unknown key or bad value.
-Status parse_options(const nlohmann::json& j, Options& o) {
-  if (!j.is_object()) return Status::invalid_options("options: the document must be a JSON object");
-  auto bad = [](const std::string& key, const std::string& why) {
-    return Status::invalid_options("options: '" + key + "' " + why);
-  };
-  auto check_keys = [&](const nlohmann::json& obj, const std::string& prefix,
-                        std::initializer_list<const char*> known) -> Status {
-    for (auto it = obj.begin(); it != obj.end(); ++it) {
-      bool found = false;
-      for (const char* k : known)
-        found = found || it.key() == k;
-      if (!found) return bad(prefix + it.key(), "is not a known option (see docs/adaptor.md)");
-    }
-    return Status::ok();
-  };
-  if (Status s = check_keys(j, "",
-                            {"isovalues", "views", "resolution", "r", "cadence", "busy",
-                             "refinement", "merging", "server", "output_dir", "keep", "memory_mb",
-                             "encoding", "glb", "log", "background", "testing"});
-      !s)
-    return s;
-  try {
-    if (j.contains("isovalues")) {
-      const auto& v = j["isovalues"];
-      if (!v.is_array() || v.empty())
-        return bad("isovalues", "must be a non-empty array of numbers");
-      o.isovalues.clear();
-      for (const auto& x : v) {
-        if (!x.is_number()) return bad("isovalues", "must be a non-empty array of numbers");
-        o.isovalues.push_back(x.get<double>());
-      }
-      if (o.isovalues.size() > 8) return bad("isovalues", "may hold at most 8 values");
-    }
-    if (j.contains("views")) {
-      o.views = j["views"].get<std::string>();
-      if (o.views.empty()) return bad("views", "must name at least one axis");
-      std::set<char> seen;
-      for (char c : o.views)
-        if ((c != 'x' && c != 'y' && c != 'z') || !seen.insert(c).second)
-          return bad("views", "must be a subset of \"xyz\"");
-    }
-    if (j.contains("resolution")) {
-      o.resolution = j["resolution"].get<int>();
-      if (o.resolution < 2 || o.resolution > 8192) return bad("resolution", "must lie in 2..8192");
-    }
-    if (j.contains("r")) {
-      o.r = j["r"].get<double>();
-      if (!(o.r >= 0.0 && o.r <= 1.0)) return bad("r", "must lie in [0, 1]");
-    }
-    if (j.contains("cadence")) {
-      const auto& c = j["cadence"];
-      if (Status s = check_keys(c, "cadence.", {"every_steps", "every_seconds"}); !s) return s;
-      if (c.contains("every_steps")) {
-        const auto n = c["every_steps"].get<std::int64_t>();
-        if (n < 1) return bad("cadence.every_steps", "must be at least 1");
-        o.every_steps = std::uint64_t(n);
-      }
-      if (c.contains("every_seconds")) {
-        o.every_seconds = c["every_seconds"].get<double>();
-        if (!(o.every_seconds >= 0.0)) return bad("cadence.every_seconds", "must be ≥ 0");
-      }
-    }
-    if (j.contains("busy")) {
-      const std::string b = j["busy"].get<std::string>();
-      if (b != "skip" && b != "coalesce") return bad("busy", "must be \"skip\" or \"coalesce\"");
-      o.coalesce = b == "coalesce";
-    }
-    if (j.contains("refinement") && j["refinement"].get<bool>())
-      return bad("refinement",
-                 "is not available in situ yet (every rank would have to answer the root's ray "
-                 "requests during the step); refine offline with 'ldimesh mesh --refine'");
-    if (j.contains("merging")) o.merging = j["merging"].get<bool>();
-    if (j.contains("server")) {
-      const auto& s = j["server"];
-      if (Status st = check_keys(s, "server.", {"enabled", "bind", "port", "token"}); !st)
-        return st;
-      if (s.contains("enabled")) o.server = s["enabled"].get<bool>();
-      if (s.contains("bind")) o.bind = s["bind"].get<std::string>();
-      if (s.contains("port")) {
-        o.port = s["port"].get<int>();
-        if (o.port < 0 || o.port > 65535) return bad("server.port", "must lie in 0..65535");
-      }
-      if (s.contains("token")) o.token = s["token"].get<std::string>();
-    }
-    if (j.contains("output_dir")) o.output_dir = j["output_dir"].get<std::string>();
-    if (j.contains("keep")) {
-      const auto k = j["keep"].get<std::int64_t>();
-      if (k < 1) return bad("keep", "must be at least 1");
-      o.keep = std::size_t(k);
-    }
-    if (j.contains("memory_mb")) {
-      const auto m = j["memory_mb"].get<std::int64_t>();
-      if (m < 1) return bad("memory_mb", "must be at least 1");
-      o.memory_mb = std::size_t(m);
-    }
-    if (j.contains("encoding")) {
-      const auto& e = j["encoding"];
-      if (Status s = check_keys(e, "encoding.", {"lossless", "depth_bits", "normal_bits"}); !s)
-        return s;
-      if (e.contains("lossless")) o.encoding.lossless = e["lossless"].get<bool>();
-      if (e.contains("depth_bits")) o.encoding.depth_bits = e["depth_bits"].get<int>();
-      if (e.contains("normal_bits")) o.encoding.normal_bits = e["normal_bits"].get<int>();
-      if (o.encoding.depth_bits < 1 || o.encoding.depth_bits > 24)
-        return bad("encoding.depth_bits", "must lie in 1..24");
-      if (o.encoding.normal_bits < 2 || o.encoding.normal_bits > 16)
-        return bad("encoding.normal_bits", "must lie in 2..16");
-    }
-    if (j.contains("glb")) {
-      const auto& g = j["glb"];
-      if (Status s = check_keys(g, "glb.", {"compression_level"}); !s) return s;
-      if (g.contains("compression_level")) {
-        o.compression_level = g["compression_level"].get<int>();
-        if (o.compression_level < 0 || o.compression_level > 10)
-          return bad("glb.compression_level", "must lie in 0..10");
-      }
-    }
-    if (j.contains("log")) o.log = j["log"].get<bool>();
-    if (j.contains("background")) o.background = j["background"].get<bool>();
-    if (j.contains("testing")) {
-      const auto& t = j["testing"];
-      if (Status s = check_keys(t, "testing.", {"slow_root_seconds", "fault"}); !s) return s;
-      if (t.contains("slow_root_seconds"))
-        o.slow_root_seconds = t["slow_root_seconds"].get<double>();
-      if (t.contains("fault")) {
-        const auto& f = t["fault"];
-        if (Status s = check_keys(f, "testing.fault.", {"kind", "step", "rank"}); !s) return s;
-        o.fault = f.at("kind").get<std::string>();
-        if (o.fault != "out_of_memory" && o.fault != "exception" && o.fault != "corrupt_message")
-          return bad("testing.fault.kind",
-                     "must be \"out_of_memory\", \"exception\" or \"corrupt_message\"");
-        o.fault_step = f.value("step", std::uint64_t(0));
-        o.fault_rank = f.value("rank", 0);
-        // The root sends no message in the reduction: only another rank's can be damaged.
-        if (o.fault_rank < (o.fault == "corrupt_message" ? 1 : 0))
-          return bad("testing.fault.rank", o.fault == "corrupt_message"
-                                               ? "must be a rank other than the root (≥ 1)"
-                                               : "must be ≥ 0");
-      }
-    }
-  } catch (const nlohmann::json::exception& e) {
-    return Status::invalid_options(std::string("options: a value has the wrong type: ") + e.what());
-  }
-  return Status::ok();
-}
 
 // One due step's work for the root's worker.
 struct Job {
@@ -291,7 +116,7 @@ HexBlock copy_hex(const HexBlock& block, BlockCopy& copy) {
 
 class AdaptorImpl final : public Adaptor {
  public:
-  AdaptorImpl(MPI_Comm comm, Options options) : comm_(comm), options_(std::move(options)) {
+  AdaptorImpl(MPI_Comm comm, AdaptorOptions options) : comm_(comm), options_(std::move(options)) {
     MPI_Comm_rank(comm_, &rank_);
     MPI_Comm_size(comm_, &size_);
   }
@@ -839,7 +664,7 @@ class AdaptorImpl final : public Adaptor {
 
   MPI_Comm comm_;
   int rank_ = 0, size_ = 1;
-  Options options_;
+  AdaptorOptions options_;
   Box domain_;
   bool has_domain_ = false;
   std::vector<Block> blocks_;
@@ -888,12 +713,10 @@ Status Adaptor::create(MPI_Comm comm, std::string_view options_json,
   if (comm == MPI_COMM_NULL)
     return Status::invalid_argument("ldimesh: the communicator is MPI_COMM_NULL");
   try {
-    Options options;
+    AdaptorOptions options;
     Status status = Status::ok();
     if (!options_json.empty()) {
-      const nlohmann::json j = nlohmann::json::parse(options_json, nullptr, false);
-      status = j.is_discarded() ? Status::invalid_options("options: not a valid JSON document")
-                                : parse_options(j, options);
+      status = parse_adaptor_options(options_json, options);
     }
     if (status && !options.fault.empty()) {
       int size = 1;

@@ -65,6 +65,16 @@ TEST(Adaptor, InvalidOptionsAreReportedOnEveryRankWithTheKey) {
   EXPECT_FALSE(s);
   s = Adaptor::create(MPI_COMM_WORLD, R"({"refinement": true})", a);
   EXPECT_NE(s.message().find("refinement"), std::string::npos) << s.message();
+  // Integers out of their type's range or not integral: named errors, not undefined behaviour
+  // in the conversion (UBSan reported it in the options fuzz target for 1e20).
+  for (const char* doc : {R"({"resolution": 1e20})", R"({"resolution": 512.5})",
+                          R"({"keep": 1.5e19})", R"({"server": {"port": -1e30}})",
+                          R"({"encoding": {"depth_bits": "16"}})"}) {
+    s = Adaptor::create(MPI_COMM_WORLD, doc, a);
+    EXPECT_EQ(s.code(), StatusCode::invalid_options) << doc;
+    EXPECT_NE(s.message().find("must be an integer in"), std::string::npos) << s.message();
+    EXPECT_EQ(a, nullptr);
+  }
 }
 
 TEST(Adaptor, DueStepsArePublishedAndWrittenOffTheSolversPath) {

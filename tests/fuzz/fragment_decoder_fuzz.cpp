@@ -18,6 +18,8 @@
 
 #include "ldimesh/transport/fragment_codec.hpp"
 
+#include "fuzz_seeds.hpp"
+
 namespace {
 
 using ldimesh::FragmentEncoding;
@@ -59,15 +61,6 @@ LdiFragment spheres_fragment(bool with_scalar) {
   return f;
 }
 
-void write_file(const std::string& path, const std::vector<std::uint8_t>& bytes) {
-  std::FILE* out = std::fopen(path.c_str(), "wb");
-  if (!out || std::fwrite(bytes.data(), 1, bytes.size(), out) != bytes.size()) {
-    std::fprintf(stderr, "fuzz: cannot write %s\n", path.c_str());
-    std::exit(1);
-  }
-  std::fclose(out);
-}
-
 // `message` with its zstd frame rewritten as one raw (stored) block (RFC 8878): mutations then
 // hit the streams themselves instead of zstd's entropy coding. The checksums go stale, which
 // the fuzzing build does not check; the sizes in the header are kept right.
@@ -92,7 +85,9 @@ std::vector<std::uint8_t> with_raw_frame(std::vector<std::uint8_t> message) {
   return message;
 }
 
-void write_seeds(const std::string& dir) {
+}  // namespace
+
+void ldimesh::fuzz::write_seeds(const std::string& dir) {
   const FragmentEncoding lossy, lossless{.lossless = true},
       coarse{.depth_bits = 16, .normal_bits = 10};
   LdiFragment empty;
@@ -108,16 +103,6 @@ void write_seeds(const std::string& dir) {
   write_file(dir + "/seed-empty-lossless", encode_fragment(empty, lossless));
   write_file(dir + "/seed-raw-lossy-scalar", with_raw_frame(encode_fragment(scalar, lossy)));
   write_file(dir + "/seed-raw-lossless", with_raw_frame(encode_fragment(plain, lossless)));
-}
-
-}  // namespace
-
-extern "C" int LLVMFuzzerInitialize(int*, char***) {
-  if (const char* dir = std::getenv("LDIMESH_FUZZ_WRITE_SEEDS")) {
-    write_seeds(dir);
-    std::exit(0);
-  }
-  return 0;
 }
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {

@@ -15,6 +15,8 @@
 #include "ldimesh/core/base/mesh.hpp"
 #include "ldimesh/transport/glb.hpp"
 
+#include "fuzz_seeds.hpp"
+
 namespace {
 
 // An octahedron of unit normals; with views, each face in the view of its z sign (else all in
@@ -48,23 +50,15 @@ void write_seed(const std::string& path, const ldimesh::Mesh& mesh,
   std::fclose(out);
 }
 
-void write_seeds(const std::string& dir) {
+}  // namespace
+
+void ldimesh::fuzz::write_seeds(const std::string& dir) {
   ldimesh::GlbOptions sequential;
   sequential.compression_level = 0;
   write_seed(dir + "/seed-plain.glb", octahedron(false, false), {});
   write_seed(dir + "/seed-scalar-views.glb", octahedron(true, true), {});
   write_seed(dir + "/seed-sequential.glb", octahedron(true, true), sequential);
   write_seed(dir + "/seed-empty.glb", ldimesh::Mesh{}, {});
-}
-
-}  // namespace
-
-extern "C" int LLVMFuzzerInitialize(int*, char***) {
-  if (const char* dir = std::getenv("LDIMESH_FUZZ_WRITE_SEEDS")) {
-    write_seeds(dir);
-    std::exit(0);
-  }
-  return 0;
 }
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {

@@ -15,16 +15,9 @@
 #include "ldimesh/core/base/mesh.hpp"
 #include "ldimesh/core/io/mesh_io.hpp"
 
-namespace {
+#include "fuzz_seeds.hpp"
 
-void write_text(const std::string& path, std::string_view bytes) {
-  std::FILE* out = std::fopen(path.c_str(), "wb");
-  if (!out || std::fwrite(bytes.data(), 1, bytes.size(), out) != bytes.size()) {
-    std::fprintf(stderr, "fuzz: cannot write %s\n", path.c_str());
-    std::exit(1);
-  }
-  std::fclose(out);
-}
+namespace {
 
 // A tetrahedron with two views and a quad, as the mesher hands meshes to write_ply.
 ldimesh::Mesh small_mesh() {
@@ -39,12 +32,14 @@ ldimesh::Mesh small_mesh() {
   return m;
 }
 
-void write_seeds(const std::string& dir) {
+}  // namespace
+
+void ldimesh::fuzz::write_seeds(const std::string& dir) {
   if (ldimesh::Status s = ldimesh::write_ply(dir + "/seed-write-ply.ply", small_mesh()); !s) {
     std::fprintf(stderr, "fuzz: write_ply failed: %s\n", s.message().c_str());
     std::exit(1);
   }
-  write_text(dir + "/seed-ascii.ply",
+  write_file(dir + "/seed-ascii.ply",
              "ply\nformat ascii 1.0\ncomment a square and a pentagon\nelement vertex 6\n"
              "property float x\nproperty float y\nproperty float z\nproperty uchar red\n"
              "element face 2\nproperty list uchar int vertex_indices\nproperty int flags\n"
@@ -66,17 +61,7 @@ void write_seeds(const std::string& dir) {
   be += std::string("\0\3", 2);
   for (unsigned v : {0u, 1u, 2u})
     be += std::string{char(0), char(0), char(0), char(v)};
-  write_text(dir + "/seed-big-endian.ply", be);
-}
-
-}  // namespace
-
-extern "C" int LLVMFuzzerInitialize(int*, char***) {
-  if (const char* dir = std::getenv("LDIMESH_FUZZ_WRITE_SEEDS")) {
-    write_seeds(dir);
-    std::exit(0);
-  }
-  return 0;
+  write_file(dir + "/seed-big-endian.ply", be);
 }
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {

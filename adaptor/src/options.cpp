@@ -1,0 +1,189 @@
+#include "options.hpp"
+
+#include <cmath>
+#include <cstdint>
+#include <initializer_list>
+#include <set>
+#include <type_traits>
+
+#include <nlohmann/json.hpp>
+
+namespace ldimesh {
+namespace {
+
+// Reads `j` into `o`, naming the first unknown key or bad value.
+Status parse_object(const nlohmann::json& j, AdaptorOptions& o) {
+  if (!j.is_object()) return Status::invalid_options("options: the document must be a JSON object");
+  auto bad = [](const std::string& key, const std::string& why) {
+    return Status::invalid_options("options: '" + key + "' " + why);
+  };
+  auto check_keys = [&](const nlohmann::json& obj, const std::string& prefix,
+                        std::initializer_list<const char*> known) -> Status {
+    for (auto it = obj.begin(); it != obj.end(); ++it) {
+      bool found = false;
+      for (const char* k : known)
+        found = found || it.key() == k;
+      if (!found) return bad(prefix + it.key(), "is not a known option (see docs/adaptor.md)");
+    }
+    return Status::ok();
+  };
+  // An integer option: a JSON number with an integral value in [lo, hi], checked before any
+  // conversion (a double out of an integer type's range would be undefined behaviour).
+  auto integer = [&](const nlohmann::json& v, const std::string& key, double lo, double hi,
+                     auto& out) -> Status {
+    const double x = v.is_number() ? v.get<double>() : NAN;
+    if (!(x >= lo && x <= hi && std::floor(x) == x))
+      return bad(key, "must be an integer in " + std::to_string(std::int64_t(lo)) + ".." +
+                          std::to_string(std::int64_t(hi)));
+    out = static_cast<std::remove_reference_t<decltype(out)>>(x);
+    return Status::ok();
+  };
+  // Counts: up to 2^53, where doubles still hold every integer.
+  constexpr double kMaxCount = 9007199254740992.0;
+  if (Status s = check_keys(j, "",
+                            {"isovalues", "views", "resolution", "r", "cadence", "busy",
+                             "refinement", "merging", "server", "output_dir", "keep", "memory_mb",
+                             "encoding", "glb", "log", "background", "testing"});
+      !s)
+    return s;
+  try {
+    if (j.contains("isovalues")) {
+      const auto& v = j["isovalues"];
+      if (!v.is_array() || v.empty())
+        return bad("isovalues", "must be a non-empty array of numbers");
+      o.isovalues.clear();
+      for (const auto& x : v) {
+        if (!x.is_number()) return bad("isovalues", "must be a non-empty array of numbers");
+        o.isovalues.push_back(x.get<double>());
+      }
+      if (o.isovalues.size() > 8) return bad("isovalues", "may hold at most 8 values");
+    }
+    if (j.contains("views")) {
+      o.views = j["views"].get<std::string>();
+      if (o.views.empty()) return bad("views", "must name at least one axis");
+      std::set<char> seen;
+      for (char c : o.views)
+        if ((c != 'x' && c != 'y' && c != 'z') || !seen.insert(c).second)
+          return bad("views", "must be a subset of \"xyz\"");
+    }
+    if (j.contains("resolution")) {
+      if (Status s = integer(j["resolution"], "resolution", 2, 8192, o.resolution); !s) return s;
+    }
+    if (j.contains("r")) {
+      o.r = j["r"].get<double>();
+      if (!(o.r >= 0.0 && o.r <= 1.0)) return bad("r", "must lie in [0, 1]");
+    }
+    if (j.contains("cadence")) {
+      const auto& c = j["cadence"];
+      if (Status s = check_keys(c, "cadence.", {"every_steps", "every_seconds"}); !s) return s;
+      if (c.contains("every_steps")) {
+        if (Status s =
+                integer(c["every_steps"], "cadence.every_steps", 1, kMaxCount, o.every_steps);
+            !s)
+          return s;
+      }
+      if (c.contains("every_seconds")) {
+        o.every_seconds = c["every_seconds"].get<double>();
+        if (!(o.every_seconds >= 0.0)) return bad("cadence.every_seconds", "must be ≥ 0");
+      }
+    }
+    if (j.contains("busy")) {
+      const std::string b = j["busy"].get<std::string>();
+      if (b != "skip" && b != "coalesce") return bad("busy", "must be \"skip\" or \"coalesce\"");
+      o.coalesce = b == "coalesce";
+    }
+    if (j.contains("refinement") && j["refinement"].get<bool>())
+      return bad("refinement",
+                 "is not available in situ yet (every rank would have to answer the root's ray "
+                 "requests during the step); refine offline with 'ldimesh mesh --refine'");
+    if (j.contains("merging")) o.merging = j["merging"].get<bool>();
+    if (j.contains("server")) {
+      const auto& s = j["server"];
+      if (Status st = check_keys(s, "server.", {"enabled", "bind", "port", "token"}); !st)
+        return st;
+      if (s.contains("enabled")) o.server = s["enabled"].get<bool>();
+      if (s.contains("bind")) o.bind = s["bind"].get<std::string>();
+      if (s.contains("port")) {
+        if (Status st = integer(s["port"], "server.port", 0, 65535, o.port); !st) return st;
+      }
+      if (s.contains("token")) o.token = s["token"].get<std::string>();
+    }
+    if (j.contains("output_dir")) o.output_dir = j["output_dir"].get<std::string>();
+    if (j.contains("keep")) {
+      if (Status s = integer(j["keep"], "keep", 1, kMaxCount, o.keep); !s) return s;
+    }
+    if (j.contains("memory_mb")) {
+      if (Status s = integer(j["memory_mb"], "memory_mb", 1, kMaxCount, o.memory_mb); !s) return s;
+    }
+    if (j.contains("encoding")) {
+      const auto& e = j["encoding"];
+      if (Status s = check_keys(e, "encoding.", {"lossless", "depth_bits", "normal_bits"}); !s)
+        return s;
+      if (e.contains("lossless")) o.encoding.lossless = e["lossless"].get<bool>();
+      if (e.contains("depth_bits"))
+        if (Status s =
+                integer(e["depth_bits"], "encoding.depth_bits", 1, 24, o.encoding.depth_bits);
+            !s)
+          return s;
+      if (e.contains("normal_bits"))
+        if (Status s =
+                integer(e["normal_bits"], "encoding.normal_bits", 2, 16, o.encoding.normal_bits);
+            !s)
+          return s;
+    }
+    if (j.contains("glb")) {
+      const auto& g = j["glb"];
+      if (Status s = check_keys(g, "glb.", {"compression_level"}); !s) return s;
+      if (g.contains("compression_level")) {
+        if (Status s = integer(g["compression_level"], "glb.compression_level", 0, 10,
+                               o.compression_level);
+            !s)
+          return s;
+      }
+    }
+    if (j.contains("log")) o.log = j["log"].get<bool>();
+    if (j.contains("background")) o.background = j["background"].get<bool>();
+    if (j.contains("testing")) {
+      const auto& t = j["testing"];
+      if (Status s = check_keys(t, "testing.", {"slow_root_seconds", "fault"}); !s) return s;
+      if (t.contains("slow_root_seconds"))
+        o.slow_root_seconds = t["slow_root_seconds"].get<double>();
+      if (t.contains("fault")) {
+        const auto& f = t["fault"];
+        if (Status s = check_keys(f, "testing.fault.", {"kind", "step", "rank"}); !s) return s;
+        o.fault = f.at("kind").get<std::string>();
+        if (o.fault != "out_of_memory" && o.fault != "exception" && o.fault != "corrupt_message")
+          return bad("testing.fault.kind",
+                     "must be \"out_of_memory\", \"exception\" or \"corrupt_message\"");
+        if (f.contains("step"))
+          if (Status s = integer(f["step"], "testing.fault.step", 0, kMaxCount, o.fault_step); !s)
+            return s;
+        // The root sends no message in the reduction: only another rank's can be damaged.
+        if (f.contains("rank"))
+          if (Status s = integer(f["rank"], "testing.fault.rank",
+                                 o.fault == "corrupt_message" ? 1 : 0, INT32_MAX, o.fault_rank);
+              !s)
+            return s;
+        if (o.fault == "corrupt_message" && o.fault_rank < 1)
+          return bad("testing.fault.rank", "must be a rank other than the root (≥ 1)");
+      }
+    }
+  } catch (const nlohmann::json::exception& e) {
+    return Status::invalid_options(std::string("options: a value has the wrong type: ") + e.what());
+  }
+  return Status::ok();
+}
+
+}  // namespace
+
+Status parse_adaptor_options(std::string_view json, AdaptorOptions& out) {
+  try {
+    const nlohmann::json j = nlohmann::json::parse(json, nullptr, false);
+    if (j.is_discarded()) return Status::invalid_options("options: not a valid JSON document");
+    return parse_object(j, out);
+  } catch (const std::exception& e) {  // allocation failure included
+    return Status::invalid_options(std::string("options: cannot be read: ") + e.what());
+  }
+}
+
+}  // namespace ldimesh

@@ -1,0 +1,49 @@
+// The adaptor's options document (docs/adaptor.md): the values and their parser. Internal to
+// the adaptor library; a header of its own so that the parser can be tested and fuzzed
+// without MPI (tests/fuzz/options_fuzz.cpp).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "ldimesh/core/base/status.hpp"
+#include "ldimesh/transport/fragment_codec.hpp"
+
+namespace ldimesh {
+
+struct AdaptorOptions {
+  std::vector<double> isovalues{0.5};
+  std::string views = "xyz";
+  int resolution = 256;
+  double r = 0.5;
+  bool merging = false;  // §5: one merged mesh per isovalue (trimmed with r = 1)
+  std::uint64_t every_steps = 1;
+  double every_seconds = 0.0;
+  bool coalesce = false;
+  bool server = true;
+  std::string bind = "127.0.0.1";
+  int port = 0;
+  std::string token;
+  std::string output_dir;
+  std::size_t keep = 16;
+  std::size_t memory_mb = 512;
+  FragmentEncoding encoding;
+  int compression_level = 7;
+  bool log = true;
+  bool background = true;          // with MPI_THREAD_MULTIPLE: the solver waits for a snapshot only
+  double slow_root_seconds = 0.0;  // testing only: the worker sleeps this long per step
+  // Testing only: a fault injected into step `fault_step` on rank `fault_rank`.
+  std::string fault;  // "", "out_of_memory", "exception" or "corrupt_message"
+  std::uint64_t fault_step = 0;
+  int fault_rank = 0;
+};
+
+// Reads the JSON document `json` into `out` (defaults for what it leaves out). Errors
+// (invalid_options, `out` then unspecified): not JSON, not an object, an unknown key (named),
+// a value of the wrong type or out of range (named, with the range). Never throws.
+Status parse_adaptor_options(std::string_view json, AdaptorOptions& out);
+
+}  // namespace ldimesh
