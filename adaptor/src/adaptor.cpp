@@ -580,6 +580,27 @@ class AdaptorImpl final : public Adaptor {
     }
   }
 
+  // Writes the step's files into output_dir. A failure (disk full, the folder gone or no longer
+  // writable) does not fail the step: it is published and served from memory like any other,
+  // and stderr says so once when writing starts failing and once when it works again.
+  void write_step(const Snapshot& snapshot) {
+    const Status s = write_step_files(options_.output_dir, snapshot);
+    if (!s) {
+      if (unwritten_steps_++ == 0)
+        std::fprintf(stderr,
+                     "ldimesh: warning: step %llu not written: %s; steps are served from memory "
+                     "until writing works again\n",
+                     (unsigned long long)snapshot.step, s.message().c_str());
+    } else if (unwritten_steps_ > 0) {
+      std::fprintf(stderr,
+                   "ldimesh: writing steps to '%s' again from step %llu (%llu steps were not "
+                   "written)\n",
+                   options_.output_dir.c_str(), (unsigned long long)snapshot.step,
+                   (unsigned long long)unwritten_steps_);
+      unwritten_steps_ = 0;
+    }
+  }
+
   Status publish(Job& job) {
     if (options_.slow_root_seconds > 0.0)
       std::this_thread::sleep_for(std::chrono::duration<double>(options_.slow_root_seconds));
@@ -618,8 +639,7 @@ class AdaptorImpl final : public Adaptor {
     meta.nonfinite_values = job.nonfinite_values;
     const std::size_t bytes = glb.size();
     Snapshot snapshot = make_snapshot(std::move(meta), std::move(glb));
-    if (!options_.output_dir.empty())
-      LDIMESH_RETURN_IF_ERROR(write_step_files(options_.output_dir, snapshot));
+    if (!options_.output_dir.empty()) write_step(snapshot);
     LDIMESH_RETURN_IF_ERROR(store_->publish(std::move(snapshot)));
     {
       std::lock_guard lock(mutex_);
@@ -684,6 +704,7 @@ class AdaptorImpl final : public Adaptor {
   bool working_ = false;
   bool stopping_ = false;
   std::uint64_t published_ = 0;
+  std::uint64_t unwritten_steps_ = 0;  // in a row, not written to output_dir (publish only)
   std::string last_error_;
   Status worker_status_ = Status::ok();  // the last failure of this rank's background work
 

@@ -4,6 +4,7 @@
 
 #include <chrono>
 #include <filesystem>
+#include <fstream>
 #include <thread>
 #include <vector>
 
@@ -67,9 +68,9 @@ TEST(Adaptor, InvalidOptionsAreReportedOnEveryRankWithTheKey) {
   EXPECT_NE(s.message().find("refinement"), std::string::npos) << s.message();
   // Integers out of their type's range or not integral: named errors, not undefined behaviour
   // in the conversion (UBSan reported it in the options fuzz target for 1e20).
-  for (const char* doc : {R"({"resolution": 1e20})", R"({"resolution": 512.5})",
-                          R"({"keep": 1.5e19})", R"({"server": {"port": -1e30}})",
-                          R"({"encoding": {"depth_bits": "16"}})"}) {
+  for (const char* doc :
+       {R"({"resolution": 1e20})", R"({"resolution": 512.5})", R"({"keep": 1.5e19})",
+        R"({"server": {"port": -1e30}})", R"({"encoding": {"depth_bits": "16"}})"}) {
     s = Adaptor::create(MPI_COMM_WORLD, doc, a);
     EXPECT_EQ(s.code(), StatusCode::invalid_options) << doc;
     EXPECT_NE(s.message().find("must be an integer in"), std::string::npos) << s.message();
@@ -96,6 +97,51 @@ TEST(Adaptor, DueStepsArePublishedAndWrittenOffTheSolversPath) {
     EXPECT_FALSE(std::filesystem::exists(dir + "/step_000001.glb"));  // not due
     EXPECT_FALSE(std::filesystem::exists(dir + "/step_000005.glb"));
   }
+}
+
+// Root only: waits (up to 60 s) until `a` has published `count` steps.
+bool wait_for_published(const Adaptor& a, std::uint64_t count) {
+  for (int k = 0; k < 6000 && a.published_steps() < count; ++k)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  return a.published_steps() >= count;
+}
+
+TEST(Adaptor, AStepThatCannotBeWrittenIsStillPublishedAndWritingResumes) {
+  const std::string dir = temp_dir("unwritable");
+  auto a = make(R"({"server": {"enabled": false}, "resolution": 32, "log": false,
+                    "output_dir": ")" +
+                dir + R"("})");
+  if (!a) return;
+  const bool root = rank_of() == 0;
+  // The output folder turns into a file (as if it vanished and something else took its name;
+  // a read-only folder would not stop root): step 0 cannot be written.
+  if (root) {
+    ::testing::internal::CaptureStderr();
+    std::filesystem::remove_all(dir);
+    std::ofstream(dir) << "not a folder";
+  }
+  MPI_Barrier(MPI_COMM_WORLD);
+  EXPECT_TRUE(a->execute(0, 0.0));
+  if (root) {
+    EXPECT_TRUE(wait_for_published(*a, 1));
+    std::filesystem::remove(dir);  // writable again: the next step recreates the folder
+  }
+  MPI_Barrier(MPI_COMM_WORLD);
+  EXPECT_TRUE(a->execute(1, 0.1));
+  if (root) {
+    EXPECT_TRUE(wait_for_published(*a, 2));
+  }
+  MPI_Barrier(MPI_COMM_WORLD);
+  EXPECT_TRUE(a->finalize()) << a->last_error();
+  if (!root) return;
+  const std::string log = ::testing::internal::GetCapturedStderr();
+  EXPECT_EQ(a->published_steps(), 2u);  // both served, though step 0 has no files
+  EXPECT_FALSE(std::filesystem::exists(dir + "/step_000000.glb"));
+  EXPECT_TRUE(std::filesystem::exists(dir + "/step_000001.glb"));
+  EXPECT_TRUE(std::filesystem::exists(dir + "/step_000001.json"));
+  EXPECT_NE(log.find("step 0 not written"), std::string::npos) << log;
+  EXPECT_NE(log.find("again from step 1 (1 steps were not written)"), std::string::npos) << log;
+  EXPECT_TRUE(a->last_error().empty()) << a->last_error();
 }
 
 TEST(Adaptor, ASlowRootMakesStepsBeSkippedNotTheSolverWait) {
