@@ -20,15 +20,19 @@ target=${1:-}
 shift || true
 case $target in
   fragment)
+    name=fragment_decoder_fuzz
     sources=(core/src/raycast/fragment.cpp core/src/raycast/ldi.cpp transport/src/fragment_codec.cpp)
     libs=(-lzstd) ;;
   ply)
+    name=ply_reader_fuzz
     sources=(core/src/io/mesh_io.cpp core/src/base/mesh.cpp core/src/base/status.cpp)
     libs=() ;;
   glb)
+    name=glb_decoder_fuzz
     sources=(transport/src/glb.cpp core/src/base/mesh.cpp core/src/base/status.cpp)
     libs=(-I/usr/include/eigen3 -ldraco) ;;
   options)
+    name=options_fuzz
     sources=(adaptor/src/options.cpp core/src/base/status.cpp)
     libs=() ;;
   *)
@@ -47,8 +51,6 @@ if ! command -v "$cxx" >/dev/null 2>&1; then
   exit 1
 fi
 
-declare -A harness=([fragment]=fragment_decoder [ply]=ply_reader [glb]=glb_decoder [options]=options)
-name=${harness[$target]}_fuzz
 out=build-fuzz/$target
 bin=$out/$name
 sources+=(tests/fuzz/$name.cpp)

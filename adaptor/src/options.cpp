@@ -27,14 +27,17 @@ Status parse_object(const nlohmann::json& j, AdaptorOptions& o) {
     }
     return Status::ok();
   };
-  // An integer option: a JSON number with an integral value in [lo, hi], checked before any
-  // conversion (a double out of an integer type's range would be undefined behaviour).
-  auto integer = [&](const nlohmann::json& v, const std::string& key, double lo, double hi,
-                     auto& out) -> Status {
+  // Integer option obj[key] (named prefix + key), if present: a JSON number with an integral
+  // value in [lo, hi], checked before any conversion (a double out of an integer type's range
+  // would be undefined behaviour).
+  auto integer = [&](const nlohmann::json& obj, const char* key, const std::string& prefix,
+                     double lo, double hi, auto& out) -> Status {
+    if (!obj.contains(key)) return Status::ok();
+    const nlohmann::json& v = obj[key];
     const double x = v.is_number() ? v.get<double>() : NAN;
     if (!(x >= lo && x <= hi && std::floor(x) == x))
-      return bad(key, "must be an integer in " + std::to_string(std::int64_t(lo)) + ".." +
-                          std::to_string(std::int64_t(hi)));
+      return bad(prefix + key, "must be an integer in " + std::to_string(std::int64_t(lo)) + ".." +
+                                   std::to_string(std::int64_t(hi)));
     out = static_cast<std::remove_reference_t<decltype(out)>>(x);
     return Status::ok();
   };
@@ -66,9 +69,7 @@ Status parse_object(const nlohmann::json& j, AdaptorOptions& o) {
         if ((c != 'x' && c != 'y' && c != 'z') || !seen.insert(c).second)
           return bad("views", "must be a subset of \"xyz\"");
     }
-    if (j.contains("resolution")) {
-      if (Status s = integer(j["resolution"], "resolution", 2, 8192, o.resolution); !s) return s;
-    }
+    if (Status s = integer(j, "resolution", "", 2, 8192, o.resolution); !s) return s;
     if (j.contains("r")) {
       o.r = j["r"].get<double>();
       if (!(o.r >= 0.0 && o.r <= 1.0)) return bad("r", "must lie in [0, 1]");
@@ -76,12 +77,8 @@ Status parse_object(const nlohmann::json& j, AdaptorOptions& o) {
     if (j.contains("cadence")) {
       const auto& c = j["cadence"];
       if (Status s = check_keys(c, "cadence.", {"every_steps", "every_seconds"}); !s) return s;
-      if (c.contains("every_steps")) {
-        if (Status s =
-                integer(c["every_steps"], "cadence.every_steps", 1, kMaxCount, o.every_steps);
-            !s)
-          return s;
-      }
+      if (Status s = integer(c, "every_steps", "cadence.", 1, kMaxCount, o.every_steps); !s)
+        return s;
       if (c.contains("every_seconds")) {
         o.every_seconds = c["every_seconds"].get<double>();
         if (!(o.every_seconds >= 0.0)) return bad("cadence.every_seconds", "must be ≥ 0");
@@ -103,43 +100,27 @@ Status parse_object(const nlohmann::json& j, AdaptorOptions& o) {
         return st;
       if (s.contains("enabled")) o.server = s["enabled"].get<bool>();
       if (s.contains("bind")) o.bind = s["bind"].get<std::string>();
-      if (s.contains("port")) {
-        if (Status st = integer(s["port"], "server.port", 0, 65535, o.port); !st) return st;
-      }
+      if (Status st = integer(s, "port", "server.", 0, 65535, o.port); !st) return st;
       if (s.contains("token")) o.token = s["token"].get<std::string>();
     }
     if (j.contains("output_dir")) o.output_dir = j["output_dir"].get<std::string>();
-    if (j.contains("keep")) {
-      if (Status s = integer(j["keep"], "keep", 1, kMaxCount, o.keep); !s) return s;
-    }
-    if (j.contains("memory_mb")) {
-      if (Status s = integer(j["memory_mb"], "memory_mb", 1, kMaxCount, o.memory_mb); !s) return s;
-    }
+    if (Status s = integer(j, "keep", "", 1, kMaxCount, o.keep); !s) return s;
+    if (Status s = integer(j, "memory_mb", "", 1, kMaxCount, o.memory_mb); !s) return s;
     if (j.contains("encoding")) {
       const auto& e = j["encoding"];
       if (Status s = check_keys(e, "encoding.", {"lossless", "depth_bits", "normal_bits"}); !s)
         return s;
       if (e.contains("lossless")) o.encoding.lossless = e["lossless"].get<bool>();
-      if (e.contains("depth_bits"))
-        if (Status s =
-                integer(e["depth_bits"], "encoding.depth_bits", 1, 24, o.encoding.depth_bits);
-            !s)
-          return s;
-      if (e.contains("normal_bits"))
-        if (Status s =
-                integer(e["normal_bits"], "encoding.normal_bits", 2, 16, o.encoding.normal_bits);
-            !s)
-          return s;
+      if (Status s = integer(e, "depth_bits", "encoding.", 1, 24, o.encoding.depth_bits); !s)
+        return s;
+      if (Status s = integer(e, "normal_bits", "encoding.", 2, 16, o.encoding.normal_bits); !s)
+        return s;
     }
     if (j.contains("glb")) {
       const auto& g = j["glb"];
       if (Status s = check_keys(g, "glb.", {"compression_level"}); !s) return s;
-      if (g.contains("compression_level")) {
-        if (Status s = integer(g["compression_level"], "glb.compression_level", 0, 10,
-                               o.compression_level);
-            !s)
-          return s;
-      }
+      if (Status s = integer(g, "compression_level", "glb.", 0, 10, o.compression_level); !s)
+        return s;
     }
     if (j.contains("log")) o.log = j["log"].get<bool>();
     if (j.contains("background")) o.background = j["background"].get<bool>();
@@ -155,15 +136,11 @@ Status parse_object(const nlohmann::json& j, AdaptorOptions& o) {
         if (o.fault != "out_of_memory" && o.fault != "exception" && o.fault != "corrupt_message")
           return bad("testing.fault.kind",
                      "must be \"out_of_memory\", \"exception\" or \"corrupt_message\"");
-        if (f.contains("step"))
-          if (Status s = integer(f["step"], "testing.fault.step", 0, kMaxCount, o.fault_step); !s)
-            return s;
+        if (Status s = integer(f, "step", "testing.fault.", 0, kMaxCount, o.fault_step); !s)
+          return s;
+        if (Status s = integer(f, "rank", "testing.fault.", 0, INT32_MAX, o.fault_rank); !s)
+          return s;
         // The root sends no message in the reduction: only another rank's can be damaged.
-        if (f.contains("rank"))
-          if (Status s = integer(f["rank"], "testing.fault.rank",
-                                 o.fault == "corrupt_message" ? 1 : 0, INT32_MAX, o.fault_rank);
-              !s)
-            return s;
         if (o.fault == "corrupt_message" && o.fault_rank < 1)
           return bad("testing.fault.rank", "must be a rank other than the root (≥ 1)");
       }

@@ -42,12 +42,7 @@ void write_seed(const std::string& path, const ldimesh::Mesh& mesh,
     std::fprintf(stderr, "fuzz: encode_glb failed: %s\n", s.message().c_str());
     std::exit(1);
   }
-  std::FILE* out = std::fopen(path.c_str(), "wb");
-  if (!out || std::fwrite(glb.data(), 1, glb.size(), out) != glb.size()) {
-    std::fprintf(stderr, "fuzz: cannot write %s\n", path.c_str());
-    std::exit(1);
-  }
-  std::fclose(out);
+  ldimesh::fuzz::write_file(path, glb);
 }
 
 }  // namespace

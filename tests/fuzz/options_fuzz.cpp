@@ -7,16 +7,12 @@
 // With LDIMESH_FUZZ_WRITE_SEEDS=DIR set, the binary writes a seed corpus into DIR and exits:
 // documents from docs/adaptor.md's examples and the tests, every key present.
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 #include <string>
 #include <string_view>
 
 #include "../../adaptor/src/options.hpp"
 
 #include "fuzz_seeds.hpp"
-
-namespace {}  // namespace
 
 void ldimesh::fuzz::write_seeds(const std::string& dir) {
   const char* seeds[] = {
@@ -32,15 +28,8 @@ void ldimesh::fuzz::write_seeds(const std::string& dir) {
                       "fault": {"kind": "corrupt_message", "step": 3, "rank": 1}}})",
   };
   int k = 0;
-  for (const char* s : seeds) {
-    const std::string path = dir + "/seed-" + std::to_string(k++) + ".json";
-    std::FILE* out = std::fopen(path.c_str(), "wb");
-    if (!out || std::fputs(s, out) < 0) {
-      std::fprintf(stderr, "fuzz: cannot write %s\n", path.c_str());
-      std::exit(1);
-    }
-    std::fclose(out);
-  }
+  for (const char* seed : seeds)
+    write_file(dir + "/seed-" + std::to_string(k++) + ".json", seed);
 }
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
