@@ -452,11 +452,117 @@ int contract_z(const StageY& y, int dxy, const AxisBasis& bz, double* f) {
   return degree;
 }
 
+// The polynomial along a segment parallel to one reference axis w, the two others fixed (every
+// pixel ray through an element whose edges lie along the world axes): the fixed axes are
+// contracted first, u < v, with the bases at the segment's coordinates, leaving the P + 1
+// coefficients h in x_w; the segment's matrix then takes them to s. (p + 1)³ + 2 (p + 1)²
+// operations, and the coherent caster keeps the first contraction over a column of pixels and
+// the matrix over the element.
+
+// The reference axes of an axis-parallel segment: u < v fixed, w moving.
+struct AxisSplit {
+  int u = 0, v = 1, w = 2;
+};
+
+// Whether the segment a → b moves along exactly one reference axis, and which.
+inline bool axis_parallel(glm::dvec3 a, glm::dvec3 b, AxisSplit& axes) {
+  const bool mx = a.x != b.x, my = a.y != b.y, mz = a.z != b.z;
+  if (int(mx) + int(my) + int(mz) != 1) return false;
+  axes.w = mx ? 0 : my ? 1 : 2;
+  axes.u = axes.w == 0 ? 1 : 0;
+  axes.v = axes.w == 2 ? 1 : 2;
+  return true;
+}
+
+// After the u contraction: g[j][l] = Σ_i c[i·s_u + j·s_v + l·s_w] · bu[i] (j along v, l along
+// w), s_r = (P + 1)^r the coefficients' stride along reference axis r.
+using FixedStage = double[kMaxNodes][kMaxNodes];
+template <int P>
+[[gnu::always_inline]] inline void contract_fixed_u(const double* c, AxisSplit axes,
+                                                    const double* bu, FixedStage& g) {
+  constexpr int n = P + 1;
+  constexpr int stride[3] = {1, n, n * n};
+  const int su = stride[axes.u], sv = stride[axes.v], sw = stride[axes.w];
+  for (int j = 0; j < n; ++j)
+    for (int l = 0; l < n; ++l) {
+      const double* row = c + j * sv + l * sw;
+      double sum = 0.0;
+      for (int i = 0; i < n; ++i)
+        sum += row[i * su] * bu[i];
+      g[j][l] = sum;
+    }
+}
+
+// The v contraction: h[l] = Σ_j g[j][l] · bv[j].
+template <int P>
+[[gnu::always_inline]] inline void contract_fixed_v(const FixedStage& g, const double* bv,
+                                                    double* h) {
+  constexpr int n = P + 1;
+  for (int l = 0; l < n; ++l)
+    h[l] = 0.0;
+  for (int j = 0; j < n; ++j)
+    for (int l = 0; l < n; ++l)
+      h[l] += g[j][l] * bv[j];
+}
+
+// The standard Bernstein coefficients m[i][l] in s of B_i^P(x(s)), x(s) = xa (1 − s) + xb s:
+// f = Σ_i h_i m[i] is h along the segment. The whole axis either way round is the identity or
+// the reversal, exactly (the general form gives the same numbers: products with 0 and 1).
+struct SegmentMatrix {
+  enum Kind { identity, reversed, general } kind = identity;
+  double m[kMaxNodes][kMaxNodes];
+};
+template <int P>
+[[gnu::always_inline]] inline void segment_matrix(double xa, double xb, SegmentMatrix& out) {
+  if (xa == 0.0 && xb == 1.0) {
+    out.kind = SegmentMatrix::identity;
+  } else if (xa == 1.0 && xb == 0.0) {
+    out.kind = SegmentMatrix::reversed;
+  } else {
+    out.kind = SegmentMatrix::general;
+    basis_along_segment<P>(xa, xb, out.m);
+    for (int i = 0; i <= P; ++i)
+      for (int l = 0; l <= P; ++l)
+        out.m[i][l] /= kBinomial[P][l];
+  }
+}
+template <int P>
+[[gnu::always_inline]] inline void along_segment(const double* h, const SegmentMatrix& m,
+                                                 double* f) {
+  if (m.kind == SegmentMatrix::identity) {
+    std::copy(h, h + P + 1, f);
+  } else if (m.kind == SegmentMatrix::reversed) {
+    std::reverse_copy(h, h + P + 1, f);
+  } else {
+    for (int l = 0; l <= P; ++l)
+      f[l] = 0.0;
+    for (int i = 0; i <= P; ++i)
+      for (int l = 0; l <= P; ++l)
+        f[l] += h[i] * m.m[i][l];
+  }
+}
+
+// f[0..P] along the axis-parallel segment a → b; returns P.
+template <int P>
+int restrict_axis_parallel(const double* c, AxisSplit axes, glm::dvec3 a, glm::dvec3 b, double* f) {
+  double bu[kMaxNodes], bv[kMaxNodes], unused[kMaxNodes], h[kMaxNodes];
+  bernstein_basis<P>(a[axes.u], bu, unused);
+  bernstein_basis<P>(a[axes.v], bv, unused);
+  FixedStage g;
+  contract_fixed_u<P>(c, axes, bu, g);
+  contract_fixed_v<P>(g, bv, h);
+  SegmentMatrix m;
+  segment_matrix<P>(a[axes.w], b[axes.w], m);
+  along_segment<P>(h, m, f);
+  return P;
+}
+
 // Standard Bernstein coefficients f[0..n] on s ∈ [0, 1] of the tensor polynomial with
 // coefficients `c` along the straight segment from reference point a (s = 0) to b (s = 1);
 // returns the degree n ≤ 3P (P per reference axis the segment moves along).
 template <int P>
 int restrict_to_segment(const double* c, glm::dvec3 a, glm::dvec3 b, double* f) {
+  if (AxisSplit axes; axis_parallel(a, b, axes)) return restrict_axis_parallel<P>(c, axes, a, b, f);
   AxisBasis bx, by, bz;
   segment_basis<P>(a.x, b.x, bx);
   segment_basis<P>(a.y, b.y, by);
@@ -770,6 +876,19 @@ ElementBins bin_elements(const std::vector<ActiveElement>& elements, int axis) {
   return bins;
 }
 
+// Whether values v[i·si + j·sj + l] (i < ni, j < nj, l < nl) all have the strict sign of
+// the first, none near underflow (nor NaN); stops at the first that differs.
+[[gnu::always_inline]] inline bool one_sign(const double* v, int ni, int nj, int si, int sj,
+                                            int nl) {
+  constexpr double kTiny = 1e-250;
+  const double sign = v[0] > 0.0 ? 1.0 : -1.0;
+  for (int i = 0; i < ni; ++i)
+    for (int j = 0; j < nj; ++j)
+      for (int l = 0; l < nl; ++l)
+        if (!(sign * v[i * si + j * sj + l] > kTiny)) return false;
+  return true;
+}
+
 // B_i^P and dB_i^P/dx at one coordinate: the basis of a reference axis a segment does not move
 // along, kept by the staged restriction for the gradient at its hits.
 struct PointBasis {
@@ -797,7 +916,7 @@ class StagedRestriction {
       contract_x<P>(c_, basis_x_, x_);
       ax_ = a.x, bx_ = b.x;
       x_valid_ = true;
-      y_valid_ = dx_valid_ = along_x_valid_ = false;
+      y_valid_ = dx_valid_ = false;
       constexpr int n = P + 1;
       x_uniform_ =
           one_sign(&x_.g[0][0][0], n, n, kMaxNodes * kMaxNodes, kMaxNodes, basis_x_.degree + 1);
@@ -827,9 +946,9 @@ class StagedRestriction {
   }
 
   // ∇ξ at parameter s of the last restrict()'s segment; false where the segment moves along ξ
-  // and another axis (then evaluate the tensor).
+  // (then evaluate the tensor).
   bool gradient(double s, glm::dvec3& g) {
-    if (a_.x != b_.x) return a_.y == b_.y && a_.z == b_.z && gradient_along_x(s, g);
+    if (a_.x != b_.x) return false;
     // G_kj = Σ_i c_ijk B_i(ξ) and its ξ-derivative are the ξ stage itself where ξ is fixed along
     // the ray (kept over the row).
     // The hit's reference point, as evaluate_tensor would be given it, and the 1-D bases and
@@ -857,46 +976,6 @@ class StagedRestriction {
       g.y += sy * z.value[k];
       g.z += sz * z.derivative[k];
     }
-    return true;
-  }
-
-  // ∇ξ where the segment moves along ξ only (η, ζ fixed): the ξ and η stages of the last
-  // restrict() hold h_kl, the polynomial in s along the ray per ζ-node k (scaled basis), and
-  // with B_j'(η) in place of B_j(η) the same for ∂/∂η. Both are kept in standard Bernstein form
-  // while η stays (a row: (p + 1)³ multiply-adds); per hit, the Bernstein basis at s and at ζ
-  // give ∂/∂ξ (the derivative along s over dξ/ds), ∂/∂η and ∂/∂ζ in (p + 1)² each, where the
-  // tensor evaluation takes 2 (p + 1)³.
-  bool gradient_along_x(double s, glm::dvec3& g) {
-    constexpr int n = P + 1;
-    if (!along_x_valid_ || along_x_at_ != a_.y) {
-      const double* dy = fixed_[1].derivative;
-      for (int k = 0; k < n; ++k)
-        for (int l = 0; l <= P; ++l) {
-          double dh = 0.0;
-          for (int j = 0; j < n; ++j)
-            dh += x_.g[k][j][l] * dy[j];
-          along_x_h_.h[k][l] = y_.h[k][l] / kBinomial[P][l];
-          along_x_dh_.h[k][l] = dh / kBinomial[P][l];
-        }
-      along_x_at_ = a_.y;
-      along_x_valid_ = true;
-    }
-    double bs[kMaxNodes], ds[kMaxNodes];
-    bernstein_basis<P>(s, bs, ds);
-    const PointBasis& z = fixed_[2];
-    double gs = 0.0, gy = 0.0, gz = 0.0;
-    for (int k = 0; k < n; ++k) {
-      double hs = 0.0, hv = 0.0, hy = 0.0;
-      for (int l = 0; l <= P; ++l) {
-        hs += along_x_h_.h[k][l] * ds[l];
-        hv += along_x_h_.h[k][l] * bs[l];
-        hy += along_x_dh_.h[k][l] * bs[l];
-      }
-      gs += hs * z.value[k];
-      gy += hy * z.value[k];
-      gz += hv * z.derivative[k];
-    }
-    g = glm::dvec3(gs / (b_.x - a_.x), gy, gz);
     return true;
   }
 
@@ -928,19 +1007,6 @@ class StagedRestriction {
       out.b[i][0] = at.derivative[i];
   }
 
-  // Whether values v[i·si + j·sj + l] (i < ni, j < nj, l < nl) all have the strict sign of
-  // the first, none near underflow (nor NaN); stops at the first that differs.
-  [[gnu::always_inline]] static bool one_sign(const double* v, int ni, int nj, int si, int sj,
-                                              int nl) {
-    constexpr double kTiny = 1e-250;
-    const double sign = v[0] > 0.0 ? 1.0 : -1.0;
-    for (int i = 0; i < ni; ++i)
-      for (int j = 0; j < nj; ++j)
-        for (int l = 0; l < nl; ++l)
-          if (!(sign * v[i * si + j * sj + l] > kTiny)) return false;
-    return true;
-  }
-
   const double* c_;
   bool x_uniform_ = false, y_uniform_ = false;
   AxisBasis basis_x_, basis_y_, basis_z_;
@@ -948,10 +1014,6 @@ class StagedRestriction {
   PointBasis fixed_[3], at_hit_[3];
   StageX x_, dx_;
   StageY y_;
-  // gradient_along_x's η stage (standard form) with B_j(η) and B_j'(η), at η = along_x_at_.
-  StageY along_x_h_, along_x_dh_;
-  double along_x_at_ = 0.0;
-  bool along_x_valid_ = false;
   double ax_ = 0, bx_ = 0, ay_ = 0, by_ = 0, az_ = 0, bz_ = 0;
   bool x_valid_ = false, y_valid_ = false, z_valid_ = false, dx_valid_ = false;
   glm::dvec3 a_{0.0}, b_{0.0};
@@ -1007,6 +1069,8 @@ class HexAxisBinding final : public AxisBinding {
     }
     const int qb0 = bins.bin_b(lo_b), qb1 = bins.bin_b(hi_b);
     const int qc0 = bins.bin_c(lo_c), qc1 = bins.bin_c(hi_c);
+    Scratch scratch;
+    scratch.read_lattice(rays);
     for (int cc = qc0; cc <= qc1; ++cc)
       for (int bb = qb0; bb <= qb1; ++bb) {
         const std::size_t bin = std::size_t(bb) + std::size_t(bins.nb) * std::size_t(cc);
@@ -1016,24 +1080,64 @@ class HexAxisBinding final : public AxisBinding {
           if (std::max(bins.bin_b(el.lo[bins.b]), qb0) != bb ||
               std::max(bins.bin_c(el.lo[bins.c]), qc0) != cc)
             continue;
-          cast_element(e, rays, out);
+          cast_element(e, rays, out, scratch);
         }
       }
   }
 
  private:
+  // What the separable path of cast_element_order needs of a lattice query, found once per
+  // query, and what it keeps per line of an element's pixels (reused from element to element).
+  struct Scratch {
+    // Whether the query's rays form a regular lattice: every ray (t0 ≤ t1) of column i and
+    // row r of the query starts at column_org[i] along the view's u axis, row_org[r] along v and
+    // depth_org along the rays, with one range [t0, t1].
+    bool regular = false;
+    double depth_org = 0.0, t0 = 0.0, t1 = 0.0;
+    std::vector<double> column_org, row_org;
+    void read_lattice(const AxisRays& rays) {
+      const View& view = *rays.lattice;
+      const int ua = exact_axis(view.u), va = exact_axis(view.v), width = view.width;
+      const int rows = int(rays.rays.size() / std::size_t(width));
+      column_org.resize(std::size_t(width));
+      row_org.resize(std::size_t(rows));
+      for (int i = 0; i < width; ++i)
+        column_org[i] = rays.rays[i].org[ua];
+      for (int r = 0; r < rows; ++r)
+        row_org[r] = rays.rays[std::size_t(r) * std::size_t(width)].org[va];
+      regular = ua >= 0 && va >= 0;
+      bool first = true;
+      for (std::size_t k = 0; k < rays.rays.size() && regular; ++k) {
+        const AxisRay& ray = rays.rays[k];
+        if (!(ray.t0 <= ray.t1)) continue;
+        if (first) depth_org = ray.org[rays.axis], t0 = ray.t0, t1 = ray.t1, first = false;
+        regular = ray.org[ua] == column_org[k % width] && ray.org[va] == row_org[k / width] &&
+                  ray.org[rays.axis] == depth_org && ray.t0 == t0 && ray.t1 == t1;
+      }
+    }
+    // Per line of the element's pixels: whether its rays are inside the element along the
+    // reference axis its image axis maps to, and the basis there.
+    struct Line {
+      bool inside;
+      PointBasis basis;
+    };
+    std::vector<Line> outer, inner;
+  };
+
   // The pixels of the lattice query `rays` whose centres element e's box covers,
   // in the order that keeps the staged restriction's first stages: rows of the image axis
   // whose world axis maps to the lower of the two reference axes across the ray.
-  void cast_element(std::uint32_t e, const AxisRays& rays, std::vector<AxisHit>& out) const {
-    with_order(active_.order, [&](auto p) { cast_element_order<p>(e, rays, out); });
+  void cast_element(std::uint32_t e, const AxisRays& rays, std::vector<AxisHit>& out,
+                    Scratch& scratch) const {
+    with_order(active_.order, [&](auto p) { cast_element_order<p>(e, rays, out, scratch); });
   }
 
   template <int P>
-  void cast_element_order(std::uint32_t e, const AxisRays& rays, std::vector<AxisHit>& out) const {
+  void cast_element_order(std::uint32_t e, const AxisRays& rays, std::vector<AxisHit>& out,
+                          Scratch& scratch) const {
     const View& view = *rays.lattice;
     const ActiveElement& el = active_.elements[e];
-    const int ua = exact_axis(view.u), va = exact_axis(view.v);
+    const int ua = exact_axis(view.u), va = exact_axis(view.v), wa = rays.axis;
     const int rows = int(rays.rays.size() / std::size_t(view.width));
     // Pixels whose centres lie in the box (an affine element lies in its box), with a margin
     // far above rounding: the exact test is the clip below.
@@ -1049,51 +1153,165 @@ class HexAxisBinding final : public AxisBinding {
     j0 = std::max(j0, rays.row_begin);
     j1 = std::min(j1, rays.row_begin + rows - 1);
     if (i0 > i1 || j0 > j1) return;
+    const auto index = [&](int i, int j) {
+      return std::size_t(j - rays.row_begin) * std::size_t(view.width) + std::size_t(i);
+    };
 
-    // The reference axis that moves along the ray, and which image axis holds the lower of the
-    // other two (keep it fixed in the outer loop).
+    // The reference axis each world axis maps to (−1: none, 3: several).
     const glm::dmat3& m = el.to_reference;
-    const auto reference_of = [&](int world) {  // the one reference axis a world axis maps to
+    const auto reference_of = [&](int world) {
       int r = -1;
       for (int k = 0; k < 3; ++k)
         if (m[world][k] != 0.0) r = r < 0 ? k : 3;
       return r;
     };
-    const int ru = reference_of(ua), rv = reference_of(va);
+    const int ru = reference_of(ua), rv = reference_of(va), rw = reference_of(wa);
+    // The image axis whose reference axis is the lower of the two across the ray goes in the
+    // outer loop, so that the first stage of the restriction is kept along the inner one.
     const bool columns_outer = ru >= 0 && ru < 3 && rv >= 0 && rv < 3 && ru < rv;
-
-    const double* c = active_.coefficients_of(e);
-    const glm::dvec3 rd = el.to_reference * rays.dir;
-    const glm::dmat3 to_world_gradient = glm::transpose(el.to_reference);
-    StagedRestriction<P> staged(c);
-    double f[kMaxRayDegree + 1];
     const int outer0 = columns_outer ? i0 : j0, outer1 = columns_outer ? i1 : j1;
     const int inner0 = columns_outer ? j0 : i0, inner1 = columns_outer ? j1 : i1;
-    for (int outer = outer0; outer <= outer1; ++outer)
-      for (int inner = inner0; inner <= inner1; ++inner) {
-        const int i = columns_outer ? outer : inner, j = columns_outer ? inner : outer;
-        const std::size_t k = std::size_t(j - rays.row_begin) * std::size_t(view.width) + i;
-        const AxisRay& ray = rays.rays[k];
-        if (!(ray.t0 <= ray.t1)) continue;
-        // As intersect_element does it.
-        const glm::dvec3 ro = el.to_reference * (ray.org - el.origin);
-        double t0 = ray.t0, t1 = ray.t1;
-        if (!clip_ray_to_box(ro, rd, glm::dvec3(0.0), glm::dvec3(1.0), t0, t1)) continue;
-        const glm::dvec3 a = glm::clamp(ro + t0 * rd, 0.0, 1.0),
-                         b = glm::clamp(ro + t1 * rd, 0.0, 1.0);
-        const int degree = staged.restrict(a, b, f);
-        if (degree <= 0) continue;  // constant along the ray, or no root possible
-        const auto found = [&](double s) {
-          glm::dvec3 g;
-          if (!staged.gradient(s, g)) g = evaluate_tensor<P>(c, a + s * (b - a)).gradient;
-          out.push_back({std::uint32_t(k),
-                         {s == 1.0 ? t1 : t0 + s * (t1 - t0),
-                          unit_normal(to_world_gradient * g, rays.dir), 0.0f}});
-        };
-        with_degree<P>(degree, [&](auto n) {
-          if constexpr (n > 0) bernstein_roots<n>(f, found);
+    const auto pixel = [&](int outer, int inner) {
+      return columns_outer ? index(outer, inner) : index(inner, outer);
+    };
+
+    const double* c = active_.coefficients_of(e);
+    const glm::dvec3 rd = m * rays.dir;
+    const glm::dmat3 to_world_gradient = glm::transpose(m);
+    // The roots of f[0..n] along the clipped stretch [t0, t1] of pixel k's ray, with the
+    // reference gradient at parameter s from `gradient`.
+    const auto emit = [&]<int n>(std::integral_constant<int, n>, std::size_t k, const double* f,
+                                 double t0, double t1, auto gradient) {
+      bernstein_roots<n>(f, [&](double s) {
+        out.push_back({std::uint32_t(k),
+                       {s == 1.0 ? t1 : t0 + s * (t1 - t0),
+                        unit_normal(to_world_gradient * gradient(s), rays.dir), 0.0f}});
+      });
+    };
+
+    // Any pixel on its own, as intersect_element does it (the clip, the restriction and the
+    // roots), with the staged restriction keeping the stages that rows of pixels share.
+    StagedRestriction<P> staged(c);
+    const auto cast_pixel = [&](std::size_t k) {
+      const AxisRay& ray = rays.rays[k];
+      const glm::dvec3 ro = m * (ray.org - el.origin);
+      double t0 = ray.t0, t1 = ray.t1;
+      if (!clip_ray_to_box(ro, rd, glm::dvec3(0.0), glm::dvec3(1.0), t0, t1)) return;
+      const glm::dvec3 a = glm::clamp(ro + t0 * rd, 0.0, 1.0),
+                       b = glm::clamp(ro + t1 * rd, 0.0, 1.0);
+      const auto tensor_gradient = [&](double s) {
+        return evaluate_tensor<P>(c, a + s * (b - a)).gradient;
+      };
+      double f[kMaxRayDegree + 1] = {};  // zeroed: not every degree writes all of it
+      if (AxisSplit axes; axis_parallel(a, b, axes)) {
+        restrict_axis_parallel<P>(c, axes, a, b, f);
+        emit(std::integral_constant<int, P>{}, k, f, t0, t1, tensor_gradient);
+        return;
+      }
+      const int degree = staged.restrict(a, b, f);
+      if (degree <= 0) return;  // constant along the ray, or no root possible
+      with_degree<P>(degree, [&](auto n) {
+        if constexpr (n > 0)
+          emit(n, k, f, t0, t1, [&](double s) {
+            glm::dvec3 g;
+            if (!staged.gradient(s, g)) g = tensor_gradient(s);
+            return g;
+          });
+      });
+    };
+
+    const bool separable = ru >= 0 && ru < 3 && rv >= 0 && rv < 3 && rw >= 0 && rw < 3 &&
+                           ru != rv && ru != rw && rv != rw;
+    if (!separable || !scratch.regular) {
+      for (int outer = outer0; outer <= outer1; ++outer)
+        for (int inner = inner0; inner <= inner1; ++inner)
+          if (const std::size_t k = pixel(outer, inner); rays.rays[k].t0 <= rays.rays[k].t1)
+            cast_pixel(k);
+      return;
+    }
+
+    // An element whose edges lie along the world axes (each world axis maps to one reference
+    // axis) in a regular lattice: every pixel's segment is parallel to reference axis rw, and
+    // the clip separates. A pixel's reference coordinate across the ray depends on its column
+    // alone along ru and on its row alone along rv (the other terms of the product are exact
+    // zeros); its stretch along the ray on neither. So the clip is done once per column, row
+    // and element, the bases once per column and row, the u contraction once per outer line
+    // and the segment's matrix once: the same operations as restrict_axis_parallel on each
+    // pixel, so the same bits.
+    const AxisSplit axes{std::min(ru, rv), std::max(ru, rv), rw};
+    const auto origin_of = [&](int i, int j) {  // the ray origin of pixel (i, j), as a ray has it
+      glm::dvec3 org;
+      org[ua] = scratch.column_org[i];
+      org[va] = scratch.row_org[j - rays.row_begin];
+      org[wa] = scratch.depth_org;
+      return m * (org - el.origin);
+    };
+    const glm::dvec3 ro0 = origin_of(i0, j0);
+    const double inv = 1.0 / rd[rw];
+    double ta = (0.0 - ro0[rw]) * inv, tb = (1.0 - ro0[rw]) * inv;
+    if (ta > tb) std::swap(ta, tb);
+    const double t0 = std::max(scratch.t0, ta), t1 = std::min(scratch.t1, tb);
+    if (!(t0 < t1)) return;
+    const double a_w = std::clamp(ro0[rw] + t0 * rd[rw], 0.0, 1.0);
+    const double b_w = std::clamp(ro0[rw] + t1 * rd[rw], 0.0, 1.0);
+    SegmentMatrix segment;
+    segment_matrix<P>(a_w, b_w, segment);
+    const auto fill = [&](std::vector<Scratch::Line>& lines, int r, int lo, int hi, bool outer) {
+      lines.resize(std::size_t(hi - lo + 1));
+      for (int q = lo; q <= hi; ++q) {
+        const double x = (outer == columns_outer ? origin_of(q, j0) : origin_of(i0, q))[r];
+        Scratch::Line& line = lines[q - lo];
+        line.inside = !(x < 0.0 || x > 1.0);
+        bernstein_basis<P>(std::clamp(x + t0 * rd[r], 0.0, 1.0), line.basis.value,
+                           line.basis.derivative);
+      }
+    };
+    fill(scratch.outer, axes.u, outer0, outer1, true);
+    fill(scratch.inner, axes.v, inner0, inner1, false);
+
+    constexpr int n = P + 1;
+    const std::size_t inner_step = columns_outer ? std::size_t(view.width) : 1;
+    for (int outer = outer0; outer <= outer1; ++outer) {
+      const Scratch::Line& o = scratch.outer[outer - outer0];
+      if (!o.inside) continue;
+      FixedStage g, dg;
+      contract_fixed_u<P>(c, axes, o.basis.value, g);
+      // One strict sign over the line: the bases that follow are nonnegative and sum to one,
+      // so no pixel of the line has a root.
+      if (one_sign(&g[0][0], n, 1, kMaxNodes, 0, n)) continue;
+      bool dg_valid = false;
+      std::size_t k = pixel(outer, inner0);
+      for (int inner = inner0; inner <= inner1; ++inner, k += inner_step) {
+        const Scratch::Line& q = scratch.inner[inner - inner0];
+        if (!q.inside || !(rays.rays[k].t0 <= rays.rays[k].t1)) continue;
+        double h[kMaxNodes], f[kMaxNodes];
+        contract_fixed_v<P>(g, q.basis.value, h);
+        if (one_sign(h, 1, 1, 0, 0, n)) continue;
+        along_segment<P>(h, segment, f);
+        // ∂/∂w from h, ∂/∂v from g with B_j'(x_v), ∂/∂u from the u contraction with B_i'(x_u)
+        // (once per line, at its first hit), all at the hit's x_w.
+        emit(std::integral_constant<int, P>{}, k, f, t0, t1, [&](double s) {
+          if (!dg_valid) {
+            contract_fixed_u<P>(c, axes, o.basis.derivative, dg);
+            dg_valid = true;
+          }
+          double bw[kMaxNodes], dbw[kMaxNodes];
+          bernstein_basis<P>(a_w + s * (b_w - a_w), bw, dbw);
+          double grad[3] = {0.0, 0.0, 0.0};
+          for (int l = 0; l < n; ++l) {
+            double du = 0.0, dv = 0.0;
+            for (int j = 0; j < n; ++j) {
+              du += dg[j][l] * q.basis.value[j];
+              dv += g[j][l] * q.basis.derivative[j];
+            }
+            grad[axes.u] += du * bw[l];
+            grad[axes.v] += dv * bw[l];
+            grad[axes.w] += h[l] * dbw[l];
+          }
+          return glm::dvec3(grad[0], grad[1], grad[2]);
         });
       }
+    }
   }
 
   Activation active_;
