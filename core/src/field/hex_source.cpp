@@ -876,16 +876,19 @@ ElementBins bin_elements(const std::vector<ActiveElement>& elements, int axis) {
   return bins;
 }
 
+// Coefficients this close to zero count as zero in the sign tests (far below any field's
+// values, far above underflow).
+constexpr double kTinyCoefficient = 1e-250;
+
 // Whether values v[i·si + j·sj + l] (i < ni, j < nj, l < nl) all have the strict sign of
 // the first, none near underflow (nor NaN); stops at the first that differs.
 [[gnu::always_inline]] inline bool one_sign(const double* v, int ni, int nj, int si, int sj,
                                             int nl) {
-  constexpr double kTiny = 1e-250;
   const double sign = v[0] > 0.0 ? 1.0 : -1.0;
   for (int i = 0; i < ni; ++i)
     for (int j = 0; j < nj; ++j)
       for (int l = 0; l < nl; ++l)
-        if (!(sign * v[i * si + j * sj + l] > kTiny)) return false;
+        if (!(sign * v[i * si + j * sj + l] > kTinyCoefficient)) return false;
   return true;
 }
 
@@ -1122,6 +1125,8 @@ class HexAxisBinding final : public AxisBinding {
       PointBasis basis;
     };
     std::vector<Line> outer, inner;
+    std::vector<double> inner_values, h;  // n rows of one value per inner pixel
+    std::vector<int> candidates;          // the inner pixels that may have a root
   };
 
   // The pixels of the lattice query `rays` whose centres element e's box covers,
@@ -1270,7 +1275,16 @@ class HexAxisBinding final : public AxisBinding {
     fill(scratch.inner, axes.v, inner0, inner1, false);
 
     constexpr int n = P + 1;
+    const int count = inner1 - inner0 + 1;
     const std::size_t inner_step = columns_outer ? std::size_t(view.width) : 1;
+    // The inner bases' values as rows (B_j at every inner pixel), so that a line's polynomials
+    // are computed with the pixels in the vector lanes.
+    scratch.inner_values.resize(std::size_t(n) * count);
+    scratch.h.resize(std::size_t(n) * count);
+    scratch.candidates.resize(std::size_t(count));
+    for (int j = 0; j < n; ++j)
+      for (int q = 0; q < count; ++q)
+        scratch.inner_values[std::size_t(j) * count + q] = scratch.inner[q].basis.value[j];
     for (int outer = outer0; outer <= outer1; ++outer) {
       const Scratch::Line& o = scratch.outer[outer - outer0];
       if (!o.inside) continue;
@@ -1279,18 +1293,43 @@ class HexAxisBinding final : public AxisBinding {
       // One strict sign over the line: the bases that follow are nonnegative and sum to one,
       // so no pixel of the line has a root.
       if (one_sign(&g[0][0], n, 1, kMaxNodes, 0, n)) continue;
-      bool dg_valid = false;
+      // The v contraction of every pixel of the line, h[l][q] = Σ_j g[j][l] · B_j(x_v(q)), in
+      // the order contract_fixed_v takes (the same bits); then the pixels whose h does not
+      // have one strict sign, without a branch on it.
+      double* h = scratch.h.data();
+      const double* bv = scratch.inner_values.data();
+      for (int l = 0; l < n; ++l) {
+        double* hl = h + std::size_t(l) * count;
+        std::fill(hl, hl + count, 0.0);
+        for (int j = 0; j < n; ++j) {
+          const double gjl = g[j][l], *bj = bv + std::size_t(j) * count;
+          for (int q = 0; q < count; ++q)
+            hl[q] += gjl * bj[q];
+        }
+      }
+      int candidates = 0;
       std::size_t k = pixel(outer, inner0);
-      for (int inner = inner0; inner <= inner1; ++inner, k += inner_step) {
-        const Scratch::Line& q = scratch.inner[inner - inner0];
-        if (!q.inside || !(rays.rays[k].t0 <= rays.rays[k].t1)) continue;
-        double h[kMaxNodes], f[kMaxNodes];
-        contract_fixed_v<P>(g, q.basis.value, h);
-        if (one_sign(h, 1, 1, 0, 0, n)) continue;
-        along_segment<P>(h, segment, f);
+      for (int q = 0; q < count; ++q, k += inner_step) {
+        double lo = h[q], hi = h[q];
+        for (int l = 1; l < n; ++l)
+          lo = std::min(lo, h[std::size_t(l) * count + q]),
+          hi = std::max(hi, h[std::size_t(l) * count + q]);
+        const bool keep = scratch.inner[q].inside && rays.rays[k].t0 <= rays.rays[k].t1 &&
+                          !(lo > kTinyCoefficient || hi < -kTinyCoefficient);
+        scratch.candidates[candidates] = q;
+        candidates += keep;
+      }
+      bool dg_valid = false;
+      for (int m = 0; m < candidates; ++m) {
+        const int q = scratch.candidates[m];
+        const PointBasis& bq = scratch.inner[q].basis;
+        double hq[kMaxNodes], f[kMaxNodes];
+        for (int l = 0; l < n; ++l)
+          hq[l] = h[std::size_t(l) * count + q];
+        along_segment<P>(hq, segment, f);
         // ∂/∂w from h, ∂/∂v from g with B_j'(x_v), ∂/∂u from the u contraction with B_i'(x_u)
         // (once per line, at its first hit), all at the hit's x_w.
-        emit(std::integral_constant<int, P>{}, k, f, t0, t1, [&](double s) {
+        emit(std::integral_constant<int, P>{}, pixel(outer, inner0 + q), f, t0, t1, [&](double s) {
           if (!dg_valid) {
             contract_fixed_u<P>(c, axes, o.basis.derivative, dg);
             dg_valid = true;
@@ -1301,12 +1340,12 @@ class HexAxisBinding final : public AxisBinding {
           for (int l = 0; l < n; ++l) {
             double du = 0.0, dv = 0.0;
             for (int j = 0; j < n; ++j) {
-              du += dg[j][l] * q.basis.value[j];
-              dv += g[j][l] * q.basis.derivative[j];
+              du += dg[j][l] * bq.value[j];
+              dv += g[j][l] * bq.derivative[j];
             }
             grad[axes.u] += du * bw[l];
             grad[axes.v] += dv * bw[l];
-            grad[axes.w] += h[l] * dbw[l];
+            grad[axes.w] += hq[l] * dbw[l];
           }
           return glm::dvec3(grad[0], grad[1], grad[2]);
         });
