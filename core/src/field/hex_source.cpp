@@ -1,5 +1,7 @@
 #include "ldimesh/core/field/hex_source.hpp"
 
+#include "curved_element.hpp"
+
 #include <algorithm>
 #include <array>
 #include <atomic>
@@ -727,9 +729,11 @@ template <int n, class Found>
 
 // What the casters need of one active element.
 struct ActiveElement {
-  glm::dvec3 origin;        // corner 0
-  glm::dmat3 to_reference;  // inverse of the affine frame's axes
-  glm::dvec3 lo, hi;        // axis-aligned bounds
+  glm::dvec3 origin;               // corner 0 (affine elements)
+  glm::dmat3 to_reference;         // inverse of the affine frame's axes (affine elements)
+  glm::dvec3 lo, hi;               // axis-aligned bounds
+  std::uint32_t curved = kAffine;  // a curved element's index in Activation::geometry
+  static constexpr std::uint32_t kAffine = ~std::uint32_t(0);
 };
 
 struct Activation {
@@ -738,8 +742,17 @@ struct Activation {
   std::vector<ActiveElement> elements;
   std::vector<double> coefficients;  // iso subtracted, values_per_element per active element
   std::uint64_t nonfinite = 0;
+  // The curved active elements' geometry in Bernstein form, points_per_element each.
+  int geometry_degree = 1;
+  std::size_t points_per_element = 0;
+  std::vector<glm::dvec3> geometry;
   const double* coefficients_of(std::size_t k) const {
     return &coefficients[k * values_per_element];
+  }
+  // Active element k as the curved intersection takes it (k must be curved).
+  curved::Element curved_element(std::size_t k) const {
+    return {order, geometry_degree, coefficients_of(k),
+            &geometry[std::size_t(elements[k].curved) * points_per_element]};
   }
 };
 
@@ -765,6 +778,17 @@ void intersect_element(const ActiveElement& e, const double* c, glm::dvec3 org, 
         hits.push_back({s == 1.0 ? t1 : t0 + s * (t1 - t0), unit_normal(g, dir), 0.0f});
       });
   });
+}
+
+// The roots of active element k along a ray, whichever its geometry.
+template <int P>
+void intersect_active(const Activation& act, std::size_t k, glm::dvec3 org, glm::dvec3 dir,
+                      double t_min, double t_max, std::vector<RayHit>& hits) {
+  const ActiveElement& el = act.elements[k];
+  if (el.curved != ActiveElement::kAffine)
+    curved::intersect(act.curved_element(k), org, dir, t_min, t_max, hits);
+  else
+    intersect_element<P>(el, act.coefficients_of(k), org, dir, t_min, t_max, hits);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -794,8 +818,7 @@ class HexBinding final : public GeometryBinding {
     auto* q = reinterpret_cast<RayQuery*>(args->context);
     const Activation& act = self->active_;
     with_order(act.order, [&](auto p) {
-      intersect_element<p>(act.elements[args->primID], act.coefficients_of(args->primID), q->org,
-                           q->dir, q->t_min, q->t_max, *q->hits);
+      intersect_active<p>(act, args->primID, q->org, q->dir, q->t_min, q->t_max, *q->hits);
     });
   }
 
@@ -1054,8 +1077,7 @@ class HexAxisBinding final : public AxisBinding {
         with_order(active_.order, [&](auto p) {
           for (std::uint32_t m = bins.first[bin]; m < bins.first[bin + 1]; ++m) {
             const std::uint32_t e = bins.elements[m];
-            intersect_element<p>(active_.elements[e], active_.coefficients_of(e), ray.org, rays.dir,
-                                 ray.t0, ray.t1, hits);
+            intersect_active<p>(active_, e, ray.org, rays.dir, ray.t0, ray.t1, hits);
           }
         });
         for (const RayHit& h : hits)
@@ -1127,6 +1149,7 @@ class HexAxisBinding final : public AxisBinding {
     std::vector<Line> outer, inner;
     std::vector<double> inner_values, h;  // n rows of one value per inner pixel
     std::vector<int> candidates;          // the inner pixels that may have a root
+    std::vector<RayHit> hits;             // one pixel's hits with a curved element
   };
 
   // The pixels of the lattice query `rays` whose centres element e's box covers,
@@ -1161,6 +1184,21 @@ class HexAxisBinding final : public AxisBinding {
     const auto index = [&](int i, int j) {
       return std::size_t(j - rays.row_begin) * std::size_t(view.width) + std::size_t(i);
     };
+    if (el.curved != ActiveElement::kAffine) {  // every pixel of the box on its own
+      std::vector<RayHit>& hits = scratch.hits;
+      const curved::Element ce = active_.curved_element(e);
+      for (int j = j0; j <= j1; ++j)
+        for (int i = i0; i <= i1; ++i) {
+          const std::size_t k = index(i, j);
+          const AxisRay& ray = rays.rays[k];
+          if (!(ray.t0 <= ray.t1)) continue;
+          hits.clear();
+          curved::intersect(ce, ray.org, rays.dir, ray.t0, ray.t1, hits);
+          for (const RayHit& h : hits)
+            out.push_back({std::uint32_t(k), h});
+        }
+      return;
+    }
 
     // The reference axis each world axis maps to (−1: none, 3: several).
     const glm::dmat3& m = el.to_reference;
@@ -1394,8 +1432,13 @@ HexElementSource::HexElementSource(const HexBlock& block) : block_(block) {
   check_order(block.order);
   check_node_set(block.nodes);
   const std::size_t n = nodes_per_element(block.order);
+  const int q = block.geometry_order;
   if (block.element_count == 0) throw std::invalid_argument("hex source: no elements");
-  if (!block.corners) throw std::invalid_argument("hex source: null corner array");
+  if (q < 0 || q > kMaxHexOrder)
+    throw std::invalid_argument("hex source: geometry order " + std::to_string(q) + " outside 0.." +
+                                std::to_string(kMaxHexOrder));
+  if (q > 0 && !block.geometry) throw std::invalid_argument("hex source: null geometry array");
+  if (q == 0 && !block.corners) throw std::invalid_argument("hex source: null corner array");
   if (!block.values) throw std::invalid_argument("hex source: null value array");
   if (block.type != ScalarType::float32 && block.type != ScalarType::float64)
     throw std::invalid_argument("hex source: unknown scalar type");
@@ -1405,39 +1448,138 @@ HexElementSource::HexElementSource(const HexBlock& block) : block_(block) {
                                 std::to_string(block_.element_stride) +
                                 " below (order + 1)^3 = " + std::to_string(n));
 
+  // Each element's geometry in Bernstein form (degree q, or 1 for corners: a trilinear map's
+  // Bernstein coefficients are its corners); affine ones keep the parallelepiped path, the
+  // others are kept for the curved intersection.
+  geometry_degree_ = q > 0 ? q : 1;
+  const int gm = geometry_degree_ + 1;
+  const std::size_t gn = std::size_t(gm) * gm * gm;
+  if (q > 0) corners_.resize(24 * block.element_count);
+  curved_of_.assign(block.element_count, kNotCurved);
+  std::vector<glm::dvec3> x(gn);
+  std::vector<double> nodal(gn), bernstein(gn);
   constexpr double inf = std::numeric_limits<double>::infinity();
   bounds_ = {glm::dvec3(inf), glm::dvec3(-inf)};
+  const auto vertex = [&](int c) {
+    return std::size_t((c & 1) * geometry_degree_) +
+           std::size_t(gm) * (std::size_t(((c >> 1) & 1) * geometry_degree_) +
+                              std::size_t(gm) * std::size_t(((c >> 2) & 1) * geometry_degree_));
+  };
   for (std::size_t e = 0; e < block.element_count; ++e) {
-    const double* corners = block.corners + 24 * e;
-    const AffineFrame f = frame_of(corners);
+    if (q > 0) {
+      const double* nodes = block.geometry + 3 * gn * e;
+      for (int axis = 0; axis < 3; ++axis) {
+        for (std::size_t m = 0; m < gn; ++m)
+          nodal[m] = nodes[3 * m + axis];
+        convert_element(q, conversion_matrix(q, block.nodes), nodal.data(), bernstein.data());
+        for (std::size_t m = 0; m < gn; ++m)
+          x[m][axis] = bernstein[m];
+      }
+      for (int c = 0; c < 8; ++c)
+        for (int axis = 0; axis < 3; ++axis)
+          corners_[24 * e + 3 * c + axis] = x[vertex(c)][axis];
+    } else {
+      for (int c = 0; c < 8; ++c)
+        x[c] = corner(block.corners + 24 * e, c);
+    }
+    for (const glm::dvec3& v : x)
+      if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z))
+        throw std::invalid_argument("hex source: element " + std::to_string(e) +
+                                    " has a non-finite geometry node");
+    const AffineFrame f = frame_of(q > 0 ? &corners_[24 * e] : block.corners + 24 * e);
     const glm::dvec3 e1 = f.axes[0], e2 = f.axes[1], e3 = f.axes[2];
     const double size = glm::length(e1) + glm::length(e2) + glm::length(e3);
-    for (int c = 0; c < 8; ++c) {
-      const glm::dvec3 affine =
-          f.origin + double(c & 1) * e1 + double((c >> 1) & 1) * e2 + double((c >> 2) & 1) * e3;
-      // Written so that NaN corners fail too.
-      if (!(glm::length(corner(corners, c) - affine) <= 1e-9 * size))
-        throw std::invalid_argument(
-            "hex source: element " + std::to_string(e) + " is not a parallelepiped (corner " +
-            std::to_string(c) +
-            " is off the affine map of corners 0, 1, 2, 4); non-parallelepiped (non-affine "
-            "trilinear) and curved isoparametric elements are a documented later step");
+    bool affine = true;
+    for (int k = 0; k < gm && affine; ++k)
+      for (int j = 0; j < gm && affine; ++j)
+        for (int i = 0; i < gm && affine; ++i) {
+          const glm::dvec3 a = f.origin + (double(i) / geometry_degree_) * e1 +
+                               (double(j) / geometry_degree_) * e2 +
+                               (double(k) / geometry_degree_) * e3;
+          affine = glm::length(x[i + gm * (j + gm * k)] - a) <= 1e-9 * size;
+        }
+    Box box;
+    if (affine) {
+      if (!(std::abs(glm::determinant(f.axes)) >
+            1e-12 * glm::length(e1) * glm::length(e2) * glm::length(e3)))
+        throw std::invalid_argument("hex source: element " + std::to_string(e) +
+                                    " is degenerate (zero volume)");
+      box = bounding_box(f);
+    } else {
+      check_jacobian(e, x);
+      curved_of_[e] = std::uint32_t(curved_geometry_.size() / gn);
+      curved_geometry_.insert(curved_geometry_.end(), x.begin(), x.end());
+      box = {x[0], x[0]};
+      for (const glm::dvec3& v : x)  // the convex hull property
+        box.lo = glm::min(box.lo, v), box.hi = glm::max(box.hi, v);
     }
-    if (!(std::abs(glm::determinant(f.axes)) >
-          1e-12 * glm::length(e1) * glm::length(e2) * glm::length(e3)))
-      throw std::invalid_argument("hex source: element " + std::to_string(e) +
-                                  " is degenerate (zero volume)");
-    const Box box = bounding_box(f);
     bounds_.lo = glm::min(bounds_.lo, box.lo);
     bounds_.hi = glm::max(bounds_.hi, box.hi);
   }
+  if (q > 0) block_.corners = corners_.data();
+}
+
+// A curved element's Jacobian determinant has one strict sign (either: a mirrored element is
+// fine) at the (q + 2)³ points of a uniform lattice of its reference cube; zero or a change of
+// sign there means a folded (inverted) or degenerate element. A necessary condition, checked
+// where the solver's mesh generator would have gone wrong.
+void HexElementSource::check_jacobian(std::size_t element, const std::vector<glm::dvec3>& x) const {
+  const curved::Element ce{block_.order, geometry_degree_, nullptr, x.data()};
+  const int points = geometry_degree_ + 2;
+  double scale = 0.0;
+  for (const glm::dvec3& v : x)
+    scale = std::max(scale, glm::length(v - x[0]));
+  int sign = 0;
+  for (int k = 0; k < points; ++k)
+    for (int j = 0; j < points; ++j)
+      for (int i = 0; i < points; ++i) {
+        const glm::dvec3 xi(double(i) / (points - 1), double(j) / (points - 1),
+                            double(k) / (points - 1));
+        const double det = glm::determinant(curved::evaluate(ce, xi).jacobian);
+        const int s = det > 1e-9 * scale * scale * scale    ? 1
+                      : det < -1e-9 * scale * scale * scale ? -1
+                                                            : 0;
+        if (s == 0 || (sign != 0 && s != sign))
+          throw std::invalid_argument(
+              "hex source: element " + std::to_string(element) +
+              " is inverted or degenerate (its Jacobian determinant vanishes or changes sign "
+              "near reference point (" +
+              std::to_string(xi.x) + ", " + std::to_string(xi.y) + ", " + std::to_string(xi.z) +
+              "))");
+        sign = s;
+      }
 }
 
 Box HexElementSource::bounds() const {
   return bounds_;
 }
 
+std::span<const glm::dvec3> HexElementSource::curved_geometry(std::size_t element) const {
+  const std::uint32_t k = curved_of_[element];
+  if (k == kNotCurved) return {};
+  const std::size_t gn =
+      std::size_t(geometry_degree_ + 1) * (geometry_degree_ + 1) * (geometry_degree_ + 1);
+  return {&curved_geometry_[k * gn], gn};
+}
+
+glm::dvec3 HexElementSource::to_world(std::size_t element, glm::dvec3 reference) const {
+  if (curved_of_[element] != kNotCurved) {
+    const curved::Element ce{block_.order, geometry_degree_, nullptr,
+                             curved_geometry(element).data()};
+    return curved::evaluate(ce, reference).x;
+  }
+  const AffineFrame f = frame_of(block_.corners + 24 * element);
+  return f.origin + f.axes * reference;
+}
+
 glm::dvec3 HexElementSource::to_reference(std::size_t element, glm::dvec3 world) const {
+  if (curved_of_[element] != kNotCurved) {
+    const curved::Element ce{block_.order, geometry_degree_, nullptr,
+                             curved_geometry(element).data()};
+    glm::dvec3 xi;
+    return curved::invert(ce, world, xi) ? xi
+                                         : glm::dvec3(std::numeric_limits<double>::quiet_NaN());
+  }
   const AffineFrame f = frame_of(block_.corners + 24 * element);
   return glm::inverse(f.axes) * (world - f.origin);
 }
@@ -1495,14 +1637,32 @@ Activation activate(const HexElementSource& source, double isovalue) {
   out.nonfinite = nonfinite.load();
   out.elements.resize(kept.size());
   out.coefficients.resize(kept.size() * n);
+  // The curved ones' geometry, numbered in element order.
+  out.geometry_degree = source.geometry_degree();
+  out.points_per_element =
+      std::size_t(out.geometry_degree + 1) * (out.geometry_degree + 1) * (out.geometry_degree + 1);
+  std::size_t curved = 0;
+  for (std::size_t k = 0; k < kept.size(); ++k)
+    if (source.is_curved(kept[k])) out.elements[k].curved = std::uint32_t(curved++);
+  out.geometry.resize(curved * out.points_per_element);
   tbb::parallel_for(std::size_t(0), kept.size(), [&](std::size_t k) {
     const std::size_t e = kept[k];
     const std::span<double> b(&out.coefficients[k * n], n);
     source.element_bernstein(e, b);
     for (double& v : b)
       v -= isovalue;
-    const AffineFrame f = frame_of(block.corners + 24 * e);
     ActiveElement& el = out.elements[k];
+    if (el.curved != ActiveElement::kAffine) {
+      const std::span<const glm::dvec3> x = source.curved_geometry(e);
+      std::copy(x.begin(), x.end(), &out.geometry[el.curved * out.points_per_element]);
+      el.origin = glm::dvec3(0.0);
+      el.to_reference = glm::dmat3(1.0);
+      el.lo = el.hi = x[0];
+      for (const glm::dvec3& v : x)  // the convex hull property
+        el.lo = glm::min(el.lo, v), el.hi = glm::max(el.hi, v);
+      return;
+    }
+    const AffineFrame f = frame_of(block.corners + 24 * e);
     el.origin = f.origin;
     el.to_reference = glm::inverse(f.axes);
     const Box box = bounding_box(f);

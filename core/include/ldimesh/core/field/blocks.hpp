@@ -56,13 +56,21 @@ struct HexBlock {
   NodeSet nodes = NodeSet::gauss_lobatto_legendre;
   std::size_t element_count = 0;
   // 8 corners × (x, y, z) per element, element after element. Corner c sits at reference
-  // coordinates (c & 1, (c >> 1) & 1, (c >> 2) & 1) along ξ, η, ζ.
+  // coordinates (c & 1, (c >> 1) & 1, (c >> 2) & 1) along ξ, η, ζ. The element is the
+  // trilinear map of its corners (affine where they form a parallelepiped). Not read when
+  // geometry_order > 0.
   const double* corners = nullptr;
   // (p + 1)³ nodal values per element; node (i, j, k) (along ξ, η, ζ) is value
   // i + (p + 1)·(j + (p + 1)·k) of its element, and element e starts at value e·element_stride.
   const void* values = nullptr;
   ScalarType type = ScalarType::float64;
   std::size_t element_stride = 0;  // in values, not bytes; 0 means (p + 1)³
+  // Curved elements: geometry of its own order q = geometry_order (1..kMaxHexOrder, independent
+  // of the field's order), given by (q + 1)³ nodes × (x, y, z) per element at the nodes of
+  // `nodes` for order q, node (i, j, k) the i + (q + 1)·(j + (q + 1)·k)-th of its element,
+  // element after element. 0: the corners describe the elements.
+  int geometry_order = 0;
+  const double* geometry = nullptr;
 };
 
 }  // namespace ldimesh

@@ -14,6 +14,7 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <memory>
 #include <span>
 #include <vector>
@@ -80,7 +81,12 @@ class HexElementSource final : public FieldSource {
   const HexBlock& block() const { return block_; }
   // Reference coordinates in element `element` of the world point `world` (inside the element
   // iff all three lie in [0, 1]). `element` must be below block().element_count.
+  // For a curved element: by Newton's method from the element's centre; NaN where it does not
+  // converge (a point far outside the element).
   glm::dvec3 to_reference(std::size_t element, glm::dvec3 world) const;
+  // The world point of reference point `reference` of element `element` (below
+  // block().element_count, not checked).
+  glm::dvec3 to_world(std::size_t element, glm::dvec3 reference) const;
   // The Bernstein coefficients of element `element` from the current values (see
   // lagrange_to_bernstein; `out` holds exactly (p + 1)³ values, else std::invalid_argument;
   // `element` must be below block().element_count, not checked). Minimum and maximum bound the
@@ -88,9 +94,24 @@ class HexElementSource final : public FieldSource {
   // coefficients non-finite.
   void element_bernstein(std::size_t element, std::span<double> out) const;
 
+  // Whether element `element` is curved (its map from the reference cube is not affine).
+  bool is_curved(std::size_t element) const { return curved_of_[element] != kNotCurved; }
+  // The geometry's degree per axis: geometry_order, or 1 for a block of corners.
+  int geometry_degree() const { return geometry_degree_; }
+  // The Bernstein coefficients of a curved element's geometry, (q + 1)³ points in the values'
+  // layout (empty for an affine element).
+  std::span<const glm::dvec3> curved_geometry(std::size_t element) const;
+
  private:
+  static constexpr std::uint32_t kNotCurved = ~std::uint32_t(0);
+  void check_jacobian(std::size_t element, const std::vector<glm::dvec3>& x) const;
+
   HexBlock block_;
   Box bounds_;
+  int geometry_degree_ = 1;
+  std::vector<double> corners_;              // from the geometry's vertices (geometry_order > 0)
+  std::vector<glm::dvec3> curved_geometry_;  // (q + 1)³ per curved element
+  std::vector<std::uint32_t> curved_of_;     // per element: its index among the curved ones
 };
 
 }  // namespace ldimesh

@@ -1,0 +1,363 @@
+#include "curved_element.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+
+#include "ldimesh/core/field/blocks.hpp"
+#include "ldimesh/core/field/field_source.hpp"
+
+namespace ldimesh::curved {
+namespace {
+
+constexpr int kMaxNodes = kMaxHexOrder + 1;
+// Boxes narrower than this (in ξ, along every axis) are not split again: a solution there that
+// the Krawczyk test could not prove (a tangent ray, a root on a box face) is taken at Newton's
+// point, or at the box centre when Newton leaves the box.
+constexpr double kMinWidth = 1e-9;
+// Bound on the boxes one ray–element search looks at (a field that is zero up to rounding over
+// a region — a plateau at the isovalue — would otherwise be split down to kMinWidth everywhere).
+constexpr int kMaxBoxes = 4096;
+// Sign tests and the Krawczyk inclusion keep this margin, relative to the coefficients'
+// magnitude and to the box: rounding in the subdivision (a few ulps per level) never drops a
+// box that holds a solution.
+constexpr double kSignMargin = 1e-12;
+constexpr double kBoxMargin = 1e-9;
+
+// B_i^n(x) and dB_i^n/dx, i = 0..n (the triangle B_i^r = (1 − x) B_i^{r−1} + x B_{i−1}^{r−1}).
+void basis(int n, double x, double* value, double* derivative) {
+  double b[kMaxNodes] = {1.0};
+  for (int r = 1; r < n; ++r) {
+    b[r] = x * b[r - 1];
+    for (int i = r - 1; i > 0; --i)
+      b[i] = (1.0 - x) * b[i] + x * b[i - 1];
+    b[0] *= 1.0 - x;
+  }
+  for (int i = 0; i <= n; ++i) {
+    const double left = i > 0 ? b[i - 1] : 0.0, right = i < n ? b[i] : 0.0;
+    derivative[i] = n * (left - right);
+    value[i] = (1.0 - x) * right + x * left;
+  }
+}
+
+// Value and gradient at r of the tensor of degree n with `count` interleaved components
+// (coefficient m's component c at c[m·count + c]).
+template <int count>
+void evaluate_tensor(int n, const double* c, glm::dvec3 r, double* value, glm::dvec3* gradient) {
+  double bx[kMaxNodes], dx[kMaxNodes], by[kMaxNodes], dy[kMaxNodes], bz[kMaxNodes], dz[kMaxNodes];
+  basis(n, r.x, bx, dx);
+  basis(n, r.y, by, dy);
+  basis(n, r.z, bz, dz);
+  for (int k = 0; k < count; ++k)
+    value[k] = 0.0, gradient[k] = glm::dvec3(0.0);
+  const int m = n + 1;
+  for (int kz = 0; kz < m; ++kz)
+    for (int jy = 0; jy < m; ++jy)
+      for (int ix = 0; ix < m; ++ix) {
+        const double* v = c + count * (ix + m * (jy + m * kz));
+        const double w = bx[ix] * by[jy] * bz[kz];
+        const glm::dvec3 dw(dx[ix] * by[jy] * bz[kz], bx[ix] * dy[jy] * bz[kz],
+                            bx[ix] * by[jy] * dz[kz]);
+        for (int k = 0; k < count; ++k)
+          value[k] += v[k] * w, gradient[k] += v[k] * dw;
+      }
+}
+
+// Splits the tensor c (degree n, `count` interleaved components) at the middle of `axis`
+// into left and right halves (de Casteljau along every line of that axis).
+void split(int n, int count, int axis, const double* c, double* left, double* right) {
+  const int m = n + 1;
+  const int stride = count * (axis == 0 ? 1 : axis == 1 ? m : m * m);
+  double w[kMaxNodes];
+  for (int a = 0; a < m; ++a)
+    for (int b = 0; b < m; ++b)
+      for (int k = 0; k < count; ++k) {
+        // The line's first coefficient: the two other axes at (a, b).
+        const int other1 = axis == 0 ? 1 : 0, other2 = axis == 2 ? 1 : 2;
+        const int s1 = count * (other1 == 0 ? 1 : other1 == 1 ? m : m * m);
+        const int s2 = count * (other2 == 0 ? 1 : other2 == 1 ? m : m * m);
+        const int base = a * s1 + b * s2 + k;
+        for (int i = 0; i < m; ++i)
+          w[i] = c[base + i * stride];
+        left[base] = w[0];
+        right[base + n * stride] = w[n];
+        for (int r = 1; r <= n; ++r) {
+          for (int i = 0; i <= n - r; ++i)
+            w[i] = 0.5 * (w[i] + w[i + 1]);
+          left[base + r * stride] = w[0];
+          right[base + (n - r) * stride] = w[n - r];
+        }
+      }
+}
+
+// Minimum and maximum of component k of a tensor with `total` values, `count` interleaved.
+void range(const double* c, int total, int count, int k, double& lo, double& hi) {
+  lo = hi = c[k];
+  for (int i = k; i < total; i += count)
+    lo = std::min(lo, c[i]), hi = std::max(hi, c[i]);
+}
+
+// Bounds of ∂/∂s_axis of component k over the box: the derivative's Bernstein coefficients
+// n (c_{i+1} − c_i) along that axis.
+void derivative_range(int n, int count, int k, int axis, const double* c, double& lo, double& hi) {
+  const int m = n + 1;
+  const int stride = count * (axis == 0 ? 1 : axis == 1 ? m : m * m);
+  lo = std::numeric_limits<double>::infinity(), hi = -lo;
+  for (int z = 0; z < m; ++z)
+    for (int y = 0; y < m; ++y)
+      for (int x = 0; x < m; ++x) {
+        const int index[3] = {x, y, z};
+        if (index[axis] == n) continue;
+        const int at = count * (x + m * (y + m * z)) + k;
+        const double v = n * (c[at + stride] - c[at]);
+        lo = std::min(lo, v), hi = std::max(hi, v);
+      }
+}
+
+struct Interval {
+  double lo = 0.0, hi = 0.0;
+};
+
+// One box of the search: its extent in ξ. Its coefficients lie in the pool at its position in
+// the stack: the geometry's three ray components (n₁, n₂, d)·(x − o) interleaved (degree q),
+// then the field (degree p).
+struct Box {
+  glm::dvec3 lo, hi;
+};
+
+// The ray's frame: d and two unit normals to it.
+void ray_frame(glm::dvec3 d, glm::dvec3& n1, glm::dvec3& n2) {
+  const glm::dvec3 a = std::abs(d.x) <= std::abs(d.y) && std::abs(d.x) <= std::abs(d.z)
+                           ? glm::dvec3(1, 0, 0)
+                       : std::abs(d.y) <= std::abs(d.z) ? glm::dvec3(0, 1, 0)
+                                                        : glm::dvec3(0, 0, 1);
+  // Axis rays get exact coordinate axes (no rounding in the planes).
+  const int axis = exact_axis(d);
+  if (axis >= 0) {
+    n1 = glm::dvec3(0.0), n2 = glm::dvec3(0.0);
+    n1[axis == 0 ? 1 : 0] = 1.0;
+    n2[axis == 2 ? 1 : 2] = 1.0;
+    return;
+  }
+  n1 = glm::normalize(glm::cross(d, a));
+  n2 = glm::cross(d, n1);
+}
+
+}  // namespace
+
+Sample evaluate(const Element& e, glm::dvec3 xi) {
+  Sample s;
+  double x[3];
+  glm::dvec3 gx[3];
+  evaluate_tensor<3>(e.q, &e.geometry[0].x, xi, x, gx);
+  s.x = glm::dvec3(x[0], x[1], x[2]);
+  // Columns ∂x/∂ξ_k: row r of the Jacobian is the gradient of x_r.
+  for (int k = 0; k < 3; ++k)
+    s.jacobian[k] = glm::dvec3(gx[0][k], gx[1][k], gx[2][k]);
+  if (e.field) evaluate_tensor<1>(e.p, e.field, xi, &s.f, &s.gradient);
+  return s;
+}
+
+bool invert(const Element& e, glm::dvec3 world, glm::dvec3& xi) {
+  // Newton's method with backtracking: a step that does not reduce |x(ξ) − world| is halved.
+  xi = glm::dvec3(0.5);
+  Sample s = evaluate(e, xi);
+  double residual = glm::length(s.x - world);
+  const double size = glm::length(e.geometry[0] - e.geometry[(e.q + 1) * (e.q + 1) * (e.q + 1) - 1]);
+  for (int iter = 0; iter < 100; ++iter) {
+    if (residual <= 1e-14 * size) return true;
+    if (!(std::abs(glm::determinant(s.jacobian)) > 0.0)) return false;
+    const glm::dvec3 step = glm::inverse(s.jacobian) * (s.x - world);
+    double scale = 1.0;
+    for (int half = 0; half < 30; ++half, scale *= 0.5) {
+      const glm::dvec3 next = xi - scale * step;
+      const Sample t = evaluate(e, next);
+      const double r = glm::length(t.x - world);
+      if (r < residual) {
+        xi = next, s = t, residual = r;
+        break;
+      }
+    }
+    if (scale * std::max({std::abs(step.x), std::abs(step.y), std::abs(step.z)}) < 1e-15)
+      return residual <= 1e-9 * size;  // no further progress
+    if (!(glm::length(xi) < 1e3)) return false;
+  }
+  return residual <= 1e-9 * size;
+}
+
+void intersect(const Element& e, glm::dvec3 o, glm::dvec3 d, double t0, double t1,
+               std::vector<RayHit>& hits, Stats* stats) {
+  const int qm = e.q + 1, pm = e.p + 1;
+  const int gq = qm * qm * qm, fp = pm * pm * pm;
+  const std::size_t box_size = std::size_t(3 * gq + fp);
+  glm::dvec3 n1, n2;
+  ray_frame(d, n1, n2);
+
+  thread_local std::vector<double> pool;
+  thread_local std::vector<Box> stack;
+  pool.resize(box_size);
+  stack.clear();
+  // The root box: the whole element.
+  double g_scale = 0.0, f_scale = 0.0;
+  for (int m = 0; m < gq; ++m) {
+    const glm::dvec3 r = e.geometry[m] - o;
+    pool[3 * m] = glm::dot(n1, r), pool[3 * m + 1] = glm::dot(n2, r),
+             pool[3 * m + 2] = glm::dot(d, r);
+    g_scale = std::max(g_scale, glm::length(r));
+  }
+  for (int m = 0; m < fp; ++m) {
+    pool[3 * gq + m] = e.field[m];
+    f_scale = std::max(f_scale, std::abs(e.field[m]));
+  }
+  const double g_margin = kSignMargin * g_scale, f_margin = kSignMargin * f_scale;
+  stack.push_back({glm::dvec3(0.0), glm::dvec3(1.0)});
+  const std::size_t first_hit = hits.size();
+  std::size_t boxes = 0, unresolved = 0;
+
+  // H, and its Jacobian in global ξ, at a reference point: Newton's iteration.
+  const auto system = [&](glm::dvec3 xi, glm::dvec3& h, glm::dmat3& jac, Sample& s) {
+    s = evaluate(e, xi);
+    const glm::dvec3 r = s.x - o;
+    h = glm::dvec3(glm::dot(n1, r), glm::dot(n2, r), s.f);
+    // Rows: n₁ᵀ J, n₂ᵀ J, ∇f ᵀ (glm is column-major: jac[col][row]).
+    const glm::dvec3 row1 = glm::transpose(s.jacobian) * n1, row2 = glm::transpose(s.jacobian) * n2;
+    for (int c = 0; c < 3; ++c)
+      jac[c] = glm::dvec3(row1[c], row2[c], s.gradient[c]);
+  };
+  const auto record = [&](const Sample& s) {
+    const double t = glm::dot(d, s.x - o);
+    if (!(t >= t0 && t <= t1)) return;
+    // ∇ₓf = J⁻ᵀ ∇ξf.
+    const glm::dvec3 g = glm::transpose(glm::inverse(s.jacobian)) * s.gradient;
+    hits.push_back({t, unit_normal(g, d), 0.0f});
+  };
+  // Newton from the box centre; true with the converged point inside the box (with margin).
+  const auto newton = [&](const Box& b, glm::dvec3& xi, Sample& s) {
+    xi = 0.5 * (b.lo + b.hi);
+    glm::dvec3 h;
+    glm::dmat3 jac;
+    for (int iter = 0; iter < 30; ++iter) {
+      system(xi, h, jac, s);
+      if (!(std::abs(glm::determinant(jac)) > 0.0)) return false;
+      const glm::dvec3 step = glm::inverse(jac) * h;
+      xi -= step;
+      if (!(std::max({std::abs(step.x), std::abs(step.y), std::abs(step.z)}) > 1e-15)) break;
+    }
+    system(xi, h, jac, s);
+    const glm::dvec3 pad = kBoxMargin * (b.hi - b.lo) + 1e-12;
+    return glm::all(glm::greaterThanEqual(xi, b.lo - pad)) &&
+           glm::all(glm::lessThanEqual(xi, b.hi + pad));
+  };
+
+  while (!stack.empty()) {
+    const std::size_t slot = stack.size() - 1;
+    const Box b = stack.back();
+    stack.pop_back();  // pushed back below when it is split
+    if (++boxes > std::size_t(kMaxBoxes)) break;
+    const double* c = &pool[slot * box_size];
+    const double* f = c + 3 * gq;
+    // The convex hull tests: the two planes, the depth range, the field.
+    double lo, hi;
+    range(c, 3 * gq, 3, 0, lo, hi);
+    if (lo > g_margin || hi < -g_margin) continue;
+    range(c, 3 * gq, 3, 1, lo, hi);
+    if (lo > g_margin || hi < -g_margin) continue;
+    range(c, 3 * gq, 3, 2, lo, hi);
+    if (hi < t0 - g_margin || lo > t1 + g_margin) continue;
+    range(f, fp, 1, 0, lo, hi);
+    if (lo > f_margin || hi < -f_margin) continue;
+
+    // The Krawczyk test in the box's own coordinates s ∈ [0, 1]³ (centre m = ½): with
+    // Y = J(m)⁻¹, K = m − Y H(m) + (I − Y J(box)) (box − m). K ⊂ box: exactly one solution in
+    // the box; K ∩ box = ∅: none.
+    double hv[3];
+    glm::dvec3 hg[3];
+    {
+      double gv[3];
+      glm::dvec3 gg[3];
+      evaluate_tensor<3>(e.q, c, glm::dvec3(0.5), gv, gg);
+      hv[0] = gv[0], hv[1] = gv[1], hg[0] = gg[0], hg[1] = gg[1];
+      evaluate_tensor<1>(e.p, f, glm::dvec3(0.5), &hv[2], &hg[2]);
+    }
+    glm::dmat3 jm;  // rows: the components' gradients in s
+    for (int col = 0; col < 3; ++col)
+      jm[col] = glm::dvec3(hg[0][col], hg[1][col], hg[2][col]);
+    const double det = glm::determinant(jm);
+    const double norms = glm::length(hg[0]) * glm::length(hg[1]) * glm::length(hg[2]);
+    bool unique = false, none = false;
+    if (std::abs(det) > 1e-12 * norms) {
+      const glm::dmat3 y = glm::inverse(jm);
+      Interval jbox[3][3];  // [row][col]
+      for (int row = 0; row < 3; ++row)
+        for (int col = 0; col < 3; ++col)
+          if (row < 2)
+            derivative_range(e.q, 3, row, col, c, jbox[row][col].lo, jbox[row][col].hi);
+          else
+            derivative_range(e.p, 1, 0, col, f, jbox[row][col].lo, jbox[row][col].hi);
+      const glm::dvec3 yh = y * glm::dvec3(hv[0], hv[1], hv[2]);
+      unique = true;
+      for (int i = 0; i < 3 && !none; ++i) {
+        double radius = 0.0;
+        for (int j = 0; j < 3; ++j) {
+          // (I − Y J)_ij as an interval.
+          double mlo = i == j ? 1.0 : 0.0, mhi = mlo;
+          for (int k = 0; k < 3; ++k) {
+            const double yik = y[k][i];
+            const double a = yik * jbox[k][j].lo, bb = yik * jbox[k][j].hi;
+            mlo -= std::max(a, bb), mhi -= std::min(a, bb);
+          }
+          radius += 0.5 * std::max(std::abs(mlo), std::abs(mhi));
+        }
+        const double centre = 0.5 - yh[i];
+        const double klo = centre - radius, khi = centre + radius;
+        if (khi < -kBoxMargin || klo > 1.0 + kBoxMargin) none = true;
+        if (!(klo > -kBoxMargin && khi < 1.0 + kBoxMargin)) unique = false;
+      }
+    }
+    if (none) continue;
+    const glm::dvec3 width = b.hi - b.lo;
+    const bool smallest = std::max({width.x, width.y, width.z}) < kMinWidth;
+    if (unique || smallest) {
+      glm::dvec3 xi;
+      Sample s;
+      if (newton(b, xi, s)) {
+        record(s);
+      } else if (smallest) {
+        xi = 0.5 * (b.lo + b.hi);
+        s = evaluate(e, xi);
+        record(s);
+      }
+      unresolved += !unique;
+      continue;
+    }
+    // Split along the widest axis: the left half is looked at next.
+    const int axis = width.x >= width.y && width.x >= width.z ? 0 : width.y >= width.z ? 1 : 2;
+    // The halves go to the next two slots; the right one then takes the box's own slot (it is
+    // looked at after the left one's whole subtree), the left one stays above it.
+    const std::size_t left = (slot + 1) * box_size, right = (slot + 2) * box_size;
+    if (pool.size() < right + box_size) pool.resize(right + box_size);
+    double* own = &pool[slot * box_size];
+    split(e.q, 3, axis, own, &pool[left], &pool[right]);
+    split(e.p, 1, axis, own + 3 * gq, &pool[left + 3 * gq], &pool[right + 3 * gq]);
+    std::copy(pool.begin() + right, pool.begin() + right + box_size,
+              pool.begin() + slot * box_size);
+    Box lb = b, rb = b;
+    const double mid = 0.5 * (b.lo[axis] + b.hi[axis]);
+    lb.hi[axis] = mid, rb.lo[axis] = mid;
+    stack.push_back(rb);
+    stack.push_back(lb);
+  }
+
+  // In increasing t; a solution found from two boxes (on their shared face) once.
+  std::sort(hits.begin() + first_hit, hits.end(),
+            [](const RayHit& a, const RayHit& b) { return a.t < b.t; });
+  const double tol = 1e-12 * g_scale;
+  std::size_t out = first_hit;
+  for (std::size_t i = first_hit; i < hits.size(); ++i)
+    if (out == first_hit || hits[i].t - hits[out - 1].t > tol) hits[out++] = hits[i];
+  hits.resize(out);
+  if (stats) stats->boxes += boxes, stats->unresolved += unresolved;
+}
+
+}  // namespace ldimesh::curved

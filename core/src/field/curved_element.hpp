@@ -1,0 +1,57 @@
+// All intersections of a ray with the isosurface of a curved (non-affine) hexahedral element:
+// geometry x(ξ) and field f(ξ) both tensor-product polynomials in Bernstein form on the
+// reference cube [0, 1]³ (degrees q and p per axis). Internal to the element source.
+//
+// A hit is a solution ξ of the system H(ξ) = (n₁·(x(ξ) − o), n₂·(x(ξ) − o), f(ξ)) = 0, with
+// n₁, n₂ ⊥ d (the ray is the intersection of two planes), and its depth t = d·(x(ξ) − o). The
+// reference cube is subdivided; a box is dropped when one component's Bernstein coefficients on
+// it have one strict sign (the convex hull property: no zero there) or its depth range misses
+// [t0, t1]; a box in which the Krawczyk operator maps the box into itself holds exactly one
+// solution, which Newton's method then converges to; otherwise the box is split in half along
+// its widest axis. docs/method.md ("Curved elements") gives the guarantees and tolerances.
+#pragma once
+
+#include <cstddef>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "ldimesh/core/raycast/axis_binding.hpp"
+
+namespace ldimesh::curved {
+
+// The Bernstein coefficients of one element, (n + 1)³ per tensor, index i + (n+1)(j + (n+1)k)
+// along ξ, η, ζ; geometry as (x, y, z) per coefficient.
+struct Element {
+  int p = 1;                             // the field's degree per axis
+  int q = 1;                             // the geometry's degree per axis
+  const double* field = nullptr;         // (p + 1)³, isovalue subtracted
+  const glm::dvec3* geometry = nullptr;  // (q + 1)³
+};
+
+// What one intersection did, for the tests and benchmarks.
+struct Stats {
+  std::size_t boxes = 0;       // boxes looked at
+  std::size_t unresolved = 0;  // solutions taken at the smallest box width without a Krawczyk proof
+};
+
+// Appends every hit of the ray o + t·d, t ∈ [t0, t1] (closed), with element e to `hits`, in
+// increasing t, with the unit normal ∇ₓf/|∇ₓf| (towards −d where the gradient vanishes).
+void intersect(const Element& e, glm::dvec3 o, glm::dvec3 d, double t0, double t1,
+               std::vector<RayHit>& hits, Stats* stats = nullptr);
+
+// x(ξ), the Jacobian ∂x/∂ξ (columns ∂x/∂ξ_k) and f(ξ), ∇ξf at a reference point (f and
+// ∇ξf zero where the element has no field).
+struct Sample {
+  glm::dvec3 x{0.0};
+  glm::dmat3 jacobian{0.0};
+  double f = 0.0;
+  glm::dvec3 gradient{0.0};
+};
+Sample evaluate(const Element& e, glm::dvec3 xi);
+
+// The reference point ξ where x(ξ) = world, by Newton's method from the element's centre;
+// false when it does not converge (the point is far outside the element, or the map folds).
+bool invert(const Element& e, glm::dvec3 world, glm::dvec3& xi);
+
+}  // namespace ldimesh::curved

@@ -1,0 +1,363 @@
+// Curved and general trilinear hexahedra: geometry of its own order q, intersected exactly.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <optional>
+#include <random>
+#include <string>
+#include <tuple>
+
+#include <gtest/gtest.h>
+
+#include "ldimesh/core/base/view.hpp"
+#include "ldimesh/core/field/hex_source.hpp"
+#include "ldimesh/core/raycast/raycaster.hpp"
+
+namespace ldimesh {
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+constexpr NodeSet kNodeSets[] = {NodeSet::gauss_lobatto_legendre, NodeSet::gauss_legendre,
+                                 NodeSet::equispaced};
+const Box kBox{{-0.5, -0.25, 0.0}, {0.5, 0.5, 0.75}};
+
+// A smooth map of kBox onto itself that fixes its boundary (its faces stay planar): the mesh of
+// distorted elements fills the box exactly.
+glm::dvec3 distort(glm::dvec3 x, double amount) {
+  const glm::dvec3 u = (x - kBox.lo) / (kBox.hi - kBox.lo);
+  const double bump = std::sin(kPi * u.x) * std::sin(kPi * u.y) * std::sin(kPi * u.z);
+  const glm::dvec3 wave(std::sin(2.0 * kPi * u.y + 0.3), std::cos(2.0 * kPi * u.z),
+                        std::sin(2.0 * kPi * u.x + 1.1));
+  return x + amount * bump * wave * (kBox.hi - kBox.lo);
+}
+
+// An n³ mesh of kBox, distorted, with geometry nodes of order q (node set `nodes`) and the
+// field `field(x)` at the field's nodes of order p, their world positions taken through the
+// element's own geometry polynomial (the source's to_world), so that a field the element
+// represents exactly stays exact.
+struct CurvedMesh {
+  std::vector<double> geometry, values;
+  HexBlock block;
+};
+
+template <class Field>
+CurvedMesh curved_mesh(int n, int p, int q, NodeSet nodes, double amount, Field field) {
+  CurvedMesh m;
+  const std::vector<double> xq = node_positions(q, nodes);
+  const glm::dvec3 size = (kBox.hi - kBox.lo) / double(n);
+  for (int ez = 0; ez < n; ++ez)
+    for (int ey = 0; ey < n; ++ey)
+      for (int ex = 0; ex < n; ++ex)
+        for (int k = 0; k <= q; ++k)
+          for (int j = 0; j <= q; ++j)
+            for (int i = 0; i <= q; ++i) {
+              const glm::dvec3 cell(ex + xq[i], ey + xq[j], ez + xq[k]);
+              const glm::dvec3 x = distort(kBox.lo + size * cell, amount);
+              m.geometry.insert(m.geometry.end(), {x.x, x.y, x.z});
+            }
+  m.block.order = p;
+  m.block.nodes = nodes;
+  m.block.element_count = std::size_t(n) * n * n;
+  m.block.geometry_order = q;
+  m.block.geometry = m.geometry.data();
+  m.values.assign(m.block.element_count * (p + 1) * (p + 1) * (p + 1), 0.0);
+  m.block.values = m.values.data();
+  const HexElementSource geometry(m.block);
+  const std::vector<double> xp = node_positions(p, nodes);
+  std::size_t v = 0;
+  for (std::size_t e = 0; e < m.block.element_count; ++e)
+    for (int k = 0; k <= p; ++k)
+      for (int j = 0; j <= p; ++j)
+        for (int i = 0; i <= p; ++i)
+          m.values[v++] = field(geometry.to_world(e, {xp[i], xp[j], xp[k]}));
+  return m;
+}
+
+std::string describe(int p, int q, NodeSet nodes) {
+  const char* names[] = {"GLL", "GL", "equispaced"};
+  return "p " + std::to_string(p) + " q " + std::to_string(q) + " " + names[int(nodes)];
+}
+
+// Hits of the isosurface x = c of the field x (represented exactly by the elements): every hit
+// lies on the plane, and, for a conforming mesh that fills the box (`fills_box`), every pixel
+// ray that crosses the plane inside the box (away from its faces) has exactly one hit, the
+// others none. Returns the number of hits checked.
+std::size_t expect_plane_hits(const HexElementSource& source, double c, const std::string& what,
+                              bool fills_box = true) {
+  const RayCaster caster(source, c);
+  std::size_t checked = 0;
+  int failures = 0;
+  for (const glm::dvec3 dir : {glm::dvec3(1, 0, 0), glm::dvec3(-1, 0, 0),
+                               glm::dvec3(0.3, -0.5, 0.8), glm::dvec3(-0.6, 0.2, -0.5)}) {
+    const View view = make_view(source.bounds(), dir, 40);
+    const Ldi ldi = caster.cast(view);
+    const double margin = 1e-6;
+    for (int j = 0; j < view.height; ++j)
+      for (int i = 0; i < view.width; ++i) {
+        const std::size_t pixel = std::size_t(j) * view.width + i;
+        const glm::dvec3 o = view.pixel_point(i, j, 0.0);
+        const double t = (c - o.x) / view.dir.x;
+        const glm::dvec3 crossing = o + t * view.dir;
+        bool inside = true, near_face = false;
+        for (int a = 0; a < 3; ++a) {
+          inside = inside && crossing[a] > kBox.lo[a] && crossing[a] < kBox.hi[a];
+          near_face = near_face || std::abs(crossing[a] - kBox.lo[a]) < margin ||
+                      std::abs(crossing[a] - kBox.hi[a]) < margin;
+        }
+        if (near_face) continue;
+        const std::uint32_t count = ldi.offsets[pixel + 1] - ldi.offsets[pixel];
+        if (!fills_box) {
+          EXPECT_LE(count, 1u) << what;
+          inside = count > 0;
+        }
+        EXPECT_EQ(count, inside ? 1u : 0u) << what << " view (" << dir.x << ", " << dir.y << ", "
+                                           << dir.z << ") pixel " << i << ", " << j;
+        if (count != (inside ? 1u : 0u) && ++failures > 5) return checked;  // enough said
+        if (count != 1) continue;
+        const glm::dvec3 hit = view.pixel_point(i, j, ldi.depth[ldi.offsets[pixel]]);
+        EXPECT_NEAR(hit.x, c, 2e-6) << what;
+        // The field's gradient is e_x: the normal faces against the ray's x direction... or
+        // along it; either way it is ±e_x.
+        EXPECT_NEAR(std::abs(ldi.normal[ldi.offsets[pixel]].x), 1.0, 1e-5) << what;
+        ++checked;
+      }
+  }
+  return checked;
+}
+
+TEST(CurvedHex, TheFieldXOnCurvedElementsCutsThePlaneExactly) {
+  // p = q with one node set: the field's nodes are the geometry's, so the field is the
+  // element's x coordinate and its isosurface the plane x = c, however curved the elements.
+  // Gauss–Legendre geometry nodes lie inside the elements: neighbours' faces then differ (the
+  // mesh is not conforming), so only the hits' positions are checked there, not the coverage.
+  for (int q : {1, 2, 3, 5})
+    for (NodeSet nodes : kNodeSets) {
+      const CurvedMesh m = curved_mesh(3, q, q, nodes, 0.05, [](glm::dvec3 x) { return x.x; });
+      const HexElementSource source(m.block);
+      std::size_t curved = 0;
+      for (std::size_t e = 0; e < m.block.element_count; ++e)
+        curved += source.is_curved(e);
+      EXPECT_GT(curved, 0u) << describe(q, q, nodes);
+      EXPECT_GT(
+          expect_plane_hits(source, 0.137, describe(q, q, nodes), nodes != NodeSet::gauss_legendre),
+          1000u);
+    }
+}
+
+TEST(CurvedHex, TrilinearElementsFromCornersAreAccepted) {
+  // Eight corners that are not a parallelepiped: the trilinear hexahedron (geometry order 1).
+  // Interior vertices of a 3³ mesh moved at random; p = 1 with equispaced nodes puts the field's
+  // nodes at the corners, so the field x(ξ) is the element's own x and x = c is a plane.
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> jitter(-0.04, 0.04);
+  const int n = 3;
+  std::vector<glm::dvec3> vertex((n + 1) * (n + 1) * (n + 1));
+  for (int k = 0; k <= n; ++k)
+    for (int j = 0; j <= n; ++j)
+      for (int i = 0; i <= n; ++i) {
+        glm::dvec3 x = kBox.lo + (kBox.hi - kBox.lo) * glm::dvec3(i, j, k) / double(n);
+        for (int a = 0; a < 3; ++a) {
+          const int index[3] = {i, j, k};
+          if (index[a] > 0 && index[a] < n) x[a] += jitter(rng);
+        }
+        vertex[i + (n + 1) * (j + (n + 1) * k)] = x;
+      }
+  std::vector<double> corners, values;
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i)
+        for (int c = 0; c < 8; ++c) {
+          const glm::dvec3 x =
+              vertex[(i + (c & 1)) + (n + 1) * ((j + ((c >> 1) & 1)) + (n + 1) * (k + (c >> 2)))];
+          corners.insert(corners.end(), {x.x, x.y, x.z});
+          values.push_back(x.x);
+        }
+  const HexBlock block{1,
+                       NodeSet::equispaced,
+                       std::size_t(n * n * n),
+                       corners.data(),
+                       values.data(),
+                       ScalarType::float64};
+  const HexElementSource source(block);
+  EXPECT_TRUE(source.is_curved(13));  // the middle element: all its corners moved
+  EXPECT_GT(expect_plane_hits(source, -0.0731, "trilinear"), 1000u);
+}
+
+// A smooth field with several crossings per ray.
+double wavy(glm::dvec3 x) {
+  return std::sin(5.0 * x.x + 1.0) * std::cos(4.0 * x.y) + 0.7 * std::sin(6.0 * x.z + x.x) - 0.1;
+}
+
+TEST(CurvedHex, AxisAndEmbreeCastersGiveTheSameHits) {
+  for (const auto& [p, q, nodes] :
+       {std::tuple{3, 2, NodeSet::gauss_lobatto_legendre}, std::tuple{2, 3, NodeSet::equispaced},
+        std::tuple{4, 2, NodeSet::gauss_legendre}}) {
+    const CurvedMesh m = curved_mesh(2, p, q, nodes, 0.08, wavy);
+    const HexElementSource source(m.block);
+    const RayCaster fast(source, 0.0), reference(source, 0.0, RayCasterOptions{CastPath::embree});
+    for (const View& view : make_axis_views(source.bounds(), 32)) {
+      ASSERT_TRUE(fast.uses_axis_casters(view));
+      const Ldi a = fast.cast(view), b = reference.cast(view);
+      EXPECT_EQ(a.offsets, b.offsets) << describe(p, q, nodes);
+      ASSERT_EQ(a.depth.size(), b.depth.size());
+      EXPECT_GT(a.sample_count(), 300u) << describe(p, q, nodes);
+      for (std::size_t k = 0; k < a.depth.size(); ++k) {
+        EXPECT_NEAR(a.depth[k], b.depth[k], 1e-6) << describe(p, q, nodes);
+        EXPECT_NEAR(glm::length(a.normal[k] - b.normal[k]), 0.0, 1e-5) << describe(p, q, nodes);
+      }
+    }
+  }
+}
+
+// The roots along one ray by dense sampling: in each element whose box the ray passes, the
+// field at 1000 depths, each mapped to reference coordinates by the source's inversion, sign
+// changes between samples inside the element refined by bisection. nullopt where the scan
+// cannot decide (roots near a face or each other, a near-tangency).
+std::optional<std::vector<double>> dense_scan(const HexElementSource& source, glm::dvec3 o,
+                                              glm::dvec3 d, double t_max) {
+  const int p = source.block().order;
+  const std::size_t n = std::size_t(p + 1) * (p + 1) * (p + 1);
+  std::vector<double> c(n), roots;
+  constexpr int kSteps = 1000;
+  const auto inside = [](glm::dvec3 xi, double pad) {
+    return xi.x >= -pad && xi.x <= 1 + pad && xi.y >= -pad && xi.y <= 1 + pad && xi.z >= -pad &&
+           xi.z <= 1 + pad;
+  };
+  std::vector<double> value(kSteps + 1);
+  std::vector<char> in(kSteps + 1);
+  for (std::size_t e = 0; e < source.block().element_count; ++e) {
+    source.element_bernstein(e, c);
+    Box box{glm::dvec3(1e300), glm::dvec3(-1e300)};  // the geometry's convex hull
+    for (const glm::dvec3& x : source.curved_geometry(e))
+      box.lo = glm::min(box.lo, x), box.hi = glm::max(box.hi, x);
+    const auto sample = [&](double t, glm::dvec3& xi) {
+      xi = source.to_reference(e, o + t * d);
+      return evaluate_bernstein(p, c, xi).value;
+    };
+    double scale = 0.0;
+    for (int k = 0; k <= kSteps; ++k) {
+      const double t = t_max * k / kSteps;
+      const glm::dvec3 x = o + t * d;
+      in[k] = false;
+      if (glm::any(glm::lessThan(x, box.lo - 1e-9)) || glm::any(glm::greaterThan(x, box.hi + 1e-9)))
+        continue;
+      glm::dvec3 xi;
+      value[k] = sample(t, xi);
+      in[k] = inside(xi, 0.0);
+      if (in[k] && inside(xi, 1e-4) != inside(xi, -1e-4) && std::abs(value[k]) < 1e-2)
+        return std::nullopt;  // the surface near a face
+      if (in[k]) scale = std::max(scale, std::abs(value[k]));
+    }
+    int last = -100;
+    for (int k = 1; k <= kSteps; ++k) {
+      if (!in[k] || !in[k - 1]) continue;
+      if (positive(value[k]) != positive(value[k - 1])) {
+        if (k - last <= 3) return std::nullopt;  // two roots within a few steps
+        last = k;
+        double a = t_max * (k - 1) / kSteps, b = t_max * k / kSteps;
+        const bool left = positive(value[k - 1]);
+        for (int iter = 0; iter < 60; ++iter) {
+          const double mid = 0.5 * (a + b);
+          glm::dvec3 unused;
+          (positive(sample(mid, unused)) == left ? a : b) = mid;
+        }
+        roots.push_back(0.5 * (a + b));
+      } else if (k < kSteps && in[k + 1] && std::abs(value[k]) <= std::abs(value[k - 1]) &&
+                 std::abs(value[k]) <= std::abs(value[k + 1]) &&
+                 positive(value[k]) == positive(value[k + 1]) &&
+                 std::abs(value[k]) < 0.02 * scale) {
+        return std::nullopt;  // a local minimum of |f| near zero: maybe two close roots
+      }
+    }
+  }
+  std::sort(roots.begin(), roots.end());
+  return roots;
+}
+
+TEST(CurvedHex, RootsMatchADenseScan) {
+  std::mt19937 rng(11);
+  int rays = 0, roots = 0;
+  for (const auto& [p, q, nodes] :
+       {std::tuple{3, 2, NodeSet::gauss_lobatto_legendre}, std::tuple{2, 4, NodeSet::equispaced}}) {
+    const CurvedMesh m = curved_mesh(2, p, q, nodes, 0.1, wavy);
+    const HexElementSource source(m.block);
+    const RayCaster caster(source, 0.0);
+    for (const glm::dvec3 dir :
+         {glm::dvec3(1, 0, 0), glm::dvec3(0, 0, -1), glm::dvec3(0.3, -0.5, 0.8)}) {
+      const View view = make_view(source.bounds(), dir, 32);
+      std::uniform_real_distribution<double> ux(0.0, view.width), uy(0.0, view.height);
+      std::vector<glm::dvec2> points(40);
+      for (glm::dvec2& pt : points)
+        pt = {ux(rng), uy(rng)};
+      const RayHitList hits = caster.cast_points(view, points);
+      for (std::size_t r = 0; r < points.size(); ++r) {
+        const glm::dvec3 o = view.point(points[r].x, points[r].y, 0.0);
+        const auto expected = dense_scan(source, o, view.dir, view.depth_extent);
+        if (!expected) continue;
+        ++rays;
+        const std::uint32_t begin = hits.offsets[r], count = hits.offsets[r + 1] - begin;
+        EXPECT_EQ(count, expected->size()) << describe(p, q, nodes) << " ray " << r;
+        if (count != expected->size()) continue;
+        for (std::uint32_t h = 0; h < count; ++h)
+          EXPECT_NEAR(hits.depth[begin + h], (*expected)[h], 1e-6) << describe(p, q, nodes);
+        roots += int(count);
+      }
+    }
+  }
+  EXPECT_GT(rays, 120);
+  EXPECT_GT(roots, 150);
+}
+
+TEST(CurvedHex, InvalidCurvedBlocksAreRejected) {
+  const CurvedMesh good =
+      curved_mesh(1, 2, 2, NodeSet::gauss_lobatto_legendre, 0.0, [](glm::dvec3 x) { return x.x; });
+  auto rejects = [&](const HexBlock& block, const char* needle) {
+    try {
+      HexElementSource source(block);
+      ADD_FAILURE() << "accepted a block that should throw (" << needle << ")";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+    }
+  };
+  HexBlock b = good.block;
+  b.geometry_order = kMaxHexOrder + 1;
+  rejects(b, "geometry order 9");
+  b = good.block;
+  b.geometry = nullptr;
+  rejects(b, "null geometry");
+  std::vector<double> geometry = good.geometry;
+  geometry[3 * 13 + 1] = std::numeric_limits<double>::quiet_NaN();
+  b = good.block;
+  b.geometry = geometry.data();
+  rejects(b, "element 0 has a non-finite geometry node");
+  // The centre node (1, 1, 1) pulled beyond a face: the element folds over.
+  geometry = good.geometry;
+  geometry[3 * 13 + 0] = kBox.hi.x + 0.6 * (kBox.hi.x - kBox.lo.x);
+  b.geometry = geometry.data();
+  rejects(b, "element 0 is inverted or degenerate");
+  // The same element mirrored (ξ reversed, a left-handed map) is fine, and has the same hits.
+  std::vector<double> mirrored(good.geometry.size()), mirrored_values(good.values.size());
+  for (int k = 0; k <= 2; ++k)
+    for (int j = 0; j <= 2; ++j)
+      for (int i = 0; i <= 2; ++i)
+        for (int a = 0; a < 3; ++a) {
+          mirrored[3 * (i + 3 * (j + 3 * k)) + a] =
+              good.geometry[3 * ((2 - i) + 3 * (j + 3 * k)) + a];
+          if (a == 0) mirrored_values[i + 3 * (j + 3 * k)] = good.values[(2 - i) + 3 * (j + 3 * k)];
+        }
+  b = good.block;
+  b.geometry = mirrored.data();
+  b.values = mirrored_values.data();
+  const HexElementSource left(b), right(good.block);
+  for (const View& view : make_axis_views(right.bounds(), 16)) {
+    const Ldi l = RayCaster(left, 0.1).cast(view), r = RayCaster(right, 0.1).cast(view);
+    EXPECT_EQ(l.offsets, r.offsets);
+    EXPECT_EQ(l.depth.size(), r.depth.size());
+    for (std::size_t k = 0; k < std::min(l.depth.size(), r.depth.size()); ++k)
+      EXPECT_NEAR(l.depth[k], r.depth[k], 1e-6);
+  }
+}
+
+}  // namespace
+}  // namespace ldimesh
