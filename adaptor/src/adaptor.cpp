@@ -55,10 +55,10 @@ std::size_t scalar_bytes(ScalarType type) {
 struct BlockCopy {
   std::vector<unsigned char> values;
   std::array<std::vector<double>, 3> coords;
-  std::vector<double> corners;
+  std::vector<double> geometry;  // an element block's corners or geometry nodes
   std::size_t bytes() const {
     return values.size() +
-           (coords[0].size() + coords[1].size() + coords[2].size() + corners.size()) *
+           (coords[0].size() + coords[1].size() + coords[2].size() + geometry.size()) *
                sizeof(double);
   }
 };
@@ -93,12 +93,19 @@ GridBlock copy_grid(const GridBlock& block, BlockCopy& copy) {
   return out;
 }
 
-// The high-order block's corners and nodal values, element after element without gaps.
+// Doubles of an element block's geometry per element: 8 corners, or the geometry nodes.
+std::size_t geometry_doubles(const HexBlock& block) {
+  const std::size_t q = std::size_t(block.geometry_order);
+  return block.geometry_order > 0 ? 3 * (q + 1) * (q + 1) * (q + 1) : 24;
+}
+
+// The high-order block's geometry and nodal values, element after element without gaps.
 HexBlock copy_hex(const HexBlock& block, BlockCopy& copy) {
   const std::size_t n = std::size_t(block.order + 1) * (block.order + 1) * (block.order + 1);
   const std::size_t size = scalar_bytes(block.type);
   const std::size_t stride = block.element_stride == 0 ? n : block.element_stride;
-  copy.corners.assign(block.corners, block.corners + 24 * block.element_count);
+  const double* geometry = block.geometry_order > 0 ? block.geometry : block.corners;
+  copy.geometry.assign(geometry, geometry + geometry_doubles(block) * block.element_count);
   copy.values.resize(block.element_count * n * size);
   const auto* src = static_cast<const unsigned char*>(block.values);
   if (stride == n) {
@@ -108,7 +115,7 @@ HexBlock copy_hex(const HexBlock& block, BlockCopy& copy) {
       std::memcpy(copy.values.data() + e * n * size, src + e * stride * size, n * size);
   }
   HexBlock out = block;
-  out.corners = copy.corners.data();
+  (block.geometry_order > 0 ? out.geometry : out.corners) = copy.geometry.data();
   out.values = copy.values.data();
   out.element_stride = 0;
   return out;
@@ -425,7 +432,8 @@ class AdaptorImpl final : public Adaptor {
       } else if (b.hex) {
         const std::size_t n =
             std::size_t(b.hex->order + 1) * (b.hex->order + 1) * (b.hex->order + 1);
-        bytes += b.hex->element_count * (n * scalar_bytes(b.hex->type) + 24 * sizeof(double));
+        bytes += b.hex->element_count *
+                 (n * scalar_bytes(b.hex->type) + geometry_doubles(*b.hex) * sizeof(double));
       } else {
         return false;
       }

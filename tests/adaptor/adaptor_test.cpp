@@ -3,6 +3,7 @@
 #include <mpi.h>
 
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <thread>
@@ -13,6 +14,7 @@
 #include "../mpi/mpi_gtest.hpp"
 #include "ldimesh/adaptor.hpp"
 #include "ldimesh/core/field/grid_source.hpp"
+#include "ldimesh/core/field/hex_source.hpp"
 #include "ldimesh/core/field/surfaces.hpp"
 #include "ldimesh/core/raycast/decomposition.hpp"
 #include "ldimesh/core/raycast/raycaster.hpp"
@@ -184,6 +186,63 @@ TEST(Adaptor, AStepWithoutSurfaceIsPublishedEmpty) {
   EXPECT_TRUE(a->finalize());
   if (rank_of() == 0) {
     EXPECT_EQ(a->published_steps(), 1u);
+  }
+}
+
+// A curved element block (geometry of order 2, each rank its share of the elements): the field
+// x on it (p = q: exact) has the plane x = c as its isosurface, and the published mesh lies on
+// it — through both the synchronous and the background (snapshot) path.
+TEST(Adaptor, CurvedElementBlocksArePublished) {
+  const int q = 2, n = 2;
+  const std::vector<double> x = node_positions(q, NodeSet::gauss_lobatto_legendre);
+  std::vector<double> geometry, values;
+  std::size_t count = 0;
+  for (int e = 0; e < n * n * n; ++e) {
+    if (e % ranks() != rank_of()) continue;
+    ++count;
+    const glm::dvec3 cell(e % n, (e / n) % n, e / (n * n));
+    for (int k = 0; k <= q; ++k)
+      for (int j = 0; j <= q; ++j)
+        for (int i = 0; i <= q; ++i) {
+          glm::dvec3 p = (cell + glm::dvec3(x[i], x[j], x[k])) / double(n);
+          // Bent inside (the nodes on the cube's faces stay): curved elements.
+          p.x += 0.05 * std::sin(3.14159 * p.y) * std::sin(3.14159 * p.z) * std::sin(3.14159 * p.x);
+          geometry.insert(geometry.end(), {p.x, p.y, p.z});
+          values.push_back(p.x);
+        }
+  }
+  for (const bool background : {false, true}) {
+    const std::string dir = temp_dir(background ? "curved_background" : "curved");
+    auto a = [&] {
+      std::unique_ptr<Adaptor> out;
+      const Status s = Adaptor::create(
+          MPI_COMM_WORLD,
+          R"({"server": {"enabled": false}, "resolution": 48, "log": false, "isovalues": [0.3],
+              "background": )" +
+              std::string(background ? "true" : "false") + R"(, "output_dir": ")" + dir + R"("})",
+          out);
+      EXPECT_TRUE(s) << s.message();
+      return out;
+    }();
+    if (!a) return;
+    EXPECT_TRUE(a->set_domain({glm::dvec3(0.0), glm::dvec3(1.0)}));
+    HexBlock block;
+    block.order = q;
+    block.nodes = NodeSet::gauss_lobatto_legendre;
+    block.element_count = count;
+    block.geometry_order = q;
+    block.geometry = geometry.data();
+    block.values = values.data();
+    if (count > 0) EXPECT_TRUE(a->add_hex_block(block));
+    EXPECT_TRUE(a->execute(0, 0.0));
+    EXPECT_TRUE(a->finalize());
+    if (rank_of() != 0) continue;
+    const Mesh mesh = testing::published_mesh(dir, 0);
+    EXPECT_GT(mesh.vertex_count(), 500u) << (background ? "background" : "synchronous");
+    double far = 0.0;
+    for (const glm::vec3& v : mesh.positions)
+      far = std::max(far, std::abs(double(v.x) - 0.3));
+    EXPECT_LT(far, 1e-4) << (background ? "background" : "synchronous");
   }
 }
 
