@@ -98,21 +98,23 @@ void range(const double* c, int total, int count, int k, double& lo, double& hi)
     lo = std::min(lo, c[i]), hi = std::max(hi, c[i]);
 }
 
-// Bounds of ∂/∂s_axis of component k over the box: the derivative's Bernstein coefficients
-// n (c_{i+1} − c_i) along that axis.
-void derivative_range(int n, int count, int k, int axis, const double* c, double& lo, double& hi) {
+// Bounds of ∂/∂s_axis of each of the `count` interleaved components over the box: the
+// derivative's Bernstein coefficients n (c_{i+1} − c_i) along that axis.
+void derivative_ranges(int n, int count, int axis, const double* c, double* lo, double* hi) {
   const int m = n + 1;
-  const int stride = count * (axis == 0 ? 1 : axis == 1 ? m : m * m);
-  lo = std::numeric_limits<double>::infinity(), hi = -lo;
-  for (int z = 0; z < m; ++z)
-    for (int y = 0; y < m; ++y)
-      for (int x = 0; x < m; ++x) {
-        const int index[3] = {x, y, z};
-        if (index[axis] == n) continue;
-        const int at = count * (x + m * (y + m * z)) + k;
-        const double v = n * (c[at + stride] - c[at]);
-        lo = std::min(lo, v), hi = std::max(hi, v);
-      }
+  const int step[3] = {count, count * m, count * m * m};
+  const int stride = step[axis], s1 = step[axis == 0 ? 1 : 0], s2 = step[axis == 2 ? 1 : 2];
+  for (int k = 0; k < count; ++k)
+    lo[k] = std::numeric_limits<double>::infinity(), hi[k] = -lo[k];
+  for (int a = 0; a < m; ++a)
+    for (int b = 0; b < m; ++b) {
+      const double* line = c + a * s1 + b * s2;
+      for (int i = 0; i < n; ++i)
+        for (int k = 0; k < count; ++k) {
+          const double v = n * (line[(i + 1) * stride + k] - line[i * stride + k]);
+          lo[k] = std::min(lo[k], v), hi[k] = std::max(hi[k], v);
+        }
+    }
 }
 
 struct Interval {
@@ -164,7 +166,8 @@ bool invert(const Element& e, glm::dvec3 world, glm::dvec3& xi) {
   xi = glm::dvec3(0.5);
   Sample s = evaluate(e, xi);
   double residual = glm::length(s.x - world);
-  const double size = glm::length(e.geometry[0] - e.geometry[(e.q + 1) * (e.q + 1) * (e.q + 1) - 1]);
+  const double size =
+      glm::length(e.geometry[0] - e.geometry[(e.q + 1) * (e.q + 1) * (e.q + 1) - 1]);
   for (int iter = 0; iter < 100; ++iter) {
     if (residual <= 1e-14 * size) return true;
     if (!(std::abs(glm::determinant(s.jacobian)) > 0.0)) return false;
@@ -268,51 +271,62 @@ void intersect(const Element& e, glm::dvec3 o, glm::dvec3 d, double t0, double t
     range(f, fp, 1, 0, lo, hi);
     if (lo > f_margin || hi < -f_margin) continue;
 
-    // The Krawczyk test in the box's own coordinates s ∈ [0, 1]³ (centre m = ½): with
-    // Y = J(m)⁻¹, K = m − Y H(m) + (I − Y J(box)) (box − m). K ⊂ box: exactly one solution in
-    // the box; K ∩ box = ∅: none.
-    double hv[3];
-    glm::dvec3 hg[3];
-    {
+    // The Jacobian of H over the box in its own coordinates s ∈ [0, 1]³, as intervals
+    // [row][col]: the derivatives' Bernstein coefficients.
+    Interval jbox[3][3];
+    for (int col = 0; col < 3; ++col) {
+      double glo[3], ghi[3];
+      derivative_ranges(e.q, 3, col, c, glo, ghi);
+      for (int row = 0; row < 2; ++row)
+        jbox[row][col] = {glo[row], ghi[row]};
+      derivative_ranges(e.p, 1, col, f, &jbox[2][col].lo, &jbox[2][col].hi);
+    }
+    // The Krawczyk test (centre m = ½): with Y = J(m)⁻¹, K = m − Y H(m) + (I − Y J(box))
+    // (box − m). K ⊂ box: exactly one solution in the box; K ∩ box = ∅: none. It can only
+    // succeed where each row of J(box) is narrow beside its size, so it is tried only there.
+    bool narrow = true;
+    for (int row = 0; row < 3 && narrow; ++row) {
+      double spread = 0.0, size = 0.0;
+      for (int col = 0; col < 3; ++col)
+        spread += jbox[row][col].hi - jbox[row][col].lo,
+            size = std::max({size, std::abs(jbox[row][col].lo), std::abs(jbox[row][col].hi)});
+      narrow = spread < size;
+    }
+    bool unique = false, none = false;
+    if (narrow) {
+      double hv[3];
+      glm::dvec3 hg[3];
       double gv[3];
       glm::dvec3 gg[3];
       evaluate_tensor<3>(e.q, c, glm::dvec3(0.5), gv, gg);
       hv[0] = gv[0], hv[1] = gv[1], hg[0] = gg[0], hg[1] = gg[1];
       evaluate_tensor<1>(e.p, f, glm::dvec3(0.5), &hv[2], &hg[2]);
-    }
-    glm::dmat3 jm;  // rows: the components' gradients in s
-    for (int col = 0; col < 3; ++col)
-      jm[col] = glm::dvec3(hg[0][col], hg[1][col], hg[2][col]);
-    const double det = glm::determinant(jm);
-    const double norms = glm::length(hg[0]) * glm::length(hg[1]) * glm::length(hg[2]);
-    bool unique = false, none = false;
-    if (std::abs(det) > 1e-12 * norms) {
-      const glm::dmat3 y = glm::inverse(jm);
-      Interval jbox[3][3];  // [row][col]
-      for (int row = 0; row < 3; ++row)
-        for (int col = 0; col < 3; ++col)
-          if (row < 2)
-            derivative_range(e.q, 3, row, col, c, jbox[row][col].lo, jbox[row][col].hi);
-          else
-            derivative_range(e.p, 1, 0, col, f, jbox[row][col].lo, jbox[row][col].hi);
-      const glm::dvec3 yh = y * glm::dvec3(hv[0], hv[1], hv[2]);
-      unique = true;
-      for (int i = 0; i < 3 && !none; ++i) {
-        double radius = 0.0;
-        for (int j = 0; j < 3; ++j) {
-          // (I − Y J)_ij as an interval.
-          double mlo = i == j ? 1.0 : 0.0, mhi = mlo;
-          for (int k = 0; k < 3; ++k) {
-            const double yik = y[k][i];
-            const double a = yik * jbox[k][j].lo, bb = yik * jbox[k][j].hi;
-            mlo -= std::max(a, bb), mhi -= std::min(a, bb);
+      glm::dmat3 jm;  // rows: the components' gradients in s
+      for (int col = 0; col < 3; ++col)
+        jm[col] = glm::dvec3(hg[0][col], hg[1][col], hg[2][col]);
+      const double det = glm::determinant(jm);
+      const double norms = glm::length(hg[0]) * glm::length(hg[1]) * glm::length(hg[2]);
+      if (std::abs(det) > 1e-12 * norms) {
+        const glm::dmat3 y = glm::inverse(jm);
+        const glm::dvec3 yh = y * glm::dvec3(hv[0], hv[1], hv[2]);
+        unique = true;
+        for (int i = 0; i < 3 && !none; ++i) {
+          double radius = 0.0;
+          for (int j = 0; j < 3; ++j) {
+            // (I − Y J)_ij as an interval.
+            double mlo = i == j ? 1.0 : 0.0, mhi = mlo;
+            for (int k = 0; k < 3; ++k) {
+              const double yik = y[k][i];
+              const double a = yik * jbox[k][j].lo, bb = yik * jbox[k][j].hi;
+              mlo -= std::max(a, bb), mhi -= std::min(a, bb);
+            }
+            radius += 0.5 * std::max(std::abs(mlo), std::abs(mhi));
           }
-          radius += 0.5 * std::max(std::abs(mlo), std::abs(mhi));
+          const double centre = 0.5 - yh[i];
+          const double klo = centre - radius, khi = centre + radius;
+          if (khi < -kBoxMargin || klo > 1.0 + kBoxMargin) none = true;
+          if (!(klo > -kBoxMargin && khi < 1.0 + kBoxMargin)) unique = false;
         }
-        const double centre = 0.5 - yh[i];
-        const double klo = centre - radius, khi = centre + radius;
-        if (khi < -kBoxMargin || klo > 1.0 + kBoxMargin) none = true;
-        if (!(klo > -kBoxMargin && khi < 1.0 + kBoxMargin)) unique = false;
       }
     }
     if (none) continue;
@@ -331,8 +345,21 @@ void intersect(const Element& e, glm::dvec3 o, glm::dvec3 d, double t0, double t
       unresolved += !unique;
       continue;
     }
-    // Split along the widest axis: the left half is looked at next.
-    const int axis = width.x >= width.y && width.x >= width.z ? 0 : width.y >= width.z ? 1 : 2;
+    // Split along the axis the components vary most along (each row of J(box) weighed by its
+    // own size, so that the planes and the field count alike): the left half is looked at next.
+    double score[3] = {0.0, 0.0, 0.0};
+    for (int row = 0; row < 3; ++row) {
+      double mag[3], total = 0.0;
+      for (int col = 0; col < 3; ++col)
+        total += mag[col] = std::max(std::abs(jbox[row][col].lo), std::abs(jbox[row][col].hi));
+      if (total > 0.0)
+        for (int col = 0; col < 3; ++col)
+          score[col] += mag[col] / total;
+    }
+    int axis = score[0] >= score[1] && score[0] >= score[2] ? 0 : score[1] >= score[2] ? 1 : 2;
+    // Never one axis alone down to nothing (every box must shrink to kMinWidth).
+    const int widest = width.x >= width.y && width.x >= width.z ? 0 : width.y >= width.z ? 1 : 2;
+    if (width[axis] < 1e-3 * width[widest]) axis = widest;
     // The halves go to the next two slots; the right one then takes the box's own slot (it is
     // looked at after the left one's whole subtree), the left one stays above it.
     const std::size_t left = (slot + 1) * box_size, right = (slot + 2) * box_size;
