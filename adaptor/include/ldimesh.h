@@ -90,6 +90,13 @@ typedef struct ldimesh_hex_block {
   int64_t value_count;    /* values the array holds */
   int type;               /* LDIMESH_FLOAT32 or LDIMESH_FLOAT64 */
   int64_t element_stride; /* values between elements; 0: (p+1)³ */
+  /* Curved elements (optional): geometry of order q = geometry_order (1..8, independent of p),
+     (q+1)³ nodes × (x, y, z) per element at the node set `nodes`, ξ fastest; corners is then
+     not read. geometry_count: the doubles the array holds, at least 3 (q+1)³ element_count.
+     0: the corners describe the elements (affine or trilinear). */
+  int geometry_order;
+  const double* geometry;
+  int64_t geometry_count;
 } ldimesh_hex_block;
 
 /* What the last ldimesh_execute did on this rank. */

@@ -251,9 +251,24 @@ int ldimesh_add_hex_block(ldimesh_adaptor* a, const ldimesh_hex_block* b) {
     return fail(a, LDIMESH_ERROR_ARGUMENT,
                 what + "the array holds " + std::to_string(b->value_count) +
                     " values, the elements read " + std::to_string(needed));
+  if (b->geometry_order < 0 || b->geometry_order > ldimesh::kMaxHexOrder)
+    return fail(a, LDIMESH_ERROR_ARGUMENT,
+                what + "geometry_order must lie in 0.." + std::to_string(ldimesh::kMaxHexOrder));
+  if (b->geometry_order > 0) {
+    const std::int64_t q1 = b->geometry_order + 1;
+    std::int64_t doubles = 0;
+    if (!mul(b->element_count, 3 * q1 * q1 * q1, doubles))
+      return fail(a, LDIMESH_ERROR_ARGUMENT, what + "element_count overflows");
+    if (!b->geometry || b->geometry_count < doubles)
+      return fail(a, LDIMESH_ERROR_ARGUMENT,
+                  what + "the geometry array holds " + std::to_string(b->geometry_count) +
+                      " doubles, the elements read " + std::to_string(doubles));
+  }
   h.order = b->order;
   h.element_count = std::size_t(b->element_count);
   h.corners = b->corners;
+  h.geometry_order = b->geometry_order;
+  h.geometry = b->geometry;
   h.values = b->values;
   h.element_stride = std::size_t(stride);
   return guarded(a, "ldimesh_add_hex_block: ", [&] { return a->impl->add_hex_block(h); });

@@ -195,6 +195,26 @@ TEST(CApi, AWrongSizeArrayIsRejectedAndTheAdaptorKeepsWorking) {
   h.value_count = 54;
   h.order = 9;
   EXPECT_EQ(ldimesh_add_hex_block(a, &h), LDIMESH_ERROR_ARGUMENT);
+  // Curved geometry of order 2: 3·27 doubles per element, one short.
+  h.order = 2;
+  std::vector<double> geometry(2 * 81, 0.0);
+  h.geometry_order = 2;
+  h.geometry = geometry.data();
+  h.geometry_count = 2 * 81 - 1;
+  EXPECT_EQ(ldimesh_add_hex_block(a, &h), LDIMESH_ERROR_ARGUMENT);
+  EXPECT_NE(std::string(ldimesh_last_error(a)).find("the elements read 162"), std::string::npos)
+      << ldimesh_last_error(a);
+  h.geometry_order = 9;
+  h.geometry_count = 2 * 81;
+  EXPECT_EQ(ldimesh_add_hex_block(a, &h), LDIMESH_ERROR_ARGUMENT);
+  EXPECT_NE(std::string(ldimesh_last_error(a)).find("geometry_order must lie in 0..8"),
+            std::string::npos)
+      << ldimesh_last_error(a);
+  // All-zero geometry nodes: degenerate elements, refused by the source with its message.
+  h.geometry_order = 2;
+  EXPECT_EQ(ldimesh_add_hex_block(a, &h), LDIMESH_ERROR_ARGUMENT);
+  EXPECT_NE(std::string(ldimesh_last_error(a)).find("degenerate"), std::string::npos)
+      << ldimesh_last_error(a);
 
   // Nothing was added: the right block now gives the sphere.
   b = slab.block();
