@@ -53,11 +53,15 @@ PolynomialSample evaluate_bernstein(int order, std::span<const double> bernstein
 // intersected element by element.
 class HexElementSource final : public FieldSource {
  public:
-  // Checks the block and computes its bounds. Throws std::invalid_argument for an order outside
-  // 1..kMaxHexOrder, an unknown node set or scalar type, no elements, a null array, an element
-  // stride below (p + 1)³, and for the first element (named by index) that is degenerate or not
-  // a parallelepiped (its trilinear map from the corners is not affine). The arrays must outlive
-  // the source; corners must not change while it lives, values may: every bind() reads them.
+  // Checks the block, converts each element's geometry and computes its bounds. Throws
+  // std::invalid_argument for an order or geometry order outside its range, an unknown node set
+  // or scalar type, no elements, a null array, an element stride below (p + 1)³, and for the
+  // first element (named by index) with a non-finite geometry node or that is degenerate or
+  // inverted (an affine one of zero volume; a curved one whose Jacobian determinant vanishes or
+  // changes sign). Elements whose map is not affine (trilinear or of geometry order q) are
+  // intersected by the curved search (docs/method.md). The arrays must outlive the source;
+  // corners and geometry must not change while it lives (they are read here), values may:
+  // every bind() reads them.
   explicit HexElementSource(const HexBlock& block);
 
   // The axis-aligned box around all elements.
