@@ -66,7 +66,8 @@ void evaluate_tensor(int n, const double* c, glm::dvec3 r, double* value, glm::d
 
 // Splits the tensor c (degree n, `count` interleaved components) at the middle of `axis`
 // into left and right halves (de Casteljau along every line of that axis).
-void split(int n, int count, int axis, const double* c, double* left, double* right) {
+template <int count>
+void split(int n, int axis, const double* c, double* left, double* right) {
   const int m = n + 1;
   const int stride = count * (axis == 0 ? 1 : axis == 1 ? m : m * m);
   double w[kMaxNodes];
@@ -92,7 +93,8 @@ void split(int n, int count, int axis, const double* c, double* left, double* ri
 }
 
 // Minimum and maximum of component k of a tensor with `total` values, `count` interleaved.
-void range(const double* c, int total, int count, int k, double& lo, double& hi) {
+template <int count>
+void range(const double* c, int total, int k, double& lo, double& hi) {
   lo = hi = c[k];
   for (int i = k; i < total; i += count)
     lo = std::min(lo, c[i]), hi = std::max(hi, c[i]);
@@ -100,7 +102,8 @@ void range(const double* c, int total, int count, int k, double& lo, double& hi)
 
 // Bounds of ∂/∂s_axis of each of the `count` interleaved components over the box: the
 // derivative's Bernstein coefficients n (c_{i+1} − c_i) along that axis.
-void derivative_ranges(int n, int count, int axis, const double* c, double* lo, double* hi) {
+template <int count>
+void derivative_ranges(int n, int axis, const double* c, double* lo, double* hi) {
   const int m = n + 1;
   const int step[3] = {count, count * m, count * m * m};
   const int stride = step[axis], s1 = step[axis == 0 ? 1 : 0], s2 = step[axis == 2 ? 1 : 2];
@@ -189,8 +192,13 @@ bool invert(const Element& e, glm::dvec3 world, glm::dvec3& xi) {
   return residual <= 1e-9 * size;
 }
 
-void intersect(const Element& e, glm::dvec3 o, glm::dvec3 d, double t0, double t1,
-               std::vector<RayHit>& hits, Stats* stats) {
+namespace {
+
+// The search from one box [lo, hi] of the reference cube, given the geometry's and the
+// field's coefficients on it (the whole element, or a piece).
+void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const glm::dvec3* geometry,
+            const double* field, glm::dvec3 o, glm::dvec3 d, double t0, double t1,
+            std::vector<RayHit>& hits, Stats* stats) {
   const int qm = e.q + 1, pm = e.p + 1;
   const int gq = qm * qm * qm, fp = pm * pm * pm;
   const std::size_t box_size = std::size_t(3 * gq + fp);
@@ -201,20 +209,21 @@ void intersect(const Element& e, glm::dvec3 o, glm::dvec3 d, double t0, double t
   thread_local std::vector<Box> stack;
   pool.resize(box_size);
   stack.clear();
-  // The root box: the whole element.
+  // The root box's coefficients; margins from the whole element's field (rounding in the
+  // subdivision scales with it).
   double g_scale = 0.0, f_scale = 0.0;
   for (int m = 0; m < gq; ++m) {
-    const glm::dvec3 r = e.geometry[m] - o;
+    const glm::dvec3 r = geometry[m] - o;
     pool[3 * m] = glm::dot(n1, r), pool[3 * m + 1] = glm::dot(n2, r),
              pool[3 * m + 2] = glm::dot(d, r);
     g_scale = std::max(g_scale, glm::length(r));
   }
   for (int m = 0; m < fp; ++m) {
-    pool[3 * gq + m] = e.field[m];
+    pool[3 * gq + m] = field[m];
     f_scale = std::max(f_scale, std::abs(e.field[m]));
   }
   const double g_margin = kSignMargin * g_scale, f_margin = kSignMargin * f_scale;
-  stack.push_back({glm::dvec3(0.0), glm::dvec3(1.0)});
+  stack.push_back({lo_box, hi_box});
   const std::size_t first_hit = hits.size();
   std::size_t boxes = 0, unresolved = 0;
 
@@ -262,13 +271,13 @@ void intersect(const Element& e, glm::dvec3 o, glm::dvec3 d, double t0, double t
     const double* f = c + 3 * gq;
     // The convex hull tests: the two planes, the depth range, the field.
     double lo, hi;
-    range(c, 3 * gq, 3, 0, lo, hi);
+    range<3>(c, 3 * gq, 0, lo, hi);
     if (lo > g_margin || hi < -g_margin) continue;
-    range(c, 3 * gq, 3, 1, lo, hi);
+    range<3>(c, 3 * gq, 1, lo, hi);
     if (lo > g_margin || hi < -g_margin) continue;
-    range(c, 3 * gq, 3, 2, lo, hi);
+    range<3>(c, 3 * gq, 2, lo, hi);
     if (hi < t0 - g_margin || lo > t1 + g_margin) continue;
-    range(f, fp, 1, 0, lo, hi);
+    range<1>(f, fp, 0, lo, hi);
     if (lo > f_margin || hi < -f_margin) continue;
 
     // The Jacobian of H over the box in its own coordinates s ∈ [0, 1]³, as intervals
@@ -276,10 +285,10 @@ void intersect(const Element& e, glm::dvec3 o, glm::dvec3 d, double t0, double t
     Interval jbox[3][3];
     for (int col = 0; col < 3; ++col) {
       double glo[3], ghi[3];
-      derivative_ranges(e.q, 3, col, c, glo, ghi);
+      derivative_ranges<3>(e.q, col, c, glo, ghi);
       for (int row = 0; row < 2; ++row)
         jbox[row][col] = {glo[row], ghi[row]};
-      derivative_ranges(e.p, 1, col, f, &jbox[2][col].lo, &jbox[2][col].hi);
+      derivative_ranges<1>(e.p, col, f, &jbox[2][col].lo, &jbox[2][col].hi);
     }
     // The Krawczyk test (centre m = ½): with Y = J(m)⁻¹, K = m − Y H(m) + (I − Y J(box))
     // (box − m). K ⊂ box: exactly one solution in the box; K ∩ box = ∅: none. It can only
@@ -365,8 +374,8 @@ void intersect(const Element& e, glm::dvec3 o, glm::dvec3 d, double t0, double t
     const std::size_t left = (slot + 1) * box_size, right = (slot + 2) * box_size;
     if (pool.size() < right + box_size) pool.resize(right + box_size);
     double* own = &pool[slot * box_size];
-    split(e.q, 3, axis, own, &pool[left], &pool[right]);
-    split(e.p, 1, axis, own + 3 * gq, &pool[left + 3 * gq], &pool[right + 3 * gq]);
+    split<3>(e.q, axis, own, &pool[left], &pool[right]);
+    split<1>(e.p, axis, own + 3 * gq, &pool[left + 3 * gq], &pool[right + 3 * gq]);
     std::copy(pool.begin() + right, pool.begin() + right + box_size,
               pool.begin() + slot * box_size);
     Box lb = b, rb = b;
@@ -385,6 +394,77 @@ void intersect(const Element& e, glm::dvec3 o, glm::dvec3 d, double t0, double t
     if (out == first_hit || hits[i].t - hits[out - 1].t > tol) hits[out++] = hits[i];
   hits.resize(out);
   if (stats) stats->boxes += boxes, stats->unresolved += unresolved;
+}
+
+}  // namespace
+
+void intersect(const Element& e, glm::dvec3 o, glm::dvec3 d, double t0, double t1,
+               std::vector<RayHit>& hits, Stats* stats) {
+  search(e, glm::dvec3(0.0), glm::dvec3(1.0), e.geometry, e.field, o, d, t0, t1, hits, stats);
+}
+
+Pieces::Pieces(const Element& e, double width) {
+  const int qm = e.q + 1, pm = e.p + 1;
+  gq_ = qm * qm * qm, fp_ = pm * pm * pm;
+  const std::size_t size = std::size_t(3 * gq_ + fp_);
+  double f_scale = 0.0;
+  for (int m = 0; m < fp_; ++m)
+    f_scale = std::max(f_scale, std::abs(e.field[m]));
+  const double margin = kSignMargin * f_scale;
+  // Depth first over boxes as in the search; a box's coefficients at its stack position.
+  struct Pending {
+    glm::dvec3 lo, hi;
+  };
+  std::vector<Pending> stack{{glm::dvec3(0.0), glm::dvec3(1.0)}};
+  std::vector<double> pool(size);
+  for (int m = 0; m < gq_; ++m)
+    for (int a = 0; a < 3; ++a)
+      pool[3 * m + a] = e.geometry[m][a];
+  std::copy(e.field, e.field + fp_, pool.begin() + 3 * gq_);
+  while (!stack.empty()) {
+    const std::size_t slot = stack.size() - 1;
+    const Pending b = stack.back();
+    stack.pop_back();
+    const double* c = &pool[slot * size];
+    double lo, hi;
+    range<1>(c + 3 * gq_, fp_, 0, lo, hi);
+    if (lo > margin || hi < -margin) continue;  // no point of the box is on the isosurface
+    const glm::dvec3 w = b.hi - b.lo;
+    const int axis = w.x >= w.y && w.x >= w.z ? 0 : w.y >= w.z ? 1 : 2;
+    if (w[axis] <= width) {
+      Piece piece{b.lo, b.hi, glm::dvec3(0.0), glm::dvec3(0.0)};
+      piece.world_lo = piece.world_hi = glm::dvec3(c[0], c[1], c[2]);
+      for (int m = 0; m < gq_; ++m) {  // the geometry's convex hull
+        const glm::dvec3 x(c[3 * m], c[3 * m + 1], c[3 * m + 2]);
+        piece.world_lo = glm::min(piece.world_lo, x), piece.world_hi = glm::max(piece.world_hi, x);
+      }
+      pieces_.push_back(piece);
+      coefficients_.insert(coefficients_.end(), c, c + size);
+      continue;
+    }
+    const std::size_t left = (slot + 1) * size, right = (slot + 2) * size;
+    if (pool.size() < right + size) pool.resize(right + size);
+    double* own = &pool[slot * size];
+    split<3>(e.q, axis, own, &pool[left], &pool[right]);
+    split<1>(e.p, axis, own + 3 * gq_, &pool[left + 3 * gq_], &pool[right + 3 * gq_]);
+    std::copy(pool.begin() + right, pool.begin() + right + size, pool.begin() + slot * size);
+    Pending lb = b, rb = b;
+    const double mid = 0.5 * (b.lo[axis] + b.hi[axis]);
+    lb.hi[axis] = mid, rb.lo[axis] = mid;
+    stack.push_back(rb);
+    stack.push_back(lb);
+  }
+}
+
+void Pieces::intersect(const Element& e, std::size_t k, glm::dvec3 o, glm::dvec3 d, double t0,
+                       double t1, std::vector<RayHit>& hits, Stats* stats) const {
+  const double* c = &coefficients_[k * std::size_t(3 * gq_ + fp_)];
+  // The piece's geometry as points: the coefficients hold them as (x, y, z) triples.
+  thread_local std::vector<glm::dvec3> geometry;
+  geometry.resize(std::size_t(gq_));
+  for (int m = 0; m < gq_; ++m)
+    geometry[m] = glm::dvec3(c[3 * m], c[3 * m + 1], c[3 * m + 2]);
+  search(e, pieces_[k].lo, pieces_[k].hi, geometry.data(), c + 3 * gq_, o, d, t0, t1, hits, stats);
 }
 
 }  // namespace ldimesh::curved

@@ -40,6 +40,29 @@ struct Stats {
 void intersect(const Element& e, glm::dvec3 o, glm::dvec3 d, double t0, double t1,
                std::vector<RayHit>& hits, Stats* stats = nullptr);
 
+// The boxes of an element's reference cube, down to a width, on which the field's Bernstein
+// coefficients do not rule out the isovalue, with the geometry's and the field's coefficients
+// on each: the first levels of the search, the same for every ray, found once per element.
+// A ray meets the isosurface only in the pieces; roots on a face two pieces share come from
+// both (the caster merges them).
+struct Piece {
+  glm::dvec3 lo, hi;              // in ξ
+  glm::dvec3 world_lo, world_hi;  // the axis-aligned box around its geometry
+};
+class Pieces {
+ public:
+  Pieces(const Element& e, double width);
+  const std::vector<Piece>& pieces() const { return pieces_; }
+  // intersect() for the part of the element in piece k.
+  void intersect(const Element& e, std::size_t k, glm::dvec3 o, glm::dvec3 d, double t0, double t1,
+                 std::vector<RayHit>& hits, Stats* stats = nullptr) const;
+
+ private:
+  int gq_ = 0, fp_ = 0;
+  std::vector<Piece> pieces_;
+  std::vector<double> coefficients_;  // per piece: 3 (q + 1)³ geometry, then (p + 1)³ field
+};
+
 // x(ξ), the Jacobian ∂x/∂ξ (columns ∂x/∂ξ_k) and f(ξ), ∇ξf at a reference point (f and
 // ∇ξf zero where the element has no field).
 struct Sample {

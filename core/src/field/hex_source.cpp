@@ -11,6 +11,7 @@
 #include <limits>
 #include <mutex>
 #include <numbers>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <type_traits>
@@ -1059,6 +1060,13 @@ class HexAxisBinding final : public AxisBinding {
 
   void prepare(int axis) const override {
     std::call_once(bins_once_[axis], [&] { bins_[axis] = bin_elements(active_.elements, axis); });
+    std::call_once(pieces_once_, [&] {  // the curved elements' pieces, for every axis
+      pieces_.resize(active_.elements.size());
+      tbb::parallel_for(std::size_t(0), active_.elements.size(), [&](std::size_t k) {
+        if (active_.elements[k].curved != ActiveElement::kAffine)
+          pieces_[k].emplace(active_.curved_element(k), kPieceWidth);
+      });
+    });
   }
 
   void cast(const AxisRays& rays, std::vector<AxisHit>& out) const override {
@@ -1169,34 +1177,45 @@ class HexAxisBinding final : public AxisBinding {
     const int rows = int(rays.rays.size() / std::size_t(view.width));
     // Pixels whose centres lie in the box (an affine element lies in its box), with a margin
     // far above rounding: the exact test is the clip below.
-    const auto pixel_range = [&](int axis, double sign, int count, int& first, int& last) {
-      const double x0 = (el.lo[axis] - view.origin[axis]) / (view.spacing * sign),
-                   x1 = (el.hi[axis] - view.origin[axis]) / (view.spacing * sign);
-      first = int(std::max(0.0, std::ceil(std::min(x0, x1) - 0.5 - 1e-6)));
-      last = int(std::min(double(count - 1), std::floor(std::max(x0, x1) - 0.5 + 1e-6)));
+    // The pixels whose centres lie in the box [lo, hi] (with a margin far above rounding: the
+    // exact tests come later), in this query's rows; false if none.
+    const auto pixels_of = [&](glm::dvec3 lo, glm::dvec3 hi, int& i0, int& i1, int& j0, int& j1) {
+      const auto range = [&](int axis, double sign, int count, int& first, int& last) {
+        const double x0 = (lo[axis] - view.origin[axis]) / (view.spacing * sign),
+                     x1 = (hi[axis] - view.origin[axis]) / (view.spacing * sign);
+        first = int(std::max(0.0, std::ceil(std::min(x0, x1) - 0.5 - 1e-6)));
+        last = int(std::min(double(count - 1), std::floor(std::max(x0, x1) - 0.5 + 1e-6)));
+      };
+      range(ua, view.u[ua], view.width, i0, i1);
+      range(va, view.v[va], view.height, j0, j1);
+      j0 = std::max(j0, rays.row_begin);
+      j1 = std::min(j1, rays.row_begin + rows - 1);
+      return i0 <= i1 && j0 <= j1;
     };
     int i0, i1, j0, j1;
-    pixel_range(ua, view.u[ua], view.width, i0, i1);
-    pixel_range(va, view.v[va], view.height, j0, j1);
-    j0 = std::max(j0, rays.row_begin);
-    j1 = std::min(j1, rays.row_begin + rows - 1);
-    if (i0 > i1 || j0 > j1) return;
+    if (!pixels_of(el.lo, el.hi, i0, i1, j0, j1)) return;  // an affine element lies in its box
     const auto index = [&](int i, int j) {
       return std::size_t(j - rays.row_begin) * std::size_t(view.width) + std::size_t(i);
     };
-    if (el.curved != ActiveElement::kAffine) {  // every pixel of the box on its own
+    if (el.curved != ActiveElement::kAffine) {
+      // Each piece of the element that may hold the isosurface, over the pixels of its box.
       std::vector<RayHit>& hits = scratch.hits;
       const curved::Element ce = active_.curved_element(e);
-      for (int j = j0; j <= j1; ++j)
-        for (int i = i0; i <= i1; ++i) {
-          const std::size_t k = index(i, j);
-          const AxisRay& ray = rays.rays[k];
-          if (!(ray.t0 <= ray.t1)) continue;
-          hits.clear();
-          curved::intersect(ce, ray.org, rays.dir, ray.t0, ray.t1, hits);
-          for (const RayHit& h : hits)
-            out.push_back({std::uint32_t(k), h});
-        }
+      const curved::Pieces& pieces = *pieces_[e];
+      for (std::size_t piece = 0; piece < pieces.pieces().size(); ++piece) {
+        const curved::Piece& box = pieces.pieces()[piece];
+        if (!pixels_of(box.world_lo, box.world_hi, i0, i1, j0, j1)) continue;
+        for (int j = j0; j <= j1; ++j)
+          for (int i = i0; i <= i1; ++i) {
+            const std::size_t k = index(i, j);
+            const AxisRay& ray = rays.rays[k];
+            if (!(ray.t0 <= ray.t1)) continue;
+            hits.clear();
+            pieces.intersect(ce, piece, ray.org, rays.dir, ray.t0, ray.t1, hits);
+            for (const RayHit& h : hits)
+              out.push_back({std::uint32_t(k), h});
+          }
+      }
       return;
     }
 
@@ -1394,6 +1413,11 @@ class HexAxisBinding final : public AxisBinding {
   Activation active_;
   mutable std::array<ElementBins, 3> bins_;
   mutable std::array<std::once_flag, 3> bins_once_;
+  // A curved element's pieces (the pixel rays share the search's first levels): boxes of a
+  // quarter of the reference cube's width per axis, at most 64 per element.
+  static constexpr double kPieceWidth = 0.125;
+  mutable std::vector<std::optional<curved::Pieces>> pieces_;
+  mutable std::once_flag pieces_once_;
 };
 
 }  // namespace
