@@ -233,7 +233,9 @@ TEST(Adaptor, CurvedElementBlocksArePublished) {
     block.geometry_order = q;
     block.geometry = geometry.data();
     block.values = values.data();
-    if (count > 0) EXPECT_TRUE(a->add_hex_block(block));
+    if (count > 0) {
+      EXPECT_TRUE(a->add_hex_block(block));
+    }
     EXPECT_TRUE(a->execute(0, 0.0));
     EXPECT_TRUE(a->finalize());
     if (rank_of() != 0) continue;
