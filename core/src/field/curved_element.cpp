@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <type_traits>
 
 #include "ldimesh/core/field/blocks.hpp"
 #include "ldimesh/core/field/field_source.hpp"
@@ -41,44 +42,72 @@ void basis(int n, double x, double* value, double* derivative) {
   }
 }
 
+// Calls fn(std::integral_constant<int, n>) for the degree n (1..kMaxHexOrder): kernels with
+// the degree as a constant, so that their loops unroll and their sums stay in registers.
+template <class Fn>
+decltype(auto) with_degree(int n, Fn&& fn) {
+  switch (n) {
+    case 1:
+      return fn(std::integral_constant<int, 1>{});
+    case 2:
+      return fn(std::integral_constant<int, 2>{});
+    case 3:
+      return fn(std::integral_constant<int, 3>{});
+    case 4:
+      return fn(std::integral_constant<int, 4>{});
+    case 5:
+      return fn(std::integral_constant<int, 5>{});
+    case 6:
+      return fn(std::integral_constant<int, 6>{});
+    case 7:
+      return fn(std::integral_constant<int, 7>{});
+    default:
+      return fn(std::integral_constant<int, 8>{});
+  }
+}
+
 // Value and gradient at r of the tensor of degree n with `count` interleaved components
-// (coefficient m's component c at c[m·count + c]).
+// (coefficient m's component c at c[m·count + c]), by sum factorisation: ξ contracted first
+// (value and ξ-derivative per row), then η, then ζ.
 template <int count>
 void evaluate_tensor(int n, const double* c, glm::dvec3 r, double* value, glm::dvec3* gradient) {
-  double bx[kMaxNodes], dx[kMaxNodes], by[kMaxNodes], dy[kMaxNodes], bz[kMaxNodes], dz[kMaxNodes];
-  basis(n, r.x, bx, dx);
-  basis(n, r.y, by, dy);
-  basis(n, r.z, bz, dz);
-  for (int k = 0; k < count; ++k)
-    value[k] = 0.0, gradient[k] = glm::dvec3(0.0);
-  const int m = n + 1;
-  for (int kz = 0; kz < m; ++kz)
-    for (int jy = 0; jy < m; ++jy)
-      for (int ix = 0; ix < m; ++ix) {
-        const double* v = c + count * (ix + m * (jy + m * kz));
-        const double w = bx[ix] * by[jy] * bz[kz];
-        const glm::dvec3 dw(dx[ix] * by[jy] * bz[kz], bx[ix] * dy[jy] * bz[kz],
-                            bx[ix] * by[jy] * dz[kz]);
-        for (int k = 0; k < count; ++k)
-          value[k] += v[k] * w, gradient[k] += v[k] * dw;
+  with_degree(n, [&](auto degree) {
+    constexpr int N = degree, m = N + 1;
+    double bx[kMaxNodes], dx[kMaxNodes], by[kMaxNodes], dy[kMaxNodes], bz[kMaxNodes], dz[kMaxNodes];
+    basis(N, r.x, bx, dx);
+    basis(N, r.y, by, dy);
+    basis(N, r.z, bz, dz);
+    for (int k = 0; k < count; ++k) {
+      double f = 0.0, fx = 0.0, fy = 0.0, fz = 0.0;
+      for (int kz = 0; kz < m; ++kz) {
+        double g = 0.0, gx = 0.0, gy = 0.0;  // the ζ-layer kz contracted over ξ and η
+        for (int jy = 0; jy < m; ++jy) {
+          const double* row = c + count * m * (jy + m * kz) + k;
+          double h = 0.0, hx = 0.0;
+          for (int ix = 0; ix < m; ++ix)
+            h += row[count * ix] * bx[ix], hx += row[count * ix] * dx[ix];
+          g += h * by[jy], gx += hx * by[jy], gy += h * dy[jy];
+        }
+        f += g * bz[kz], fx += gx * bz[kz], fy += gy * bz[kz], fz += g * dz[kz];
       }
+      value[k] = f, gradient[k] = glm::dvec3(fx, fy, fz);
+    }
+  });
 }
 
 // Splits the tensor c (degree n, `count` interleaved components) at the middle of `axis`
-// into left and right halves (de Casteljau along every line of that axis).
-template <int count>
-void split(int n, int axis, const double* c, double* left, double* right) {
-  const int m = n + 1;
-  const int stride = count * (axis == 0 ? 1 : axis == 1 ? m : m * m);
-  double w[kMaxNodes];
+// into left and right halves (de Casteljau along every line of that axis). `right` may be
+// `c` (each line is read before its halves are written).
+template <int count, int n>
+void split_fixed(int axis, const double* c, double* left, double* right) {
+  constexpr int m = n + 1;
+  const int step[3] = {count, count * m, count * m * m};
+  const int stride = step[axis], s1 = step[axis == 0 ? 1 : 0], s2 = step[axis == 2 ? 1 : 2];
   for (int a = 0; a < m; ++a)
     for (int b = 0; b < m; ++b)
       for (int k = 0; k < count; ++k) {
-        // The line's first coefficient: the two other axes at (a, b).
-        const int other1 = axis == 0 ? 1 : 0, other2 = axis == 2 ? 1 : 2;
-        const int s1 = count * (other1 == 0 ? 1 : other1 == 1 ? m : m * m);
-        const int s2 = count * (other2 == 0 ? 1 : other2 == 1 ? m : m * m);
         const int base = a * s1 + b * s2 + k;
+        double w[m];
         for (int i = 0; i < m; ++i)
           w[i] = c[base + i * stride];
         left[base] = w[0];
@@ -90,6 +119,10 @@ void split(int n, int axis, const double* c, double* left, double* right) {
           right[base + (n - r) * stride] = w[n - r];
         }
       }
+}
+template <int count>
+void split(int n, int axis, const double* c, double* left, double* right) {
+  with_degree(n, [&](auto degree) { split_fixed<count, degree>(axis, c, left, right); });
 }
 
 // Minimum and maximum of component k of a tensor with `total` values, `count` interleaved.
@@ -104,20 +137,23 @@ void range(const double* c, int total, int k, double& lo, double& hi) {
 // derivative's Bernstein coefficients n (c_{i+1} − c_i) along that axis.
 template <int count>
 void derivative_ranges(int n, int axis, const double* c, double* lo, double* hi) {
-  const int m = n + 1;
-  const int step[3] = {count, count * m, count * m * m};
-  const int stride = step[axis], s1 = step[axis == 0 ? 1 : 0], s2 = step[axis == 2 ? 1 : 2];
-  for (int k = 0; k < count; ++k)
-    lo[k] = std::numeric_limits<double>::infinity(), hi[k] = -lo[k];
-  for (int a = 0; a < m; ++a)
-    for (int b = 0; b < m; ++b) {
-      const double* line = c + a * s1 + b * s2;
-      for (int i = 0; i < n; ++i)
-        for (int k = 0; k < count; ++k) {
-          const double v = n * (line[(i + 1) * stride + k] - line[i * stride + k]);
-          lo[k] = std::min(lo[k], v), hi[k] = std::max(hi[k], v);
+  with_degree(n, [&](auto degree) {
+    constexpr int N = degree, m = N + 1;
+    const int step[3] = {count, count * m, count * m * m};
+    const int stride = step[axis], s1 = step[axis == 0 ? 1 : 0], s2 = step[axis == 2 ? 1 : 2];
+    for (int k = 0; k < count; ++k) {
+      double l = std::numeric_limits<double>::infinity(), h = -l;
+      for (int a = 0; a < m; ++a)
+        for (int b = 0; b < m; ++b) {
+          const double* line = c + a * s1 + b * s2 + k;
+          for (int i = 0; i < N; ++i) {
+            const double v = N * (line[(i + 1) * stride] - line[i * stride]);
+            l = std::min(l, v), h = std::max(h, v);
+          }
         }
+      lo[k] = l, hi[k] = h;
     }
+  });
 }
 
 struct Interval {
@@ -369,15 +405,13 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const glm::d
     // Never one axis alone down to nothing (every box must shrink to kMinWidth).
     const int widest = width.x >= width.y && width.x >= width.z ? 0 : width.y >= width.z ? 1 : 2;
     if (width[axis] < 1e-3 * width[widest]) axis = widest;
-    // The halves go to the next two slots; the right one then takes the box's own slot (it is
-    // looked at after the left one's whole subtree), the left one stays above it.
-    const std::size_t left = (slot + 1) * box_size, right = (slot + 2) * box_size;
-    if (pool.size() < right + box_size) pool.resize(right + box_size);
+    // The right half takes the box's own slot (it is looked at after the left one's whole
+    // subtree), the left one the next.
+    const std::size_t left = (slot + 1) * box_size;
+    if (pool.size() < left + box_size) pool.resize(left + box_size);
     double* own = &pool[slot * box_size];
-    split<3>(e.q, axis, own, &pool[left], &pool[right]);
-    split<1>(e.p, axis, own + 3 * gq, &pool[left + 3 * gq], &pool[right + 3 * gq]);
-    std::copy(pool.begin() + right, pool.begin() + right + box_size,
-              pool.begin() + slot * box_size);
+    split<3>(e.q, axis, own, &pool[left], own);
+    split<1>(e.p, axis, own + 3 * gq, &pool[left + 3 * gq], own + 3 * gq);
     Box lb = b, rb = b;
     const double mid = 0.5 * (b.lo[axis] + b.hi[axis]);
     lb.hi[axis] = mid, rb.lo[axis] = mid;
@@ -442,12 +476,11 @@ Pieces::Pieces(const Element& e, double width) {
       coefficients_.insert(coefficients_.end(), c, c + size);
       continue;
     }
-    const std::size_t left = (slot + 1) * size, right = (slot + 2) * size;
-    if (pool.size() < right + size) pool.resize(right + size);
+    const std::size_t left = (slot + 1) * size;
+    if (pool.size() < left + size) pool.resize(left + size);
     double* own = &pool[slot * size];
-    split<3>(e.q, axis, own, &pool[left], &pool[right]);
-    split<1>(e.p, axis, own + 3 * gq_, &pool[left + 3 * gq_], &pool[right + 3 * gq_]);
-    std::copy(pool.begin() + right, pool.begin() + right + size, pool.begin() + slot * size);
+    split<3>(e.q, axis, own, &pool[left], own);
+    split<1>(e.p, axis, own + 3 * gq_, &pool[left + 3 * gq_], own + 3 * gq_);
     Pending lb = b, rb = b;
     const double mid = 0.5 * (b.lo[axis] + b.hi[axis]);
     lb.hi[axis] = mid, rb.lo[axis] = mid;
