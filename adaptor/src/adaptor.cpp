@@ -115,7 +115,8 @@ HexBlock copy_hex(const HexBlock& block, BlockCopy& copy) {
       std::memcpy(copy.values.data() + e * n * size, src + e * stride * size, n * size);
   }
   HexBlock out = block;
-  (block.geometry_order > 0 ? out.geometry : out.corners) = copy.geometry.data();
+  out.corners = block.geometry_order > 0 ? nullptr : copy.geometry.data();
+  out.geometry = block.geometry_order > 0 ? copy.geometry.data() : nullptr;
   out.values = copy.values.data();
   out.element_stride = 0;
   return out;

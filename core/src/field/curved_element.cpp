@@ -182,7 +182,7 @@ void ray_frame(glm::dvec3 d, glm::dvec3& n1, glm::dvec3& n2) {
     return;
   }
   n1 = glm::normalize(glm::cross(d, a));
-  n2 = glm::cross(d, n1);
+  n2 = glm::normalize(glm::cross(d, n1));
 }
 
 }  // namespace
@@ -212,15 +212,14 @@ bool invert(const Element& e, glm::dvec3 world, glm::dvec3& xi) {
     if (!(std::abs(glm::determinant(s.jacobian)) > 0.0)) return false;
     const glm::dvec3 step = glm::inverse(s.jacobian) * (s.x - world);
     double scale = 1.0;
-    for (int half = 0; half < 30; ++half, scale *= 0.5) {
+    bool progress = false;
+    for (int half = 0; half < 30 && !progress; ++half, scale *= 0.5) {
       const glm::dvec3 next = xi - scale * step;
       const Sample t = evaluate(e, next);
       const double r = glm::length(t.x - world);
-      if (r < residual) {
-        xi = next, s = t, residual = r;
-        break;
-      }
+      if (r < residual) xi = next, s = t, residual = r, progress = true;
     }
+    if (!progress) break;
     if (scale * std::max({std::abs(step.x), std::abs(step.y), std::abs(step.z)}) < 1e-15)
       return residual <= 1e-9 * size;  // no further progress
     if (!(glm::length(xi) < 1e3)) return false;
@@ -248,10 +247,11 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const glm::d
   // The root box's coefficients; margins from the whole element's field (rounding in the
   // subdivision scales with it).
   double g_scale = 0.0, f_scale = 0.0;
+  const double dd = glm::dot(d, d);  // t = d·(x − o) / |d|², for any length of d
   for (int m = 0; m < gq; ++m) {
     const glm::dvec3 r = geometry[m] - o;
     pool[3 * m] = glm::dot(n1, r), pool[3 * m + 1] = glm::dot(n2, r),
-             pool[3 * m + 2] = glm::dot(d, r);
+             pool[3 * m + 2] = glm::dot(d, r) / dd;
     g_scale = std::max(g_scale, glm::length(r));
   }
   for (int m = 0; m < fp; ++m) {
@@ -274,7 +274,7 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const glm::d
       jac[c] = glm::dvec3(row1[c], row2[c], s.gradient[c]);
   };
   const auto record = [&](const Sample& s) {
-    const double t = glm::dot(d, s.x - o);
+    const double t = glm::dot(d, s.x - o) / dd;
     if (!(t >= t0 && t <= t1)) return;
     // ∇ₓf = J⁻ᵀ ∇ξf.
     const glm::dvec3 g = glm::transpose(glm::inverse(s.jacobian)) * s.gradient;
@@ -302,7 +302,9 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const glm::d
     const std::size_t slot = stack.size() - 1;
     const Box b = stack.back();
     stack.pop_back();  // pushed back below when it is split
-    if (++boxes > std::size_t(kMaxBoxes)) break;
+    // Out of budget, the boxes still pending are not split again (each gets Newton's point
+    // or its centre), so that no solution that was still pending is lost.
+    const bool out_of_budget = ++boxes > std::size_t(kMaxBoxes);
     const double* c = &pool[slot * box_size];
     const double* f = c + 3 * gq;
     // The convex hull tests: the two planes, the depth range, the field.
@@ -369,26 +371,32 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const glm::d
           }
           const double centre = 0.5 - yh[i];
           const double klo = centre - radius, khi = centre + radius;
+          // None: K misses the box grown by the margin; one: K lies inside the box shrunk by
+          // it (no outward rounding in K, so the margin stands in for it).
           if (khi < -kBoxMargin || klo > 1.0 + kBoxMargin) none = true;
-          if (!(klo > -kBoxMargin && khi < 1.0 + kBoxMargin)) unique = false;
+          if (!(klo > kBoxMargin && khi < 1.0 - kBoxMargin)) unique = false;
         }
       }
     }
     if (none) continue;
     const glm::dvec3 width = b.hi - b.lo;
-    const bool smallest = std::max({width.x, width.y, width.z}) < kMinWidth;
+    const bool smallest = std::max({width.x, width.y, width.z}) < kMinWidth || out_of_budget;
     if (unique || smallest) {
       glm::dvec3 xi;
       Sample s;
       if (newton(b, xi, s)) {
         record(s);
-      } else if (smallest) {
+        unresolved += !unique;
+        continue;
+      }
+      if (smallest) {
         xi = 0.5 * (b.lo + b.hi);
         s = evaluate(e, xi);
         record(s);
+        ++unresolved;
+        continue;
       }
-      unresolved += !unique;
-      continue;
+      // Proved but Newton left the box (rounding at its edge): split it like any other.
     }
     // Split along the axis the components vary most along (each row of J(box) weighed by its
     // own size, so that the planes and the field count alike): the left half is looked at next.

@@ -8,7 +8,8 @@
 // it have one strict sign (the convex hull property: no zero there) or its depth range misses
 // [t0, t1]; a box in which the Krawczyk operator maps the box into itself holds exactly one
 // solution, which Newton's method then converges to; otherwise the box is split in half along
-// its widest axis. docs/method.md ("Curved elements") gives the guarantees and tolerances.
+// the axis the components vary most along. docs/method.md ("Curved elements") gives the
+// guarantees and tolerances.
 #pragma once
 
 #include <cstddef>
@@ -35,8 +36,8 @@ struct Stats {
   std::size_t unresolved = 0;  // solutions taken at the smallest box width without a Krawczyk proof
 };
 
-// Appends every hit of the ray o + t·d, t ∈ [t0, t1] (closed), with element e to `hits`, in
-// increasing t, with the unit normal ∇ₓf/|∇ₓf| (towards −d where the gradient vanishes).
+// Appends every hit of the ray o + t·d (d of any length), t ∈ [t0, t1] (closed), with element e to
+// `hits`, in increasing t, with the unit normal ∇ₓf/|∇ₓf| (towards −d where the gradient vanishes).
 void intersect(const Element& e, glm::dvec3 o, glm::dvec3 d, double t0, double t1,
                std::vector<RayHit>& hits, Stats* stats = nullptr);
 

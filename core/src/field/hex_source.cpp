@@ -19,6 +19,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 namespace ldimesh {
 namespace {
@@ -1050,7 +1051,8 @@ class StagedRestriction {
 // box covers, each pixel's ray clipped to the element exactly as intersect_element clips it,
 // the polynomial along it from the staged restriction (rows of pixels share its first stages),
 // the roots by the same subdivision. Rays of other queries (single points) find their elements
-// through the bins. Both give the roots of the Embree binding, to the bit.
+// through the bins. Both give the roots of the Embree binding, to the bit, for affine elements;
+// curved ones are searched piece by piece here and whole there: the same roots to rounding.
 class HexAxisBinding final : public AxisBinding {
  public:
   explicit HexAxisBinding(Activation active) : active_(std::move(active)) {}
@@ -1062,9 +1064,13 @@ class HexAxisBinding final : public AxisBinding {
     std::call_once(bins_once_[axis], [&] { bins_[axis] = bin_elements(active_.elements, axis); });
     std::call_once(pieces_once_, [&] {  // the curved elements' pieces, for every axis
       pieces_.resize(active_.elements.size());
-      tbb::parallel_for(std::size_t(0), active_.elements.size(), [&](std::size_t k) {
-        if (active_.elements[k].curved != ActiveElement::kAffine)
-          pieces_[k].emplace(active_.curved_element(k), kPieceWidth);
+      const double width = active_.order <= 4 && active_.geometry_degree <= 4 ? 0.125 : 0.25;
+      // Isolated: a thread waiting in call_once must not take a task that waits on it.
+      tbb::this_task_arena::isolate([&] {
+        tbb::parallel_for(std::size_t(0), active_.elements.size(), [&](std::size_t k) {
+          if (active_.elements[k].curved != ActiveElement::kAffine)
+            pieces_[k].emplace(active_.curved_element(k), width);
+        });
       });
     });
   }
@@ -1413,9 +1419,9 @@ class HexAxisBinding final : public AxisBinding {
   Activation active_;
   mutable std::array<ElementBins, 3> bins_;
   mutable std::array<std::once_flag, 3> bins_once_;
-  // A curved element's pieces (the pixel rays share the search's first levels): boxes of a
-  // quarter of the reference cube's width per axis, at most 64 per element.
-  static constexpr double kPieceWidth = 0.125;
+  // A curved element's pieces (the pixel rays share the search's first levels): boxes of an
+  // eighth of the reference cube's width per axis (a quarter for p or q above 4, so that an
+  // element's pieces stay within a few MB), only those where the field allows the isovalue.
   mutable std::vector<std::optional<curved::Pieces>> pieces_;
   mutable std::once_flag pieces_once_;
 };
@@ -1510,7 +1516,7 @@ HexElementSource::HexElementSource(const HexBlock& block) : block_(block) {
       if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z))
         throw std::invalid_argument("hex source: element " + std::to_string(e) +
                                     " has a non-finite geometry node");
-    const AffineFrame f = frame_of(q > 0 ? &corners_[24 * e] : block.corners + 24 * e);
+    const AffineFrame f = frame_of(corners_of(e));
     const glm::dvec3 e1 = f.axes[0], e2 = f.axes[1], e3 = f.axes[2];
     const double size = glm::length(e1) + glm::length(e2) + glm::length(e3);
     bool affine = true;
@@ -1540,7 +1546,6 @@ HexElementSource::HexElementSource(const HexBlock& block) : block_(block) {
     bounds_.lo = glm::min(bounds_.lo, box.lo);
     bounds_.hi = glm::max(bounds_.hi, box.hi);
   }
-  if (q > 0) block_.corners = corners_.data();
 }
 
 // A curved element's Jacobian determinant has one strict sign (either: a mirrored element is
@@ -1550,19 +1555,17 @@ HexElementSource::HexElementSource(const HexBlock& block) : block_(block) {
 void HexElementSource::check_jacobian(std::size_t element, const std::vector<glm::dvec3>& x) const {
   const curved::Element ce{block_.order, geometry_degree_, nullptr, x.data()};
   const int points = geometry_degree_ + 2;
-  double scale = 0.0;
-  for (const glm::dvec3& v : x)
-    scale = std::max(scale, glm::length(v - x[0]));
   int sign = 0;
   for (int k = 0; k < points; ++k)
     for (int j = 0; j < points; ++j)
       for (int i = 0; i < points; ++i) {
         const glm::dvec3 xi(double(i) / (points - 1), double(j) / (points - 1),
                             double(k) / (points - 1));
-        const double det = glm::determinant(curved::evaluate(ce, xi).jacobian);
-        const int s = det > 1e-9 * scale * scale * scale    ? 1
-                      : det < -1e-9 * scale * scale * scale ? -1
-                                                            : 0;
+        const glm::dmat3 jac = curved::evaluate(ce, xi).jacobian;
+        // Relative to the columns' lengths, as the affine test: thin elements are fine.
+        const double det = glm::determinant(jac),
+                     tol = 1e-10 * glm::length(jac[0]) * glm::length(jac[1]) * glm::length(jac[2]);
+        const int s = det > tol ? 1 : det < -tol ? -1 : 0;
         if (s == 0 || (sign != 0 && s != sign))
           throw std::invalid_argument(
               "hex source: element " + std::to_string(element) +
@@ -1576,6 +1579,10 @@ void HexElementSource::check_jacobian(std::size_t element, const std::vector<glm
 
 Box HexElementSource::bounds() const {
   return bounds_;
+}
+
+const double* HexElementSource::corners_of(std::size_t element) const {
+  return block_.geometry_order > 0 ? &corners_[24 * element] : block_.corners + 24 * element;
 }
 
 std::span<const glm::dvec3> HexElementSource::curved_geometry(std::size_t element) const {
@@ -1592,7 +1599,7 @@ glm::dvec3 HexElementSource::to_world(std::size_t element, glm::dvec3 reference)
                              curved_geometry(element).data()};
     return curved::evaluate(ce, reference).x;
   }
-  const AffineFrame f = frame_of(block_.corners + 24 * element);
+  const AffineFrame f = frame_of(corners_of(element));
   return f.origin + f.axes * reference;
 }
 
@@ -1604,7 +1611,7 @@ glm::dvec3 HexElementSource::to_reference(std::size_t element, glm::dvec3 world)
     return curved::invert(ce, world, xi) ? xi
                                          : glm::dvec3(std::numeric_limits<double>::quiet_NaN());
   }
-  const AffineFrame f = frame_of(block_.corners + 24 * element);
+  const AffineFrame f = frame_of(corners_of(element));
   return glm::inverse(f.axes) * (world - f.origin);
 }
 
@@ -1686,7 +1693,7 @@ Activation activate(const HexElementSource& source, double isovalue) {
         el.lo = glm::min(el.lo, v), el.hi = glm::max(el.hi, v);
       return;
     }
-    const AffineFrame f = frame_of(block.corners + 24 * e);
+    const AffineFrame f = frame_of(source.corners_of(e));
     el.origin = f.origin;
     el.to_reference = glm::inverse(f.axes);
     const Box box = bounding_box(f);

@@ -98,6 +98,9 @@ class HexElementSource final : public FieldSource {
   // coefficients non-finite.
   void element_bernstein(std::size_t element, std::span<double> out) const;
 
+  // The 8 corners × (x, y, z) of element `element` (the geometry's vertices when the block gives
+  // geometry nodes).
+  const double* corners_of(std::size_t element) const;
   // Whether element `element` is curved (its map from the reference cube is not affine).
   bool is_curved(std::size_t element) const { return curved_of_[element] != kNotCurved; }
   // The geometry's degree per axis: geometry_order, or 1 for a block of corners.
