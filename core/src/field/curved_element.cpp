@@ -1,5 +1,7 @@
 #include "curved_element.hpp"
 
+#include "bernstein_basis.hpp"
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -25,22 +27,6 @@ constexpr int kMaxBoxes = 4096;
 // box that holds a solution.
 constexpr double kSignMargin = 1e-12;
 constexpr double kBoxMargin = 1e-9;
-
-// B_i^n(x) and dB_i^n/dx, i = 0..n (the triangle B_i^r = (1 − x) B_i^{r−1} + x B_{i−1}^{r−1}).
-void basis(int n, double x, double* value, double* derivative) {
-  double b[kMaxNodes] = {1.0};
-  for (int r = 1; r < n; ++r) {
-    b[r] = x * b[r - 1];
-    for (int i = r - 1; i > 0; --i)
-      b[i] = (1.0 - x) * b[i] + x * b[i - 1];
-    b[0] *= 1.0 - x;
-  }
-  for (int i = 0; i <= n; ++i) {
-    const double left = i > 0 ? b[i - 1] : 0.0, right = i < n ? b[i] : 0.0;
-    derivative[i] = n * (left - right);
-    value[i] = (1.0 - x) * right + x * left;
-  }
-}
 
 // Calls fn(std::integral_constant<int, n>) for the degree n (1..kMaxHexOrder): kernels with
 // the degree as a constant, so that their loops unroll and their sums stay in registers.
@@ -74,9 +60,9 @@ void evaluate_tensor(int n, const double* c, glm::dvec3 r, double* value, glm::d
   with_degree(n, [&](auto degree) {
     constexpr int N = degree, m = N + 1;
     double bx[kMaxNodes], dx[kMaxNodes], by[kMaxNodes], dy[kMaxNodes], bz[kMaxNodes], dz[kMaxNodes];
-    basis(N, r.x, bx, dx);
-    basis(N, r.y, by, dy);
-    basis(N, r.z, bz, dz);
+    bernstein_basis<N>(r.x, bx, dx);
+    bernstein_basis<N>(r.y, by, dy);
+    bernstein_basis<N>(r.z, bz, dz);
     for (int k = 0; k < count; ++k) {
       double f = 0.0, fx = 0.0, fy = 0.0, fz = 0.0;
       for (int kz = 0; kz < m; ++kz) {
@@ -166,6 +152,25 @@ struct Interval {
 struct Box {
   glm::dvec3 lo, hi;
 };
+
+// Splits box b, just popped from the top of `stack` (its coefficients in the pool at the
+// stack's size), in half along `axis`: the right half takes its slot (it is looked at after
+// the left one's whole subtree), the left one the next; both pushed, the left on top.
+void split_box(const Element& e, int axis, const Box& b, std::vector<double>& pool,
+               std::vector<Box>& stack) {
+  const int qm = e.q + 1, pm = e.p + 1, gq = qm * qm * qm;
+  const std::size_t size = std::size_t(3 * gq + pm * pm * pm), slot = stack.size();
+  const std::size_t left = (slot + 1) * size;
+  if (pool.size() < left + size) pool.resize(left + size);
+  double* own = &pool[slot * size];
+  split<3>(e.q, axis, own, &pool[left], own);
+  split<1>(e.p, axis, own + 3 * gq, &pool[left + 3 * gq], own + 3 * gq);
+  Box lb = b, rb = b;
+  const double mid = 0.5 * (b.lo[axis] + b.hi[axis]);
+  lb.hi[axis] = mid, rb.lo[axis] = mid;
+  stack.push_back(rb);
+  stack.push_back(lb);
+}
 
 // The ray's frame: d and two unit normals to it.
 void ray_frame(glm::dvec3 d, glm::dvec3& n1, glm::dvec3& n2) {
@@ -413,18 +418,7 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const glm::d
     // Never one axis alone down to nothing (every box must shrink to kMinWidth).
     const int widest = width.x >= width.y && width.x >= width.z ? 0 : width.y >= width.z ? 1 : 2;
     if (width[axis] < 1e-3 * width[widest]) axis = widest;
-    // The right half takes the box's own slot (it is looked at after the left one's whole
-    // subtree), the left one the next.
-    const std::size_t left = (slot + 1) * box_size;
-    if (pool.size() < left + box_size) pool.resize(left + box_size);
-    double* own = &pool[slot * box_size];
-    split<3>(e.q, axis, own, &pool[left], own);
-    split<1>(e.p, axis, own + 3 * gq, &pool[left + 3 * gq], own + 3 * gq);
-    Box lb = b, rb = b;
-    const double mid = 0.5 * (b.lo[axis] + b.hi[axis]);
-    lb.hi[axis] = mid, rb.lo[axis] = mid;
-    stack.push_back(rb);
-    stack.push_back(lb);
+    split_box(e, axis, b, pool, stack);
   }
 
   // In increasing t; a solution found from two boxes (on their shared face) once.
@@ -454,10 +448,7 @@ Pieces::Pieces(const Element& e, double width) {
     f_scale = std::max(f_scale, std::abs(e.field[m]));
   const double margin = kSignMargin * f_scale;
   // Depth first over boxes as in the search; a box's coefficients at its stack position.
-  struct Pending {
-    glm::dvec3 lo, hi;
-  };
-  std::vector<Pending> stack{{glm::dvec3(0.0), glm::dvec3(1.0)}};
+  std::vector<Box> stack{{glm::dvec3(0.0), glm::dvec3(1.0)}};
   std::vector<double> pool(size);
   for (int m = 0; m < gq_; ++m)
     for (int a = 0; a < 3; ++a)
@@ -465,7 +456,7 @@ Pieces::Pieces(const Element& e, double width) {
   std::copy(e.field, e.field + fp_, pool.begin() + 3 * gq_);
   while (!stack.empty()) {
     const std::size_t slot = stack.size() - 1;
-    const Pending b = stack.back();
+    const Box b = stack.back();
     stack.pop_back();
     const double* c = &pool[slot * size];
     double lo, hi;
@@ -484,16 +475,7 @@ Pieces::Pieces(const Element& e, double width) {
       coefficients_.insert(coefficients_.end(), c, c + size);
       continue;
     }
-    const std::size_t left = (slot + 1) * size;
-    if (pool.size() < left + size) pool.resize(left + size);
-    double* own = &pool[slot * size];
-    split<3>(e.q, axis, own, &pool[left], own);
-    split<1>(e.p, axis, own + 3 * gq_, &pool[left + 3 * gq_], own + 3 * gq_);
-    Pending lb = b, rb = b;
-    const double mid = 0.5 * (b.lo[axis] + b.hi[axis]);
-    lb.hi[axis] = mid, rb.lo[axis] = mid;
-    stack.push_back(rb);
-    stack.push_back(lb);
+    split_box(e, axis, b, pool, stack);
   }
 }
 

@@ -1,5 +1,6 @@
 #include "ldimesh/core/field/hex_source.hpp"
 
+#include "bernstein_basis.hpp"
 #include "curved_element.hpp"
 
 #include <algorithm>
@@ -281,24 +282,6 @@ Box bounding_box(const AffineFrame& f) {
 template <int P, class Fn>
 [[gnu::always_inline]] inline decltype(auto) with_degree(int d, Fn&& fn) {
   return with_one_of<0, P, 2 * P, 3 * P>(d, std::forward<Fn>(fn));
-}
-
-// B_i^P(x) and dB_i^P/dx for i = 0..P, from the triangle B_i^r = (1 − x) B_i^{r−1} + x
-// B_{i−1}^{r−1} and dB_i^P/dx = P (B_{i−1}^{P−1} − B_i^{P−1}).
-template <int P>
-[[gnu::always_inline]] inline void bernstein_basis(double x, double* value, double* derivative) {
-  double b[kMaxNodes] = {1.0};
-  for (int r = 1; r < P; ++r) {
-    b[r] = x * b[r - 1];
-    for (int i = r - 1; i > 0; --i)
-      b[i] = (1.0 - x) * b[i] + x * b[i - 1];
-    b[0] *= 1.0 - x;
-  }
-  for (int i = 0; i <= P; ++i) {
-    const double left = i > 0 ? b[i - 1] : 0.0, right = i < P ? b[i] : 0.0;
-    derivative[i] = P * (left - right);
-    value[i] = (1.0 - x) * right + x * left;
-  }
 }
 
 template <int P>
