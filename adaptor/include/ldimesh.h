@@ -61,6 +61,12 @@ enum {
   LDIMESH_NODES_EQUISPACED = 2 /* evenly spaced, both ends (Lagrange finite elements) */
 };
 
+/* Node order within an element (ldimesh_hex_block.ordering). */
+enum {
+  LDIMESH_ORDER_LEXICOGRAPHIC = 0, /* node (i, j, k) at i + (n+1)(j + (n+1)k): ξ fastest */
+  LDIMESH_ORDER_VTK = 1            /* VTK_LAGRANGE_HEXAHEDRON's (deal.II's DataOut, .vtu files) */
+};
+
 typedef struct ldimesh_adaptor ldimesh_adaptor;
 
 /* One rank-local block of point data (ldimesh::GridBlock). Initialise with
@@ -97,6 +103,7 @@ typedef struct ldimesh_hex_block {
   int geometry_order;
   const double* geometry;
   int64_t geometry_count;
+  int ordering; /* LDIMESH_ORDER_*: of the values and the geometry nodes (not the corners) */
 } ldimesh_hex_block;
 
 /* What the last ldimesh_execute did on this rank. */

@@ -269,6 +269,10 @@ int ldimesh_add_hex_block(ldimesh_adaptor* a, const ldimesh_hex_block* b) {
   h.corners = b->corners;
   h.geometry_order = b->geometry_order;
   h.geometry = b->geometry;
+  if (b->ordering != LDIMESH_ORDER_LEXICOGRAPHIC && b->ordering != LDIMESH_ORDER_VTK)
+    return fail(a, LDIMESH_ERROR_ARGUMENT, what + "ordering must be LDIMESH_ORDER_*");
+  h.ordering = b->ordering == LDIMESH_ORDER_VTK ? ldimesh::NodeOrdering::vtk_lagrange
+                                                : ldimesh::NodeOrdering::lexicographic;
   h.values = b->values;
   h.element_stride = std::size_t(stride);
   return guarded(a, "ldimesh_add_hex_block: ", [&] { return a->impl->add_hex_block(h); });

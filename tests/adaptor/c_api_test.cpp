@@ -210,6 +210,13 @@ TEST(CApi, AWrongSizeArrayIsRejectedAndTheAdaptorKeepsWorking) {
   EXPECT_NE(std::string(ldimesh_last_error(a)).find("geometry_order must lie in 0..8"),
             std::string::npos)
       << ldimesh_last_error(a);
+  h.geometry_order = 2;
+  h.ordering = 7;
+  EXPECT_EQ(ldimesh_add_hex_block(a, &h), LDIMESH_ERROR_ARGUMENT);
+  EXPECT_NE(std::string(ldimesh_last_error(a)).find("ordering must be LDIMESH_ORDER_*"),
+            std::string::npos)
+      << ldimesh_last_error(a);
+  h.ordering = LDIMESH_ORDER_VTK;
   // All-zero geometry nodes: degenerate elements, refused by the source with its message.
   h.geometry_order = 2;
   EXPECT_EQ(ldimesh_add_hex_block(a, &h), LDIMESH_ERROR_ARGUMENT);

@@ -230,13 +230,66 @@ void convert_element(int order, const ConversionMatrix& m, const double* in, dou
 
 // Copies the (p + 1)³ = n nodal values of `element` as doubles into `nodal`; returns how many
 // are NaN or ±Inf.
+// vtk_lagrange_index without the checks.
+std::size_t vtk_index(int i, int j, int k, int p) {
+  const bool ib = i == 0 || i == p, jb = j == 0 || j == p, kb = k == 0 || k == p;
+  const int bounds = int(ib) + int(jb) + int(kb), e = p - 1;
+  if (bounds == 3) return std::size_t((j == 0 ? (i == p) : (i == p ? 2 : 3)) + (k == p ? 4 : 0));
+  if (bounds == 2) {
+    int edge, t;
+    if (!ib)
+      edge = (j == 0 ? 0 : 2) + (k == p ? 4 : 0), t = i;
+    else if (!jb)
+      edge = (i == 0 ? 3 : 1) + (k == p ? 4 : 0), t = j;
+    else
+      edge = 8 + (i == 0 ? (j == 0 ? 0 : 3) : (j == 0 ? 1 : 2)), t = k;
+    return std::size_t(8 + edge * e + t - 1);
+  }
+  if (bounds == 1) {
+    int face, a, b;
+    if (ib)
+      face = i == 0 ? 0 : 1, a = j, b = k;
+    else if (jb)
+      face = j == 0 ? 2 : 3, a = i, b = k;
+    else
+      face = k == 0 ? 4 : 5, a = i, b = j;
+    return std::size_t(8 + 12 * e + face * e * e + (a - 1) + e * (b - 1));
+  }
+  return std::size_t(8 + 12 * e + 6 * e * e + (i - 1) + e * ((j - 1) + e * (k - 1)));
+}
+
+// For each order, the position in the solver's array of the element's lexicographic node m.
+const std::vector<std::uint16_t>& node_permutation(int order, NodeOrdering ordering) {
+  static const auto tables = [] {
+    std::array<std::array<std::vector<std::uint16_t>, 2>, kMaxHexOrder + 1> t;
+    for (int p = 1; p <= kMaxHexOrder; ++p)
+      for (int k = 0; k <= p; ++k)
+        for (int j = 0; j <= p; ++j)
+          for (int i = 0; i <= p; ++i) {
+            t[p][0].push_back(std::uint16_t(i + (p + 1) * (j + (p + 1) * k)));
+            t[p][1].push_back(std::uint16_t(vtk_index(i, j, k, p)));
+          }
+    return t;
+  }();
+  return tables[order][ordering == NodeOrdering::vtk_lagrange ? 1 : 0];
+}
+
 std::size_t read_nodal(const HexBlock& block, std::size_t element, std::size_t n, double* nodal) {
   const std::size_t first = element * block.element_stride;
-  // One branch per element on the scalar type, none per value.
+  // One branch per element on the scalar type and the ordering, none per value.
+  const auto read = [&](const auto* values) {
+    if (block.ordering == NodeOrdering::lexicographic) {
+      std::copy_n(values + first, n, nodal);
+      return;
+    }
+    const std::vector<std::uint16_t>& at = node_permutation(block.order, block.ordering);
+    for (std::size_t m = 0; m < n; ++m)
+      nodal[m] = double(values[first + at[m]]);
+  };
   if (block.type == ScalarType::float32)
-    std::copy_n(static_cast<const float*>(block.values) + first, n, nodal);
+    read(static_cast<const float*>(block.values));
   else
-    std::copy_n(static_cast<const double*>(block.values) + first, n, nodal);
+    read(static_cast<const double*>(block.values));
   std::size_t nonfinite = 0;
   for (std::size_t i = 0; i < n; ++i)
     nonfinite += !std::isfinite(nodal[i]);
@@ -1411,6 +1464,15 @@ class HexAxisBinding final : public AxisBinding {
 
 }  // namespace
 
+std::size_t vtk_lagrange_index(int i, int j, int k, int order) {
+  check_order(order);
+  if (std::min({i, j, k}) < 0 || std::max({i, j, k}) > order)
+    throw std::invalid_argument("vtk_lagrange_index: node (" + std::to_string(i) + ", " +
+                                std::to_string(j) + ", " + std::to_string(k) +
+                                ") outside an element of order " + std::to_string(order));
+  return vtk_index(i, j, k, order);
+}
+
 std::vector<double> node_positions(int order, NodeSet nodes) {
   check_order(order);
   check_node_set(nodes);
@@ -1453,6 +1515,8 @@ HexElementSource::HexElementSource(const HexBlock& block) : block_(block) {
   if (q > 0 && !block.geometry) throw std::invalid_argument("hex source: null geometry array");
   if (q == 0 && !block.corners) throw std::invalid_argument("hex source: null corner array");
   if (!block.values) throw std::invalid_argument("hex source: null value array");
+  if (block.ordering != NodeOrdering::lexicographic && block.ordering != NodeOrdering::vtk_lagrange)
+    throw std::invalid_argument("hex source: unknown node ordering");
   if (block.type != ScalarType::float32 && block.type != ScalarType::float64)
     throw std::invalid_argument("hex source: unknown scalar type");
   if (block_.element_stride == 0) block_.element_stride = n;
@@ -1481,9 +1545,10 @@ HexElementSource::HexElementSource(const HexBlock& block) : block_(block) {
   for (std::size_t e = 0; e < block.element_count; ++e) {
     if (q > 0) {
       const double* nodes = block.geometry + 3 * gn * e;
+      const std::vector<std::uint16_t>& at = node_permutation(q, block.ordering);
       for (int axis = 0; axis < 3; ++axis) {
         for (std::size_t m = 0; m < gn; ++m)
-          nodal[m] = nodes[3 * m + axis];
+          nodal[m] = nodes[3 * at[m] + axis];
         convert_element(q, conversion_matrix(q, block.nodes), nodal.data(), bernstein.data());
         for (std::size_t m = 0; m < gn; ++m)
           x[m][axis] = bernstein[m];

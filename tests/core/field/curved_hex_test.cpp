@@ -7,6 +7,7 @@
 #include <random>
 #include <string>
 #include <tuple>
+#include <utility>
 
 #include <gtest/gtest.h>
 
@@ -359,6 +360,81 @@ TEST(CurvedHex, InvalidCurvedBlocksAreRejected) {
     for (std::size_t k = 0; k < std::min(l.depth.size(), r.depth.size()); ++k)
       EXPECT_NEAR(l.depth[k], r.depth[k], 1e-6);
   }
+}
+
+TEST(CurvedHex, VtkLagrangeIndexIsVtks) {
+  // vtkLagrangeHexahedron::PointIndexFromIJK(i, j, k, {p, p, p}) of VTK 9.1 for p = 2 and 3, node
+  // (i, j, k) in lexicographic order (printed with Debian's python3-vtk9); p = 1..8 agreed with
+  // it when this was written.
+  const std::vector<std::size_t> vtk2 = {0,  8,  1,  11, 24, 9,  3, 10, 2,  16, 22, 17, 20, 26,
+                                         21, 19, 23, 18, 4,  12, 5, 15, 25, 13, 7,  14, 6};
+  const std::vector<std::size_t> vtk3 = {
+      0,  8,  9,  1,  14, 48, 49, 10, 15, 50, 51, 11, 3,  12, 13, 2,  24, 40, 41, 26, 32, 56,
+      57, 36, 33, 58, 59, 37, 30, 44, 45, 28, 25, 42, 43, 27, 34, 60, 61, 38, 35, 62, 63, 39,
+      31, 46, 47, 29, 4,  16, 17, 5,  22, 52, 53, 18, 23, 54, 55, 19, 7,  20, 21, 6};
+  for (const auto& [p, expected] : {std::pair{2, vtk2}, std::pair{3, vtk3}}) {
+    std::vector<std::size_t> got;
+    for (int k = 0; k <= p; ++k)
+      for (int j = 0; j <= p; ++j)
+        for (int i = 0; i <= p; ++i)
+          got.push_back(vtk_lagrange_index(i, j, k, p));
+    EXPECT_EQ(got, expected) << "p " << p;
+  }
+  // Every order: a permutation of the element's nodes.
+  for (int p = 1; p <= kMaxHexOrder; ++p) {
+    std::vector<bool> seen((p + 1) * (p + 1) * (p + 1), false);
+    for (int k = 0; k <= p; ++k)
+      for (int j = 0; j <= p; ++j)
+        for (int i = 0; i <= p; ++i) {
+          const std::size_t at = vtk_lagrange_index(i, j, k, p);
+          ASSERT_LT(at, seen.size());
+          EXPECT_FALSE(seen[at]) << "p " << p;
+          seen[at] = true;
+        }
+  }
+  EXPECT_THROW(vtk_lagrange_index(3, 0, 0, 2), std::invalid_argument);
+  EXPECT_THROW(vtk_lagrange_index(0, 0, 0, 9), std::invalid_argument);
+}
+
+TEST(CurvedHex, VtkOrderedBlocksGiveTheSameHits) {
+  // The same curved mesh with its values and geometry nodes in VTK's order: the same numbers
+  // reach the source, so the LDIs are equal to the bit.
+  const int p = 3, q = 2;
+  const CurvedMesh m = curved_mesh(2, p, q, NodeSet::equispaced, 0.08, wavy);
+  const int np = (p + 1) * (p + 1) * (p + 1), nq = (q + 1) * (q + 1) * (q + 1);
+  std::vector<double> values(m.values.size()), geometry(m.geometry.size());
+  for (std::size_t e = 0; e < m.block.element_count; ++e) {
+    for (int k = 0; k <= p; ++k)
+      for (int j = 0; j <= p; ++j)
+        for (int i = 0; i <= p; ++i)
+          values[e * np + vtk_lagrange_index(i, j, k, p)] =
+              m.values[e * np + i + (p + 1) * (j + (p + 1) * k)];
+    for (int k = 0; k <= q; ++k)
+      for (int j = 0; j <= q; ++j)
+        for (int i = 0; i <= q; ++i)
+          for (int a = 0; a < 3; ++a)
+            geometry[3 * (e * nq + vtk_lagrange_index(i, j, k, q)) + a] =
+                m.geometry[3 * (e * nq + i + (q + 1) * (j + (q + 1) * k)) + a];
+  }
+  HexBlock vtk = m.block;
+  vtk.values = values.data();
+  vtk.geometry = geometry.data();
+  vtk.ordering = NodeOrdering::vtk_lagrange;
+  const HexElementSource a(m.block), b(vtk);
+  for (const View& view : make_axis_views(a.bounds(), 24)) {
+    const Ldi la = RayCaster(a, 0.0).cast(view), lb = RayCaster(b, 0.0).cast(view);
+    EXPECT_GT(la.sample_count(), 100u);
+    EXPECT_EQ(la.offsets, lb.offsets);
+    EXPECT_EQ(la.depth, lb.depth);
+    EXPECT_EQ(la.normal, lb.normal);
+  }
+  // Read as lexicographic, the VTK-ordered arrays are another field: the test can fail.
+  HexBlock wrong = vtk;
+  wrong.ordering = NodeOrdering::lexicographic;
+  wrong.geometry = m.geometry.data();
+  const HexElementSource c(wrong);
+  const View view = make_view(a.bounds(), {1, 0, 0}, 24);
+  EXPECT_NE(RayCaster(a, 0.0).cast(view).depth, RayCaster(c, 0.0).cast(view).depth);
 }
 
 }  // namespace

@@ -49,6 +49,12 @@ enum class NodeSet {
 
 inline constexpr int kMaxHexOrder = 8;
 
+// Where an element's nodes lie in the solver's arrays.
+enum class NodeOrdering {
+  lexicographic,  // node (i, j, k) is the i + (n + 1)·(j + (n + 1)·k)-th: ξ fastest
+  vtk_lagrange,   // VTK_LAGRANGE_HEXAHEDRON's: corners, edges, faces, interior (vtk_lagrange_index)
+};
+
 // One block of hexahedral elements of one polynomial order and node set, described by pointers
 // into the solver's own arrays (nothing is copied).
 struct HexBlock {
@@ -71,6 +77,9 @@ struct HexBlock {
   // element after element. 0: the corners describe the elements.
   int geometry_order = 0;
   const double* geometry = nullptr;
+  // The order of the nodal values and of the geometry nodes within an element (not of the
+  // corners, whose order is the one above).
+  NodeOrdering ordering = NodeOrdering::lexicographic;
 };
 
 }  // namespace ldimesh

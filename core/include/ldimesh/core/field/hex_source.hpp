@@ -35,6 +35,16 @@ struct PolynomialSample {
 // 1 ≤ order ≤ kMaxHexOrder.
 std::vector<double> node_positions(int order, NodeSet nodes);
 
+// The position of node (i, j, k) (0..order along ξ, η, ζ) of an element of `order` in VTK's
+// Lagrange hexahedron order (VTK_LAGRANGE_HEXAHEDRON, as deal.II's DataOut writes high-order
+// cells): the corners (0,0,0), (p,0,0), (p,p,0), (0,p,0), then the same at ζ = p; the edges'
+// interior nodes (along ξ at η = 0, along η at ξ = p, along ξ at η = p, along η at ξ = 0 — at
+// ζ = 0, then at ζ = p — then along ζ at (0,0), (p,0), (p,p), (0,p)), each in increasing
+// parameter; the faces' interior nodes (ξ = 0, ξ = p with η fastest; η = 0, η = p with ξ
+// fastest; ζ = 0, ζ = p with ξ fastest); then the interior, ξ fastest. Throws
+// std::invalid_argument for an order outside 1..kMaxHexOrder or a node outside the element.
+std::size_t vtk_lagrange_index(int i, int j, int k, int order);
+
 // Converts the (p + 1)³ nodal values of one element (layout as in HexBlock) into the (p + 1)³
 // tensor-product Bernstein coefficients on [0, 1]³ of the same polynomial, same layout. Both
 // spans must hold exactly (p + 1)³ values and must not overlap; throws std::invalid_argument
