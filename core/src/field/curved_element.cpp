@@ -190,6 +190,16 @@ void ray_frame(glm::dvec3 d, glm::dvec3& n1, glm::dvec3& n2) {
   n2 = glm::normalize(glm::cross(d, n1));
 }
 
+// The sign tests' margin for the field: rounding in the subdivision scales with the element's
+// coefficients.
+double field_margin(const Element& e) {
+  const int pm = e.p + 1;
+  double scale = 0.0;
+  for (int m = 0; m < pm * pm * pm; ++m)
+    scale = std::max(scale, std::abs(e.field[m]));
+  return kSignMargin * scale;
+}
+
 }  // namespace
 
 Sample evaluate(const Element& e, glm::dvec3 xi) {
@@ -234,11 +244,12 @@ bool invert(const Element& e, glm::dvec3 world, glm::dvec3& xi) {
 
 namespace {
 
-// The search from one box [lo, hi] of the reference cube, given the geometry's and the
-// field's coefficients on it (the whole element, or a piece).
-void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const glm::dvec3* geometry,
-            const double* field, glm::dvec3 o, glm::dvec3 d, double t0, double t1,
-            std::vector<RayHit>& hits, Stats* stats) {
+// The search from one box [lo, hi] of the reference cube, given the geometry's ((x, y, z)
+// triples) and the field's coefficients on it (the whole element, or a piece), and the margin
+// of the field's sign tests.
+void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double* geometry,
+            const double* field, double f_margin, glm::dvec3 o, glm::dvec3 d, double t0, double t1,
+            std::vector<RayHit>& hits) {
   const int qm = e.q + 1, pm = e.p + 1;
   const int gq = qm * qm * qm, fp = pm * pm * pm;
   const std::size_t box_size = std::size_t(3 * gq + fp);
@@ -249,24 +260,20 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const glm::d
   thread_local std::vector<Box> stack;
   pool.resize(box_size);
   stack.clear();
-  // The root box's coefficients; margins from the whole element's field (rounding in the
-  // subdivision scales with it).
-  double g_scale = 0.0, f_scale = 0.0;
+  // The root box's coefficients (the geometry as (x, y, z) triples).
+  double g_scale = 0.0;
   const double dd = glm::dot(d, d);  // t = d·(x − o) / |d|², for any length of d
   for (int m = 0; m < gq; ++m) {
-    const glm::dvec3 r = geometry[m] - o;
+    const glm::dvec3 r = glm::dvec3(geometry[3 * m], geometry[3 * m + 1], geometry[3 * m + 2]) - o;
     pool[3 * m] = glm::dot(n1, r), pool[3 * m + 1] = glm::dot(n2, r),
              pool[3 * m + 2] = glm::dot(d, r) / dd;
     g_scale = std::max(g_scale, glm::length(r));
   }
-  for (int m = 0; m < fp; ++m) {
-    pool[3 * gq + m] = field[m];
-    f_scale = std::max(f_scale, std::abs(e.field[m]));
-  }
-  const double g_margin = kSignMargin * g_scale, f_margin = kSignMargin * f_scale;
+  std::copy(field, field + fp, pool.begin() + 3 * gq);
+  const double g_margin = kSignMargin * g_scale;
   stack.push_back({lo_box, hi_box});
   const std::size_t first_hit = hits.size();
-  std::size_t boxes = 0, unresolved = 0;
+  std::size_t boxes = 0;
 
   // H, and its Jacobian in global ξ, at a reference point: Newton's iteration.
   const auto system = [&](glm::dvec3 xi, glm::dvec3& h, glm::dmat3& jac, Sample& s) {
@@ -391,14 +398,12 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const glm::d
       Sample s;
       if (newton(b, xi, s)) {
         record(s);
-        unresolved += !unique;
         continue;
       }
       if (smallest) {
         xi = 0.5 * (b.lo + b.hi);
         s = evaluate(e, xi);
         record(s);
-        ++unresolved;
         continue;
       }
       // Proved but Newton left the box (rounding at its edge): split it like any other.
@@ -429,24 +434,22 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const glm::d
   for (std::size_t i = first_hit; i < hits.size(); ++i)
     if (out == first_hit || hits[i].t - hits[out - 1].t > tol) hits[out++] = hits[i];
   hits.resize(out);
-  if (stats) stats->boxes += boxes, stats->unresolved += unresolved;
 }
 
 }  // namespace
 
 void intersect(const Element& e, glm::dvec3 o, glm::dvec3 d, double t0, double t1,
-               std::vector<RayHit>& hits, Stats* stats) {
-  search(e, glm::dvec3(0.0), glm::dvec3(1.0), e.geometry, e.field, o, d, t0, t1, hits, stats);
+               std::vector<RayHit>& hits) {
+  search(e, glm::dvec3(0.0), glm::dvec3(1.0), &e.geometry[0].x, e.field, field_margin(e), o, d, t0,
+         t1, hits);
 }
 
 Pieces::Pieces(const Element& e, double width) {
   const int qm = e.q + 1, pm = e.p + 1;
   gq_ = qm * qm * qm, fp_ = pm * pm * pm;
   const std::size_t size = std::size_t(3 * gq_ + fp_);
-  double f_scale = 0.0;
-  for (int m = 0; m < fp_; ++m)
-    f_scale = std::max(f_scale, std::abs(e.field[m]));
-  const double margin = kSignMargin * f_scale;
+  field_margin_ = field_margin(e);
+  const double margin = field_margin_;
   // Depth first over boxes as in the search; a box's coefficients at its stack position.
   std::vector<Box> stack{{glm::dvec3(0.0), glm::dvec3(1.0)}};
   std::vector<double> pool(size);
@@ -480,14 +483,9 @@ Pieces::Pieces(const Element& e, double width) {
 }
 
 void Pieces::intersect(const Element& e, std::size_t k, glm::dvec3 o, glm::dvec3 d, double t0,
-                       double t1, std::vector<RayHit>& hits, Stats* stats) const {
+                       double t1, std::vector<RayHit>& hits) const {
   const double* c = &coefficients_[k * std::size_t(3 * gq_ + fp_)];
-  // The piece's geometry as points: the coefficients hold them as (x, y, z) triples.
-  thread_local std::vector<glm::dvec3> geometry;
-  geometry.resize(std::size_t(gq_));
-  for (int m = 0; m < gq_; ++m)
-    geometry[m] = glm::dvec3(c[3 * m], c[3 * m + 1], c[3 * m + 2]);
-  search(e, pieces_[k].lo, pieces_[k].hi, geometry.data(), c + 3 * gq_, o, d, t0, t1, hits, stats);
+  search(e, pieces_[k].lo, pieces_[k].hi, c, c + 3 * gq_, field_margin_, o, d, t0, t1, hits);
 }
 
 }  // namespace ldimesh::curved

@@ -30,16 +30,10 @@ struct Element {
   const glm::dvec3* geometry = nullptr;  // (q + 1)³
 };
 
-// What one intersection did, for the tests and benchmarks.
-struct Stats {
-  std::size_t boxes = 0;       // boxes looked at
-  std::size_t unresolved = 0;  // solutions taken at the smallest box width without a Krawczyk proof
-};
-
 // Appends every hit of the ray o + t·d (d of any length), t ∈ [t0, t1] (closed), with element e to
 // `hits`, in increasing t, with the unit normal ∇ₓf/|∇ₓf| (towards −d where the gradient vanishes).
 void intersect(const Element& e, glm::dvec3 o, glm::dvec3 d, double t0, double t1,
-               std::vector<RayHit>& hits, Stats* stats = nullptr);
+               std::vector<RayHit>& hits);
 
 // The boxes of an element's reference cube, down to a width, on which the field's Bernstein
 // coefficients do not rule out the isovalue, with the geometry's and the field's coefficients
@@ -56,10 +50,11 @@ class Pieces {
   const std::vector<Piece>& pieces() const { return pieces_; }
   // intersect() for the part of the element in piece k.
   void intersect(const Element& e, std::size_t k, glm::dvec3 o, glm::dvec3 d, double t0, double t1,
-                 std::vector<RayHit>& hits, Stats* stats = nullptr) const;
+                 std::vector<RayHit>& hits) const;
 
  private:
   int gq_ = 0, fp_ = 0;
+  double field_margin_ = 0.0;  // the sign tests' margin, from the whole element's field
   std::vector<Piece> pieces_;
   std::vector<double> coefficients_;  // per piece: 3 (q + 1)³ geometry, then (p + 1)³ field
 };

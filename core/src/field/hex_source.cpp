@@ -794,6 +794,16 @@ struct Activation {
   }
 };
 
+// The ray o + t·d clipped to affine element e: false if it misses, else [t0, t1] narrowed to
+// the stretch inside and its ends a, b in reference coordinates. Both casters clip with it.
+inline bool clip_to_element(const ActiveElement& e, glm::dvec3 org, glm::dvec3 dir, double& t0,
+                            double& t1, glm::dvec3& a, glm::dvec3& b) {
+  const glm::dvec3 ro = e.to_reference * (org - e.origin), rd = e.to_reference * dir;
+  if (!clip_ray_to_box(ro, rd, glm::dvec3(0.0), glm::dvec3(1.0), t0, t1)) return false;
+  a = glm::clamp(ro + t0 * rd, 0.0, 1.0), b = glm::clamp(ro + t1 * rd, 0.0, 1.0);
+  return true;
+}
+
 // Every root in [t_min, t_max] of the ray o + t·d in element e (coefficients c), appended to
 // `hits` with its normal: the ray in reference coordinates, clipped to the unit cube, the
 // polynomial along the clipped segment, its roots by Bernstein subdivision. Both casters call
@@ -801,10 +811,9 @@ struct Activation {
 template <int P>
 void intersect_element(const ActiveElement& e, const double* c, glm::dvec3 org, glm::dvec3 dir,
                        double t_min, double t_max, std::vector<RayHit>& hits) {
-  const glm::dvec3 ro = e.to_reference * (org - e.origin), rd = e.to_reference * dir;
   double t0 = t_min, t1 = t_max;
-  if (!clip_ray_to_box(ro, rd, glm::dvec3(0.0), glm::dvec3(1.0), t0, t1)) return;
-  const glm::dvec3 a = glm::clamp(ro + t0 * rd, 0.0, 1.0), b = glm::clamp(ro + t1 * rd, 0.0, 1.0);
+  glm::dvec3 a, b;
+  if (!clip_to_element(e, org, dir, t0, t1, a, b)) return;
 
   double f[kMaxRayDegree + 1];
   const int degree = restrict_to_segment<P>(c, a, b, f);
@@ -1298,11 +1307,9 @@ class HexAxisBinding final : public AxisBinding {
     StagedRestriction<P> staged(c);
     const auto cast_pixel = [&](std::size_t k) {
       const AxisRay& ray = rays.rays[k];
-      const glm::dvec3 ro = m * (ray.org - el.origin);
       double t0 = ray.t0, t1 = ray.t1;
-      if (!clip_ray_to_box(ro, rd, glm::dvec3(0.0), glm::dvec3(1.0), t0, t1)) return;
-      const glm::dvec3 a = glm::clamp(ro + t0 * rd, 0.0, 1.0),
-                       b = glm::clamp(ro + t1 * rd, 0.0, 1.0);
+      glm::dvec3 a, b;
+      if (!clip_to_element(el, ray.org, rays.dir, t0, t1, a, b)) return;
       const auto tensor_gradient = [&](double s) {
         return evaluate_tensor<P>(c, a + s * (b - a)).gradient;
       };
