@@ -13,6 +13,14 @@ Edges runs in this process (a first, untimed run warms it up), and each ldimesh 
 its step --steps times (`ldimesh mesh --repeat`); its first step, a cold start of a fresh
 process (page faults on every new buffer, cold caches), is reported on its own row.
 
+Both sides run with glibc told to keep freed memory (MALLOC_MMAP_MAX_=0 and large trim and top-pad
+thresholds; the script re-executes itself with them, and its children inherit them): Flying Edges
+allocates its edge cases and its output anew on every Update, and on a virtual machine where a page
+fault is expensive (this one: ≈ 3.5 µs, perf in the exception handler) those faults were most of
+its time — 0.12 s against 0.024 s with the memory kept, on the same data and threads — and varied
+from day to day. ldimesh's later steps reuse their buffers anyway. --default-allocator times both
+sides without the setting (the peer then looks slower than it is).
+
     /usr/bin/python3 bench/flying_edges.py [--build build] [--repeats 5] [--threads 2] [--steps 4]
 
 Prints a Markdown table (docs/benchmarks.md, "Ray casting beside Flying Edges") and, with
@@ -104,7 +112,13 @@ def main():
                     help="steps per ldimesh process (the first is the cold start)")
     ap.add_argument("--threads", type=int, default=os.cpu_count())
     ap.add_argument("--json", help="write the figures to this file")
+    ap.add_argument("--default-allocator", action="store_true",
+                    help="leave glibc's allocator as it is (see the module's comment)")
     args = ap.parse_args()
+    keep = {"MALLOC_MMAP_MAX_": "0", "MALLOC_TRIM_THRESHOLD_": str(1 << 40),
+            "MALLOC_TOP_PAD_": str(1 << 30)}
+    if not args.default_allocator and any(os.environ.get(k) != v for k, v in keep.items()):
+        os.execve(sys.executable, [sys.executable] + sys.argv, {**os.environ, **keep})
     vtk.vtkSMPTools.Initialize(args.threads)
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -131,8 +145,10 @@ def main():
     med = statistics.median
     fe_s, fe65_s = med(fe), med(fe65)
     rows = []
-    print(f"Marschner–Lobb, isovalue 0.5; {args.threads} threads; medians of {args.repeats} "
-          f"interleaved runs. vtkFlyingEdges3D on 256³: {fe_s:.4f} s "
+    allocator = ("glibc's default allocator" if args.default_allocator else
+                 "freed memory kept (MALLOC_MMAP_MAX_=0)")
+    print(f"Marschner–Lobb, isovalue 0.5; {args.threads} threads; {allocator}; medians of "
+          f"{args.repeats} interleaved runs. vtkFlyingEdges3D on 256³: {fe_s:.4f} s "
           f"({triangles['fe']} triangles); on the 65³ samples of the elements: {fe65_s:.4f} s.\n")
     print("| case | ldimesh s | Flying Edges s | ratio |")
     print("|---|---|---|---|")
@@ -160,7 +176,8 @@ def main():
                      "flying_edges_65": fe65_s, "hits": hits})
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"threads": args.threads, "repeats": args.repeats, "rows": rows}, f,
+            json.dump({"threads": args.threads, "repeats": args.repeats,
+                       "default_allocator": args.default_allocator, "rows": rows}, f,
                       indent=1)
 
 
