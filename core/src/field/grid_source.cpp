@@ -103,6 +103,28 @@ glm::dvec3 trilinear_gradient(const double corner[8], glm::dvec3 p, glm::dvec3 s
   return grad;
 }
 
+// The value on a cell face crossed by an axis ray: the bilinear interpolation of the face's
+// four points (f[0..3], b the lower bit) with weights w (trilinear_value's products with the
+// weight along the ray exactly 1), summed in that order. Both axis paths evaluate faces here, so
+// that a face shared by two cells has one value.
+inline double face_value(const double w[4], const double f[4]) {
+  return ((w[0] * f[0] + w[1] * f[1]) + w[2] * f[2]) + w[3] * f[3];
+}
+
+// The hit of an axis ray (along a, direction `dir`) in a cell whose face values fa (entry) and
+// fb (exit) differ in sign, entered at ta and left at tb: the root of the linear function between
+// the faces (as trilinear_segment_roots computes it for a segment along one axis) and the
+// gradient there (as solve_cell). `local` holds the ray's local coordinates across it, `size`
+// the cell's edges; corner[n] = value − iso at corner n (x + 2y + 4z).
+inline RayHit axis_root(const double corner[8], int a, int step, glm::dvec3 local,
+                        glm::dvec3 size, double fa, double fb, double ta, double tb,
+                        glm::dvec3 dir) {
+  const double s = fa / (fa - fb);
+  local[a] = step > 0 ? s : 1.0 - s;
+  return {s == 1.0 ? tb : ta + s * (tb - ta),
+          unit_normal(trilinear_gradient(corner, local, size), dir), 0.0f};
+}
+
 // The roots of one cell c on the ray segment [ta, tb], appended to `hits`: the cell's cubic
 // (Marmitt et al.). `entry_face`/`exit_face` say along which axes the segment starts/ends
 // exactly on a cell face (the local coordinate is then exactly 0 or 1, so that a face point is
@@ -376,6 +398,11 @@ std::unique_ptr<GeometryBinding> bind_grid(RTCDevice device, const GridView<T>& 
 // value that is zero or not finite). The Embree binding solves a segment along one axis as a
 // line too (trilinear_segment_roots), so both give the same roots, to the bit, at every
 // degenerate spot as well.
+//
+// An axis view's pixel rays (a lattice query) are cast in object order instead (cast_lattice):
+// the straddling cells of the rows' slab, visited once each in memory order, solve the rays
+// through them with the same arithmetic; only rays whose segment ends inside the block walk
+// their columns as above.
 template <class T>
 class GridAxisBinding final : public AxisBinding {
  public:
@@ -412,6 +439,7 @@ class GridAxisBinding final : public AxisBinding {
   void cast(const AxisRays& rays, std::vector<AxisHit>& out) const override {
     const int a = rays.axis;
     prepare(a);
+    if (rays.lattice && cast_lattice(rays, out)) return;
     std::vector<RayHit> hits;
     const auto cast_one = [&](std::size_t k) {
       const AxisRay& ray = rays.rays[k];
@@ -574,6 +602,251 @@ class GridAxisBinding final : public AxisBinding {
     });
   }
 
+  // The pixel columns (or rows) of a lattice by the cell they lie in along one axis: pixels
+  // pixels[first[q]] … pixels[first[q + 1] − 1] lie in cell first_ + q, at local coordinate p
+  // (per pixel) across the rays, as cast_ray computes it; cells lo … hi (relative) hold some.
+  struct PixelIndex {
+    std::vector<std::uint32_t> first, pixels, next;
+    std::vector<std::int64_t> cell;  // per pixel: its relative cell, −1 outside the block
+    std::vector<double> p;
+    std::int64_t lo = 0, hi = -1;
+  };
+  struct LatticeScratch {
+    PixelIndex columns, rows;
+    std::vector<std::uint8_t> whole;  // per ray: its segment covers the block along the axis
+    std::vector<RayHit> hits;
+  };
+  static LatticeScratch& lattice_scratch() {
+    thread_local LatticeScratch scratch;
+    return scratch;
+  }
+
+  template <class Coordinate>
+  void index_pixels(int axis, std::size_t count, Coordinate coordinate, PixelIndex& ix) const {
+    ix.cell.assign(count, -1);
+    ix.p.assign(count, 0.0);
+    ix.first.assign(std::size_t(cells_[axis]) + 1, 0);
+    ix.lo = cells_[axis];
+    ix.hi = -1;
+    const double lowest = g_.coord(axis, first_[axis]), highest = g_.coord(axis, last_[axis] + 1);
+    for (std::size_t m = 0; m < count; ++m) {
+      const double x = coordinate(m);
+      if (x < lowest || x > highest) continue;
+      const std::int64_t c = cell_index(axis, x);
+      const double lo = g_.coord(axis, c);
+      ix.p[m] = std::clamp((x - lo) / (g_.coord(axis, c + 1) - lo), 0.0, 1.0);
+      const std::int64_t q = c - first_[axis];
+      ix.cell[m] = q;
+      ++ix.first[std::size_t(q) + 1];
+      ix.lo = std::min(ix.lo, q);
+      ix.hi = std::max(ix.hi, q);
+    }
+    for (std::size_t q = 1; q < ix.first.size(); ++q)
+      ix.first[q] += ix.first[q - 1];
+    ix.pixels.resize(ix.first.back());
+    ix.next.assign(ix.first.begin(), ix.first.end() - 1);
+    for (std::size_t m = 0; m < count; ++m)
+      if (ix.cell[m] >= 0) ix.pixels[ix.next[std::size_t(ix.cell[m])]++] = std::uint32_t(m);
+  }
+
+  // Object order for the pixel rays of an axis view's rows (AxisRays::lattice): the straddling
+  // cells of the rows' slab of the block are visited once each, in memory order, and each
+  // solves the rays through it, instead of each ray walking its own column (at 512² of a 256³
+  // block four rays share a column, and the column walks read the block out of order). The rays
+  // whose segment covers the block's whole stretch along the axis — a view, or a rank's
+  // fragment of its own block — are solved so; the others by cast_ray. Per ray and cell the
+  // arithmetic is cast_ray's (its whole-segment case): the same cell across the ray, the same
+  // face values (face_value), roots and gradients (axis_root), and solve_cell where a face value
+  // is zero or not finite. Returns false where the rays do not form a lattice of this view
+  // (cast() then casts them one by one).
+  bool cast_lattice(const AxisRays& rays, std::vector<AxisHit>& out) const {
+    const View& view = *rays.lattice;
+    const int a = rays.axis;
+    const int ua = exact_axis(view.u), va = exact_axis(view.v);
+    if (ua < 0 || va < 0 || ua == a || va == a || view.width <= 0) return false;
+    const std::span<const AxisRay> ray = rays.rays;
+    const std::size_t width = std::size_t(view.width), n = ray.size();
+    if (n == 0) return true;
+    if (n % width != 0) return false;
+    const double oa = ray[0].org[a];
+    for (std::size_t row = 0; row < n; row += width)
+      for (std::size_t i = 0; i < width; ++i) {
+        const glm::dvec3 o = ray[row + i].org;
+        if (o[ua] != ray[i].org[ua] || o[va] != ray[row].org[va] || o[a] != oa) return false;
+      }
+
+    const glm::dvec3 dir = rays.dir;
+    const int step = dir[a] > 0.0 ? 1 : -1;
+    const double inv = 1.0 / dir[a];
+    const auto t_at = [&](std::int64_t node) { return (g_.coord(a, node) - oa) * inv; };
+    const double t_lo = std::min(t_at(first_[a]), t_at(last_[a] + 1));
+    const double t_hi = std::max(t_at(first_[a]), t_at(last_[a] + 1));
+    LatticeScratch& x = lattice_scratch();
+    x.whole.assign(n, 0);
+    for (std::size_t k = 0; k < n; ++k) {
+      const AxisRay& r = ray[k];
+      if (!(r.t0 <= r.t1)) continue;
+      if (r.t0 <= t_lo && r.t1 >= t_hi) {
+        x.whole[k] = 1;
+        continue;
+      }
+      x.hits.clear();
+      cast_ray(a, dir, r, x.hits);
+      for (const RayHit& h : x.hits)
+        out.push_back({std::uint32_t(k), h});
+    }
+    index_pixels(ua, width, [&](std::size_t i) { return ray[i].org[ua]; }, x.columns);
+    index_pixels(va, n / width, [&](std::size_t j) { return ray[j * width].org[va]; }, x.rows);
+    if (x.columns.hi < x.columns.lo || x.rows.hi < x.rows.lo) return true;
+
+    // The slab: every cell along a, the cells that hold pixels across.
+    std::array<std::int64_t, 3> lo{0, 0, 0}, hi{cells_[0] - 1, cells_[1] - 1, cells_[2] - 1};
+    lo[ua] = x.columns.lo;
+    hi[ua] = x.columns.hi;
+    lo[va] = x.rows.lo;
+    hi[va] = x.rows.hi;
+    const Lattice lattice{ray, width, oa, step, inv, dir, lo, hi};
+    const bool u_is_b = ua < va;
+    switch (a * 2 + int(u_is_b)) {
+      case 0: solve_slab<0, false>(lattice, x, out); break;
+      case 1: solve_slab<0, true>(lattice, x, out); break;
+      case 2: solve_slab<1, false>(lattice, x, out); break;
+      case 3: solve_slab<1, true>(lattice, x, out); break;
+      case 4: solve_slab<2, false>(lattice, x, out); break;
+      default: solve_slab<2, true>(lattice, x, out); break;
+    }
+    return true;
+  }
+
+  // What solve_slab needs of a lattice query: its rays (ray k is pixel (k % width, k / width)),
+  // their common origin along the ray axis, the direction, and the slab's cells (relative).
+  struct Lattice {
+    std::span<const AxisRay> ray;
+    std::size_t width;
+    double oa;
+    int step;
+    double inv;
+    glm::dvec3 dir;
+    std::array<std::int64_t, 3> lo, hi;
+  };
+
+  // The straddling cells of the slab, by their bits (rows along x), each solving the rays
+  // through it: along axis A, B < C the transverse axes; kUIsB: the image's u axis (pixel
+  // columns) is B, else C. The axes as constants keep the coordinates in registers.
+  template <int A, bool kUIsB>
+  void solve_slab(const Lattice& l, LatticeScratch& x, std::vector<AxisHit>& out) const {
+    constexpr int B = A == 0 ? 1 : 0, C = A == 2 ? 1 : 2;
+    const PixelIndex& along_b = kUIsB ? x.columns : x.rows;
+    const PixelIndex& along_c = kUIsB ? x.rows : x.columns;
+    const std::size_t stride_b = kUIsB ? 1 : l.width, stride_c = kUIsB ? l.width : 1;
+    const std::array<std::int64_t, 3> s = g_.strides;
+    std::int64_t offsets[8];
+    for (int m = 0; m < 8; ++m)
+      offsets[m] = (m & 1) * s[0] + ((m >> 1) & 1) * s[1] + ((m >> 2) & 1) * s[2];
+    // Corner index of face point m (β = m & 1 along B, γ = m >> 1 along C) on the entry and the
+    // exit face.
+    const int in = l.step > 0 ? 0 : 1;
+    int face_in[4], face_out[4];
+    for (int m = 0; m < 4; ++m) {
+      face_in[m] = (in << A) | ((m & 1) << B) | ((m >> 1) << C);
+      face_out[m] = ((1 - in) << A) | ((m & 1) << B) | ((m >> 1) << C);
+    }
+    const auto t_at = [&](std::int64_t node) { return (g_.coord(A, node) - l.oa) * l.inv; };
+
+    // The rays of a cell whose face values differ in sign, solved after its loop (no branch on
+    // the outcome, which is near random).
+    struct Candidate {
+      std::uint32_t k;
+      double fa, fb, pb, pc;
+    };
+    constexpr int kCandidates = 64;
+    Candidate candidates[kCandidates];
+    int n_candidates = 0;
+    double corner[8];
+    std::array<std::int64_t, 3> cell;
+    double t_in = 0.0, t_out = 0.0;
+    glm::dvec3 size;
+    const auto flush = [&] {
+      for (int m = 0; m < n_candidates; ++m) {
+        const Candidate& h = candidates[m];
+        glm::dvec3 local;
+        local[B] = h.pb;
+        local[C] = h.pc;
+        out.push_back({h.k, axis_root(corner, A, l.step, local, size, h.fa, h.fb, t_in, t_out,
+                                      l.dir)});
+      }
+      n_candidates = 0;
+    };
+    const auto solve_cell_rays = [&](std::int64_t rx, std::int64_t ry, std::int64_t rz) {
+      const std::int64_t rel[3] = {rx, ry, rz};
+      const std::size_t qb = std::size_t(rel[B]), qc = std::size_t(rel[C]);
+      const std::uint32_t b0 = along_b.first[qb], b1 = along_b.first[qb + 1];
+      const std::uint32_t c0 = along_c.first[qc], c1 = along_c.first[qc + 1];
+      if (b0 == b1 || c0 == c1) return;
+      for (int k = 0; k < 3; ++k)
+        cell[k] = first_[k] + rel[k];
+      const std::int64_t i = cell[A];
+      t_in = t_at(l.step > 0 ? i : i + 1);
+      t_out = t_at(l.step > 0 ? i + 1 : i);
+      if (!(t_out > t_in)) return;
+      const T* lower = g_.values + cell[0] * s[0] + cell[1] * s[1] + cell[2] * s[2];
+      for (int m = 0; m < 8; ++m)
+        corner[m] = double(lower[offsets[m]]) - iso_;
+      double f_in[4], f_out[4];
+      for (int m = 0; m < 4; ++m) {
+        f_in[m] = corner[face_in[m]];
+        f_out[m] = corner[face_out[m]];
+      }
+      size[A] = g_.coord(A, i + 1) - g_.coord(A, i);
+      size[B] = g_.coord(B, cell[B] + 1) - g_.coord(B, cell[B]);
+      size[C] = g_.coord(C, cell[C] + 1) - g_.coord(C, cell[C]);
+      for (std::uint32_t mc = c0; mc < c1; ++mc) {
+        const std::uint32_t pixel_c = along_c.pixels[mc];
+        const double pc = along_c.p[pixel_c];
+        for (std::uint32_t mb = b0; mb < b1; ++mb) {
+          const std::uint32_t pixel_b = along_b.pixels[mb];
+          const std::size_t k = pixel_b * stride_b + pixel_c * stride_c;
+          if (!x.whole[k]) continue;
+          const double pb = along_b.p[pixel_b];
+          const double wb[2] = {1.0 - pb, pb}, wc[2] = {1.0 - pc, pc};
+          const double w[4] = {wb[0] * wc[0], wb[1] * wc[0], wb[0] * wc[1], wb[1] * wc[1]};
+          const double fa = face_value(w, f_in), fb = face_value(w, f_out);
+          if (std::isfinite(fa) && std::isfinite(fb) && fa != 0.0 && fb != 0.0) [[likely]] {
+            candidates[n_candidates] = {std::uint32_t(k), fa, fb, pb, pc};
+            n_candidates += positive(fa) != positive(fb);
+            if (n_candidates == kCandidates) flush();
+            continue;
+          }
+          // A face value zero or not finite: solve_cell decides, as in cast_ray.
+          std::array<int, 3> steps{0, 0, 0};
+          steps[A] = l.step;
+          std::array<bool, 3> entry_face{false, false, false}, exit_face{false, false, false};
+          entry_face[A] = exit_face[A] = true;
+          x.hits.clear();
+          solve_cell<true>(g_, iso_, l.ray[k].org, l.dir, cell, steps, t_in, t_out, entry_face,
+                           exit_face, x.hits);
+          for (const RayHit& h : x.hits)
+            out.push_back({std::uint32_t(k), h});
+        }
+      }
+      flush();
+    };
+
+    const std::size_t cw = row_words();
+    const std::size_t w0 = std::size_t(l.lo[0]) / 64, w1 = std::size_t(l.hi[0]) / 64;
+    for (std::int64_t z = l.lo[2]; z <= l.hi[2]; ++z)
+      for (std::int64_t y = l.lo[1]; y <= l.hi[1]; ++y) {
+        const std::uint64_t* row = &straddle_[std::size_t(y + cells_[1] * z) * cw];
+        for (std::size_t w = w0; w <= w1; ++w) {
+          std::uint64_t bits = row[w];
+          if (w == w0) bits &= ~std::uint64_t(0) << (l.lo[0] % 64);
+          if (w == w1 && l.hi[0] % 64 != 63) bits &= (std::uint64_t(1) << (l.hi[0] % 64 + 1)) - 1;
+          for (; bits; bits &= bits - 1)
+            solve_cell_rays(std::int64_t(w) * 64 + std::countr_zero(bits), y, z);
+        }
+      }
+  }
+
   // The cell along transverse axis b that holds coordinate x ∈ [coord(first), coord(last + 1)]:
   // the last cell whose lower face is at or below x (the upper cell on a shared face, as the
   // Embree binding's walk starts).
@@ -621,9 +894,9 @@ class GridAxisBinding final : public AxisBinding {
     const T* points = g_.values + cell[b] * sb + cell[c] * sc;
     const auto face = [&](std::int64_t node) {
       const T* q = points + node * sa;
-      return ((w[0] * (double(q[0]) - iso_) + w[1] * (double(q[sb]) - iso_)) +
-              w[2] * (double(q[sc]) - iso_)) +
-             w[3] * (double(q[sb + sc]) - iso_);
+      const double f[4] = {double(q[0]) - iso_, double(q[sb]) - iso_, double(q[sc]) - iso_,
+                           double(q[sb + sc]) - iso_};
+      return face_value(w, f);
     };
     // Where corner n of a cell (index x + 2y + 4z, as solve_cell has them) lies from the cell's
     // lowest point.
@@ -650,18 +923,15 @@ class GridAxisBinding final : public AxisBinding {
     // the one root of the linear function between the faces (as trilinear_segment_roots
     // computes it for a segment along one axis), and the gradient there, as solve_cell.
     const auto emit_root = [&](std::int64_t i, double fa, double fb, double ta, double tb) {
-      const double s = fa / (fa - fb);
       double corner[8];
       const T* lower = points + i * sa;
       for (int n = 0; n < 8; ++n)
         corner[n] = double(lower[offsets[n]]) - iso_;
-      glm::dvec3 local, cell_size = size;
+      glm::dvec3 local(0.0), cell_size = size;
       local[b] = p[b];
       local[c] = p[c];
-      local[a] = step > 0 ? s : 1.0 - s;
       cell_size[a] = g_.coord(a, i + 1) - g_.coord(a, i);
-      hits.push_back({s == 1.0 ? tb : ta + s * (tb - ta),
-                      unit_normal(trilinear_gradient(corner, local, cell_size), dir), 0.0f});
+      hits.push_back(axis_root(corner, a, step, local, cell_size, fa, fb, ta, tb, dir));
     };
     // The cells whose face values differ in sign, solved (emit_root) in ray order when the
     // buffer fills, before solve_cell adds a hit and at the end.

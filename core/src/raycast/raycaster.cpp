@@ -70,10 +70,14 @@ AxisScratch& axis_scratch() {
   return scratch;
 }
 
-// Rows per task of an axis view's cast: about 4096 rays, so that sources that loop over their
-// primitives' pixels (elements) see each primitive in few tasks.
+// Rows per task of an axis view's cast: about 16384 rays, so that sources that loop over their
+// primitives' pixels (elements) or their cells (grids) see each in few tasks and read the cells'
+// bits for few slabs, but at least 16 tasks per view for the threads to share. The split does
+// not depend on the thread count (nor, since each ray's hits are sorted, do the hits).
 int rows_per_task(const View& view) {
-  return std::clamp(4096 / std::max(view.width, 1), 1, std::max(view.height, 1));
+  const int height = std::max(view.height, 1);
+  const int rows = std::min(16384 / std::max(view.width, 1), (height + 15) / 16);
+  return std::clamp(rows, 1, height);
 }
 
 }  // namespace
