@@ -339,11 +339,21 @@ TEST(FragmentCodec, QuantizingInPlaceGivesTheRoundTripsFragment) {
       if (!e.lossless && f.sample_count() > 1000) {
         EXPECT_FALSE(same_bits(q.depth, f.depth));
       }
+      // In pieces of any size (as the reduction quantizes a rank's samples in parallel): the
+      // same fragment.
+      for (std::size_t piece : {std::size_t(1), std::size_t(7), std::size_t(1000)}) {
+        LdiFragment r = f;
+        check_fragment_encodable(r, e);
+        for (std::size_t begin = 0; begin < r.depth.size(); begin += piece)
+          quantize_samples(r, e, begin, begin + piece);
+        expect_exact(q, r);
+      }
     }
   }
   LdiFragment bad = edge_case_fragment(false);
   bad.normal[0] = glm::vec3(0.0f);
   EXPECT_THROW(quantize_fragment(bad), std::invalid_argument);
+  EXPECT_THROW(check_fragment_encodable(bad, {}), std::invalid_argument);
 }
 
 // check_fragment accepts what decode_fragment accepts and gives its shape; it rejects a

@@ -549,20 +549,30 @@ void check_encodable(const LdiFragment& f, const FragmentEncoding& e) {
 
 }  // namespace
 
-void quantize_fragment(LdiFragment& f, const FragmentEncoding& e) {
+void check_fragment_encodable(const LdiFragment& f, const FragmentEncoding& e) {
   check_encodable(f, e);
+}
+
+void quantize_samples(LdiFragment& f, const FragmentEncoding& e, std::size_t begin,
+                      std::size_t end) {
   if (e.lossless) return;
+  end = std::min(end, f.depth.size());
   // The encoder's quantizers and the decoder's reconstruction; prediction and zstd are
   // lossless, so this is decode_fragment(encode_fragment(f)).
   const DepthQuantizer dq(effective_depth_bits(e.depth_bits, f.depth_lo, f.depth_hi), f.depth_lo,
                           f.depth_hi);
   const NormalQuantizer nq(e.normal_bits);
-  for (std::size_t s = 0; s < f.depth.size(); ++s) {
+  for (std::size_t s = begin; s < end; ++s) {
     f.depth[s] = dq.dequantize(dq.quantize(f.depth[s]));
     std::uint32_t u = 0, v = 0;
     nq.quantize(f.normal[s], u, v);
     f.normal[s] = nq.dequantize(u, v);
   }
+}
+
+void quantize_fragment(LdiFragment& f, const FragmentEncoding& e) {
+  check_encodable(f, e);
+  quantize_samples(f, e, 0, f.depth.size());
 }
 
 std::vector<std::uint8_t> encode_fragment(const LdiFragment& f, const FragmentEncoding& e) {

@@ -6,6 +6,7 @@
 #include <stdexcept>
 #include <string>
 
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include "ldimesh/core/base/timing.hpp"
@@ -164,7 +165,12 @@ Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragm
     tbb::parallel_for(std::size_t(0), fragments.size(), [&](std::size_t v) {
       LdiFragment& f = fragments[v];
       try {
-        quantize_fragment(f, encoding);
+        check_fragment_encodable(f, encoding);
+        // The samples in parallel too: a rank has few views (three fragments on its threads).
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, f.depth.size(), 8192),
+                          [&](const tbb::blocked_range<std::size_t>& r) {
+                            quantize_samples(f, encoding, r.begin(), r.end());
+                          });
       } catch (...) {
         // Never leave the collective: go on with the fragment emptied (its view kept), and
         // report the failure up the tree.

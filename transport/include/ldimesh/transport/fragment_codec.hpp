@@ -63,6 +63,14 @@ std::vector<std::uint8_t> encode_fragment(const LdiFragment& fragment,
 // other ranks' samples arrive with, not the bytes).
 void quantize_fragment(LdiFragment& fragment, const FragmentEncoding& encoding = {});
 
+// quantize_fragment in two steps, so that a caller can quantize a large fragment's samples in
+// parallel: check_fragment_encodable throws as quantize_fragment does (and changes nothing);
+// quantize_samples then quantizes samples [begin, end) alone (each sample on its own, so any
+// split gives the same values). quantize_samples assumes the check passed.
+void check_fragment_encodable(const LdiFragment& fragment, const FragmentEncoding& encoding);
+void quantize_samples(LdiFragment& fragment, const FragmentEncoding& encoding, std::size_t begin,
+                      std::size_t end);
+
 // Decodes `bytes` into `out`. Validates the header, every size and count, the checksum and the
 // decoded fragment's invariants before use: truncated, corrupted or hostile input returns an
 // error Status ("fragment: ...": corrupt_input; out_of_memory should an allocation fail) and
