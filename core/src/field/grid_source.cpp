@@ -610,6 +610,13 @@ class GridAxisBinding final : public AxisBinding {
     std::vector<std::int64_t> cell;  // per pixel: its relative cell, −1 outside the block
     std::vector<double> p;
     std::int64_t lo = 0, hi = -1;
+    // Pixels per cell that holds any.
+    double density() const {
+      std::size_t cells = 0;
+      for (std::size_t q = 0; q + 1 < first.size(); ++q)
+        cells += first[q + 1] > first[q];
+      return cells == 0 ? 0.0 : double(pixels.size()) / double(cells);
+    }
   };
   struct LatticeScratch {
     PixelIndex columns, rows;
@@ -682,6 +689,12 @@ class GridAxisBinding final : public AxisBinding {
     const double t_lo = std::min(t_at(first_[a]), t_at(last_[a] + 1));
     const double t_hi = std::max(t_at(first_[a]), t_at(last_[a] + 1));
     LatticeScratch& x = lattice_scratch();
+    index_pixels(ua, width, [&](std::size_t i) { return ray[i].org[ua]; }, x.columns);
+    index_pixels(va, n / width, [&](std::size_t j) { return ray[j * width].org[va]; }, x.rows);
+    // Object order pays where several rays share a cell (measured on Marschner–Lobb 256³: 20–40 %
+    // faster at 2 × 2 rays per cell, 5–10 % at 1.5 × 1.5, 15–25 % slower at one ray per cell on
+    // two threads): below 2 rays per column of cells on average the rays walk their columns.
+    if (x.columns.density() * x.rows.density() < 2.0) return false;
     x.whole.assign(n, 0);
     for (std::size_t k = 0; k < n; ++k) {
       const AxisRay& r = ray[k];
@@ -695,8 +708,6 @@ class GridAxisBinding final : public AxisBinding {
       for (const RayHit& h : x.hits)
         out.push_back({std::uint32_t(k), h});
     }
-    index_pixels(ua, width, [&](std::size_t i) { return ray[i].org[ua]; }, x.columns);
-    index_pixels(va, n / width, [&](std::size_t j) { return ray[j * width].org[va]; }, x.rows);
     if (x.columns.hi < x.columns.lo || x.rows.hi < x.rows.lo) return true;
 
     // The slab: every cell along a, the cells that hold pixels across.
