@@ -7,6 +7,8 @@
 !   call ldimesh_create(MPI_COMM_WORLD, '{"isovalues": [0.5]}', insitu, ierr)
 !   call ldimesh_set_domain(insitu, lo, hi, ierr)
 !   call ldimesh_add_uniform_grid(insitu, u, origin, spacing, ghost_lo, ghost_hi, ierr)
+!   ! or elements: values((p+1)**3, n), corners(3, 8, n) or curved geometry(3, (q+1)**3, n)
+!   call ldimesh_add_hex_elements(insitu, p, LDIMESH_NODES_GLL, values, ierr, corners=corners)
 !   do step = 1, nsteps
 !     ...; call ldimesh_execute(insitu, int(step, c_int64_t), t, ierr)
 !   end do
@@ -28,6 +30,7 @@ module ldimesh_mod
   integer(c_int), parameter, public :: LDIMESH_FLOAT32 = 0, LDIMESH_FLOAT64 = 1
   integer(c_int), parameter, public :: LDIMESH_NODES_GLL = 0, LDIMESH_NODES_GL = 1, &
                                        LDIMESH_NODES_EQUISPACED = 2
+  integer(c_int), parameter, public :: LDIMESH_ORDER_LEXICOGRAPHIC = 0, LDIMESH_ORDER_VTK = 1
 
   ! ldimesh_grid_block of ldimesh.h, field by field (x is the first index, as in Fortran).
   type, bind(C), public :: ldimesh_grid_block
@@ -42,6 +45,22 @@ module ldimesh_mod
     integer(c_int) :: ghost_lo(3) = 0
     integer(c_int) :: ghost_hi(3) = 0
   end type ldimesh_grid_block
+
+  ! ldimesh_hex_block of ldimesh.h, field by field, with ldimesh_hex_block_init's defaults.
+  type, bind(C), public :: ldimesh_hex_block
+    integer(c_int) :: order = 0
+    integer(c_int) :: nodes = LDIMESH_NODES_GLL
+    integer(c_int64_t) :: element_count = 0
+    type(c_ptr) :: corners = c_null_ptr
+    type(c_ptr) :: values = c_null_ptr
+    integer(c_int64_t) :: value_count = 0
+    integer(c_int) :: type = LDIMESH_FLOAT64
+    integer(c_int64_t) :: element_stride = 0
+    integer(c_int) :: geometry_order = 0
+    type(c_ptr) :: geometry = c_null_ptr
+    integer(c_int64_t) :: geometry_count = 0
+    integer(c_int) :: ordering = LDIMESH_ORDER_LEXICOGRAPHIC
+  end type ldimesh_hex_block
 
   ! ldimesh_step_report of ldimesh.h.
   type, bind(C), public :: ldimesh_step_report
@@ -88,6 +107,12 @@ module ldimesh_mod
       type(ldimesh_grid_block), intent(in) :: block
       integer(c_int) :: c_add_grid_block
     end function c_add_grid_block
+    function c_add_hex_block(a, block) bind(C, name='ldimesh_add_hex_block')
+      import :: c_int, c_ptr, ldimesh_hex_block
+      type(c_ptr), value :: a
+      type(ldimesh_hex_block), intent(in) :: block
+      integer(c_int) :: c_add_hex_block
+    end function c_add_hex_block
     function c_clear_blocks(a) bind(C, name='ldimesh_clear_blocks')
       import :: c_int, c_ptr
       type(c_ptr), value :: a
@@ -148,8 +173,14 @@ module ldimesh_mod
     module procedure add_uniform_grid_r8, add_uniform_grid_r4
   end interface ldimesh_add_uniform_grid
 
+  ! Hexahedral elements from a 2D array of nodal values (kind 4 or 8), one column per element.
+  interface ldimesh_add_hex_elements
+    module procedure add_hex_elements_r8, add_hex_elements_r4
+  end interface ldimesh_add_hex_elements
+
   public :: ldimesh_create, ldimesh_create_from_file, ldimesh_set_domain, &
-            ldimesh_add_grid_block, ldimesh_add_uniform_grid, ldimesh_clear_blocks, &
+            ldimesh_add_grid_block, ldimesh_add_uniform_grid, ldimesh_add_hex_block, &
+            ldimesh_add_hex_elements, ldimesh_clear_blocks, &
             ldimesh_execute, ldimesh_finalize, ldimesh_destroy, ldimesh_last_error, &
             ldimesh_url, ldimesh_last_report, ldimesh_published_steps
 
@@ -250,6 +281,109 @@ contains
     block%ghost_lo = int(ghost_lo, c_int)
     block%ghost_hi = int(ghost_hi, c_int)
   end subroutine describe_uniform
+
+  ! Any hex block, described field by field (element strides, …).
+  subroutine ldimesh_add_hex_block(adaptor, block, ierr)
+    type(ldimesh_adaptor), intent(in) :: adaptor
+    type(ldimesh_hex_block), intent(in) :: block
+    integer, intent(out) :: ierr
+    ierr = c_add_hex_block(adaptor%handle, block)
+  end subroutine ldimesh_add_hex_block
+
+  ! Elements of order `order` (1..8) with nodes `node_set` (LDIMESH_NODES_*): values(:, e) are
+  ! element e's (order+1)**3 nodal values. Their geometry is either corners(3, 8, e) — the 8
+  ! corners, x fastest then y then z (affine or trilinear elements) — or, for curved elements,
+  ! geometry(3, (q+1)**3, e) with q = geometry_order (1..8), at the same node set. `ordering`
+  ! (LDIMESH_ORDER_*, default lexicographic) orders the values and the geometry nodes.
+  subroutine add_hex_elements_r8(adaptor, order, node_set, values, ierr, corners, geometry, &
+                                 geometry_order, ordering)
+    type(ldimesh_adaptor), intent(in) :: adaptor
+    integer, intent(in) :: order, node_set
+    real(c_double), intent(in), target, contiguous :: values(:, :)
+    integer, intent(out) :: ierr
+    real(c_double), intent(in), target, contiguous, optional :: corners(:, :, :), geometry(:, :, :)
+    integer, intent(in), optional :: geometry_order, ordering
+    type(ldimesh_hex_block) :: block
+    block%type = LDIMESH_FLOAT64
+    if (size(values) > 0) block%values = c_loc(values)
+    call add_hex_elements(adaptor, block, order, node_set, shape(values), ierr, corners, &
+                          geometry, geometry_order, ordering)
+  end subroutine add_hex_elements_r8
+
+  subroutine add_hex_elements_r4(adaptor, order, node_set, values, ierr, corners, geometry, &
+                                 geometry_order, ordering)
+    type(ldimesh_adaptor), intent(in) :: adaptor
+    integer, intent(in) :: order, node_set
+    real(c_float), intent(in), target, contiguous :: values(:, :)
+    integer, intent(out) :: ierr
+    real(c_double), intent(in), target, contiguous, optional :: corners(:, :, :), geometry(:, :, :)
+    integer, intent(in), optional :: geometry_order, ordering
+    type(ldimesh_hex_block) :: block
+    block%type = LDIMESH_FLOAT32
+    if (size(values) > 0) block%values = c_loc(values)
+    call add_hex_elements(adaptor, block, order, node_set, shape(values), ierr, corners, &
+                          geometry, geometry_order, ordering)
+  end subroutine add_hex_elements_r4
+
+  ! The shared part: the shapes checked here (the C API checks the counts it is given).
+  subroutine add_hex_elements(adaptor, block, order, node_set, value_shape, ierr, corners, &
+                              geometry, geometry_order, ordering)
+    type(ldimesh_adaptor), intent(in) :: adaptor
+    type(ldimesh_hex_block), intent(inout) :: block
+    integer, intent(in) :: order, node_set, value_shape(2)
+    integer, intent(out) :: ierr
+    real(c_double), intent(in), target, contiguous, optional :: corners(:, :, :), geometry(:, :, :)
+    integer, intent(in), optional :: geometry_order, ordering
+    character(len=*), parameter :: what = 'ldimesh_add_hex_elements: '
+    integer :: q
+    block%order = int(order, c_int)
+    block%nodes = int(node_set, c_int)
+    block%element_count = int(value_shape(2), c_int64_t)
+    block%value_count = int(value_shape(1), c_int64_t)*int(value_shape(2), c_int64_t)
+    if (present(ordering)) block%ordering = int(ordering, c_int)
+    if (order >= 1 .and. order <= 8) then
+      if (value_shape(1) /= (order + 1)**3) then
+        ierr = fail(adaptor, what//'values must have (order+1)**3 rows, one column per element')
+        return
+      end if
+    end if
+    if (present(corners) .eqv. present(geometry)) then
+      ierr = fail(adaptor, what//'give either corners or geometry')
+      return
+    end if
+    if (present(corners)) then
+      if (size(corners, 1) /= 3 .or. size(corners, 2) /= 8 .or. &
+          size(corners, 3) /= value_shape(2)) then
+        ierr = fail(adaptor, what//'corners must have the shape (3, 8, elements)')
+        return
+      end if
+      if (size(corners) > 0) block%corners = c_loc(corners)
+    else
+      if (.not. present(geometry_order)) then
+        ierr = fail(adaptor, what//'geometry needs geometry_order')
+        return
+      end if
+      q = geometry_order
+      if (size(geometry, 1) /= 3 .or. size(geometry, 3) /= value_shape(2) .or. &
+          (q >= 1 .and. q <= 8 .and. size(geometry, 2) /= (q + 1)**3)) then
+        ierr = fail(adaptor, what//'geometry must have the shape (3, (q+1)**3, elements)')
+        return
+      end if
+      block%geometry_order = int(q, c_int)
+      if (size(geometry) > 0) block%geometry = c_loc(geometry)
+      block%geometry_count = size(geometry, kind=c_int64_t)
+    end if
+    ierr = c_add_hex_block(adaptor%handle, block)
+  end subroutine add_hex_elements
+
+  ! Keeps `message` as the adaptor's last error; returns LDIMESH_ERROR_ARGUMENT.
+  integer function fail(adaptor, message)
+    type(ldimesh_adaptor), intent(in) :: adaptor
+    character(len=*), intent(in) :: message
+    integer(c_int) :: ignored
+    ignored = c_set_error(adaptor%handle, message//c_null_char)
+    fail = LDIMESH_ERROR_ARGUMENT
+  end function fail
 
   subroutine ldimesh_clear_blocks(adaptor, ierr)
     type(ldimesh_adaptor), intent(in) :: adaptor

@@ -1,0 +1,132 @@
+! The Fortran side of tests/adaptor/fortran_api_test.cpp: a solver's element arrays handed to the
+! adaptor through the Fortran module (ldimesh_add_hex_elements), as a Fortran code would. The C++
+! test creates the adaptor through the C API and passes its handle here.
+module fortran_hex_elements
+  use, intrinsic :: iso_c_binding
+  use ldimesh_mod
+  implicit none
+  private
+
+  integer, parameter :: n = 2, p = 2, q = 2  ! 2³ elements over [0, 1]³, field and geometry order 2
+  ! Read by the adaptor at every due step: kept here, with the TARGET attribute.
+  real(c_double), allocatable, target, save :: values(:, :), geometry(:, :, :), corners(:, :, :)
+  real(c_float), allocatable, target, save :: values4(:, :)
+
+contains
+
+  ! The position of GLL node (i, j, k) (nodes 0, 1/2, 1 per axis) of element e, x bent inside the
+  ! cube (the nodes on its faces stay): x + 0.05 sin(πx) sin(πy) sin(πz).
+  function node(e, i, j, k, bent) result(x)
+    integer, intent(in) :: e, i, j, k
+    logical, intent(in) :: bent
+    real(c_double) :: x(3), pi
+    pi = acos(-1.0_c_double)
+    x = (real([mod(e, n), mod(e/n, n), e/(n*n)], c_double) + &
+         0.5_c_double*real([i, j, k], c_double))/real(n, c_double)
+    if (bent) x(1) = x(1) + 0.05_c_double*sin(pi*x(2))*sin(pi*x(3))*sin(pi*x(1))
+  end function node
+
+  ! Adds this rank's elements (element e on rank mod(e, ranks)) of the field x: curved elements
+  ! (geometry of order 2, double values) when curved /= 0, else the straight cubes from their 8
+  ! corners (x fastest, then y, then z) with float values. Returns the module's status.
+  integer(c_int) function fortran_add_hex_elements(handle, rank, ranks, curved) &
+      bind(C, name='fortran_add_hex_elements')
+    type(c_ptr), value :: handle
+    integer(c_int), value :: rank, ranks, curved
+    type(ldimesh_adaptor) :: insitu
+    integer :: e, i, j, k, c, m, count, ierr
+    real(c_double) :: x(3)
+    insitu%handle = handle
+    count = 0
+    do e = 0, n**3 - 1
+      if (mod(e, ranks) == rank) count = count + 1
+    end do
+    if (allocated(values)) deallocate (values, values4, geometry, corners)
+    allocate (values((p + 1)**3, count), values4((p + 1)**3, count), &
+              geometry(3, (q + 1)**3, count), corners(3, 8, count))
+    count = 0
+    do e = 0, n**3 - 1
+      if (mod(e, ranks) /= rank) cycle
+      count = count + 1
+      m = 0
+      do k = 0, 2
+        do j = 0, 2
+          do i = 0, 2
+            m = m + 1
+            x = node(e, i, j, k, curved /= 0)
+            geometry(:, m, count) = x
+            values(m, count) = x(1)
+            values4(m, count) = real(x(1), c_float)
+          end do
+        end do
+      end do
+      do c = 0, 7
+        corners(:, c + 1, count) = node(e, 2*mod(c, 2), 2*mod(c/2, 2), 2*(c/4), .false.)
+      end do
+    end do
+    if (curved /= 0) then
+      call ldimesh_add_hex_elements(insitu, p, LDIMESH_NODES_GLL, values, ierr, &
+                                    geometry=geometry, geometry_order=q)
+    else
+      call ldimesh_add_hex_elements(insitu, p, LDIMESH_NODES_GLL, values4, ierr, corners=corners)
+    end if
+    fortran_add_hex_elements = int(ierr, c_int)
+  end function fortran_add_hex_elements
+
+  ! Wrong shapes and degenerate geometry, each refused with LDIMESH_ERROR_ARGUMENT and a message
+  ! saying why. Returns how many calls did not do so (0: all refused as they should be).
+  integer(c_int) function fortran_refused_shapes(handle) bind(C, name='fortran_refused_shapes')
+    type(c_ptr), value :: handle
+    type(ldimesh_adaptor) :: insitu
+    real(c_double), target :: good(27, 1), short(26, 1), cube(3, 8, 1), seven(3, 7, 1), &
+                              curved(3, 27, 1), thin(3, 26, 1), flat(3, 27, 1)
+    integer :: ierr, failures, c
+    insitu%handle = handle
+    failures = 0
+    good = 0.5_c_double
+    short = 0.5_c_double
+    flat = 0.0_c_double
+    do c = 0, 7
+      cube(:, c + 1, 1) = real([mod(c, 2), mod(c/2, 2), c/4], c_double)
+    end do
+    seven = cube(:, 1:7, :)
+    curved = 0.0_c_double
+    thin = 0.0_c_double
+    call ldimesh_add_hex_elements(insitu, 2, LDIMESH_NODES_GLL, short, ierr, corners=cube)
+    call expect_refused('(order+1)**3 rows')
+    call ldimesh_add_hex_elements(insitu, 2, LDIMESH_NODES_GLL, good, ierr)
+    call expect_refused('either corners or geometry')
+    call ldimesh_add_hex_elements(insitu, 2, LDIMESH_NODES_GLL, good, ierr, corners=cube, &
+                                  geometry=curved, geometry_order=2)
+    call expect_refused('either corners or geometry')
+    call ldimesh_add_hex_elements(insitu, 2, LDIMESH_NODES_GLL, good, ierr, corners=seven)
+    call expect_refused('(3, 8, elements)')
+    call ldimesh_add_hex_elements(insitu, 2, LDIMESH_NODES_GLL, good, ierr, geometry=curved)
+    call expect_refused('geometry_order')
+    call ldimesh_add_hex_elements(insitu, 2, LDIMESH_NODES_GLL, good, ierr, geometry=thin, &
+                                  geometry_order=2)
+    call expect_refused('(3, (q+1)**3, elements)')
+    ! Shapes right, geometry degenerate (every node at the origin): the C API's own check.
+    call ldimesh_add_hex_elements(insitu, 2, LDIMESH_NODES_GLL, good, ierr, geometry=flat, &
+                                  geometry_order=2)
+    call expect_refused('degenerate')
+    call ldimesh_add_hex_elements(insitu, 9, LDIMESH_NODES_GLL, good, ierr, corners=cube)
+    call expect_refused('order must lie in 1..8')
+    fortran_refused_shapes = int(failures, c_int)
+
+  contains
+
+    subroutine expect_refused(words)
+      character(len=*), intent(in) :: words
+      character(len=:), allocatable :: message
+      message = ldimesh_last_error(insitu)
+      if (ierr /= LDIMESH_ERROR_ARGUMENT .or. index(message, words) == 0) then
+        write (0, '(a,i0,a)') 'fortran_refused_shapes: expected a refusal naming "'//words// &
+          '", got status ', ierr, ': '//message
+        failures = failures + 1
+      end if
+    end subroutine expect_refused
+
+  end function fortran_refused_shapes
+
+end module fortran_hex_elements
