@@ -42,24 +42,24 @@ struct CurvedMesh {
   HexBlock block;
 };
 
-template <class Field>
-CurvedMesh curved_mesh(int n, int p, int q, NodeSet nodes, double amount, Field field) {
+// Elements whose geometry node (i, j, k) is point(e, ξ) at the node set's positions ξ, with the
+// field `field(x)` at the field's nodes of order p taken through the element's own geometry
+// polynomial (the source's to_world), so that a field the element represents exactly stays
+// exact.
+template <class Point, class Field>
+CurvedMesh mesh_of(std::size_t elements, int p, int q, NodeSet nodes, Point point, Field field) {
   CurvedMesh m;
   const std::vector<double> xq = node_positions(q, nodes);
-  const glm::dvec3 size = (kBox.hi - kBox.lo) / double(n);
-  for (int ez = 0; ez < n; ++ez)
-    for (int ey = 0; ey < n; ++ey)
-      for (int ex = 0; ex < n; ++ex)
-        for (int k = 0; k <= q; ++k)
-          for (int j = 0; j <= q; ++j)
-            for (int i = 0; i <= q; ++i) {
-              const glm::dvec3 cell(ex + xq[i], ey + xq[j], ez + xq[k]);
-              const glm::dvec3 x = distort(kBox.lo + size * cell, amount);
-              m.geometry.insert(m.geometry.end(), {x.x, x.y, x.z});
-            }
+  for (std::size_t e = 0; e < elements; ++e)
+    for (int k = 0; k <= q; ++k)
+      for (int j = 0; j <= q; ++j)
+        for (int i = 0; i <= q; ++i) {
+          const glm::dvec3 x = point(e, glm::dvec3(xq[i], xq[j], xq[k]));
+          m.geometry.insert(m.geometry.end(), {x.x, x.y, x.z});
+        }
   m.block.order = p;
   m.block.nodes = nodes;
-  m.block.element_count = std::size_t(n) * n * n;
+  m.block.element_count = elements;
   m.block.geometry_order = q;
   m.block.geometry = m.geometry.data();
   m.values.assign(m.block.element_count * (p + 1) * (p + 1) * (p + 1), 0.0);
@@ -73,6 +73,40 @@ CurvedMesh curved_mesh(int n, int p, int q, NodeSet nodes, double amount, Field 
         for (int i = 0; i <= p; ++i)
           m.values[v++] = field(geometry.to_world(e, {xp[i], xp[j], xp[k]}));
   return m;
+}
+
+template <class Field>
+CurvedMesh curved_mesh(int n, int p, int q, NodeSet nodes, double amount, Field field) {
+  const glm::dvec3 size = (kBox.hi - kBox.lo) / double(n);
+  return mesh_of(std::size_t(n) * n * n, p, q, nodes,
+                 [&](std::size_t e, glm::dvec3 xi) {
+                   const glm::dvec3 cell(double(e % n), double(e / n % n), double(e / n / n));
+                   return distort(kBox.lo + size * (cell + xi), amount);
+                 },
+                 field);
+}
+
+// A spherical shell r0 ≤ |x| ≤ r1 as a cubed sphere: 6 patches of n × n elements across and
+// `layers` elements along the radius, each geometry node on the sphere of its radius (a curved,
+// unstructured mesh: the patches meet at an angle, eight elements share each cube corner).
+template <class Field>
+CurvedMesh shell_mesh(int n, int layers, int p, int q, NodeSet nodes, double r0, double r1,
+                      Field field) {
+  return mesh_of(std::size_t(6) * n * n * layers, p, q, nodes,
+                 [&](std::size_t e, glm::dvec3 xi) {
+                   const std::size_t patch = e / (std::size_t(n) * n * layers);
+                   const std::size_t rest = e % (std::size_t(n) * n * layers);
+                   const double u = -1.0 + 2.0 * (double(rest % n) + xi.x) / n;
+                   const double v = -1.0 + 2.0 * (double(rest / n % n) + xi.y) / n;
+                   const double w = (double(rest / n / n) + xi.z) / layers;
+                   const int a = int(patch / 2);
+                   glm::dvec3 c;
+                   c[a] = patch % 2 ? -1.0 : 1.0;
+                   c[(a + 1) % 3] = u;
+                   c[(a + 2) % 3] = v;
+                   return (r0 + (r1 - r0) * w) * glm::normalize(c);
+                 },
+                 field);
 }
 
 std::string describe(int p, int q, NodeSet nodes) {
@@ -188,6 +222,139 @@ TEST(CurvedHex, TrilinearElementsFromCornersAreAccepted) {
 // A smooth field with several crossings per ray.
 double wavy(glm::dvec3 x) {
   return std::sin(5.0 * x.x + 1.0) * std::cos(4.0 * x.y) + 0.7 * std::sin(6.0 * x.z + x.x) - 0.1;
+}
+
+// The field r² on curved elements of a spherical shell: with p = 2q the elements represent
+// r² ∘ x(ξ) exactly (degree 2q in each variable), so its isosurface r² = c is the sphere of
+// radius √c itself, however the shell is meshed. Every hit lies on that sphere with a radial
+// normal, every pixel ray that passes the centre closer than √c (away from tangency) meets it
+// twice and the others not at all, and two different meshes of the shell (other element counts,
+// geometry orders and node sets) give the same hits.
+TEST(CurvedHex, RSquaredOnCurvedShellsIsTheExactSphere) {
+  const double radius = 0.72;
+  const Box domain{glm::dvec3(-1.0), glm::dvec3(1.0)};
+  const std::vector<glm::dvec3> directions{glm::dvec3(1, 0, 0), glm::dvec3(0, 0, -1),
+                                           glm::dvec3(0, 1, 0), glm::dvec3(0.4, -0.3, 0.85)};
+  std::vector<std::vector<Ldi>> ldis;
+  for (const auto& [n, layers, q, nodes] :
+       {std::tuple{2, 2, 2, NodeSet::gauss_lobatto_legendre},
+        std::tuple{3, 1, 3, NodeSet::equispaced}}) {
+    const std::string what = "shell " + std::to_string(n) + " × " + std::to_string(n) + " × " +
+                             std::to_string(layers) + ", " + describe(2 * q, q, nodes);
+    const CurvedMesh m =
+        shell_mesh(n, layers, 2 * q, q, nodes, 0.5, 1.0, [](glm::dvec3 x) { return glm::dot(x, x); });
+    const HexElementSource source(m.block);
+    std::size_t curved = 0;
+    for (std::size_t e = 0; e < m.block.element_count; ++e)
+      curved += source.is_curved(e);
+    EXPECT_EQ(curved, m.block.element_count) << what;
+    const RayCaster caster(source, radius * radius);
+    ldis.emplace_back();
+    std::size_t hits = 0, rays = 0;
+    for (const glm::dvec3& dir : directions) {
+      const View view = make_view(domain, dir, 48);
+      EXPECT_EQ(caster.uses_axis_casters(view), exact_axis(dir) >= 0);
+      const Ldi ldi = caster.cast(view);
+      for (int j = 0; j < view.height; ++j)
+        for (int i = 0; i < view.width; ++i) {
+          const std::size_t pixel = std::size_t(j) * view.width + i;
+          const glm::dvec3 o = view.pixel_point(i, j, 0.0);
+          const double passing = glm::length(o - glm::dot(o, view.dir) * view.dir);
+          const std::uint32_t begin = ldi.offsets[pixel], count = ldi.offsets[pixel + 1] - begin;
+          if (std::abs(passing - radius) > 1e-3) {
+            EXPECT_EQ(count, passing < radius ? 2u : 0u) << what << " pixel " << i << ", " << j;
+            ++rays;
+          }
+          for (std::uint32_t h = begin; h < begin + count; ++h) {
+            const glm::dvec3 x = view.pixel_point(i, j, ldi.depth[h]);
+            EXPECT_NEAR(glm::length(x), radius, 1e-6) << what;
+            EXPECT_NEAR(std::abs(glm::dot(glm::dvec3(ldi.normal[h]), glm::normalize(x))), 1.0,
+                        1e-5)
+                << what;
+            ++hits;
+          }
+        }
+      ldis.back().push_back(ldi);
+    }
+    EXPECT_GT(hits, 4000u) << what;
+    EXPECT_GT(rays, 8000u) << what;
+  }
+  for (std::size_t v = 0; v < directions.size(); ++v) {
+    const Ldi &a = ldis[0][v], &b = ldis[1][v];
+    EXPECT_EQ(a.offsets, b.offsets) << "view " << v;
+    if (a.depth.size() != b.depth.size()) continue;
+    for (std::size_t h = 0; h < a.depth.size(); ++h) {
+      EXPECT_NEAR(a.depth[h], b.depth[h], 1e-6) << "view " << v;
+      EXPECT_NEAR(glm::length(a.normal[h] - b.normal[h]), 0.0, 1e-5) << "view " << v;
+    }
+  }
+}
+
+// The same mesh with every element's nodes numbered from another corner — each element turned
+// or mirrored by one of the cube's 48 symmetries, its values and geometry nodes alike — and the
+// elements listed in another order: the same hits.
+TEST(CurvedHex, TurnedAndReorderedElementsGiveTheSameHits) {
+  std::mt19937 rng(29);
+  for (const auto& [p, q, nodes] : {std::tuple{3, 2, NodeSet::gauss_lobatto_legendre},
+                                    std::tuple{2, 3, NodeSet::gauss_legendre}}) {
+    const CurvedMesh m = curved_mesh(2, p, q, nodes, 0.08, wavy);
+    const std::size_t elements = m.block.element_count;
+    std::vector<std::size_t> order(elements);
+    for (std::size_t e = 0; e < elements; ++e)
+      order[e] = e;
+    std::shuffle(order.begin(), order.end(), rng);
+    // Node (i, j, k) of the turned element is node old of the original, old[axes[a]] = new[a]
+    // or its mirror N − new[a].
+    const auto turned = [](const int axes[3], const bool flip[3], int N, int i, int j, int k) {
+      const int fresh[3] = {i, j, k};
+      int old[3];
+      for (int a = 0; a < 3; ++a)
+        old[axes[a]] = flip[a] ? N - fresh[a] : fresh[a];
+      return old[0] + (N + 1) * (old[1] + (N + 1) * old[2]);
+    };
+    CurvedMesh t = m;
+    std::uniform_int_distribution<int> coin(0, 1), six(0, 5);
+    const int permutations[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
+    const std::size_t np = std::size_t(p + 1) * (p + 1) * (p + 1), nq = std::size_t(q + 1) * (q + 1) * (q + 1);
+    int mirrored = 0;
+    for (std::size_t e = 0; e < elements; ++e) {
+      const std::size_t from = order[e];
+      const int which = six(rng);
+      const int* axes = permutations[which];
+      const bool flip[3] = {coin(rng) == 1, coin(rng) == 1, coin(rng) == 1};
+      const int odd_permutation[6] = {0, 1, 1, 0, 0, 1};
+      mirrored += (flip[0] + flip[1] + flip[2] + odd_permutation[which]) % 2;
+      std::size_t m_out = 0;
+      for (int k = 0; k <= p; ++k)
+        for (int j = 0; j <= p; ++j)
+          for (int i = 0; i <= p; ++i)
+            t.values[e * np + m_out++] = m.values[from * np + turned(axes, flip, p, i, j, k)];
+      m_out = 0;
+      for (int k = 0; k <= q; ++k)
+        for (int j = 0; j <= q; ++j)
+          for (int i = 0; i <= q; ++i, ++m_out)
+            for (int c = 0; c < 3; ++c)
+              t.geometry[3 * (e * nq + m_out) + c] =
+                  m.geometry[3 * (from * nq + turned(axes, flip, q, i, j, k)) + c];
+    }
+    t.block.values = t.values.data();
+    t.block.geometry = t.geometry.data();
+    const HexElementSource a(m.block), b(t.block);
+    const RayCaster ca(a, 0.0), cb(b, 0.0);
+    std::size_t compared = 0;
+    for (const View& view : make_axis_views(a.bounds(), 32)) {
+      const Ldi la = ca.cast(view), lb = cb.cast(view);
+      EXPECT_EQ(la.offsets, lb.offsets) << describe(p, q, nodes);
+      if (la.depth.size() != lb.depth.size()) continue;
+      for (std::size_t h = 0; h < la.depth.size(); ++h) {
+        EXPECT_NEAR(la.depth[h], lb.depth[h], 1e-6) << describe(p, q, nodes);
+        EXPECT_NEAR(glm::length(la.normal[h] - lb.normal[h]), 0.0, 1e-5) << describe(p, q, nodes);
+      }
+      compared += la.depth.size();
+    }
+    EXPECT_GT(compared, 300u) << describe(p, q, nodes);
+    EXPECT_GT(mirrored, 0) << "no element was mirrored";
+  }
 }
 
 TEST(CurvedHex, AxisAndEmbreeCastersGiveTheSameHits) {
