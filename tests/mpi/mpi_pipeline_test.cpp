@@ -19,6 +19,7 @@
 #include "ldimesh/core/field/analytic_fields.hpp"
 #include "ldimesh/core/field/analytic_source.hpp"
 #include "ldimesh/core/field/grid_source.hpp"
+#include "ldimesh/core/field/hex_source.hpp"
 #include "ldimesh/core/field/surfaces.hpp"
 #include "ldimesh/core/raycast/decomposition.hpp"
 #include "ldimesh/transport/distributed.hpp"
@@ -138,6 +139,71 @@ TEST(MpiPipeline, GridBlocksWithGhostLayersSplitAcrossRanks) {
       whole, blocks, {r % blocks[0], (r / blocks[0]) % blocks[1], r / (blocks[0] * blocks[1])});
   const GridSource mine(part.block);
   expect_distributed_equals_one_process(mine, {part.owned, reference.bounds()}, reference, 0.5, 64);
+}
+
+// Curved elements (geometry of order 2, interiors bent) dealt out to the ranks one by one (element
+// e on rank e mod ranks, as an unstructured mesh's partition may put neighbours anywhere): each
+// rank casts its elements over the whole domain, roots on faces shared across ranks meet in the
+// reduction, and the root's mesh is the one process's.
+TEST(MpiPipeline, CurvedElementsDealtToTheRanksGiveTheOneProcessMesh) {
+  const int n = 3, p = 3, q = 2;
+  const std::vector<double> xq = node_positions(q, NodeSet::gauss_lobatto_legendre);
+  const std::vector<double> xp = node_positions(p, NodeSet::gauss_lobatto_legendre);
+  const auto bend = [](glm::dvec3 x) {
+    x.x += 0.06 * std::sin(3.14159 * x.y) * std::sin(3.14159 * x.z) * std::sin(3.14159 * x.x);
+    return x;
+  };
+  const auto field = [](glm::dvec3 x) {
+    return std::sin(4.0 * x.x + 0.5) * std::cos(3.0 * x.y) + 0.6 * std::sin(5.0 * x.z) - 0.1;
+  };
+  // All elements, and this rank's share, with the field at the field's nodes through the
+  // geometry's own polynomial.
+  std::vector<double> all_geometry, all_values, my_geometry, my_values;
+  std::size_t mine_count = 0;
+  for (int e = 0; e < n * n * n; ++e) {
+    const glm::dvec3 cell(e % n, (e / n) % n, e / (n * n));
+    std::vector<double> geometry;
+    for (int k = 0; k <= q; ++k)
+      for (int j = 0; j <= q; ++j)
+        for (int i = 0; i <= q; ++i) {
+          const glm::dvec3 x = bend((cell + glm::dvec3(xq[i], xq[j], xq[k])) / double(n));
+          geometry.insert(geometry.end(), {x.x, x.y, x.z});
+        }
+    HexBlock one;
+    one.order = p;
+    one.element_count = 1;
+    one.geometry_order = q;
+    one.geometry = geometry.data();
+    std::vector<double> zeros(std::size_t(p + 1) * (p + 1) * (p + 1), 0.0), values;
+    one.values = zeros.data();
+    const HexElementSource shape(one);
+    for (int k = 0; k <= p; ++k)
+      for (int j = 0; j <= p; ++j)
+        for (int i = 0; i <= p; ++i)
+          values.push_back(field(shape.to_world(0, {xp[i], xp[j], xp[k]})));
+    all_geometry.insert(all_geometry.end(), geometry.begin(), geometry.end());
+    all_values.insert(all_values.end(), values.begin(), values.end());
+    if (e % ranks() == rank_of()) {
+      my_geometry.insert(my_geometry.end(), geometry.begin(), geometry.end());
+      my_values.insert(my_values.end(), values.begin(), values.end());
+      ++mine_count;
+    }
+  }
+  const auto block_of = [&](const std::vector<double>& geometry, const std::vector<double>& values,
+                            std::size_t count) {
+    HexBlock b;
+    b.order = p;
+    b.element_count = count;
+    b.geometry_order = q;
+    b.geometry = geometry.data();
+    b.values = values.data();
+    return b;
+  };
+  const HexElementSource reference(block_of(all_geometry, all_values, std::size_t(n) * n * n));
+  const HexElementSource mine(block_of(my_geometry, my_values, mine_count));
+  EXPECT_TRUE(reference.is_curved(13));  // the middle element: its interior nodes bent
+  const Box domain{glm::dvec3(0.0), glm::dvec3(1.0)};
+  expect_distributed_equals_one_process(mine, {domain, domain}, reference, 0.0, 48);
 }
 
 // The root may leave the decoding and merging of what it receives to later (its worker thread):
