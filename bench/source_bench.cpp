@@ -90,6 +90,11 @@ int main(int argc, char** argv) {
                  "cube's faces kept); 0: affine cubes from corners")
       ->check(CLI::Range(0, ldimesh::kMaxHexOrder));
   bool with_embree = false, json = false;
+  int shell = 0;
+  app.add_option("--shell", shell,
+                 "elements of a spherical shell 0.5 ≤ r ≤ 1 instead of cubes: a cubed sphere of 6 "
+                 "× E² × SHELL elements (E = --elements), geometry of order --curved (≥ 1)")
+      ->check(CLI::Range(0, 64));
   app.add_flag("--embree", with_embree, "also cast with Embree for every ray (the reference)");
   app.add_flag("--json", json, "end with one JSON line of the cast rows");
   std::string only;
@@ -120,9 +125,14 @@ int main(int argc, char** argv) {
   block.spacing = glm::dvec3(2.0 / (n - 1));
   const ldimesh::GridSource grid(block);
 
-  // Elements: elements³ cubes over [−1, 1]³, order p, GLL nodes, float64.
+  if (shell > 0 && curved == 0) {
+    std::fprintf(stderr, "ldimesh_bench_sources: --shell needs --curved Q (the geometry order)\n");
+    return 2;
+  }
+  // Elements: elements³ cubes over [−1, 1]³, order p, GLL nodes, float64 — or the shell.
   const int p1 = order + 1;
-  const std::size_t count = std::size_t(elements) * elements * elements;
+  const std::size_t count = shell > 0 ? std::size_t(6) * elements * elements * shell
+                                      : std::size_t(elements) * elements * elements;
   std::vector<double> corners(count * 24), nodal(count * p1 * p1 * p1);
   const std::vector<double> nodes =
       ldimesh::node_positions(order, ldimesh::NodeSet::gauss_lobatto_legendre);
@@ -140,7 +150,35 @@ int main(int argc, char** argv) {
   const std::vector<double> geometry_nodes =
       ldimesh::node_positions(std::max(curved, 1), ldimesh::NodeSet::gauss_lobatto_legendre);
   std::vector<double> geometry(curved > 0 ? count * 3 * q1 * q1 * q1 : 0);
-  for (std::size_t e = 0; e < count; ++e) {
+  // The shell's map of element e's reference point ξ: patch e / (E² · shell) of the cube's six
+  // faces, the point on that face put on the sphere of its radius.
+  const auto shell_point = [&](std::size_t e, glm::dvec3 xi) {
+    const std::size_t per_patch = std::size_t(elements) * elements * shell;
+    const std::size_t patch = e / per_patch, rest = e % per_patch;
+    const int a = int(patch / 2);
+    glm::dvec3 c;
+    c[a] = patch % 2 ? -1.0 : 1.0;
+    c[(a + 1) % 3] = -1.0 + 2.0 * (double(rest % elements) + xi.x) / elements;
+    c[(a + 2) % 3] = -1.0 + 2.0 * (double(rest / elements % elements) + xi.y) / elements;
+    return (0.5 + 0.5 * (double(rest / elements / elements) + xi.z) / shell) * glm::normalize(c);
+  };
+  for (std::size_t e = 0; e < count && shell > 0; ++e) {
+    for (int k = 0; k < q1; ++k)
+      for (int j = 0; j < q1; ++j)
+        for (int i = 0; i < q1; ++i) {
+          const glm::dvec3 x = shell_point(
+              e, glm::dvec3(geometry_nodes[i], geometry_nodes[j], geometry_nodes[k]));
+          double* g = &geometry[3 * (e * q1 * q1 * q1 + (std::size_t(k) * q1 + j) * q1 + i)];
+          g[0] = x.x, g[1] = x.y, g[2] = x.z;
+        }
+    for (int k = 0; k < p1; ++k)
+      for (int j = 0; j < p1; ++j)
+        for (int i = 0; i < p1; ++i) {
+          const glm::dvec3 x = shell_point(e, glm::dvec3(nodes[i], nodes[j], nodes[k]));
+          nodal[e * p1 * p1 * p1 + (std::size_t(k) * p1 + j) * p1 + i] = ml(x.x, x.y, x.z);
+        }
+  }
+  for (std::size_t e = 0; e < count && shell == 0; ++e) {
     const glm::dvec3 lo{-1 + size * double(e % elements),
                         -1 + size * double((e / elements) % elements),
                         -1 + size * double(e / (std::size_t(elements) * elements))};
@@ -177,9 +215,12 @@ int main(int argc, char** argv) {
   std::printf(
       "| source | isovalue | primitives | after culling | scene build s "
       "|\n|---|---|---|---|---|\n");
-  char grid_label[96], hex_label[96];
+  char grid_label[96], hex_label[128];
   std::snprintf(grid_label, sizeof grid_label, "grid %d³ float32, 8³-cell bricks", n);
-  if (curved > 0)
+  if (shell > 0)
+    std::snprintf(hex_label, sizeof hex_label, "shell 6 × %d² × %d curved elements, p = %d, q = %d, GLL",
+                  elements, shell, order, curved);
+  else if (curved > 0)
     std::snprintf(hex_label, sizeof hex_label, "%d³ curved elements, p = %d, q = %d, GLL", elements,
                   order, curved);
   else
