@@ -83,28 +83,33 @@ void evaluate_tensor(int n, const double* c, glm::dvec3 r, double* value, glm::d
 
 // Splits the tensor c (degree n, `count` interleaved components) at the middle of `axis`
 // into left and right halves (de Casteljau along every line of that axis). `right` may be
-// `c` (each line is read before its halves are written).
+// `c` (each slab is read before its halves are written). The tensor is taken as slabs
+// [outer][i][inner] (i along `axis`, inner the contiguous values below it), and de Casteljau's
+// levels run over whole rows of a slab: the same operations on each line as line by line, so
+// the same values, but independent ones side by side (the vector lanes) instead of one
+// dependent chain per line.
 template <int count, int n>
 void split_fixed(int axis, const double* c, double* left, double* right) {
   constexpr int m = n + 1;
-  const int step[3] = {count, count * m, count * m * m};
-  const int stride = step[axis], s1 = step[axis == 0 ? 1 : 0], s2 = step[axis == 2 ? 1 : 2];
-  for (int a = 0; a < m; ++a)
-    for (int b = 0; b < m; ++b)
-      for (int k = 0; k < count; ++k) {
-        const int base = a * s1 + b * s2 + k;
-        double w[m];
-        for (int i = 0; i < m; ++i)
-          w[i] = c[base + i * stride];
-        left[base] = w[0];
-        right[base + n * stride] = w[n];
-        for (int r = 1; r <= n; ++r) {
-          for (int i = 0; i <= n - r; ++i)
-            w[i] = 0.5 * (w[i] + w[i + 1]);
-          left[base + r * stride] = w[0];
-          right[base + (n - r) * stride] = w[n - r];
-        }
+  const int inner = axis == 0 ? count : axis == 1 ? count * m : count * m * m;
+  const int outer = axis == 0 ? m * m : axis == 1 ? m : 1;
+  double w[m * count * m * m];  // a slab: m rows of `inner` values
+  for (int o = 0; o < outer; ++o) {
+    const int base = o * m * inner;
+    std::copy(c + base, c + base + m * inner, w);
+    std::copy(w, w + inner, left + base);
+    std::copy(w + n * inner, w + m * inner, right + base + n * inner);
+    for (int r = 1; r <= n; ++r) {
+      for (int i = 0; i <= n - r; ++i) {
+        double* row = w + i * inner;
+        const double* next = row + inner;
+        for (int j = 0; j < inner; ++j)
+          row[j] = 0.5 * (row[j] + next[j]);
       }
+      std::copy(w, w + inner, left + base + r * inner);
+      std::copy(w + (n - r) * inner, w + (n - r + 1) * inner, right + base + (n - r) * inner);
+    }
+  }
 }
 template <int count>
 void split(int n, int axis, const double* c, double* left, double* right) {
