@@ -29,6 +29,12 @@ case $target in
     libs=() ;;
   glb)
     name=glb_decoder_fuzz
+    # Debian's Draco 1.5.5 can spend up to ≈ 15 s on a hostile 1.3 KB stream (an unbounded
+    # count in its texture-coordinate predictor: docs/reliability.md, an open finding). That is
+    # bounded (2^31 steps), not a hang: the per-input limit sits above it, so that the target
+    # goes on finding crashes, leaks and undefined behaviour; the OK line reports the slowest
+    # input, and a real hang still stops the run.
+    timeout=30
     sources=(transport/src/glb.cpp core/src/base/mesh.cpp core/src/base/status.cpp)
     libs=(-I/usr/include/eigen3 -ldraco) ;;
   options)
@@ -77,7 +83,7 @@ LDIMESH_FUZZ_WRITE_SEEDS=$out/corpus "$bin"
 
 echo "fuzz: $target for $seconds s, corpus $out/corpus ($(ls "$out/corpus" | wc -l) inputs)"
 status=0
-"$bin" -max_total_time="$seconds" -timeout=10 -print_final_stats=1 \
+"$bin" -max_total_time="$seconds" -timeout="${timeout:-10}" -print_final_stats=1 \
   -artifact_prefix="$out/artifacts/" "$@" "$out/corpus" >"$out/fuzz.log" 2>&1 || status=$?
 runs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$out/fuzz.log" | tail -n 1)
 if [ "$status" -ne 0 ]; then
@@ -86,5 +92,6 @@ if [ "$status" -ne 0 ]; then
        "$out/artifacts/, the whole log in $out/fuzz.log" >&2
   exit 1
 fi
+slowest=$(sed -n 's/^stat::slowest_unit_time_sec: *//p' "$out/fuzz.log" | tail -n 1)
 echo "fuzz: OK, ${runs:-?} executions in $seconds s, no crash, leak or undefined behaviour" \
-     "(log: $out/fuzz.log)"
+     "(slowest input ${slowest:-?} s; log: $out/fuzz.log)"
