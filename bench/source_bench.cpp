@@ -166,8 +166,8 @@ int main(int argc, char** argv) {
     for (int k = 0; k < q1; ++k)
       for (int j = 0; j < q1; ++j)
         for (int i = 0; i < q1; ++i) {
-          const glm::dvec3 x = shell_point(
-              e, glm::dvec3(geometry_nodes[i], geometry_nodes[j], geometry_nodes[k]));
+          const glm::dvec3 x =
+              shell_point(e, glm::dvec3(geometry_nodes[i], geometry_nodes[j], geometry_nodes[k]));
           double* g = &geometry[3 * (e * q1 * q1 * q1 + (std::size_t(k) * q1 + j) * q1 + i)];
           g[0] = x.x, g[1] = x.y, g[2] = x.z;
         }
@@ -218,8 +218,9 @@ int main(int argc, char** argv) {
   char grid_label[96], hex_label[128];
   std::snprintf(grid_label, sizeof grid_label, "grid %d³ float32, 8³-cell bricks", n);
   if (shell > 0)
-    std::snprintf(hex_label, sizeof hex_label, "shell 6 × %d² × %d curved elements, p = %d, q = %d, GLL",
-                  elements, shell, order, curved);
+    std::snprintf(hex_label, sizeof hex_label,
+                  "shell 6 × %d² × %d curved elements, p = %d, q = %d, GLL", elements, shell, order,
+                  curved);
   else if (curved > 0)
     std::snprintf(hex_label, sizeof hex_label, "%d³ curved elements, p = %d, q = %d, GLL", elements,
                   order, curved);

@@ -261,11 +261,11 @@ contains
   logical function contiguous_block(adaptor, field)
     type(ldimesh_adaptor), intent(in) :: adaptor
     class(*), intent(in) :: field(:, :, :)
-    integer(c_int) :: ignored
+    integer :: ignored
     contiguous_block = is_contiguous(field)
-    if (.not. contiguous_block) ignored = c_set_error(adaptor%handle, &
+    if (.not. contiguous_block) ignored = fail(adaptor, &
       'ldimesh_add_uniform_grid: the array is not contiguous (pass a whole array or a range '// &
-      'of its last index)'//c_null_char)
+      'of its last index)')
   end function contiguous_block
 
   subroutine describe_uniform(block, dims, count, origin, spacing, ghost_lo, ghost_hi)

@@ -25,7 +25,8 @@ using testing::ranks;
 ldimesh_adaptor* create(const std::string& dir) {
   const std::string options =
       R"({"server": {"enabled": false}, "log": false, "resolution": 48, "isovalues": [0.3],
-          "output_dir": ")" + dir + R"("})";
+          "output_dir": ")" +
+      dir + R"("})";
   ldimesh_adaptor* a = nullptr;
   EXPECT_EQ(ldimesh_create(MPI_COMM_WORLD, options.c_str(), &a), LDIMESH_OK)
       << ldimesh_last_error(nullptr);

@@ -116,9 +116,8 @@ inline double face_value(const double w[4], const double f[4]) {
 // the faces (as trilinear_segment_roots computes it for a segment along one axis) and the
 // gradient there (as solve_cell). `local` holds the ray's local coordinates across it, `size`
 // the cell's edges; corner[n] = value − iso at corner n (x + 2y + 4z).
-inline RayHit axis_root(const double corner[8], int a, int step, glm::dvec3 local,
-                        glm::dvec3 size, double fa, double fb, double ta, double tb,
-                        glm::dvec3 dir) {
+inline RayHit axis_root(const double corner[8], int a, int step, glm::dvec3 local, glm::dvec3 size,
+                        double fa, double fb, double ta, double tb, glm::dvec3 dir) {
   const double s = fa / (fa - fb);
   local[a] = step > 0 ? s : 1.0 - s;
   return {s == 1.0 ? tb : ta + s * (tb - ta),
@@ -683,14 +682,15 @@ class GridAxisBinding final : public AxisBinding {
       }
 
     const glm::dvec3 dir = rays.dir;
-    const int step = dir[a] > 0.0 ? 1 : -1;
     const double inv = 1.0 / dir[a];
     const auto t_at = [&](std::int64_t node) { return (g_.coord(a, node) - oa) * inv; };
     const double t_lo = std::min(t_at(first_[a]), t_at(last_[a] + 1));
     const double t_hi = std::max(t_at(first_[a]), t_at(last_[a] + 1));
     LatticeScratch& x = lattice_scratch();
-    index_pixels(ua, width, [&](std::size_t i) { return ray[i].org[ua]; }, x.columns);
-    index_pixels(va, n / width, [&](std::size_t j) { return ray[j * width].org[va]; }, x.rows);
+    index_pixels(
+        ua, width, [&](std::size_t i) { return ray[i].org[ua]; }, x.columns);
+    index_pixels(
+        va, n / width, [&](std::size_t j) { return ray[j * width].org[va]; }, x.rows);
     // Object order pays where several rays share a cell (measured on Marschner–Lobb 256³: 20–40 %
     // faster at 2 × 2 rays per cell, 5–10 % at 1.5 × 1.5, 15–25 % slower at one ray per cell on
     // two threads): below 2 rays per column of cells on average the rays walk their columns.
@@ -716,15 +716,27 @@ class GridAxisBinding final : public AxisBinding {
     hi[ua] = x.columns.hi;
     lo[va] = x.rows.lo;
     hi[va] = x.rows.hi;
-    const Lattice lattice{ray, width, oa, step, inv, dir, lo, hi};
+    const Lattice lattice{ray, width, oa, dir, lo, hi};
     const bool u_is_b = ua < va;
     switch (a * 2 + int(u_is_b)) {
-      case 0: solve_slab<0, false>(lattice, x, out); break;
-      case 1: solve_slab<0, true>(lattice, x, out); break;
-      case 2: solve_slab<1, false>(lattice, x, out); break;
-      case 3: solve_slab<1, true>(lattice, x, out); break;
-      case 4: solve_slab<2, false>(lattice, x, out); break;
-      default: solve_slab<2, true>(lattice, x, out); break;
+      case 0:
+        solve_slab<0, false>(lattice, x, out);
+        break;
+      case 1:
+        solve_slab<0, true>(lattice, x, out);
+        break;
+      case 2:
+        solve_slab<1, false>(lattice, x, out);
+        break;
+      case 3:
+        solve_slab<1, true>(lattice, x, out);
+        break;
+      case 4:
+        solve_slab<2, false>(lattice, x, out);
+        break;
+      default:
+        solve_slab<2, true>(lattice, x, out);
+        break;
     }
     return true;
   }
@@ -735,8 +747,6 @@ class GridAxisBinding final : public AxisBinding {
     std::span<const AxisRay> ray;
     std::size_t width;
     double oa;
-    int step;
-    double inv;
     glm::dvec3 dir;
     std::array<std::int64_t, 3> lo, hi;
   };
@@ -756,13 +766,15 @@ class GridAxisBinding final : public AxisBinding {
       offsets[m] = (m & 1) * s[0] + ((m >> 1) & 1) * s[1] + ((m >> 2) & 1) * s[2];
     // Corner index of face point m (β = m & 1 along B, γ = m >> 1 along C) on the entry and the
     // exit face.
-    const int in = l.step > 0 ? 0 : 1;
+    const int step = l.dir[A] > 0.0 ? 1 : -1;
+    const double inv = 1.0 / l.dir[A];
+    const int in = step > 0 ? 0 : 1;
     int face_in[4], face_out[4];
     for (int m = 0; m < 4; ++m) {
       face_in[m] = (in << A) | ((m & 1) << B) | ((m >> 1) << C);
       face_out[m] = ((1 - in) << A) | ((m & 1) << B) | ((m >> 1) << C);
     }
-    const auto t_at = [&](std::int64_t node) { return (g_.coord(A, node) - l.oa) * l.inv; };
+    const auto t_at = [&](std::int64_t node) { return (g_.coord(A, node) - l.oa) * inv; };
 
     // The rays of a cell whose face values differ in sign, solved after its loop (no branch on
     // the outcome, which is near random).
@@ -783,8 +795,8 @@ class GridAxisBinding final : public AxisBinding {
         glm::dvec3 local;
         local[B] = h.pb;
         local[C] = h.pc;
-        out.push_back({h.k, axis_root(corner, A, l.step, local, size, h.fa, h.fb, t_in, t_out,
-                                      l.dir)});
+        out.push_back(
+            {h.k, axis_root(corner, A, step, local, size, h.fa, h.fb, t_in, t_out, l.dir)});
       }
       n_candidates = 0;
     };
@@ -797,8 +809,8 @@ class GridAxisBinding final : public AxisBinding {
       for (int k = 0; k < 3; ++k)
         cell[k] = first_[k] + rel[k];
       const std::int64_t i = cell[A];
-      t_in = t_at(l.step > 0 ? i : i + 1);
-      t_out = t_at(l.step > 0 ? i + 1 : i);
+      t_in = t_at(step > 0 ? i : i + 1);
+      t_out = t_at(step > 0 ? i + 1 : i);
       if (!(t_out > t_in)) return;
       const T* lower = g_.values + cell[0] * s[0] + cell[1] * s[1] + cell[2] * s[2];
       for (int m = 0; m < 8; ++m)
@@ -830,7 +842,7 @@ class GridAxisBinding final : public AxisBinding {
           }
           // A face value zero or not finite: solve_cell decides, as in cast_ray.
           std::array<int, 3> steps{0, 0, 0};
-          steps[A] = l.step;
+          steps[A] = step;
           std::array<bool, 3> entry_face{false, false, false}, exit_face{false, false, false};
           entry_face[A] = exit_face[A] = true;
           x.hits.clear();

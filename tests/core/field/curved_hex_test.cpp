@@ -78,12 +78,13 @@ CurvedMesh mesh_of(std::size_t elements, int p, int q, NodeSet nodes, Point poin
 template <class Field>
 CurvedMesh curved_mesh(int n, int p, int q, NodeSet nodes, double amount, Field field) {
   const glm::dvec3 size = (kBox.hi - kBox.lo) / double(n);
-  return mesh_of(std::size_t(n) * n * n, p, q, nodes,
-                 [&](std::size_t e, glm::dvec3 xi) {
-                   const glm::dvec3 cell(double(e % n), double(e / n % n), double(e / n / n));
-                   return distort(kBox.lo + size * (cell + xi), amount);
-                 },
-                 field);
+  return mesh_of(
+      std::size_t(n) * n * n, p, q, nodes,
+      [&](std::size_t e, glm::dvec3 xi) {
+        const glm::dvec3 cell(double(e % n), double(e / n % n), double(e / n / n));
+        return distort(kBox.lo + size * (cell + xi), amount);
+      },
+      field);
 }
 
 // A spherical shell r0 ≤ |x| ≤ r1 as a cubed sphere: 6 patches of n × n elements across and
@@ -92,21 +93,22 @@ CurvedMesh curved_mesh(int n, int p, int q, NodeSet nodes, double amount, Field 
 template <class Field>
 CurvedMesh shell_mesh(int n, int layers, int p, int q, NodeSet nodes, double r0, double r1,
                       Field field) {
-  return mesh_of(std::size_t(6) * n * n * layers, p, q, nodes,
-                 [&](std::size_t e, glm::dvec3 xi) {
-                   const std::size_t patch = e / (std::size_t(n) * n * layers);
-                   const std::size_t rest = e % (std::size_t(n) * n * layers);
-                   const double u = -1.0 + 2.0 * (double(rest % n) + xi.x) / n;
-                   const double v = -1.0 + 2.0 * (double(rest / n % n) + xi.y) / n;
-                   const double w = (double(rest / n / n) + xi.z) / layers;
-                   const int a = int(patch / 2);
-                   glm::dvec3 c;
-                   c[a] = patch % 2 ? -1.0 : 1.0;
-                   c[(a + 1) % 3] = u;
-                   c[(a + 2) % 3] = v;
-                   return (r0 + (r1 - r0) * w) * glm::normalize(c);
-                 },
-                 field);
+  return mesh_of(
+      std::size_t(6) * n * n * layers, p, q, nodes,
+      [&](std::size_t e, glm::dvec3 xi) {
+        const std::size_t patch = e / (std::size_t(n) * n * layers);
+        const std::size_t rest = e % (std::size_t(n) * n * layers);
+        const double u = -1.0 + 2.0 * (double(rest % n) + xi.x) / n;
+        const double v = -1.0 + 2.0 * (double(rest / n % n) + xi.y) / n;
+        const double w = (double(rest / n / n) + xi.z) / layers;
+        const int a = int(patch / 2);
+        glm::dvec3 c;
+        c[a] = patch % 2 ? -1.0 : 1.0;
+        c[(a + 1) % 3] = u;
+        c[(a + 2) % 3] = v;
+        return (r0 + (r1 - r0) * w) * glm::normalize(c);
+      },
+      field);
 }
 
 std::string describe(int p, int q, NodeSet nodes) {
@@ -236,13 +238,12 @@ TEST(CurvedHex, RSquaredOnCurvedShellsIsTheExactSphere) {
   const std::vector<glm::dvec3> directions{glm::dvec3(1, 0, 0), glm::dvec3(0, 0, -1),
                                            glm::dvec3(0, 1, 0), glm::dvec3(0.4, -0.3, 0.85)};
   std::vector<std::vector<Ldi>> ldis;
-  for (const auto& [n, layers, q, nodes] :
-       {std::tuple{2, 2, 2, NodeSet::gauss_lobatto_legendre},
-        std::tuple{3, 1, 3, NodeSet::equispaced}}) {
+  for (const auto& [n, layers, q, nodes] : {std::tuple{2, 2, 2, NodeSet::gauss_lobatto_legendre},
+                                            std::tuple{3, 1, 3, NodeSet::equispaced}}) {
     const std::string what = "shell " + std::to_string(n) + " × " + std::to_string(n) + " × " +
                              std::to_string(layers) + ", " + describe(2 * q, q, nodes);
-    const CurvedMesh m =
-        shell_mesh(n, layers, 2 * q, q, nodes, 0.5, 1.0, [](glm::dvec3 x) { return glm::dot(x, x); });
+    const CurvedMesh m = shell_mesh(n, layers, 2 * q, q, nodes, 0.5, 1.0,
+                                    [](glm::dvec3 x) { return glm::dot(x, x); });
     const HexElementSource source(m.block);
     std::size_t curved = 0;
     for (std::size_t e = 0; e < m.block.element_count; ++e)
@@ -268,8 +269,7 @@ TEST(CurvedHex, RSquaredOnCurvedShellsIsTheExactSphere) {
           for (std::uint32_t h = begin; h < begin + count; ++h) {
             const glm::dvec3 x = view.pixel_point(i, j, ldi.depth[h]);
             EXPECT_NEAR(glm::length(x), radius, 1e-6) << what;
-            EXPECT_NEAR(std::abs(glm::dot(glm::dvec3(ldi.normal[h]), glm::normalize(x))), 1.0,
-                        1e-5)
+            EXPECT_NEAR(std::abs(glm::dot(glm::dvec3(ldi.normal[h]), glm::normalize(x))), 1.0, 1e-5)
                 << what;
             ++hits;
           }
@@ -314,8 +314,10 @@ TEST(CurvedHex, TurnedAndReorderedElementsGiveTheSameHits) {
     };
     CurvedMesh t = m;
     std::uniform_int_distribution<int> coin(0, 1), six(0, 5);
-    const int permutations[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
-    const std::size_t np = std::size_t(p + 1) * (p + 1) * (p + 1), nq = std::size_t(q + 1) * (q + 1) * (q + 1);
+    const int permutations[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2},
+                                    {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
+    const std::size_t np = std::size_t(p + 1) * (p + 1) * (p + 1),
+                      nq = std::size_t(q + 1) * (q + 1) * (q + 1);
     int mirrored = 0;
     for (std::size_t e = 0; e < elements; ++e) {
       const std::size_t from = order[e];
