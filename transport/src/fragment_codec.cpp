@@ -159,6 +159,12 @@ int effective_depth_bits(int bits, double lo, double hi) {
   return bits;
 }
 
+// round(x) for x ≥ 0 (halves up): the conversion truncates, which is floor(x + 0.5) there, without
+// the call that std::floor is on baseline x86-64.
+inline std::uint32_t round_nonnegative(double x) {
+  return std::uint32_t(x + 0.5);
+}
+
 // q = round((d − lo)/(hi − lo)·(2^b − 1)), decoded as lo + q·(hi − lo)/(2^b − 1) rounded to
 // float. Monotone both ways, so depths sorted per pixel stay sorted.
 struct DepthQuantizer {
@@ -171,7 +177,7 @@ struct DepthQuantizer {
   std::uint32_t quantize(float d) const {
     if (max_q == 0) return 0;
     const double t = (double(d) - lo) / (hi - lo) * double(max_q);
-    return std::uint32_t(std::floor(std::clamp(t, 0.0, double(max_q)) + 0.5));
+    return round_nonnegative(std::min(std::max(t, 0.0), double(max_q)));
   }
   float dequantize(std::uint32_t q) const {
     if (max_q == 0) return float(lo);
@@ -199,22 +205,21 @@ struct NormalQuantizer {
 
   std::uint32_t to_grid(double p) const {
     const double t = (p + 1.0) * double(half);
-    return std::uint32_t(std::floor(std::clamp(t, 0.0, double(max_u)) + 0.5));
+    return round_nonnegative(std::min(std::max(t, 0.0), double(max_u)));
   }
   double from_grid(std::uint32_t u) const { return (double(u) - double(half)) / double(half); }
 
   void quantize(glm::vec3 n, std::uint32_t& u, std::uint32_t& v) const {
     const double x = n.x, y = n.y, z = n.z;
     const double s = std::abs(x) + std::abs(y) + std::abs(z);
-    double px = x / s, py = y / s;
-    if (z < 0.0) {
-      const double fx = (1.0 - std::abs(py)) * sign_not_zero(px);
-      const double fy = (1.0 - std::abs(px)) * sign_not_zero(py);
-      px = fx;
-      py = fy;
-    }
-    u = to_grid(px);
-    v = to_grid(py);
+    const double px = x / s, py = y / s;
+    // The lower half folded over the corners; both computed and one selected (z < 0 is a coin
+    // toss over a surface's normals).
+    const double fx = (1.0 - std::abs(py)) * sign_not_zero(px);
+    const double fy = (1.0 - std::abs(px)) * sign_not_zero(py);
+    const bool lower = z < 0.0;
+    u = to_grid(lower ? fx : px);
+    v = to_grid(lower ? fy : py);
     // The square's edges fold onto the lower half twice: (±1, p) and (±1, −p) are one normal,
     // as are (p, ±1) and (−p, ±1), and all four corners are −z. One code each, the one that
     // re-encoding the decoded normal gives (p ≥ 0 along the edge; sign_not_zero(±0) = +1).
@@ -225,11 +230,10 @@ struct NormalQuantizer {
   glm::vec3 dequantize(std::uint32_t u, std::uint32_t v) const {
     const double px = from_grid(u), py = from_grid(v);
     const double z = 1.0 - std::abs(px) - std::abs(py);
-    double x = px, y = py;
-    if (z < 0.0) {
-      x = (1.0 - std::abs(py)) * sign_not_zero(px);
-      y = (1.0 - std::abs(px)) * sign_not_zero(py);
-    }
+    const double fx = (1.0 - std::abs(py)) * sign_not_zero(px);
+    const double fy = (1.0 - std::abs(px)) * sign_not_zero(py);
+    const bool lower = z < 0.0;  // folded as in quantize
+    const double x = lower ? fx : px, y = lower ? fy : py;
     const double len = std::sqrt(x * x + y * y + z * z);  // ≥ 1/√3 on the octahedron
     return glm::vec3(float(x / len), float(y / len), float(z / len));
   }
