@@ -6,6 +6,7 @@
 //
 //   build/bin/ldimesh_bench_sources [--grid-points 256] [--elements 16] [--order 4] [--res 512]
 //                                   [--embree] [--json]
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <string>
@@ -19,6 +20,7 @@
 
 #include "bench_util.hpp"
 #include "ldimesh/core/field/analytic_fields.hpp"
+#include "ldimesh/core/field/cubed_shell.hpp"
 #include "ldimesh/core/field/grid_source.hpp"
 #include "ldimesh/core/field/hex_source.hpp"
 #include "ldimesh/core/raycast/raycaster.hpp"
@@ -150,18 +152,9 @@ int main(int argc, char** argv) {
   const std::vector<double> geometry_nodes =
       ldimesh::node_positions(std::max(curved, 1), ldimesh::NodeSet::gauss_lobatto_legendre);
   std::vector<double> geometry(curved > 0 ? count * 3 * q1 * q1 * q1 : 0);
-  // The shell's map of element e's reference point ξ: patch e / (E² · shell) of the cube's six
-  // faces, the point on that face put on the sphere of its radius.
-  const auto shell_point = [&](std::size_t e, glm::dvec3 xi) {
-    const std::size_t per_patch = std::size_t(elements) * elements * shell;
-    const std::size_t patch = e / per_patch, rest = e % per_patch;
-    const int a = int(patch / 2);
-    glm::dvec3 c;
-    c[a] = patch % 2 ? -1.0 : 1.0;
-    c[(a + 1) % 3] = -1.0 + 2.0 * (double(rest % elements) + xi.x) / elements;
-    c[(a + 2) % 3] = -1.0 + 2.0 * (double(rest / elements % elements) + xi.y) / elements;
-    return (0.5 + 0.5 * (double(rest / elements / elements) + xi.z) / shell) * glm::normalize(c);
-  };
+  // The shell's map of element e's reference point ξ (a cubed sphere, 0.5 ≤ r ≤ 1).
+  const ldimesh::CubedShell cubed{elements, std::max(shell, 1), 0.5, 1.0};
+  const auto shell_point = [&](std::size_t e, glm::dvec3 xi) { return cubed.point(e, xi); };
   for (std::size_t e = 0; e < count && shell > 0; ++e) {
     for (int k = 0; k < q1; ++k)
       for (int j = 0; j < q1; ++j)

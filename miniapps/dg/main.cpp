@@ -7,11 +7,20 @@
 // sampled at the nodes every step. They approach, merge and part again: the isosurface changes
 // topology. The adaptor reads the nodal array in place through a HexBlock.
 //
+// With --mesh shell the mesh is curved and unstructured, as a real solver's: the spherical shell
+// 0.5 ≤ r ≤ 1 as a cubed sphere (6 · E² · L elements, geometry of order q at GLL nodes, every
+// node on its sphere), nodes in VTK's Lagrange order (as deal.II's DataOut and FLEXI write them),
+// the element list dealt to the ranks in contiguous runs (a rank's elements need not fill a box,
+// and the ranks' boxes overlap). Two blobs orbit inside the shell in opposite directions, meet
+// and part; --field radius puts u = |x|² there instead (its isosurfaces are spheres).
+//
 //   mpiexec -n 4 build/bin/ldimesh-dg --elements 8 --order 3 --steps 100
+//   mpiexec -n 4 build/bin/ldimesh-dg --mesh shell --elements 4 --order 4 --steps 100
 #include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <exception>
 #include <memory>
 #include <string>
 #include <vector>
@@ -20,6 +29,7 @@
 #include <glm/glm.hpp>
 
 #include "ldimesh/adaptor.hpp"
+#include "ldimesh/core/field/cubed_shell.hpp"
 #include "ldimesh/core/field/hex_source.hpp"
 #include "ldimesh/core/raycast/decomposition.hpp"
 #include "miniapp.hpp"
@@ -111,6 +121,141 @@ class ElementBlock {
   std::vector<double> values_;
 };
 
+// Two blobs orbiting the z axis in opposite directions inside the shell, on the sphere r = 0.75
+// (--mesh shell): u(x, t) = Σ± exp(−|x − x±(t)|² / σ²). They meet a quarter turn from where
+// they start. --field radius: u = |x|² (steady; its isovalue r² gives the sphere of radius r).
+struct ShellField {
+  double sigma = 0.18;
+  double angular_velocity = 1.5707963267948966;  // a quarter turn per unit of time
+  bool radius = false;
+
+  double operator()(glm::dvec3 x, double t) const {
+    if (radius) return glm::dot(x, x);
+    const double a = angular_velocity * t;
+    const glm::dvec3 plus{0.75 * std::cos(a), 0.75 * std::sin(a), 0.12};
+    const glm::dvec3 minus{-0.75 * std::cos(a), 0.75 * std::sin(a), -0.12};
+    const double s2 = sigma * sigma;
+    const glm::dvec3 dp = x - plus, dm = x - minus;
+    return std::exp(-glm::dot(dp, dp) / s2) + std::exp(-glm::dot(dm, dm) / s2);
+  }
+};
+
+// One rank's run of the shell's elements: geometry nodes and nodal values in VTK's Lagrange
+// order, element after element. The field is sampled where the solver's own geometry puts its
+// nodes (the order-q map through the geometry nodes), as a DG code evaluates its solution.
+class ShellBlock {
+ public:
+  ShellBlock(const ldimesh::CubedShell& shell, int order, int geometry_order, int rank, int ranks)
+      : order_(order), geometry_order_(geometry_order) {
+    const std::size_t total = shell.element_count();
+    first_ = total * std::size_t(rank) / std::size_t(ranks);
+    count_ = total * std::size_t(rank + 1) / std::size_t(ranks) - first_;
+    const int q = geometry_order;
+    const std::size_t gn = std::size_t(q + 1) * (q + 1) * (q + 1);
+    const std::vector<double> xq =
+        ldimesh::node_positions(q, ldimesh::NodeSet::gauss_lobatto_legendre);
+    geometry_.resize(count_ * gn * 3);
+    for (std::size_t e = 0; e < count_; ++e)
+      for (int k = 0; k <= q; ++k)
+        for (int j = 0; j <= q; ++j)
+          for (int i = 0; i <= q; ++i) {
+            const glm::dvec3 x = shell.point(first_ + e, {xq[i], xq[j], xq[k]});
+            double* g = &geometry_[3 * (e * gn + ldimesh::vtk_lagrange_index(i, j, k, q))];
+            g[0] = x.x, g[1] = x.y, g[2] = x.z;
+          }
+    // The field's nodes in space, through the geometry's polynomial.
+    const int n = order + 1;
+    const std::size_t vn = std::size_t(n) * n * n;
+    values_.assign(count_ * vn, 0.0);
+    positions_.resize(count_ * vn);
+    if (count_ == 0) return;
+    const ldimesh::HexElementSource shape(hex_block());
+    const std::vector<double> xp =
+        ldimesh::node_positions(order, ldimesh::NodeSet::gauss_lobatto_legendre);
+    for (std::size_t e = 0; e < count_; ++e)
+      for (int k = 0; k < n; ++k)
+        for (int j = 0; j < n; ++j)
+          for (int i = 0; i < n; ++i)
+            positions_[e * vn + ldimesh::vtk_lagrange_index(i, j, k, order)] =
+                shape.to_world(e, {xp[i], xp[j], xp[k]});
+  }
+
+  std::size_t first() const { return first_; }
+  std::size_t count() const { return count_; }
+
+  void sample(const ShellField& u, double t) {
+    for (std::size_t m = 0; m < values_.size(); ++m)
+      values_[m] = u(positions_[m], t);
+  }
+
+  ldimesh::HexBlock hex_block() const {
+    ldimesh::HexBlock b;
+    b.order = order_;
+    b.nodes = ldimesh::NodeSet::gauss_lobatto_legendre;
+    b.element_count = count_;
+    b.geometry_order = geometry_order_;
+    b.geometry = geometry_.data();
+    b.values = values_.data();
+    b.type = ldimesh::ScalarType::float64;
+    b.ordering = ldimesh::NodeOrdering::vtk_lagrange;
+    return b;
+  }
+
+ private:
+  int order_, geometry_order_;
+  std::size_t first_ = 0, count_ = 0;
+  std::vector<double> geometry_;  // (q + 1)³ nodes × (x, y, z) per element
+  std::vector<double> values_;
+  std::vector<glm::dvec3> positions_;  // of the field's nodes, in the values' order
+};
+
+// --mesh shell: the rank's run of the shell's elements, described once, sampled every step.
+int run_shell(MiniApp& app, const CommonArgs& args, const ldimesh::CubedShell& shell, int order,
+              int geometry_order, const ShellField& u, double dt) {
+  if (shell.element_count() < std::size_t(app.size())) {
+    app.check(ldimesh::Status::invalid_argument(
+                  "the shell's " + std::to_string(shell.element_count()) +
+                  " elements are fewer than the " + std::to_string(app.size()) + " ranks"),
+              "start");
+    return ldimesh::miniapp::kExitUsage;
+  }
+  // The elements' geometry is checked where the field's node positions are computed; a rank
+  // that fails says so, and every rank stops (none waits in a collective for it).
+  std::unique_ptr<ShellBlock> made;
+  int failed = 0;
+  try {
+    made = std::make_unique<ShellBlock>(shell, order, geometry_order, app.rank(), app.size());
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "ldimesh-dg: rank %d: the shell's elements: %s\n", app.rank(), e.what());
+    failed = 1;
+  }
+  MPI_Allreduce(MPI_IN_PLACE, &failed, 1, MPI_INT, MPI_MAX, app.comm());
+  if (failed) return ldimesh::miniapp::kExitUsage;
+  ShellBlock& block = *made;
+  block.sample(u, 0.0);
+  char line[320];
+  std::snprintf(line, sizeof line,
+                "ldimesh-dg: shell 0.5 <= r <= 1, 6 x %d^2 x %d = %zu curved elements of order "
+                "%d, geometry order %d (GLL, VTK node order), field %s, on %d ranks, %llu steps, "
+                "dt=%g",
+                shell.n, shell.layers, shell.element_count(), order, geometry_order,
+                u.radius ? "radius" : "blobs", app.size(),
+                static_cast<unsigned long long>(args.steps), dt);
+  app.print(line);
+
+  std::unique_ptr<Adaptor> adaptor;
+  if (!app.create_adaptor(args, /*default_isovalue=*/u.radius ? 0.5625 : 0.5, adaptor))
+    return ldimesh::miniapp::kExitOptions;
+  app.check(adaptor->set_domain({{-1.0, -1.0, -1.0}, {1.0, 1.0, 1.0}}), "set_domain");
+  app.check(adaptor->add_hex_block(block.hex_block()), "add_hex_block");
+  app.run(*adaptor, args, [&](std::uint64_t step) {
+    const double t = double(step) * dt;
+    block.sample(u, t);
+    return t;
+  });
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -131,7 +276,32 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   cli.add_option("--dt", dt, "time per step")->capture_default_str();
   cli.add_option("--sigma", blobs.sigma, "width of the blobs")->capture_default_str();
+  std::string mesh = "box", field = "blobs";
+  int layers = 2, geometry_order = 2;
+  cli.add_option("--mesh", mesh,
+                 "box: E³ straight elements tiling [0, 1]³ split into blocks; shell: the curved, "
+                 "unstructured cubed-sphere shell 0.5 ≤ r ≤ 1 (6 · E² · layers elements, VTK node "
+                 "order, dealt to the ranks in runs)")
+      ->check(CLI::IsMember({"box", "shell"}))
+      ->capture_default_str();
+  cli.add_option("--layers", layers, "shell: elements through the thickness")
+      ->check(CLI::Range(1, 64))
+      ->capture_default_str();
+  cli.add_option("--geometry-order", geometry_order, "shell: order q of the elements' geometry")
+      ->check(CLI::Range(1, ldimesh::kMaxHexOrder))
+      ->capture_default_str();
+  cli.add_option("--field", field,
+                 "shell: blobs (two orbiting Gaussian blobs) or radius (u = |x|², steady)")
+      ->check(CLI::IsMember({"blobs", "radius"}))
+      ->capture_default_str();
   if (const auto code = app.parse(cli, argc, argv)) return *code;
+  if (mesh == "shell") {
+    ShellField u;
+    u.sigma = blobs.sigma;
+    u.radius = field == "radius";
+    return run_shell(app, args, ldimesh::CubedShell{elements, layers, 0.5, 1.0}, order,
+                     geometry_order, u, dt);
+  }
 
   const ldimesh::Box domain{{0.0, 0.0, 0.0}, {1.0, 1.0, 1.0}};
   const std::array<int, 3> blocks = ldimesh::block_grid(domain, app.size());

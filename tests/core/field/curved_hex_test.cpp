@@ -12,6 +12,7 @@
 #include <gtest/gtest.h>
 
 #include "ldimesh/core/base/view.hpp"
+#include "ldimesh/core/field/cubed_shell.hpp"
 #include "ldimesh/core/field/hex_source.hpp"
 #include "ldimesh/core/raycast/raycaster.hpp"
 
@@ -95,18 +96,8 @@ CurvedMesh shell_mesh(int n, int layers, int p, int q, NodeSet nodes, double r0,
                       Field field) {
   return mesh_of(
       std::size_t(6) * n * n * layers, p, q, nodes,
-      [&](std::size_t e, glm::dvec3 xi) {
-        const std::size_t patch = e / (std::size_t(n) * n * layers);
-        const std::size_t rest = e % (std::size_t(n) * n * layers);
-        const double u = -1.0 + 2.0 * (double(rest % n) + xi.x) / n;
-        const double v = -1.0 + 2.0 * (double(rest / n % n) + xi.y) / n;
-        const double w = (double(rest / n / n) + xi.z) / layers;
-        const int a = int(patch / 2);
-        glm::dvec3 c;
-        c[a] = patch % 2 ? -1.0 : 1.0;
-        c[(a + 1) % 3] = u;
-        c[(a + 2) % 3] = v;
-        return (r0 + (r1 - r0) * w) * glm::normalize(c);
+      [shell = CubedShell{n, layers, r0, r1}](std::size_t e, glm::dvec3 xi) {
+        return shell.point(e, xi);
       },
       field);
 }

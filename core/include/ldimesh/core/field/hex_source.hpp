@@ -9,8 +9,11 @@
 // Reimers 2007), then converged with Newton steps safeguarded by bisection. No fixed step: a root
 // is never skipped, however close to its neighbours.
 //
-// Geometry is affine per element (parallelepipeds, sheared or rotated); the constructor refuses
-// other elements (std::invalid_argument naming the element).
+// Geometry: 8 corners per element (the trilinear map; parallelepipeds keep the affine fast path)
+// or nodes of its own order q (HexBlock::geometry_order, curved elements: their intersection
+// subdivides the reference cube and converges by Newton on (ξ, t), docs/method.md); nodes in
+// lexicographic or VTK Lagrange order. The constructor refuses an inverted or degenerate element
+// (std::invalid_argument naming it).
 #pragma once
 
 #include <cstddef>
