@@ -189,13 +189,15 @@ TEST(Adaptor, AStepWithoutSurfaceIsPublishedEmpty) {
   }
 }
 
-// A curved element block (geometry of order 2, each rank its share of the elements): the field
-// x on it (p = q: exact) has the plane x = c as its isosurface, and the published mesh lies on
-// it — through both the synchronous and the background (snapshot) path.
+// Curved element blocks (geometry of order 2, each rank its share of the elements): the field
+// x on them (p = q: exact) has the plane x = c as its isosurface, and the published mesh lies on
+// it — through both the synchronous and the background (snapshot) path. A second block reads
+// the same geometry array with another field (y; two fields of one solver on one mesh): its
+// plane y = c is published beside the first, and the shared array is left as it was.
 TEST(Adaptor, CurvedElementBlocksArePublished) {
   const int q = 2, n = 2;
   const std::vector<double> x = node_positions(q, NodeSet::gauss_lobatto_legendre);
-  std::vector<double> geometry, values;
+  std::vector<double> geometry, values, values_y;
   std::size_t count = 0;
   for (int e = 0; e < n * n * n; ++e) {
     if (e % ranks() != rank_of()) continue;
@@ -209,8 +211,10 @@ TEST(Adaptor, CurvedElementBlocksArePublished) {
           p.x += 0.05 * std::sin(3.14159 * p.y) * std::sin(3.14159 * p.z) * std::sin(3.14159 * p.x);
           geometry.insert(geometry.end(), {p.x, p.y, p.z});
           values.push_back(p.x);
+          values_y.push_back(p.y);
         }
   }
+  const std::vector<double> geometry_before = geometry;
   for (const bool background : {false, true}) {
     const std::string dir = temp_dir(background ? "curved_background" : "curved");
     auto a = [&] {
@@ -233,18 +237,34 @@ TEST(Adaptor, CurvedElementBlocksArePublished) {
     block.geometry_order = q;
     block.geometry = geometry.data();
     block.values = values.data();
+    HexBlock block_y = block;
+    block_y.values = values_y.data();
     if (count > 0) {
       EXPECT_TRUE(a->add_hex_block(block));
+      EXPECT_TRUE(a->add_hex_block(block_y));
     }
     EXPECT_TRUE(a->execute(0, 0.0));
     EXPECT_TRUE(a->finalize());
+    EXPECT_EQ(geometry, geometry_before);
     if (rank_of() != 0) continue;
     const Mesh mesh = testing::published_mesh(dir, 0);
-    EXPECT_GT(mesh.vertex_count(), 500u) << (background ? "background" : "synchronous");
+    const char* path = background ? "background" : "synchronous";
+    EXPECT_GT(mesh.vertex_count(), 1000u) << path;
+    // Every vertex on one of the planes, and each plane away from the other holds vertices.
+    // Within the GLB's position step, a tenth of a pixel (the mesh now spans the box along x
+    // and y, so its quantization shows).
+    const double tolerance = 0.1 / 48;
     double far = 0.0;
-    for (const glm::vec3& v : mesh.positions)
-      far = std::max(far, std::abs(double(v.x) - 0.3));
-    EXPECT_LT(far, 1e-4) << (background ? "background" : "synchronous");
+    std::size_t on_x = 0, on_y = 0;
+    for (const glm::vec3& v : mesh.positions) {
+      const double dx = std::abs(double(v.x) - 0.3), dy = std::abs(double(v.y) - 0.3);
+      far = std::max(far, std::min(dx, dy));
+      on_x += dx < tolerance && dy > 0.05;
+      on_y += dy < tolerance && dx > 0.05;
+    }
+    EXPECT_LT(far, tolerance) << path;
+    EXPECT_GT(on_x, 300u) << path;
+    EXPECT_GT(on_y, 300u) << path;
   }
 }
 
