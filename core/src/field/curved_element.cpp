@@ -5,8 +5,11 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <limits>
+#include <span>
 #include <type_traits>
+#include <utility>
 
 #include "ldimesh/core/field/blocks.hpp"
 #include "ldimesh/core/field/field_source.hpp"
@@ -158,23 +161,18 @@ struct Box {
   glm::dvec3 lo, hi;
 };
 
-// Splits box b, just popped from the top of `stack` (its coefficients in the pool at the
-// stack's size), in half along `axis`: the right half takes its slot (it is looked at after
-// the left one's whole subtree), the left one the next; both pushed, the left on top.
-void split_box(const Element& e, int axis, const Box& b, std::vector<double>& pool,
-               std::vector<Box>& stack) {
+// Splits the coefficients of the box in pool slot `slot` (just popped from the top of the
+// search's stack) in half along `axis`: the right half keeps the slot (it is looked at after the
+// left one's whole subtree), the left one takes the next; the caller pushes both, the left on
+// top.
+void split_coefficients(const Element& e, int axis, std::size_t slot, std::vector<double>& pool) {
   const int qm = e.q + 1, pm = e.p + 1, gq = qm * qm * qm;
-  const std::size_t size = std::size_t(3 * gq + pm * pm * pm), slot = stack.size();
+  const std::size_t size = std::size_t(3 * gq + pm * pm * pm);
   const std::size_t left = (slot + 1) * size;
   if (pool.size() < left + size) pool.resize(left + size);
   double* own = &pool[slot * size];
   split<3>(e.q, axis, own, &pool[left], own);
   split<1>(e.p, axis, own + 3 * gq, &pool[left + 3 * gq], own + 3 * gq);
-  Box lb = b, rb = b;
-  const double mid = 0.5 * (b.lo[axis] + b.hi[axis]);
-  lb.hi[axis] = mid, rb.lo[axis] = mid;
-  stack.push_back(rb);
-  stack.push_back(lb);
 }
 
 // The ray's frame: d and two unit normals to it.
@@ -249,39 +247,71 @@ bool invert(const Element& e, glm::dvec3 world, glm::dvec3& xi) {
 
 namespace {
 
-// The search from one box [lo, hi] of the reference cube, given the geometry's ((x, y, z)
-// triples) and the field's coefficients on it (the whole element, or a piece), and the margin
-// of the field's sign tests.
+// The search from one box [lo, hi] of the reference cube for many rays of one direction d,
+// given the geometry's ((x, y, z) triples) and the field's coefficients on the box (the whole
+// element, or a piece), and the margin of the field's sign tests. Hits go to `out` with their
+// ray's index, per ray in increasing t, a solution found from two boxes (on their shared face)
+// once.
+//
+// The rays share the search's boxes: the subdivision does not depend on the ray (the split axis
+// comes from the Jacobian's ranges over the box, and the planes' derivatives do not depend on
+// where the ray passes), so each box's coefficients, ranges, Jacobian and centre value are
+// found once for all the rays still in it, and each ray only takes its own tests — its planes
+// and depth range against the box's ranges, the Krawczyk test with its own H(m), Newton. Every
+// ray visits the boxes its own search would.
 void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double* geometry,
-            const double* field, double f_margin, glm::dvec3 o, glm::dvec3 d, double t0, double t1,
-            std::vector<RayHit>& hits) {
+            const double* field, double f_margin, glm::dvec3 d, std::span<const RayRef> rays,
+            std::vector<AxisHit>& out) {
   const int qm = e.q + 1, pm = e.p + 1;
   const int gq = qm * qm * qm, fp = pm * pm * pm;
   const std::size_t box_size = std::size_t(3 * gq + fp);
   glm::dvec3 n1, n2;
   ray_frame(d, n1, n2);
+  const double dd = glm::dot(d, d);  // t = d·(x − o) / |d|², for any length of d
 
+  // A box of the search and the rays still in it (lists[begin, end)).
+  struct Entry {
+    Box box;
+    std::size_t begin, end;
+  };
+  // What each ray carries: its components (n₁, n₂, d)·o (the box's coefficients are the
+  // geometry's components, the ray's subtracted in the tests), its margins, its box count.
+  struct State {
+    glm::dvec3 offset;
+    double g_margin = 0.0, g_scale = 0.0;
+    std::size_t boxes = 0;
+  };
   thread_local std::vector<double> pool;
-  thread_local std::vector<Box> stack;
+  thread_local std::vector<Entry> stack;
+  thread_local std::vector<std::uint32_t> lists;
+  thread_local std::vector<State> state;
+  thread_local std::vector<std::pair<std::uint32_t, RayHit>> found;
   pool.resize(box_size);
   stack.clear();
-  // The root box's coefficients (the geometry as (x, y, z) triples).
-  double g_scale = 0.0;
-  const double dd = glm::dot(d, d);  // t = d·(x − o) / |d|², for any length of d
+  lists.clear();
+  found.clear();
+  state.assign(rays.size(), State{});
   for (int m = 0; m < gq; ++m) {
-    const glm::dvec3 r = glm::dvec3(geometry[3 * m], geometry[3 * m + 1], geometry[3 * m + 2]) - o;
-    pool[3 * m] = glm::dot(n1, r), pool[3 * m + 1] = glm::dot(n2, r),
-             pool[3 * m + 2] = glm::dot(d, r) / dd;
-    g_scale = std::max(g_scale, glm::length(r));
+    const glm::dvec3 x(geometry[3 * m], geometry[3 * m + 1], geometry[3 * m + 2]);
+    pool[3 * m] = glm::dot(n1, x), pool[3 * m + 1] = glm::dot(n2, x),
+             pool[3 * m + 2] = glm::dot(d, x) / dd;
   }
   std::copy(field, field + fp, pool.begin() + 3 * gq);
-  const double g_margin = kSignMargin * g_scale;
-  stack.push_back({lo_box, hi_box});
-  const std::size_t first_hit = hits.size();
-  std::size_t boxes = 0;
+  for (std::size_t r = 0; r < rays.size(); ++r) {
+    const glm::dvec3 o = rays[r].org;
+    State& st = state[r];
+    st.offset = glm::dvec3(glm::dot(n1, o), glm::dot(n2, o), glm::dot(d, o) / dd);
+    for (int m = 0; m < gq; ++m)
+      st.g_scale = std::max(
+          st.g_scale,
+          glm::length(glm::dvec3(geometry[3 * m], geometry[3 * m + 1], geometry[3 * m + 2]) - o));
+    st.g_margin = kSignMargin * st.g_scale;
+    lists.push_back(std::uint32_t(r));
+  }
+  stack.push_back({{lo_box, hi_box}, 0, rays.size()});
 
-  // H, and its Jacobian in global ξ, at a reference point: Newton's iteration.
-  const auto system = [&](glm::dvec3 xi, glm::dvec3& h, glm::dmat3& jac, Sample& s) {
+  // H, and its Jacobian in global ξ, at a reference point: Newton's iteration for ray r.
+  const auto system = [&](glm::dvec3 o, glm::dvec3 xi, glm::dvec3& h, glm::dmat3& jac, Sample& s) {
     s = evaluate(e, xi);
     const glm::dvec3 r = s.x - o;
     h = glm::dvec3(glm::dot(n1, r), glm::dot(n2, r), s.f);
@@ -290,26 +320,26 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
     for (int c = 0; c < 3; ++c)
       jac[c] = glm::dvec3(row1[c], row2[c], s.gradient[c]);
   };
-  const auto record = [&](const Sample& s) {
-    const double t = glm::dot(d, s.x - o) / dd;
-    if (!(t >= t0 && t <= t1)) return;
+  const auto record = [&](std::uint32_t r, const Sample& s) {
+    const double t = glm::dot(d, s.x - rays[r].org) / dd;
+    if (!(t >= rays[r].t0 && t <= rays[r].t1)) return;
     // ∇ₓf = J⁻ᵀ ∇ξf.
     const glm::dvec3 g = glm::transpose(glm::inverse(s.jacobian)) * s.gradient;
-    hits.push_back({t, unit_normal(g, d), 0.0f});
+    found.push_back({r, {t, unit_normal(g, d), 0.0f}});
   };
   // Newton from the box centre; true with the converged point inside the box (with margin).
-  const auto newton = [&](const Box& b, glm::dvec3& xi, Sample& s) {
+  const auto newton = [&](glm::dvec3 o, const Box& b, glm::dvec3& xi, Sample& s) {
     xi = 0.5 * (b.lo + b.hi);
     glm::dvec3 h;
     glm::dmat3 jac;
     for (int iter = 0; iter < 30; ++iter) {
-      system(xi, h, jac, s);
+      system(o, xi, h, jac, s);
       if (!(std::abs(glm::determinant(jac)) > 0.0)) return false;
       const glm::dvec3 step = glm::inverse(jac) * h;
       xi -= step;
       if (!(std::max({std::abs(step.x), std::abs(step.y), std::abs(step.z)}) > 1e-15)) break;
     }
-    system(xi, h, jac, s);
+    system(o, xi, h, jac, s);
     const glm::dvec3 pad = kBoxMargin * (b.hi - b.lo) + 1e-12;
     return glm::all(glm::greaterThanEqual(xi, b.lo - pad)) &&
            glm::all(glm::lessThanEqual(xi, b.hi + pad));
@@ -317,23 +347,33 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
 
   while (!stack.empty()) {
     const std::size_t slot = stack.size() - 1;
-    const Box b = stack.back();
+    const Entry entry = stack.back();
+    const Box b = entry.box;
     stack.pop_back();  // pushed back below when it is split
-    // Out of budget, the boxes still pending are not split again (each gets Newton's point
-    // or its centre), so that no solution that was still pending is lost.
-    const bool out_of_budget = ++boxes > std::size_t(kMaxBoxes);
     const double* c = &pool[slot * box_size];
     const double* f = c + 3 * gq;
-    // The convex hull tests: the two planes, the depth range, the field.
+    for (std::size_t m = entry.begin; m < entry.end; ++m)
+      ++state[lists[m]].boxes;
+    // The convex hull tests: the field (the same for every ray), then each ray's two planes and
+    // depth range.
     double lo, hi;
-    range<3>(c, 3 * gq, 0, lo, hi);
-    if (lo > g_margin || hi < -g_margin) continue;
-    range<3>(c, 3 * gq, 1, lo, hi);
-    if (lo > g_margin || hi < -g_margin) continue;
-    range<3>(c, 3 * gq, 2, lo, hi);
-    if (hi < t0 - g_margin || lo > t1 + g_margin) continue;
     range<1>(f, fp, 0, lo, hi);
     if (lo > f_margin || hi < -f_margin) continue;
+    double plo[3], phi[3];
+    for (int k = 0; k < 3; ++k)
+      range<3>(c, 3 * gq, k, plo[k], phi[k]);
+    const std::size_t in_box = lists.size();
+    for (std::size_t m = entry.begin; m < entry.end; ++m) {
+      const std::uint32_t r = lists[m];
+      const State& st = state[r];
+      const bool misses =
+          plo[0] - st.offset[0] > st.g_margin || phi[0] - st.offset[0] < -st.g_margin ||
+          plo[1] - st.offset[1] > st.g_margin || phi[1] - st.offset[1] < -st.g_margin ||
+          phi[2] - st.offset[2] < rays[r].t0 - st.g_margin ||
+          plo[2] - st.offset[2] > rays[r].t1 + st.g_margin;
+      if (!misses) lists.push_back(r);
+    }
+    if (lists.size() == in_box) continue;
 
     // The Jacobian of H over the box in its own coordinates s ∈ [0, 1]³, as intervals
     // [row][col]: the derivatives' Bernstein coefficients.
@@ -348,6 +388,7 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
     // The Krawczyk test (centre m = ½): with Y = J(m)⁻¹, K = m − Y H(m) + (I − Y J(box))
     // (box − m). K ⊂ box: exactly one solution in the box; K ∩ box = ∅: none. It can only
     // succeed where each row of J(box) is narrow beside its size, so it is tried only there.
+    // Only H(m) depends on the ray.
     bool narrow = true;
     for (int row = 0; row < 3 && narrow; ++row) {
       double spread = 0.0, size = 0.0;
@@ -356,26 +397,25 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
             size = std::max({size, std::abs(jbox[row][col].lo), std::abs(jbox[row][col].hi)});
       narrow = spread < size;
     }
-    bool unique = false, none = false;
+    bool krawczyk = false;
+    double centre_value[3], radius[3] = {0.0, 0.0, 0.0};
+    glm::dmat3 y(0.0);
     if (narrow) {
-      double hv[3];
       glm::dvec3 hg[3];
       double gv[3];
       glm::dvec3 gg[3];
       evaluate_tensor<3>(e.q, c, glm::dvec3(0.5), gv, gg);
-      hv[0] = gv[0], hv[1] = gv[1], hg[0] = gg[0], hg[1] = gg[1];
-      evaluate_tensor<1>(e.p, f, glm::dvec3(0.5), &hv[2], &hg[2]);
+      centre_value[0] = gv[0], centre_value[1] = gv[1], hg[0] = gg[0], hg[1] = gg[1];
+      evaluate_tensor<1>(e.p, f, glm::dvec3(0.5), &centre_value[2], &hg[2]);
       glm::dmat3 jm;  // rows: the components' gradients in s
       for (int col = 0; col < 3; ++col)
         jm[col] = glm::dvec3(hg[0][col], hg[1][col], hg[2][col]);
       const double det = glm::determinant(jm);
       const double norms = glm::length(hg[0]) * glm::length(hg[1]) * glm::length(hg[2]);
       if (std::abs(det) > 1e-12 * norms) {
-        const glm::dmat3 y = glm::inverse(jm);
-        const glm::dvec3 yh = y * glm::dvec3(hv[0], hv[1], hv[2]);
-        unique = true;
-        for (int i = 0; i < 3 && !none; ++i) {
-          double radius = 0.0;
+        krawczyk = true;
+        y = glm::inverse(jm);
+        for (int i = 0; i < 3; ++i)
           for (int j = 0; j < 3; ++j) {
             // (I − Y J)_ij as an interval.
             double mlo = i == j ? 1.0 : 0.0, mhi = mlo;
@@ -384,35 +424,52 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
               const double a = yik * jbox[k][j].lo, bb = yik * jbox[k][j].hi;
               mlo -= std::max(a, bb), mhi -= std::min(a, bb);
             }
-            radius += 0.5 * std::max(std::abs(mlo), std::abs(mhi));
+            radius[i] += 0.5 * std::max(std::abs(mlo), std::abs(mhi));
           }
-          const double centre = 0.5 - yh[i];
-          const double klo = centre - radius, khi = centre + radius;
+      }
+    }
+    const glm::dvec3 width = b.hi - b.lo;
+    const bool narrowest = std::max({width.x, width.y, width.z}) < kMinWidth;
+    const std::size_t split_begin = lists.size();
+    for (std::size_t m = in_box; m < split_begin; ++m) {
+      const std::uint32_t r = lists[m];
+      const glm::dvec3 o = rays[r].org;
+      bool unique = false, none = false;
+      if (krawczyk) {
+        const glm::dvec3 yh = y * glm::dvec3(centre_value[0] - state[r].offset[0],
+                                             centre_value[1] - state[r].offset[1], centre_value[2]);
+        unique = true;
+        for (int i = 0; i < 3 && !none; ++i) {
+          const double klo = 0.5 - yh[i] - radius[i], khi = 0.5 - yh[i] + radius[i];
           // None: K misses the box grown by the margin; one: K lies inside the box shrunk by
           // it (no outward rounding in K, so the margin stands in for it).
           if (khi < -kBoxMargin || klo > 1.0 + kBoxMargin) none = true;
           if (!(klo > kBoxMargin && khi < 1.0 - kBoxMargin)) unique = false;
         }
       }
-    }
-    if (none) continue;
-    const glm::dvec3 width = b.hi - b.lo;
-    const bool smallest = std::max({width.x, width.y, width.z}) < kMinWidth || out_of_budget;
-    if (unique || smallest) {
-      glm::dvec3 xi;
-      Sample s;
-      if (newton(b, xi, s)) {
-        record(s);
-        continue;
+      if (none) continue;
+      // Out of budget, the boxes still pending are not split again (each gets Newton's point
+      // or its centre), so that no solution that was still pending is lost.
+      const bool smallest = narrowest || state[r].boxes > std::size_t(kMaxBoxes);
+      if (unique || smallest) {
+        glm::dvec3 xi;
+        Sample s;
+        if (newton(o, b, xi, s)) {
+          record(r, s);
+          continue;
+        }
+        if (smallest) {
+          xi = 0.5 * (b.lo + b.hi);
+          s = evaluate(e, xi);
+          record(r, s);
+          continue;
+        }
+        // Proved but Newton left the box (rounding at its edge): split it like any other.
       }
-      if (smallest) {
-        xi = 0.5 * (b.lo + b.hi);
-        s = evaluate(e, xi);
-        record(s);
-        continue;
-      }
-      // Proved but Newton left the box (rounding at its edge): split it like any other.
+      lists.push_back(r);
     }
+    if (lists.size() == split_begin) continue;
+
     // Split along the axis the components vary most along (each row of J(box) weighed by its
     // own size, so that the planes and the field count alike): the left half is looked at next.
     double score[3] = {0.0, 0.0, 0.0};
@@ -428,25 +485,45 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
     // Never one axis alone down to nothing (every box must shrink to kMinWidth).
     const int widest = width.x >= width.y && width.x >= width.z ? 0 : width.y >= width.z ? 1 : 2;
     if (width[axis] < 1e-3 * width[widest]) axis = widest;
-    split_box(e, axis, b, pool, stack);
+    split_coefficients(e, axis, slot, pool);
+    Box lb = b, rb = b;
+    const double mid = 0.5 * (b.lo[axis] + b.hi[axis]);
+    lb.hi[axis] = mid, rb.lo[axis] = mid;
+    stack.push_back({rb, split_begin, lists.size()});
+    stack.push_back({lb, split_begin, lists.size()});
   }
 
-  // In increasing t; a solution found from two boxes (on their shared face) once.
-  std::sort(hits.begin() + first_hit, hits.end(),
-            [](const RayHit& a, const RayHit& b) { return a.t < b.t; });
-  const double tol = 1e-12 * g_scale;
-  std::size_t out = first_hit;
-  for (std::size_t i = first_hit; i < hits.size(); ++i)
-    if (out == first_hit || hits[i].t - hits[out - 1].t > tol) hits[out++] = hits[i];
-  hits.resize(out);
+  // Per ray in increasing t; a solution found from two boxes (on their shared face) once.
+  std::sort(found.begin(), found.end(), [](const auto& a, const auto& b) {
+    return a.first != b.first ? a.first < b.first : a.second.t < b.second.t;
+  });
+  for (std::size_t i = 0; i < found.size(); ++i) {
+    const std::uint32_t r = found[i].first;
+    if (i > 0 && found[i - 1].first == r &&
+        found[i].second.t - found[i - 1].second.t <= 1e-12 * state[r].g_scale)
+      continue;
+    out.push_back({rays[r].index, found[i].second});
+  }
+}
+
+// One ray's search, its hits appended to `hits`.
+void search_one(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double* geometry,
+                const double* field, double f_margin, glm::dvec3 o, glm::dvec3 d, double t0,
+                double t1, std::vector<RayHit>& hits) {
+  thread_local std::vector<AxisHit> out;
+  out.clear();
+  const RayRef ray{0, o, t0, t1};
+  search(e, lo_box, hi_box, geometry, field, f_margin, d, std::span(&ray, 1), out);
+  for (const AxisHit& h : out)
+    hits.push_back(h.hit);
 }
 
 }  // namespace
 
 void intersect(const Element& e, glm::dvec3 o, glm::dvec3 d, double t0, double t1,
                std::vector<RayHit>& hits) {
-  search(e, glm::dvec3(0.0), glm::dvec3(1.0), &e.geometry[0].x, e.field, field_margin(e), o, d, t0,
-         t1, hits);
+  search_one(e, glm::dvec3(0.0), glm::dvec3(1.0), &e.geometry[0].x, e.field, field_margin(e), o, d,
+             t0, t1, hits);
 }
 
 Pieces::Pieces(const Element& e, double width) {
@@ -483,14 +560,25 @@ Pieces::Pieces(const Element& e, double width) {
       coefficients_.insert(coefficients_.end(), c, c + size);
       continue;
     }
-    split_box(e, axis, b, pool, stack);
+    split_coefficients(e, axis, slot, pool);
+    Box lb = b, rb = b;
+    const double mid = 0.5 * (b.lo[axis] + b.hi[axis]);
+    lb.hi[axis] = mid, rb.lo[axis] = mid;
+    stack.push_back(rb);
+    stack.push_back(lb);
   }
 }
 
 void Pieces::intersect(const Element& e, std::size_t k, glm::dvec3 o, glm::dvec3 d, double t0,
                        double t1, std::vector<RayHit>& hits) const {
   const double* c = &coefficients_[k * std::size_t(3 * gq_ + fp_)];
-  search(e, pieces_[k].lo, pieces_[k].hi, c, c + 3 * gq_, field_margin_, o, d, t0, t1, hits);
+  search_one(e, pieces_[k].lo, pieces_[k].hi, c, c + 3 * gq_, field_margin_, o, d, t0, t1, hits);
+}
+
+void Pieces::intersect(const Element& e, std::size_t k, std::span<const RayRef> rays, glm::dvec3 d,
+                       std::vector<AxisHit>& hits) const {
+  const double* c = &coefficients_[k * std::size_t(3 * gq_ + fp_)];
+  search(e, pieces_[k].lo, pieces_[k].hi, c, c + 3 * gq_, field_margin_, d, rays, hits);
 }
 
 }  // namespace ldimesh::curved

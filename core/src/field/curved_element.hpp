@@ -13,6 +13,8 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
+#include <span>
 #include <vector>
 
 #include <glm/glm.hpp>
@@ -28,6 +30,14 @@ struct Element {
   int q = 1;                             // the geometry's degree per axis
   const double* field = nullptr;         // (p + 1)³, isovalue subtracted
   const glm::dvec3* geometry = nullptr;  // (q + 1)³
+};
+
+// A ray o + t·d of a batch (their common d given beside), t ∈ [t0, t1] (closed), and the index
+// its hits are reported with.
+struct RayRef {
+  std::uint32_t index = 0;
+  glm::dvec3 org{0.0};
+  double t0 = 0.0, t1 = 0.0;
 };
 
 // Appends every hit of the ray o + t·d (d of any length), t ∈ [t0, t1] (closed), with element e to
@@ -51,6 +61,12 @@ class Pieces {
   // intersect() for the part of the element in piece k.
   void intersect(const Element& e, std::size_t k, glm::dvec3 o, glm::dvec3 d, double t0, double t1,
                  std::vector<RayHit>& hits) const;
+  // The same for many rays of one direction at once (the pixel rays through the piece): the
+  // search's boxes, their coefficients and their Jacobians are shared by the rays, each ray's
+  // hits the same as its own search's (up to rounding in the planes' offsets), reported with
+  // its index, per ray in increasing t.
+  void intersect(const Element& e, std::size_t k, std::span<const RayRef> rays, glm::dvec3 d,
+                 std::vector<AxisHit>& hits) const;
 
  private:
   int gq_ = 0, fp_ = 0;

@@ -1208,7 +1208,7 @@ class HexAxisBinding final : public AxisBinding {
     std::vector<Line> outer, inner;
     std::vector<double> inner_values, h;  // n rows of one value per inner pixel
     std::vector<int> candidates;          // the inner pixels that may have a root
-    std::vector<RayHit> hits;             // one pixel's hits with a curved element
+    std::vector<curved::RayRef> batch;    // the pixel rays through a curved element's piece
   };
 
   // The pixels of the lattice query `rays` whose centres element e's box covers,
@@ -1249,23 +1249,22 @@ class HexAxisBinding final : public AxisBinding {
       return std::size_t(j - rays.row_begin) * std::size_t(view.width) + std::size_t(i);
     };
     if (el.curved != ActiveElement::kAffine) {
-      // Each piece of the element that may hold the isosurface, over the pixels of its box.
-      std::vector<RayHit>& hits = scratch.hits;
+      // Each piece of the element that may hold the isosurface, with the pixel rays of its box
+      // at once (they share the search's boxes).
+      std::vector<curved::RayRef>& batch = scratch.batch;
       const curved::Element ce = active_.curved_element(e);
       const curved::Pieces& pieces = *pieces_[e];
       for (std::size_t piece = 0; piece < pieces.pieces().size(); ++piece) {
         const curved::Piece& box = pieces.pieces()[piece];
         if (!pixels_of(box.world_lo, box.world_hi, i0, i1, j0, j1)) continue;
+        batch.clear();
         for (int j = j0; j <= j1; ++j)
           for (int i = i0; i <= i1; ++i) {
             const std::size_t k = index(i, j);
             const AxisRay& ray = rays.rays[k];
-            if (!(ray.t0 <= ray.t1)) continue;
-            hits.clear();
-            pieces.intersect(ce, piece, ray.org, rays.dir, ray.t0, ray.t1, hits);
-            for (const RayHit& h : hits)
-              out.push_back({std::uint32_t(k), h});
+            if (ray.t0 <= ray.t1) batch.push_back({std::uint32_t(k), ray.org, ray.t0, ray.t1});
           }
+        if (!batch.empty()) pieces.intersect(ce, piece, batch, rays.dir, out);
       }
       return;
     }
@@ -1464,7 +1463,8 @@ class HexAxisBinding final : public AxisBinding {
   mutable std::array<std::once_flag, 3> bins_once_;
   // A curved element's pieces (the pixel rays share the search's first levels): boxes of an
   // eighth of the reference cube's width per axis (a quarter for p or q above 4, so that an
-  // element's pieces stay within a few MB), only those where the field allows the isovalue.
+  // element's pieces stay within a few MB), only those where the field allows the isovalue; the
+  // pixel rays through a piece are searched together (they share its boxes).
   mutable std::vector<std::optional<curved::Pieces>> pieces_;
   mutable std::once_flag pieces_once_;
 };
