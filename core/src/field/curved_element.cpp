@@ -154,25 +154,25 @@ struct Interval {
   double lo = 0.0, hi = 0.0;
 };
 
-// One box of the search: its extent in ξ. Its coefficients lie in the pool at its position in
-// the stack: the geometry's three ray components (n₁, n₂, d)·(x − o) interleaved (degree q),
-// then the field (degree p).
+// One box of a subdivision: its extent in ξ. Its coefficients lie in a pool at its position in
+// the stack: geometry values interleaved (degree q), then the field (degree p).
 struct Box {
   glm::dvec3 lo, hi;
 };
 
-// Splits the coefficients of the box in pool slot `slot` (just popped from the top of the
-// search's stack) in half along `axis`: the right half keeps the slot (it is looked at after the
-// left one's whole subtree), the left one takes the next; the caller pushes both, the left on
-// top.
+// Splits the coefficients of the box in pool slot `slot` (just popped from the top of its
+// stack: `components` geometry values per coefficient interleaved, then the field) in half along
+// `axis`: the right half keeps the slot (it is looked at after the left one's whole subtree), the
+// left one takes the next; the caller pushes both, the left on top.
+template <int components>
 void split_coefficients(const Element& e, int axis, std::size_t slot, std::vector<double>& pool) {
   const int qm = e.q + 1, pm = e.p + 1, gq = qm * qm * qm;
-  const std::size_t size = std::size_t(3 * gq + pm * pm * pm);
+  const std::size_t size = std::size_t(components * gq + pm * pm * pm);
   const std::size_t left = (slot + 1) * size;
   if (pool.size() < left + size) pool.resize(left + size);
   double* own = &pool[slot * size];
-  split<3>(e.q, axis, own, &pool[left], own);
-  split<1>(e.p, axis, own + 3 * gq, &pool[left + 3 * gq], own + 3 * gq);
+  split<components>(e.q, axis, own, &pool[left], own);
+  split<1>(e.p, axis, own + components * gq, &pool[left + components * gq], own + components * gq);
 }
 
 // The ray's frame: d and two unit normals to it.
@@ -264,7 +264,10 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
             std::vector<AxisHit>& out) {
   const int qm = e.q + 1, pm = e.p + 1;
   const int gq = qm * qm * qm, fp = pm * pm * pm;
-  const std::size_t box_size = std::size_t(3 * gq + fp);
+  // A box's coefficients: the geometry's two plane components n₁·x, n₂·x interleaved, then the
+  // field. The depth d·x is tested on the root box only (pruning; a solution outside [t0, t1]
+  // is dropped where it is recorded), which saves a third of the geometry's splits.
+  const std::size_t box_size = std::size_t(2 * gq + fp);
   glm::dvec3 n1, n2;
   ray_frame(d, n1, n2);
   const double dd = glm::dot(d, d);  // t = d·(x − o) / |d|², for any length of d
@@ -291,12 +294,14 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
   lists.clear();
   found.clear();
   state.assign(rays.size(), State{});
+  double depth_lo = std::numeric_limits<double>::infinity(), depth_hi = -depth_lo;
   for (int m = 0; m < gq; ++m) {
     const glm::dvec3 x(geometry[3 * m], geometry[3 * m + 1], geometry[3 * m + 2]);
-    pool[3 * m] = glm::dot(n1, x), pool[3 * m + 1] = glm::dot(n2, x),
-             pool[3 * m + 2] = glm::dot(d, x) / dd;
+    pool[2 * m] = glm::dot(n1, x), pool[2 * m + 1] = glm::dot(n2, x);
+    const double depth = glm::dot(d, x) / dd;
+    depth_lo = std::min(depth_lo, depth), depth_hi = std::max(depth_hi, depth);
   }
-  std::copy(field, field + fp, pool.begin() + 3 * gq);
+  std::copy(field, field + fp, pool.begin() + 2 * gq);
   for (std::size_t r = 0; r < rays.size(); ++r) {
     const glm::dvec3 o = rays[r].org;
     State& st = state[r];
@@ -306,9 +311,13 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
           st.g_scale,
           glm::length(glm::dvec3(geometry[3 * m], geometry[3 * m + 1], geometry[3 * m + 2]) - o));
     st.g_margin = kSignMargin * st.g_scale;
+    // The depth range of the root box against the ray's [t0, t1].
+    if (depth_hi - st.offset[2] < rays[r].t0 - st.g_margin ||
+        depth_lo - st.offset[2] > rays[r].t1 + st.g_margin)
+      continue;
     lists.push_back(std::uint32_t(r));
   }
-  stack.push_back({{lo_box, hi_box}, 0, rays.size()});
+  if (!lists.empty()) stack.push_back({{lo_box, hi_box}, 0, lists.size()});
 
   // H, and its Jacobian in global ξ, at a reference point: Newton's iteration for ray r.
   const auto system = [&](glm::dvec3 o, glm::dvec3 xi, glm::dvec3& h, glm::dmat3& jac, Sample& s) {
@@ -351,26 +360,23 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
     const Box b = entry.box;
     stack.pop_back();  // pushed back below when it is split
     const double* c = &pool[slot * box_size];
-    const double* f = c + 3 * gq;
+    const double* f = c + 2 * gq;
     for (std::size_t m = entry.begin; m < entry.end; ++m)
       ++state[lists[m]].boxes;
-    // The convex hull tests: the field (the same for every ray), then each ray's two planes and
-    // depth range.
+    // The convex hull tests: the field (the same for every ray), then each ray's two planes.
     double lo, hi;
     range<1>(f, fp, 0, lo, hi);
     if (lo > f_margin || hi < -f_margin) continue;
-    double plo[3], phi[3];
-    for (int k = 0; k < 3; ++k)
-      range<3>(c, 3 * gq, k, plo[k], phi[k]);
+    double plo[2], phi[2];
+    for (int k = 0; k < 2; ++k)
+      range<2>(c, 2 * gq, k, plo[k], phi[k]);
     const std::size_t in_box = lists.size();
     for (std::size_t m = entry.begin; m < entry.end; ++m) {
       const std::uint32_t r = lists[m];
       const State& st = state[r];
       const bool misses =
           plo[0] - st.offset[0] > st.g_margin || phi[0] - st.offset[0] < -st.g_margin ||
-          plo[1] - st.offset[1] > st.g_margin || phi[1] - st.offset[1] < -st.g_margin ||
-          phi[2] - st.offset[2] < rays[r].t0 - st.g_margin ||
-          plo[2] - st.offset[2] > rays[r].t1 + st.g_margin;
+          plo[1] - st.offset[1] > st.g_margin || phi[1] - st.offset[1] < -st.g_margin;
       if (!misses) lists.push_back(r);
     }
     if (lists.size() == in_box) continue;
@@ -379,8 +385,8 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
     // [row][col]: the derivatives' Bernstein coefficients.
     Interval jbox[3][3];
     for (int col = 0; col < 3; ++col) {
-      double glo[3], ghi[3];
-      derivative_ranges<3>(e.q, col, c, glo, ghi);
+      double glo[2], ghi[2];
+      derivative_ranges<2>(e.q, col, c, glo, ghi);
       for (int row = 0; row < 2; ++row)
         jbox[row][col] = {glo[row], ghi[row]};
       derivative_ranges<1>(e.p, col, f, &jbox[2][col].lo, &jbox[2][col].hi);
@@ -402,9 +408,9 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
     glm::dmat3 y(0.0);
     if (narrow) {
       glm::dvec3 hg[3];
-      double gv[3];
-      glm::dvec3 gg[3];
-      evaluate_tensor<3>(e.q, c, glm::dvec3(0.5), gv, gg);
+      double gv[2];
+      glm::dvec3 gg[2];
+      evaluate_tensor<2>(e.q, c, glm::dvec3(0.5), gv, gg);
       centre_value[0] = gv[0], centre_value[1] = gv[1], hg[0] = gg[0], hg[1] = gg[1];
       evaluate_tensor<1>(e.p, f, glm::dvec3(0.5), &centre_value[2], &hg[2]);
       glm::dmat3 jm;  // rows: the components' gradients in s
@@ -485,7 +491,7 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
     // Never one axis alone down to nothing (every box must shrink to kMinWidth).
     const int widest = width.x >= width.y && width.x >= width.z ? 0 : width.y >= width.z ? 1 : 2;
     if (width[axis] < 1e-3 * width[widest]) axis = widest;
-    split_coefficients(e, axis, slot, pool);
+    split_coefficients<2>(e, axis, slot, pool);
     Box lb = b, rb = b;
     const double mid = 0.5 * (b.lo[axis] + b.hi[axis]);
     lb.hi[axis] = mid, rb.lo[axis] = mid;
@@ -560,7 +566,7 @@ Pieces::Pieces(const Element& e, double width) {
       coefficients_.insert(coefficients_.end(), c, c + size);
       continue;
     }
-    split_coefficients(e, axis, slot, pool);
+    split_coefficients<3>(e, axis, slot, pool);
     Box lb = b, rb = b;
     const double mid = 0.5 * (b.lo[axis] + b.hi[axis]);
     lb.hi[axis] = mid, rb.lo[axis] = mid;
