@@ -148,8 +148,8 @@ class ShellBlock {
   ShellBlock(const ldimesh::CubedShell& shell, int order, int geometry_order, int rank, int ranks)
       : order_(order), geometry_order_(geometry_order) {
     const std::size_t total = shell.element_count();
-    first_ = total * std::size_t(rank) / std::size_t(ranks);
-    count_ = total * std::size_t(rank + 1) / std::size_t(ranks) - first_;
+    const std::size_t first = total * std::size_t(rank) / std::size_t(ranks);
+    count_ = total * std::size_t(rank + 1) / std::size_t(ranks) - first;
     const int q = geometry_order;
     const std::size_t gn = std::size_t(q + 1) * (q + 1) * (q + 1);
     const std::vector<double> xq =
@@ -159,7 +159,7 @@ class ShellBlock {
       for (int k = 0; k <= q; ++k)
         for (int j = 0; j <= q; ++j)
           for (int i = 0; i <= q; ++i) {
-            const glm::dvec3 x = shell.point(first_ + e, {xq[i], xq[j], xq[k]});
+            const glm::dvec3 x = shell.point(first + e, {xq[i], xq[j], xq[k]});
             double* g = &geometry_[3 * (e * gn + ldimesh::vtk_lagrange_index(i, j, k, q))];
             g[0] = x.x, g[1] = x.y, g[2] = x.z;
           }
@@ -179,9 +179,6 @@ class ShellBlock {
             positions_[e * vn + ldimesh::vtk_lagrange_index(i, j, k, order)] =
                 shape.to_world(e, {xp[i], xp[j], xp[k]});
   }
-
-  std::size_t first() const { return first_; }
-  std::size_t count() const { return count_; }
 
   void sample(const ShellField& u, double t) {
     for (std::size_t m = 0; m < values_.size(); ++m)
@@ -203,7 +200,7 @@ class ShellBlock {
 
  private:
   int order_, geometry_order_;
-  std::size_t first_ = 0, count_ = 0;
+  std::size_t count_ = 0;
   std::vector<double> geometry_;  // (q + 1)³ nodes × (x, y, z) per element
   std::vector<double> values_;
   std::vector<glm::dvec3> positions_;  // of the field's nodes, in the values' order

@@ -175,6 +175,14 @@ void split_coefficients(const Element& e, int axis, std::size_t slot, std::vecto
   split<1>(e.p, axis, own + components * gq, &pool[left + components * gq], own + components * gq);
 }
 
+// The halves of box b along `axis`, left then right (their coefficients: split_coefficients).
+std::pair<Box, Box> halves(const Box& b, int axis) {
+  Box left = b, right = b;
+  const double mid = 0.5 * (b.lo[axis] + b.hi[axis]);
+  left.hi[axis] = mid, right.lo[axis] = mid;
+  return {left, right};
+}
+
 // The ray's frame: d and two unit normals to it.
 void ray_frame(glm::dvec3 d, glm::dvec3& n1, glm::dvec3& n2) {
   const glm::dvec3 a = std::abs(d.x) <= std::abs(d.y) && std::abs(d.x) <= std::abs(d.z)
@@ -257,8 +265,8 @@ namespace {
 // comes from the Jacobian's ranges over the box, and the planes' derivatives do not depend on
 // where the ray passes), so each box's coefficients, ranges, Jacobian and centre value are
 // found once for all the rays still in it, and each ray only takes its own tests — its planes
-// and depth range against the box's ranges, the Krawczyk test with its own H(m), Newton. Every
-// ray visits the boxes its own search would.
+// against the box's ranges, the Krawczyk test with its own H(m), Newton (its depth range is
+// tested on the root box). Every ray visits the boxes its own search would.
 void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double* geometry,
             const double* field, double f_margin, glm::dvec3 d, std::span<const RayRef> rays,
             std::vector<AxisHit>& out) {
@@ -492,9 +500,7 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
     const int widest = width.x >= width.y && width.x >= width.z ? 0 : width.y >= width.z ? 1 : 2;
     if (width[axis] < 1e-3 * width[widest]) axis = widest;
     split_coefficients<2>(e, axis, slot, pool);
-    Box lb = b, rb = b;
-    const double mid = 0.5 * (b.lo[axis] + b.hi[axis]);
-    lb.hi[axis] = mid, rb.lo[axis] = mid;
+    const auto [lb, rb] = halves(b, axis);
     stack.push_back({rb, split_begin, lists.size()});
     stack.push_back({lb, split_begin, lists.size()});
   }
@@ -512,24 +518,18 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
   }
 }
 
-// One ray's search, its hits appended to `hits`.
-void search_one(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double* geometry,
-                const double* field, double f_margin, glm::dvec3 o, glm::dvec3 d, double t0,
-                double t1, std::vector<RayHit>& hits) {
-  thread_local std::vector<AxisHit> out;
-  out.clear();
-  const RayRef ray{0, o, t0, t1};
-  search(e, lo_box, hi_box, geometry, field, f_margin, d, std::span(&ray, 1), out);
-  for (const AxisHit& h : out)
-    hits.push_back(h.hit);
-}
-
 }  // namespace
 
 void intersect(const Element& e, glm::dvec3 o, glm::dvec3 d, double t0, double t1,
                std::vector<RayHit>& hits) {
-  search_one(e, glm::dvec3(0.0), glm::dvec3(1.0), &e.geometry[0].x, e.field, field_margin(e), o, d,
-             t0, t1, hits);
+  // The search with one ray (the Embree path's callback, any direction).
+  thread_local std::vector<AxisHit> out;
+  out.clear();
+  const RayRef ray{0, o, t0, t1};
+  search(e, glm::dvec3(0.0), glm::dvec3(1.0), &e.geometry[0].x, e.field, field_margin(e), d,
+         std::span(&ray, 1), out);
+  for (const AxisHit& h : out)
+    hits.push_back(h.hit);
 }
 
 Pieces::Pieces(const Element& e, double width) {
@@ -567,18 +567,10 @@ Pieces::Pieces(const Element& e, double width) {
       continue;
     }
     split_coefficients<3>(e, axis, slot, pool);
-    Box lb = b, rb = b;
-    const double mid = 0.5 * (b.lo[axis] + b.hi[axis]);
-    lb.hi[axis] = mid, rb.lo[axis] = mid;
+    const auto [lb, rb] = halves(b, axis);
     stack.push_back(rb);
     stack.push_back(lb);
   }
-}
-
-void Pieces::intersect(const Element& e, std::size_t k, glm::dvec3 o, glm::dvec3 d, double t0,
-                       double t1, std::vector<RayHit>& hits) const {
-  const double* c = &coefficients_[k * std::size_t(3 * gq_ + fp_)];
-  search_one(e, pieces_[k].lo, pieces_[k].hi, c, c + 3 * gq_, field_margin_, o, d, t0, t1, hits);
 }
 
 void Pieces::intersect(const Element& e, std::size_t k, std::span<const RayRef> rays, glm::dvec3 d,

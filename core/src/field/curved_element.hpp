@@ -58,13 +58,10 @@ class Pieces {
  public:
   Pieces(const Element& e, double width);
   const std::vector<Piece>& pieces() const { return pieces_; }
-  // intersect() for the part of the element in piece k.
-  void intersect(const Element& e, std::size_t k, glm::dvec3 o, glm::dvec3 d, double t0, double t1,
-                 std::vector<RayHit>& hits) const;
-  // The same for many rays of one direction at once (the pixel rays through the piece): the
-  // search's boxes, their coefficients and their Jacobians are shared by the rays, each ray's
-  // hits the same as its own search's (up to rounding in the planes' offsets), reported with
-  // its index, per ray in increasing t.
+  // intersect() for the part of the element in piece k, for many rays of one direction at once
+  // (the pixel rays through the piece): the search's boxes, their coefficients and their
+  // Jacobians are shared by the rays, each ray's hits the same as its own search's (up to
+  // rounding in the planes' offsets), reported with its index, per ray in increasing t.
   void intersect(const Element& e, std::size_t k, std::span<const RayRef> rays, glm::dvec3 d,
                  std::vector<AxisHit>& hits) const;
 

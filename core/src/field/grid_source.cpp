@@ -717,27 +717,15 @@ class GridAxisBinding final : public AxisBinding {
     lo[va] = x.rows.lo;
     hi[va] = x.rows.hi;
     const Lattice lattice{ray, width, oa, dir, lo, hi};
-    const bool u_is_b = ua < va;
-    switch (a * 2 + int(u_is_b)) {
-      case 0:
-        solve_slab<0, false>(lattice, x, out);
-        break;
-      case 1:
-        solve_slab<0, true>(lattice, x, out);
-        break;
-      case 2:
-        solve_slab<1, false>(lattice, x, out);
-        break;
-      case 3:
-        solve_slab<1, true>(lattice, x, out);
-        break;
-      case 4:
-        solve_slab<2, false>(lattice, x, out);
-        break;
-      default:
-        solve_slab<2, true>(lattice, x, out);
-        break;
-    }
+    // The axes as template constants: the slab solver for (a, whether u is the lower transverse
+    // axis).
+    using Solver =
+        void (GridAxisBinding::*)(const Lattice&, LatticeScratch&, std::vector<AxisHit>&) const;
+    static constexpr Solver kSolvers[6] = {
+        &GridAxisBinding::solve_slab<0, false>, &GridAxisBinding::solve_slab<0, true>,
+        &GridAxisBinding::solve_slab<1, false>, &GridAxisBinding::solve_slab<1, true>,
+        &GridAxisBinding::solve_slab<2, false>, &GridAxisBinding::solve_slab<2, true>};
+    (this->*kSolvers[a * 2 + int(ua < va)])(lattice, x, out);
     return true;
   }
 
