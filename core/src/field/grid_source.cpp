@@ -86,21 +86,23 @@ struct Brick {
   bool nonfinite = false;
 };
 
-// ∇ of the trilinear interpolant at local point p, per unit length (size: the cell's edges).
-glm::dvec3 trilinear_gradient(const double corner[8], glm::dvec3 p, glm::dvec3 size) {
-  glm::dvec3 grad;
-  for (int axis = 0; axis < 3; ++axis) {
-    const int o1 = (axis + 1) % 3, o2 = (axis + 2) % 3;
-    double sum = 0.0;
-    for (int m = 0; m < 4; ++m) {
-      const int b1 = m & 1, b2 = m >> 1;
-      const int i0 = (b1 << o1) | (b2 << o2), i1 = i0 | (1 << axis);
-      const double w = (b1 ? p[o1] : 1.0 - p[o1]) * (b2 ? p[o2] : 1.0 - p[o2]);
-      sum += w * (corner[i1] - corner[i0]);
-    }
-    grad[axis] = sum / size[axis];
-  }
-  return grad;
+// ∇ of the trilinear interpolant at local point p, per unit length (inv_size: one over the
+// cell's edges; corner[n] at corner n = x + 2y + 4z): along each axis the bilinear blend, across
+// it, of the cell's four edge differences along it. Written out: the hits' gradients and
+// divisions were a large part of the axis casts (a loop over the axes compiled to index
+// arithmetic and branches; one division per cell instead of three per hit).
+inline glm::dvec3 trilinear_gradient(const double c[8], glm::dvec3 p, glm::dvec3 inv_size) {
+  const glm::dvec3 q = 1.0 - p;
+  // The blend of edge differences d00 (lower, lower) … d11 across an axis, u the first of the
+  // other two axes in x, y, z order after it (cyclic) and v the second.
+  const auto blend = [](double d00, double d10, double d01, double d11, double pu, double qu,
+                        double pv, double qv) {
+    return qv * (qu * d00 + pu * d10) + pv * (qu * d01 + pu * d11);
+  };
+  return {
+      blend(c[1] - c[0], c[3] - c[2], c[5] - c[4], c[7] - c[6], p.y, q.y, p.z, q.z) * inv_size.x,
+      blend(c[2] - c[0], c[6] - c[4], c[3] - c[1], c[7] - c[5], p.z, q.z, p.x, q.x) * inv_size.y,
+      blend(c[4] - c[0], c[5] - c[1], c[6] - c[2], c[7] - c[3], p.x, q.x, p.y, q.y) * inv_size.z};
 }
 
 // The value on a cell face crossed by an axis ray: the bilinear interpolation of the face's
@@ -114,14 +116,15 @@ inline double face_value(const double w[4], const double f[4]) {
 // The hit of an axis ray (along a, direction `dir`) in a cell whose face values fa (entry) and
 // fb (exit) differ in sign, entered at ta and left at tb: the root of the linear function between
 // the faces (as trilinear_segment_roots computes it for a segment along one axis) and the
-// gradient there (as solve_cell). `local` holds the ray's local coordinates across it, `size`
-// the cell's edges; corner[n] = value − iso at corner n (x + 2y + 4z).
-inline RayHit axis_root(const double corner[8], int a, int step, glm::dvec3 local, glm::dvec3 size,
-                        double fa, double fb, double ta, double tb, glm::dvec3 dir) {
+// gradient there (as solve_cell). `local` holds the ray's local coordinates across it,
+// `inv_size` one over the cell's edges; corner[n] = value − iso at corner n (x + 2y + 4z).
+inline RayHit axis_root(const double corner[8], int a, int step, glm::dvec3 local,
+                        glm::dvec3 inv_size, double fa, double fb, double ta, double tb,
+                        glm::dvec3 dir) {
   const double s = fa / (fa - fb);
   local[a] = step > 0 ? s : 1.0 - s;
   return {s == 1.0 ? tb : ta + s * (tb - ta),
-          unit_normal(trilinear_gradient(corner, local, size), dir), 0.0f};
+          unit_normal(trilinear_gradient(corner, local, inv_size), dir), 0.0f};
 }
 
 // The roots of one cell c on the ray segment [ta, tb], appended to `hits`: the cell's cubic
@@ -159,12 +162,12 @@ void solve_cell(const GridView<T>& g, double iso, glm::dvec3 org, glm::dvec3 dir
   }
   double roots[3];
   const int n = trilinear_segment_roots(corner, a, b, roots);
-
+  const glm::dvec3 inv_size = 1.0 / size;
   for (int r = 0; r < n; ++r) {
     const glm::dvec3 p = a + roots[r] * (b - a);
     // A root at the very end of the segment keeps tb exactly (the half-open rule compares it).
     const double t = roots[r] == 1.0 ? tb : ta + roots[r] * (tb - ta);
-    hits.push_back({t, unit_normal(trilinear_gradient(corner, p, size), dir), 0.0f});
+    hits.push_back({t, unit_normal(trilinear_gradient(corner, p, inv_size), dir), 0.0f});
   }
 }
 
@@ -778,13 +781,15 @@ class GridAxisBinding final : public AxisBinding {
     double t_in = 0.0, t_out = 0.0;
     glm::dvec3 size;
     const auto flush = [&] {
+      if (n_candidates == 0) return;
+      const glm::dvec3 inv_size = 1.0 / size;
       for (int m = 0; m < n_candidates; ++m) {
         const Candidate& h = candidates[m];
         glm::dvec3 local;
         local[B] = h.pb;
         local[C] = h.pc;
         out.push_back(
-            {h.k, axis_root(corner, A, step, local, size, h.fa, h.fb, t_in, t_out, l.dir)});
+            {h.k, axis_root(corner, A, step, local, inv_size, h.fa, h.fb, t_in, t_out, l.dir)});
       }
       n_candidates = 0;
     };
@@ -942,7 +947,7 @@ class GridAxisBinding final : public AxisBinding {
       local[b] = p[b];
       local[c] = p[c];
       cell_size[a] = g_.coord(a, i + 1) - g_.coord(a, i);
-      hits.push_back(axis_root(corner, a, step, local, cell_size, fa, fb, ta, tb, dir));
+      hits.push_back(axis_root(corner, a, step, local, 1.0 / cell_size, fa, fb, ta, tb, dir));
     };
     // The cells whose face values differ in sign, solved (emit_root) in ray order when the
     // buffer fills, before solve_cell adds a hit and at the end.

@@ -69,7 +69,8 @@ inline bool positive(double v) {
 // faces the viewer.
 inline glm::vec3 unit_normal(glm::dvec3 grad, glm::dvec3 dir) {
   const double len = glm::length(grad);
-  return len > 0.0 ? glm::vec3(grad / len) : glm::vec3(-dir);
+  // One division, not three: the casters' hits spend much of their time here.
+  return len > 0.0 ? glm::vec3(grad * (1.0 / len)) : glm::vec3(-dir);
 }
 
 // Clips the ray o + t·d to the closed box [lo, hi], narrowing [t0, t1]; false if it misses.
