@@ -42,16 +42,23 @@ std::size_t sort_and_merge(std::span<RayHit> hits, double tolerance, glm::dvec3 
   std::size_t kept = 0;
   for (std::size_t k = 0; k < hits.size();) {
     const double first = hits[k].t;
+    std::size_t end = k + 1;
+    while (end < hits.size() && hits[end].t - first <= tolerance)
+      ++end;
     std::size_t best = k;
-    float best_dot = glm::dot(hits[k].normal, d);
-    for (++k; k < hits.size() && hits[k].t - first <= tolerance; ++k) {
-      const float dot = glm::dot(hits[k].normal, d);
-      if (dot < best_dot || (dot == best_dot && normal_less(hits[k].normal, hits[best].normal))) {
-        best = k;
-        best_dot = dot;
+    if (end - k > 1) {  // duplicates: the one described above
+      float best_dot = glm::dot(hits[k].normal, d);
+      for (std::size_t m = k + 1; m < end; ++m) {
+        const float dot = glm::dot(hits[m].normal, d);
+        if (dot < best_dot || (dot == best_dot && normal_less(hits[m].normal, hits[best].normal))) {
+          best = m;
+          best_dot = dot;
+        }
       }
     }
-    hits[kept++] = hits[best];
+    if (kept != best) hits[kept] = hits[best];
+    ++kept;
+    k = end;
   }
   return kept;
 }
@@ -62,8 +69,8 @@ struct AxisScratch {
   std::vector<AxisRay> rays;
   std::vector<RaySegment> segments;
   std::vector<AxisHit> hits;
-  std::vector<RayHit> by_ray, ray_hits;
-  std::vector<std::uint32_t> first, next;
+  std::vector<RayHit> ray_hits;
+  std::vector<std::uint32_t> first, next, order;
 };
 AxisScratch& axis_scratch() {
   thread_local AxisScratch scratch;
@@ -282,12 +289,18 @@ void RayCaster::cast_axis_rays(const AxisRays& rays, std::span<const RaySegment>
       ++x.first[h.ray + 1];
     for (std::size_t k = 0; k < n; ++k)
       x.first[k + 1] += x.first[k];
-    x.by_ray.resize(x.hits.size());
+    // The hits' indices by ray (small: the scatter stays in cache), then each ray's hits
+    // gathered (independent loads, which overlap) — scattering the hits themselves missed the
+    // cache on most writes.
+    x.order.resize(x.hits.size());
     x.next.assign(x.first.begin(), x.first.end() - 1);
-    for (const AxisHit& h : x.hits)
-      x.by_ray[x.next[h.ray]++] = h.hit;
+    for (std::uint32_t m = 0; m < std::uint32_t(x.hits.size()); ++m)
+      x.order[x.next[x.hits[m].ray]++] = m;
     for (std::size_t k = 0; k < n; ++k) {
-      const std::span<RayHit> hits(x.by_ray.data() + x.first[k], x.first[k + 1] - x.first[k]);
+      x.ray_hits.clear();
+      for (std::uint32_t j = x.first[k]; j < x.first[k + 1]; ++j)
+        x.ray_hits.push_back(x.hits[x.order[j]].hit);
+      const std::span<RayHit> hits(x.ray_hits);
       run.append(hits.first(hits.empty() ? 0 : finish_ray(segments[k], rays.dir, hits)),
                  has_scalar_);
     }
