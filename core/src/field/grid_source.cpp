@@ -12,6 +12,10 @@
 #include <type_traits>
 #include <vector>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
@@ -85,6 +89,49 @@ struct Brick {
   // Some corner point of its cells is NaN or ±Inf: its cells check their corners.
   bool nonfinite = false;
 };
+
+// Bit i: v[i] ≥ threshold (false for NaN); bit i of `finite`: v[i] is neither NaN nor ±Inf.
+// The grid caster's binding classifies every point so; with SSE2 (every x86-64) four floats or
+// two doubles per comparison — the portable loop took about three cycles per point.
+template <class T>
+std::uint64_t sign_bits(const T* v, T threshold, std::uint64_t& finite) {
+#if defined(__SSE2__)
+  std::uint64_t word = 0, ok = 0;
+  if constexpr (std::is_same_v<T, float>) {
+    const __m128 t = _mm_set1_ps(threshold), top = _mm_set1_ps(std::numeric_limits<T>::max());
+    const __m128 magnitude = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
+    for (int i = 0; i < 64; i += 4) {
+      const __m128 x = _mm_loadu_ps(v + i);
+      word |= std::uint64_t(_mm_movemask_ps(_mm_cmpge_ps(x, t))) << i;
+      ok |= std::uint64_t(_mm_movemask_ps(_mm_cmple_ps(_mm_and_ps(x, magnitude), top))) << i;
+    }
+  } else {
+    const __m128d t = _mm_set1_pd(threshold), top = _mm_set1_pd(std::numeric_limits<T>::max());
+    const __m128d magnitude = _mm_castsi128_pd(_mm_set1_epi64x(0x7fffffffffffffffll));
+    for (int i = 0; i < 64; i += 2) {
+      const __m128d x = _mm_loadu_pd(v + i);
+      word |= std::uint64_t(_mm_movemask_pd(_mm_cmpge_pd(x, t))) << i;
+      ok |= std::uint64_t(_mm_movemask_pd(_mm_cmple_pd(_mm_and_pd(x, magnitude), top))) << i;
+    }
+  }
+  finite = ok;
+  return word;
+#else
+  std::uint8_t flags[64];
+  finite = 0;
+  for (int i = 0; i < 64; ++i) {
+    flags[i] = v[i] >= threshold;
+    finite |= std::uint64_t(std::abs(v[i]) <= std::numeric_limits<T>::max()) << i;
+  }
+  std::uint64_t word = 0;
+  for (int i = 0; i < 64; i += 8) {  // eight 0/1 bytes into eight bits
+    std::uint64_t bytes;
+    std::memcpy(&bytes, flags + i, 8);
+    word |= ((bytes * 0x0102040810204080ull) >> 56) << i;
+  }
+  return word;
+#endif
+}
 
 // ∇ of the trilinear interpolant at local point p, per unit length (inv_size: one over the
 // cell's edges; corner[n] at corner n = x + 2y + 4z): along each axis the bilinear blend, across
@@ -491,7 +538,6 @@ class GridAxisBinding final : public AxisBinding {
     tbb::parallel_for(std::int64_t(0), pz, [&](std::int64_t z) {
       std::uint64_t bad = 0;
       T line[64];
-      std::uint8_t flags[64];
       for (std::int64_t y = 0; y < py; ++y) {
         std::uint64_t* row = &sign[std::size_t(y + py * z) * pw];
         const T* v = g_.values + (first_[0]) * g_.strides[0] + (first_[1] + y) * g_.strides[1] +
@@ -500,26 +546,15 @@ class GridAxisBinding final : public AxisBinding {
         for (std::int64_t x0 = 0; x0 < px; x0 += 64) {
           const int n = int(std::min<std::int64_t>(64, px - x0));
           const T* src = v + x0 * sx;
-          if (sx == 1) {
-            std::copy_n(src, n, line);
-          } else {
+          if (sx != 1 || n < 64) {  // into a padded line (the padding: clear, not counted)
             for (int i = 0; i < n; ++i)
               line[i] = src[i * sx];
+            std::fill(line + n, line + 64, T(-INFINITY));
+            src = line;
           }
-          std::fill(line + n, line + 64, T(-INFINITY));  // padding: clear, and not counted
-          std::uint32_t count = 0;
-          for (int i = 0; i < 64; ++i) {
-            flags[i] = line[i] >= threshold;
-            count += !(std::abs(line[i]) <= std::numeric_limits<T>::max());  // NaN or ±Inf
-          }
-          bad += count - std::uint32_t(64 - n);
-          std::uint64_t word = 0;
-          for (int i = 0; i < 64; i += 8) {  // eight 0/1 bytes into eight bits
-            std::uint64_t bytes;
-            std::memcpy(&bytes, flags + i, 8);
-            word |= ((bytes * 0x0102040810204080ull) >> 56) << i;
-          }
-          row[x0 / 64] = word;
+          std::uint64_t finite = 0;
+          row[x0 / 64] = sign_bits(src, threshold, finite);
+          bad += std::uint64_t(64 - std::popcount(finite)) - std::uint64_t(64 - n);
         }
       }
       if (bad > 0) nonfinite.fetch_add(bad, std::memory_order_relaxed);
