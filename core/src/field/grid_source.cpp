@@ -815,11 +815,33 @@ class GridAxisBinding final : public AxisBinding {
     int n_candidates = 0;
     double corner[8];
     std::array<std::int64_t, 3> cell;
+    // The cell's stretch of the rays [t_in, t_out] and its inverse edges, computed when a ray
+    // needs them (most straddling cells at one ray per cell have no hit); a cell without
+    // thickness along the rays (t_out ≤ t_in) has none.
     double t_in = 0.0, t_out = 0.0;
-    glm::dvec3 size;
+    glm::dvec3 inv_size;
+    bool extent_known = false, extent_ok = false;
+    const auto extent = [&] {
+      if (!extent_known) {
+        const std::int64_t i = cell[A];
+        t_in = t_at(step > 0 ? i : i + 1);
+        t_out = t_at(step > 0 ? i + 1 : i);
+        extent_ok = t_out > t_in;
+        glm::dvec3 size;
+        size[A] = g_.coord(A, i + 1) - g_.coord(A, i);
+        size[B] = g_.coord(B, cell[B] + 1) - g_.coord(B, cell[B]);
+        size[C] = g_.coord(C, cell[C] + 1) - g_.coord(C, cell[C]);
+        inv_size = 1.0 / size;
+        extent_known = true;
+      }
+      return extent_ok;
+    };
     const auto flush = [&] {
       if (n_candidates == 0) return;
-      const glm::dvec3 inv_size = 1.0 / size;
+      if (!extent()) {
+        n_candidates = 0;
+        return;
+      }
       for (int m = 0; m < n_candidates; ++m) {
         const Candidate& h = candidates[m];
         glm::dvec3 local;
@@ -838,10 +860,7 @@ class GridAxisBinding final : public AxisBinding {
       if (b0 == b1 || c0 == c1) return;
       for (int k = 0; k < 3; ++k)
         cell[k] = first_[k] + rel[k];
-      const std::int64_t i = cell[A];
-      t_in = t_at(step > 0 ? i : i + 1);
-      t_out = t_at(step > 0 ? i + 1 : i);
-      if (!(t_out > t_in)) return;
+      extent_known = false;
       const T* lower = g_.values + cell[0] * s[0] + cell[1] * s[1] + cell[2] * s[2];
       for (int m = 0; m < 8; ++m)
         corner[m] = double(lower[offsets[m]]) - iso_;
@@ -850,9 +869,6 @@ class GridAxisBinding final : public AxisBinding {
         f_in[m] = corner[face_in[m]];
         f_out[m] = corner[face_out[m]];
       }
-      size[A] = g_.coord(A, i + 1) - g_.coord(A, i);
-      size[B] = g_.coord(B, cell[B] + 1) - g_.coord(B, cell[B]);
-      size[C] = g_.coord(C, cell[C] + 1) - g_.coord(C, cell[C]);
       for (std::uint32_t mc = c0; mc < c1; ++mc) {
         const std::uint32_t pixel_c = along_c.pixels[mc];
         const double pc = along_c.p[pixel_c];
@@ -871,6 +887,7 @@ class GridAxisBinding final : public AxisBinding {
             continue;
           }
           // A face value zero or not finite: solve_cell decides, as in cast_ray.
+          if (!extent()) continue;
           std::array<int, 3> steps{0, 0, 0};
           steps[A] = step;
           std::array<bool, 3> entry_face{false, false, false}, exit_face{false, false, false};
