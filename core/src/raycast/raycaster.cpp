@@ -10,6 +10,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/partitioner.h>
 
 namespace ldimesh {
 namespace {
@@ -324,7 +325,10 @@ std::vector<RayCaster::HitRun> RayCaster::cast_rows(const View& view, Segment se
     const int rows = rows_per_task(view);
     const int tasks = (view.height + rows - 1) / rows;
     std::vector<RayCaster::HitRun> runs(tasks);
-    tbb::parallel_for(0, tasks, [&](int task) {
+    // One task at a time to the threads (simple partitioner): the tasks' work is uneven (where
+    // the surface lies), and the default partitioner's halves left a thread idle at 3 × 256²
+    // (ML 256³ on two threads 0.100–0.116 → 0.081–0.101 s).
+    const auto cast_task = [&](int task) {
       const int j0 = task * rows, j1 = std::min(view.height, j0 + rows);
       const std::size_t n = std::size_t(j1 - j0) * view.width;
       AxisScratch& x = axis_scratch();
@@ -352,7 +356,14 @@ std::vector<RayCaster::HitRun> RayCaster::cast_rows(const View& view, Segment se
       query.lattice = &view;
       query.row_begin = j0;
       cast_axis_rays(query, segments, runs[task]);
-    });
+    };
+    tbb::parallel_for(
+        tbb::blocked_range<int>(0, tasks, 1),
+        [&](const tbb::blocked_range<int>& range) {
+          for (int task = range.begin(); task != range.end(); ++task)
+            cast_task(task);
+        },
+        tbb::simple_partitioner());
     return runs;
   }
   ensure_scene();
