@@ -36,7 +36,7 @@ void cast_row(const char* label, const ldimesh::FieldSource& source, double iso,
   tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
   const std::vector<ldimesh::View> views = ldimesh::make_axis_views(source.bounds(), res);
   double best = 1e30, best_bind = 1e30;
-  std::size_t rays = 0, hits = 0;
+  std::size_t rays = 0, hits = 0, primitives = 0;
   for (int run = 0; run < 3; ++run) {  // best of 3
     rays = hits = 0;
     const auto start = std::chrono::steady_clock::now();
@@ -48,6 +48,7 @@ void cast_row(const char* label, const ldimesh::FieldSource& source, double iso,
     }
     const double total = seconds_since(start);
     if (total < best) best = total, best_bind = bind;
+    primitives = caster.primitive_count();  // after culling (not timed)
   }
   const char* caster = path == ldimesh::CastPath::embree ? "Embree" : "coherent";
   std::printf("| %s | %s | %d | %d² × 3 | %.3f | %.3f | %.2f | %.2f | %zu |\n", label, caster,
@@ -57,6 +58,7 @@ void cast_row(const char* label, const ldimesh::FieldSource& source, double iso,
                   {"threads", threads},
                   {"resolution", res},
                   {"bind_seconds", best_bind},
+                  {"primitives", primitives},
                   {"seconds", best},
                   {"rays", rays},
                   {"hits", hits}});
