@@ -481,6 +481,11 @@ class GridAxisBinding final : public AxisBinding {
   }
   std::uint64_t nonfinite_values() const override { return nonfinite_; }
 
+  bool prefers_column_tasks(const View& view) const override {
+    const int ua = exact_axis(view.u), va = exact_axis(view.v);
+    return ua >= 0 && va >= 0 && std::abs(g_.strides[va]) < std::abs(g_.strides[ua]);
+  }
+
   void prepare(int a) const override {
     std::call_once(column_once_[a], [this, a] { build_columns(a); });
   }
@@ -504,7 +509,7 @@ class GridAxisBinding final : public AxisBinding {
     const View* view = rays.lattice;
     if (view &&
         std::abs(g_.strides[exact_axis(view->v)]) < std::abs(g_.strides[exact_axis(view->u)])) {
-      const std::size_t width = std::size_t(view->width), rows = rays.rays.size() / width;
+      const std::size_t width = std::size_t(rays.width()), rows = rays.rays.size() / width;
       for (std::size_t i = 0; i < width; ++i)
         for (std::size_t j = 0; j < rows; ++j)
           cast_one(j * width + i);
@@ -707,9 +712,9 @@ class GridAxisBinding final : public AxisBinding {
     const View& view = *rays.lattice;
     const int a = rays.axis;
     const int ua = exact_axis(view.u), va = exact_axis(view.v);
-    if (ua < 0 || va < 0 || ua == a || va == a || view.width <= 0) return false;
+    if (ua < 0 || va < 0 || ua == a || va == a || rays.width() <= 0) return false;
     const std::span<const AxisRay> ray = rays.rays;
-    const std::size_t width = std::size_t(view.width), n = ray.size();
+    const std::size_t width = std::size_t(rays.width()), n = ray.size();
     if (n == 0) return true;
     if (n % width != 0) return false;
     const double oa = ray[0].org[a];

@@ -1126,7 +1126,8 @@ class HexAxisBinding final : public AxisBinding {
     prepare(axis);
     const ElementBins& bins = bins_[axis];
     std::vector<RayHit> hits;
-    if (!rays.lattice) {
+    // The pixel loops below take whole rows (never given otherwise: prefers_column_tasks).
+    if (!rays.lattice || rays.width() != rays.lattice->width) {
       for (std::size_t k = 0; k < rays.rays.size(); ++k) {
         const AxisRay& ray = rays.rays[k];
         if (!(ray.t0 <= ray.t1)) continue;

@@ -43,11 +43,16 @@ struct AxisRays {
   int axis = 2;             // the coordinate axis the rays are parallel to
   glm::dvec3 dir{0, 0, 1};  // exactly ±e_axis
   std::span<const AxisRay> rays;
-  // Set when the rays are the pixel centres of rows row_begin … row_begin + rays.size() / width
-  // − 1 of this view (an axis view), row after row: ray k is pixel (k % width, row_begin + k /
-  // width). Sources that loop over the pixels their primitives cover use it; others ignore it.
+  // Set when the rays are the pixel centres of a rectangle of this view (an axis view), row after
+  // row: ray k is pixel (column_begin + k % w, row_begin + k / w), w = columns, or the view's
+  // width where columns is 0 (whole rows). Sources that loop over the pixels their primitives
+  // cover use it; others ignore it.
   const View* lattice = nullptr;
   int row_begin = 0;
+  int column_begin = 0;
+  int columns = 0;
+  // The rectangle's width.
+  int width() const { return columns > 0 ? columns : (lattice ? lattice->width : 0); }
 };
 
 // A source bound to one isovalue for axis-parallel rays.
@@ -64,6 +69,10 @@ class AxisBinding {
   // The same figures as the Embree binding's (GeometryBinding).
   virtual std::size_t primitive_count() const = 0;
   virtual bool has_scalar() const { return false; }
+  // Whether the caster should hand this source an axis view's pixels in blocks of columns (all
+  // rows) rather than blocks of rows: a grid whose rows along the view's v axis are its fastest
+  // memory axis, where a block of rows is a slab a few cells thin along it.
+  virtual bool prefers_column_tasks(const View& /*view*/) const { return false; }
   virtual std::uint64_t nonfinite_values() const { return 0; }
 };
 

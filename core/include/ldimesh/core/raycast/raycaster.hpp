@@ -127,9 +127,12 @@ class RayCaster {
   };
 
   // Every pixel's ray on the segment `segment_of(position, segment)` gives (none if it returns
-  // false), in parallel over rows; one run per row.
+  // false), in parallel over blocks of rows (or of columns); runs of consecutive rows in order.
   template <class Segment>
   std::vector<HitRun> cast_rows(const View& view, Segment segment_of) const;
+  // The runs of blocks of `per_task` columns as one run per row.
+  std::vector<HitRun> rows_from_column_blocks(const View& view, const std::vector<HitRun>& blocks,
+                                              int per_task) const;
   // Hits along the ray through `image_position` on its segment `segment`, through Embree.
   void trace(const View& view, glm::dvec2 image_position, const RaySegment& segment,
              std::vector<RayHit>& hits) const;
