@@ -956,11 +956,11 @@ class GridAxisBinding final : public AxisBinding {
       return;
     // Local coordinates across the ray, as solve_cell computes them.
     double p[3];
-    glm::dvec3 size;
+    glm::dvec3 inv_size(0.0);  // one over the cells' edges across the ray (the gradients')
     for (int k : {b, c}) {
-      const double lo = g_.coord(k, cell[k]);
-      size[k] = g_.coord(k, cell[k] + 1) - lo;
-      p[k] = std::clamp((o[k] - lo) / size[k], 0.0, 1.0);
+      const double lo = g_.coord(k, cell[k]), size = g_.coord(k, cell[k] + 1) - lo;
+      p[k] = std::clamp((o[k] - lo) / size, 0.0, 1.0);
+      inv_size[k] = 1.0 / size;
     }
     // The four face points' weights in trilinear_value's order (b is the lower bit).
     const double wb[2] = {1.0 - p[b], p[b]}, wc[2] = {1.0 - p[c], p[c]};
@@ -1002,11 +1002,11 @@ class GridAxisBinding final : public AxisBinding {
       const T* lower = points + i * sa;
       for (int n = 0; n < 8; ++n)
         corner[n] = double(lower[offsets[n]]) - iso_;
-      glm::dvec3 local(0.0), cell_size = size;
+      glm::dvec3 local(0.0), inv_cell = inv_size;  // across the ray: the column's, once
       local[b] = p[b];
       local[c] = p[c];
-      cell_size[a] = g_.coord(a, i + 1) - g_.coord(a, i);
-      hits.push_back(axis_root(corner, a, step, local, 1.0 / cell_size, fa, fb, ta, tb, dir));
+      inv_cell[a] = 1.0 / (g_.coord(a, i + 1) - g_.coord(a, i));
+      hits.push_back(axis_root(corner, a, step, local, inv_cell, fa, fb, ta, tb, dir));
     };
     // The cells whose face values differ in sign, solved (emit_root) in ray order when the
     // buffer fills, before solve_cell adds a hit and at the end.

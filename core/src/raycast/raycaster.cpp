@@ -103,10 +103,14 @@ std::vector<RayCaster::HitRun> RayCaster::rows_from_column_blocks(const View& vi
                                                                   const std::vector<HitRun>& blocks,
                                                                   int per_task) const {
   const std::size_t height = std::size_t(std::max(view.height, 0));
+  // Block t's width (the last may be narrower).
+  const auto width_of = [&](std::size_t t) {
+    return std::size_t(std::min(per_task, view.width - int(t) * per_task));
+  };
   // Per block: where each of its rows' samples start.
   std::vector<std::vector<std::size_t>> starts(blocks.size());
   for (std::size_t t = 0; t < blocks.size(); ++t) {
-    const std::size_t w = blocks[t].counts.size() / std::max<std::size_t>(height, 1);
+    const std::size_t w = width_of(t);
     std::vector<std::size_t>& first = starts[t];
     first.assign(height + 1, 0);
     std::size_t sum = 0, k = 0;
@@ -129,7 +133,7 @@ std::vector<RayCaster::HitRun> RayCaster::rows_from_column_blocks(const View& vi
     if (has_scalar_) row.scalar.reserve(samples);
     for (std::size_t t = 0; t < blocks.size(); ++t) {
       const HitRun& b = blocks[t];
-      const std::size_t w = std::size_t(std::min(per_task, view.width - int(t) * per_task));
+      const std::size_t w = width_of(t);
       row.counts.insert(row.counts.end(), b.counts.begin() + std::ptrdiff_t(j * w),
                         b.counts.begin() + std::ptrdiff_t((j + 1) * w));
       const auto s0 = std::ptrdiff_t(starts[t][j]), s1 = std::ptrdiff_t(starts[t][j + 1]);
