@@ -617,29 +617,35 @@ int restrict_to_segment(const double* c, glm::dvec3 a, glm::dvec3 b, double* f) 
 // ---------------------------------------------------------------------------------------------
 // Roots of a univariate Bernstein polynomial on [0, 1]
 
-// Value and derivative at u of the Bernstein polynomial c[0..n] on [0, 1] by Horner's rule in
-// r = u / (1 − u) (or (1 − u) / u from the other end, for u > 1/2, so that |r| ≤ 1):
-// Σ C(n, i) c_i u^i (1 − u)^(n−i) = (1 − u)^n Σ C(n, i) c_i r^i. O(n) per evaluation where
-// de Casteljau's is O(n²). The degree n is a constant in these kernels, so that their loops
-// unroll and their arrays stay in registers.
+// Value and first two derivatives at u of the Bernstein polynomial c[0..n] on [0, 1] by
+// Horner's rule in r = u / (1 − u) (or (1 − u) / u from the other end, for u > 1/2, so that
+// |r| ≤ 1): Σ C(n, i) c_i u^i (1 − u)^(n−i) = (1 − u)^n Σ C(n, i) c_i r^i, and the derivatives
+// likewise from the coefficients' first and second differences. O(n) per evaluation where
+// de Casteljau's is O(n²); the three sums are independent chains. The degree n is a constant in
+// these kernels, so that their loops unroll and their arrays stay in registers.
 template <int n>
 [[gnu::always_inline]] inline void bernstein_horner(const double* c, double u, double& value,
-                                                    double& derivative) {
+                                                    double& first, double& second) {
   const bool low = u <= 0.5;
   const double near = low ? 1.0 - u : u, r = (low ? u : 1.0 - u) / near;
   // From the far end: coefficient i of the sum is c[low ? i : n − i].
   const auto at = [&](int i) { return c[low ? i : n - i]; };
-  // f: Σ C(n, i) e_i r^i; d: Σ C(n − 1, i) (e_{i+1} − e_i) r^i (the derivative's); near^(n−1).
-  double f = at(n), d = at(n) - at(n - 1), power = 1.0;
+  const auto diff2 = [&](int i) { return at(i + 2) - 2.0 * at(i + 1) + at(i); };
+  // f: Σ C(n, i) e_i r^i; d: Σ C(n − 1, i) Δe_i r^i; d2: Σ C(n − 2, i) Δ²e_i r^i; near^(n−2).
+  double f = at(n), d = at(n) - at(n - 1), d2 = 0.0, power = 1.0;
+  if constexpr (n >= 2) d2 = diff2(n - 2);
   for (int i = n - 1; i >= 0; --i) {
     f = f * r + kBinomial[n][i] * at(i);
-    if (i > 0) {
-      d = d * r + kBinomial[n - 1][i - 1] * (at(i) - at(i - 1));
+    if (i > 0) d = d * r + kBinomial[n - 1][i - 1] * (at(i) - at(i - 1));
+    if (i > 1) {
+      d2 = d2 * r + kBinomial[n - 2][i - 2] * diff2(i - 2);
       power *= near;
     }
   }
-  value = f * power * near;
-  derivative = (low ? n : -n) * d * power;  // d/du = −d/d(1 − u) from the far end
+  const double power1 = n >= 2 ? power * near : 1.0;  // near^(n−1)
+  value = f * power1 * near;
+  first = (low ? n : -n) * d * power1;        // d/du = −d/d(1 − u) from the far end
+  second = double(n * (n - 1)) * d2 * power;  // the same from either end
 }
 
 // Splits c[0..n] at 1/2 into the coefficients of the left and right halves (de Casteljau). The
@@ -647,11 +653,17 @@ template <int n>
 // `right`) may be `c`: c is read before the halves are written.
 template <int n>
 [[gnu::always_inline]] inline void split_in_half(const double* c, double* left, double* right) {
+  // Unrolled whole, so that w lives in registers: vectorised, its overlapping pairs went through
+  // the stack, and each level's loads waited on the last one's stores.
   double w[n + 1];
-  std::copy(c, c + n + 1, w);
+#pragma GCC unroll 16
+  for (int i = 0; i <= n; ++i)
+    w[i] = c[i];
   left[0] = w[0];
   right[n] = w[n];
+#pragma GCC unroll 16
   for (int r = 1; r <= n; ++r) {
+#pragma GCC unroll 16
     for (int i = 0; i <= n - r; ++i)
       w[i] = 0.5 * (w[i] + w[i + 1]);
     left[r] = w[0];
@@ -667,68 +679,113 @@ template <int n>
   return v;
 }
 
-// The single root in [0, 1] of c[0..n], whose end values c[0] and c[n] differ in sign: Newton
-// steps from a regula falsi start, falling back to bisection whenever they leave the bracket.
-template <int n>
-[[gnu::always_inline]] inline double converge(const double* c, double tol) {
-  if (c[n] == 0.0) return 1.0;  // exactly at the end: keep it exact (the half-open rule needs it)
-  double a = 0.0, b = 1.0, ga = c[0];
-  // Start where the control polygon crosses zero (its one sign change): far closer than the
-  // chord from c[0] to c[n] when the polynomial bends.
-  double u = 0.5;
-  for (int i = 0; i < n; ++i)
-    if (positive(c[i]) != positive(c[i + 1])) {
-      u = (i + c[i] / (c[i] - c[i + 1])) / n;
-      break;
-    }
-  if (!(u > a && u < b)) u = 0.5;
-  // A value within the evaluation's rounding error (about 2n operations, each within an ulp or
-  // two of the coefficients' magnitude) is a root as far as the coefficients can tell: further
-  // steps would chase rounding noise (slowly, near a double root).
-  double magnitude = 0.0;
-  for (int i = 0; i <= n; ++i)
-    magnitude = std::max(magnitude, std::abs(c[i]));
-  const double noise = 4.0 * (n + 1) * std::numeric_limits<double>::epsilon() * magnitude;
-  // |f''| ≤ n (n − 1) max |Δ²c| on [0, 1] (the second derivative's Bernstein coefficients).
-  double curvature = 0.0;
-  for (int i = 0; i + 2 <= n; ++i)
-    curvature = std::max(curvature, std::abs(c[i + 2] - 2.0 * c[i + 1] + c[i]));
-  curvature *= n * (n - 1);
-  for (int iter = 0; iter < 64 && b - a > tol; ++iter) {
-    double g, dg;
-    bernstein_horner<n>(c, u, g, dg);
-    if (g == 0.0 || std::abs(g) <= noise) return u;
-    // The bracket's update without a branch: which side u falls on is a coin toss.
-    const bool same_side = positive(g) == positive(ga);
-    a = same_side ? u : a;
-    ga = same_side ? g : ga;
-    b = same_side ? b : u;
-    double next = u - g / dg;
-    const bool newton = next > a && next < b;
-    if (!newton) next = 0.5 * (a + b);
-    // After a Newton step δ the error is at most about |f''| δ² / (2 |f'|): stop once that bound
-    // (with the coefficients' bound on f'') is below tol instead of taking one more step to see
-    // it.
-    const double step = std::abs(next - u);
-    if (step < tol || (newton && step * step * curvature < 2.0 * tol * std::abs(dg))) return next;
-    u = next;
+// The single root in [0, 1] of each of L polynomials c[l][0..n], whose end values c[l][0] and
+// c[l][n] differ in sign, to within tol[l]: Halley steps from the control polygon's crossing,
+// falling back to bisection whenever they leave the bracket. The L lanes advance in lock step,
+// each by exactly the operations it would take alone (converge is the one-lane case, so any
+// lane count gives the same bits): their chains of divisions are independent and overlap.
+template <int n, int L>
+[[gnu::always_inline]] inline void converge_lanes(const double* const* c, const double* tol,
+                                                  double* root) {
+  double a[L], b[L], ga[L], u[L], noise[L], m2[L], m3[L];
+  bool active[L];
+  for (int l = 0; l < L; ++l) {
+    const double* cl = c[l];
+    // Exactly at the end: keep it exact (the half-open rule needs it).
+    active[l] = cl[n] != 0.0;
+    root[l] = 1.0;
+    a[l] = 0.0, b[l] = 1.0, ga[l] = cl[0];
+    // Start where the control polygon crosses zero (its one sign change): far closer than the
+    // chord from c[0] to c[n] when the polynomial bends.
+    double start = 0.5;
+    for (int i = 0; i < n; ++i)
+      if (positive(cl[i]) != positive(cl[i + 1])) {
+        start = (i + cl[i] / (cl[i] - cl[i + 1])) / n;
+        break;
+      }
+    u[l] = start > 0.0 && start < 1.0 ? start : 0.5;
+    // A value within the evaluation's rounding error (about 2n operations, each within an ulp
+    // or two of the coefficients' magnitude) is a root as far as the coefficients can tell:
+    // further steps would chase rounding noise (slowly, near a double root).
+    double magnitude = 0.0;
+    for (int i = 0; i <= n; ++i)
+      magnitude = std::max(magnitude, std::abs(cl[i]));
+    noise[l] = 4.0 * (n + 1) * std::numeric_limits<double>::epsilon() * magnitude;
+    // Bounds on |f''| and |f'''| over [0, 1]: n (n − 1) max |Δ²c| and n (n − 1) (n − 2)
+    // max |Δ³c| (the derivatives' Bernstein coefficients).
+    double d2 = 0.0, d3 = 0.0;
+    for (int i = 0; i + 2 <= n; ++i)
+      d2 = std::max(d2, std::abs(cl[i + 2] - 2.0 * cl[i + 1] + cl[i]));
+    for (int i = 0; i + 3 <= n; ++i)
+      d3 = std::max(d3, std::abs(cl[i + 3] - 3.0 * cl[i + 2] + 3.0 * cl[i + 1] - cl[i]));
+    m2[l] = d2 * (n * (n - 1));
+    m3[l] = d3 * (n * (n - 1) * (n - 2));
   }
-  return u;
+  for (int iter = 0; iter < 64; ++iter) {
+    bool any = false;
+    for (int l = 0; l < L; ++l) {
+      if (!active[l]) continue;
+      const auto finish = [&](double r) { root[l] = r, active[l] = false; };
+      if (!(b[l] - a[l] > tol[l])) {
+        finish(u[l]);
+        continue;
+      }
+      double g, dg, ddg;
+      bernstein_horner<n>(c[l], u[l], g, dg, ddg);
+      if (g == 0.0 || std::abs(g) <= noise[l]) {
+        finish(u[l]);
+        continue;
+      }
+      // The bracket's update without a branch: which side u falls on is a coin toss.
+      const bool same_side = positive(g) == positive(ga[l]);
+      a[l] = same_side ? u[l] : a[l];
+      ga[l] = same_side ? g : ga[l];
+      b[l] = same_side ? b[l] : u[l];
+      // Halley's step: cubic convergence, so that from the polygon's start two evaluations
+      // often do where Newton's steps take three.
+      double next = u[l] - 2.0 * g * dg / (2.0 * dg * dg - g * ddg);
+      const bool halley = next > a[l] && next < b[l];
+      if (!halley) next = 0.5 * (a[l] + b[l]);
+      // After a Halley step δ the error is about |f'''/(6 f') − (f''/(2 f'))²| δ³ at most:
+      // stop once that bound (with the coefficients' bounds on f'' and f''') is below tol,
+      // instead of taking one more step to see it.
+      const double step = std::abs(next - u[l]), slope = std::abs(dg);
+      if (step < tol[l] ||
+          (halley && step * step * step * (m3[l] * slope * (2.0 / 3.0) + m2[l] * m2[l]) <
+                         4.0 * tol[l] * slope * slope)) {
+        finish(next);
+        continue;
+      }
+      u[l] = next;
+      any = true;
+    }
+    if (!any) return;
+  }
+  for (int l = 0; l < L; ++l)
+    if (active[l]) root[l] = u[l];  // out of iterations
 }
 
-// Calls found(s) for every s ∈ [0, 1] where f = c[0..n] changes sign (zero counts as positive),
-// in increasing order. Bernstein subdivision: by Descartes' rule of signs for the Bernstein
-// basis, f has at most as many roots in a piece as its coefficients have sign variations. None:
-// no sign change. One: the end coefficients (the end values) differ in sign, so exactly one
-// simple root. More: split in half and look again.
-template <int n, class Found>
-[[gnu::always_inline]] inline void bernstein_roots(const double* c, Found found) {
+template <int n>
+[[gnu::always_inline]] inline double converge(const double* c, double tol) {
+  double root;
+  converge_lanes<n, 1>(&c, &tol, &root);
+  return root;
+}
+
+// Isolates the roots in [0, 1] of f = c[0..n], in increasing order: exact(s) for a root known
+// exactly (a zero at the start), bracket(piece, s0, s1) for a stretch [s0, s1] holding exactly
+// one sign change of f, with f's coefficients on it. Bernstein subdivision: by Descartes' rule
+// of signs for the Bernstein basis, f has at most as many roots in a piece as its coefficients
+// have sign variations. None: no sign change. One: the end coefficients (the end values) differ
+// in sign, so exactly one simple root. More: split in half and look again.
+template <int n, class Exact, class Bracket>
+[[gnu::always_inline]] inline void isolate_roots(const double* c, Exact exact, Bracket bracket) {
   // Depth-first: the left half is looked at next (in local arrays), the right one waits on a
   // stack; at most one pending interval per level, and kMinWidth = 1e-12 > 2^-40 bounds the
   // levels.
   // A root exactly at the start belongs to this segment (the caster's half-open rule drops one
   // exactly at a shared end); the caster merges it with the same root found by subdivision.
-  if (c[0] == 0.0) found(0.0);
+  if (c[0] == 0.0) exact(0.0);
   struct Piece {
     double s0, s1;
     double c[n + 1];
@@ -751,15 +808,31 @@ template <int n, class Found>
     }
     // One variation: one root. Too small (or out of budget): a root only where the ends differ
     // in sign, so a touching double root without a sign change is dropped.
-    if (variations > 0 && positive(piece[0]) != positive(piece[n])) {
-      const double u = converge<n>(piece, kConverged / w);
-      found(u == 1.0 ? s1 : s0 + w * u);
-    }
+    if (variations > 0 && positive(piece[0]) != positive(piece[n])) bracket(piece, s0, s1);
     if (top == 0) break;
     const Piece& next = stack[--top];
     std::copy(next.c, next.c + n + 1, piece);
     s0 = next.s0, s1 = next.s1;
   }
+}
+
+// Where in [s0, s1] the root u ∈ [0, 1] of the piece on it lies (its end exactly where u is).
+inline double piece_root(double s0, double s1, double u) {
+  return u == 1.0 ? s1 : s0 + (s1 - s0) * u;
+}
+
+// The tolerance in u of a piece [s0, s1] of a segment.
+inline double piece_tolerance(double s0, double s1) {
+  return kConverged / (s1 - s0);
+}
+
+// Calls found(s) for every s ∈ [0, 1] where f = c[0..n] changes sign (zero counts as positive),
+// in increasing order: isolate_roots, each bracket converged at once.
+template <int n, class Found>
+[[gnu::always_inline]] inline void bernstein_roots(const double* c, Found found) {
+  isolate_roots<n>(c, found, [&](const double* piece, double s0, double s1) {
+    found(piece_root(s0, s1, converge<n>(piece, piece_tolerance(s0, s1))));
+  });
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1092,6 +1165,49 @@ class StagedRestriction {
   glm::dvec3 a_{0.0}, b_{0.0};
 };
 
+// A root of one pixel's polynomial along a line of an element's pixels (pixel q of the line):
+// known exactly (s), or bracketed by [s0, s1] with the polynomial's coefficients there, to be
+// converged.
+template <int P>
+struct LineRoot {
+  LineRoot() {}  // left uninitialised: filled where it is appended
+  int q;
+  bool exact;
+  double s0, s1, s;
+  double c[P + 1];
+};
+
+template <int P>
+std::vector<LineRoot<P>>& line_roots() {
+  thread_local std::vector<LineRoot<P>> roots;
+  return roots;
+}
+
+// Converges the bracketed roots, four lanes at a time (converge_lanes: the same bits as one by
+// one).
+template <int P>
+void converge_roots(std::vector<LineRoot<P>>& roots) {
+  constexpr int kLanes = 4;
+  const auto solve = [&]<int L>(std::integral_constant<int, L>, LineRoot<P>* const* lane) {
+    const double* c[L];
+    double tol[L], u[L];
+    for (int l = 0; l < L; ++l)
+      c[l] = lane[l]->c, tol[l] = piece_tolerance(lane[l]->s0, lane[l]->s1);
+    converge_lanes<P, L>(c, tol, u);
+    for (int l = 0; l < L; ++l)
+      lane[l]->s = piece_root(lane[l]->s0, lane[l]->s1, u[l]);
+  };
+  LineRoot<P>* lane[kLanes];
+  int filled = 0;
+  for (LineRoot<P>& root : roots) {
+    if (root.exact) continue;
+    lane[filled++] = &root;
+    if (filled == kLanes) solve(std::integral_constant<int, kLanes>{}, lane), filled = 0;
+  }
+  for (int l = 0; l < filled; ++l)
+    solve(std::integral_constant<int, 1>{}, lane + l);
+}
+
 // Object order for the pixel rays of axis views: each active element loops over the pixels its
 // box covers, each pixel's ray clipped to the element exactly as intersect_element clips it,
 // the polynomial along it from the staged restriction (rows of pixels share its first stages),
@@ -1293,13 +1409,17 @@ class HexAxisBinding final : public AxisBinding {
     const glm::dmat3 to_world_gradient = glm::transpose(m);
     // The roots of f[0..n] along the clipped stretch [t0, t1] of pixel k's ray, with the
     // reference gradient at parameter s from `gradient`.
+    // The hit at parameter s of pixel k's clipped stretch [t0, t1], with reference gradient g.
+    const auto hit_at = [&](std::size_t k, double s, double t0, double t1, glm::dvec3 g) {
+      out.push_back({std::uint32_t(k),
+                     {s == 1.0 ? t1 : t0 + s * (t1 - t0),
+                      unit_normal(to_world_gradient * g, rays.dir), 0.0f}});
+    };
+    // The roots of f[0..n] along the clipped stretch [t0, t1] of pixel k's ray, with the
+    // reference gradient at parameter s from `gradient`.
     const auto emit = [&]<int n>(std::integral_constant<int, n>, std::size_t k, const double* f,
                                  double t0, double t1, auto gradient) {
-      bernstein_roots<n>(f, [&](double s) {
-        out.push_back({std::uint32_t(k),
-                       {s == 1.0 ? t1 : t0 + s * (t1 - t0),
-                        unit_normal(to_world_gradient * gradient(s), rays.dir), 0.0f}});
-      });
+      bernstein_roots<n>(f, [&](double s) { hit_at(k, s, t0, t1, gradient(s)); });
     };
 
     // Any pixel on its own, as intersect_element does it (the clip, the restriction and the
@@ -1425,36 +1545,58 @@ class HexAxisBinding final : public AxisBinding {
         scratch.candidates[candidates] = q;
         candidates += keep;
       }
-      bool dg_valid = false;
+      // Every candidate's roots isolated first, then converged four at a time (their chains of
+      // divisions are independent and overlap, where one root after the other each waits on its
+      // own), then appended in the order found: pixel by pixel, along each ray — the same hits,
+      // to the bit, as emit on each pixel.
+      std::vector<LineRoot<P>>& roots = line_roots<P>();
+      roots.clear();
       for (int m = 0; m < candidates; ++m) {
         const int q = scratch.candidates[m];
-        const PointBasis& bq = scratch.inner[q].basis;
         double hq[kMaxNodes], f[kMaxNodes];
         for (int l = 0; l < n; ++l)
           hq[l] = h[std::size_t(l) * count + q];
         along_segment<P>(hq, segment, f);
+        isolate_roots<P>(
+            f,
+            [&](double s) {
+              LineRoot<P>& root = roots.emplace_back();
+              root.q = q, root.exact = true, root.s = s;
+            },
+            [&](const double* piece, double s0, double s1) {
+              LineRoot<P>& root = roots.emplace_back();
+              root.q = q, root.exact = false, root.s0 = s0, root.s1 = s1;
+              std::copy(piece, piece + P + 1, root.c);
+            });
+      }
+      converge_roots<P>(roots);
+      bool dg_valid = false;
+      for (const LineRoot<P>& root : roots) {
+        const int q = root.q;
+        const PointBasis& bq = scratch.inner[q].basis;
         // ∂/∂w from h, ∂/∂v from g with B_j'(x_v), ∂/∂u from the u contraction with B_i'(x_u)
         // (once per line, at its first hit), all at the hit's x_w.
-        emit(std::integral_constant<int, P>{}, pixel(outer, inner0 + q), f, t0, t1, [&](double s) {
-          if (!dg_valid) {
-            contract_fixed_u<P>(c, axes, o.basis.derivative, dg);
-            dg_valid = true;
+        if (!dg_valid) {
+          contract_fixed_u<P>(c, axes, o.basis.derivative, dg);
+          dg_valid = true;
+        }
+        const double s = root.s;
+        double bw[kMaxNodes], dbw[kMaxNodes];
+        bernstein_basis<P>(a_w + s * (b_w - a_w), bw, dbw);
+        double gu = 0.0, gv = 0.0, gw = 0.0;  // in registers: the axes are known at run time
+        for (int l = 0; l < n; ++l) {
+          double du = 0.0, dv = 0.0;
+          for (int j = 0; j < n; ++j) {
+            du += dg[j][l] * bq.value[j];
+            dv += g[j][l] * bq.derivative[j];
           }
-          double bw[kMaxNodes], dbw[kMaxNodes];
-          bernstein_basis<P>(a_w + s * (b_w - a_w), bw, dbw);
-          double grad[3] = {0.0, 0.0, 0.0};
-          for (int l = 0; l < n; ++l) {
-            double du = 0.0, dv = 0.0;
-            for (int j = 0; j < n; ++j) {
-              du += dg[j][l] * bq.value[j];
-              dv += g[j][l] * bq.derivative[j];
-            }
-            grad[axes.u] += du * bw[l];
-            grad[axes.v] += dv * bw[l];
-            grad[axes.w] += hq[l] * dbw[l];
-          }
-          return glm::dvec3(grad[0], grad[1], grad[2]);
-        });
+          gu += du * bw[l];
+          gv += dv * bw[l];
+          gw += h[std::size_t(l) * count + q] * dbw[l];
+        }
+        glm::dvec3 grad;
+        grad[axes.u] = gu, grad[axes.v] = gv, grad[axes.w] = gw;
+        hit_at(pixel(outer, inner0 + q), s, t0, t1, grad);
       }
     }
   }
