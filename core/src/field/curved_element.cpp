@@ -269,7 +269,7 @@ namespace {
 // tested on the root box). Every ray visits the boxes its own search would.
 void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double* geometry,
             const double* field, double f_margin, glm::dvec3 d, std::span<const RayRef> rays,
-            std::vector<AxisHit>& out) {
+            AxisHits& out) {
   const int qm = e.q + 1, pm = e.p + 1;
   const int gq = qm * qm * qm, fp = pm * pm * pm;
   // A box's coefficients: the geometry's two plane components n₁·x, n₂·x interleaved, then the
@@ -523,7 +523,7 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
 void intersect(const Element& e, glm::dvec3 o, glm::dvec3 d, double t0, double t1,
                std::vector<RayHit>& hits) {
   // The search with one ray (the Embree path's callback, any direction).
-  thread_local std::vector<AxisHit> out;
+  thread_local AxisHits out;
   out.clear();
   const RayRef ray{0, o, t0, t1};
   search(e, glm::dvec3(0.0), glm::dvec3(1.0), &e.geometry[0].x, e.field, field_margin(e), d,
@@ -574,7 +574,7 @@ Pieces::Pieces(const Element& e, double width) {
 }
 
 void Pieces::intersect(const Element& e, std::size_t k, std::span<const RayRef> rays, glm::dvec3 d,
-                       std::vector<AxisHit>& hits) const {
+                       AxisHits& hits) const {
   const double* c = &coefficients_[k * std::size_t(3 * gq_ + fp_)];
   search(e, pieces_[k].lo, pieces_[k].hi, c, c + 3 * gq_, field_margin_, d, rays, hits);
 }

@@ -63,7 +63,7 @@ class Pieces {
   // Jacobians are shared by the rays, each ray's hits the same as its own search's (up to
   // rounding in the planes' offsets), reported with its index, per ray in increasing t.
   void intersect(const Element& e, std::size_t k, std::span<const RayRef> rays, glm::dvec3 d,
-                 std::vector<AxisHit>& hits) const;
+                 AxisHits& hits) const;
 
  private:
   int gq_ = 0, fp_ = 0;

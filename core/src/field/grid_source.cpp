@@ -490,7 +490,7 @@ class GridAxisBinding final : public AxisBinding {
     std::call_once(column_once_[a], [this, a] { build_columns(a); });
   }
 
-  void cast(const AxisRays& rays, std::vector<AxisHit>& out) const override {
+  void cast(const AxisRays& rays, AxisHits& out) const override {
     const int a = rays.axis;
     prepare(a);
     if (rays.lattice && cast_lattice(rays, out)) return;
@@ -708,7 +708,7 @@ class GridAxisBinding final : public AxisBinding {
   // face values (face_value), roots and gradients (axis_root), and solve_cell where a face value
   // is zero or not finite. Returns false where the rays do not form a lattice of this view
   // (cast() then casts them one by one).
-  bool cast_lattice(const AxisRays& rays, std::vector<AxisHit>& out) const {
+  bool cast_lattice(const AxisRays& rays, AxisHits& out) const {
     const View& view = *rays.lattice;
     const int a = rays.axis;
     const int ua = exact_axis(view.u), va = exact_axis(view.v);
@@ -764,8 +764,7 @@ class GridAxisBinding final : public AxisBinding {
     const Lattice lattice{ray, width, oa, dir, lo, hi};
     // The axes as template constants: the slab solver for (a, whether u is the lower transverse
     // axis).
-    using Solver =
-        void (GridAxisBinding::*)(const Lattice&, LatticeScratch&, std::vector<AxisHit>&) const;
+    using Solver = void (GridAxisBinding::*)(const Lattice&, LatticeScratch&, AxisHits&) const;
     static constexpr Solver kSolvers[6] = {
         &GridAxisBinding::solve_slab<0, false>, &GridAxisBinding::solve_slab<0, true>,
         &GridAxisBinding::solve_slab<1, false>, &GridAxisBinding::solve_slab<1, true>,
@@ -788,7 +787,7 @@ class GridAxisBinding final : public AxisBinding {
   // through it: along axis A, B < C the transverse axes; kUIsB: the image's u axis (pixel
   // columns) is B, else C. The axes as constants keep the coordinates in registers.
   template <int A, bool kUIsB>
-  void solve_slab(const Lattice& l, LatticeScratch& x, std::vector<AxisHit>& out) const {
+  void solve_slab(const Lattice& l, LatticeScratch& x, AxisHits& out) const {
     constexpr int B = A == 0 ? 1 : 0, C = A == 2 ? 1 : 2;
     const PixelIndex& along_b = kUIsB ? x.columns : x.rows;
     const PixelIndex& along_c = kUIsB ? x.rows : x.columns;

@@ -1236,7 +1236,7 @@ class HexAxisBinding final : public AxisBinding {
     });
   }
 
-  void cast(const AxisRays& rays, std::vector<AxisHit>& out) const override {
+  void cast(const AxisRays& rays, AxisHits& out) const override {
     if (active_.elements.empty() || rays.rays.empty()) return;
     const int axis = rays.axis;
     prepare(axis);
@@ -1331,13 +1331,12 @@ class HexAxisBinding final : public AxisBinding {
   // The pixels of the lattice query `rays` whose centres element e's box covers,
   // in the order that keeps the staged restriction's first stages: rows of the image axis
   // whose world axis maps to the lower of the two reference axes across the ray.
-  void cast_element(std::uint32_t e, const AxisRays& rays, std::vector<AxisHit>& out,
-                    Scratch& scratch) const {
+  void cast_element(std::uint32_t e, const AxisRays& rays, AxisHits& out, Scratch& scratch) const {
     with_order(active_.order, [&](auto p) { cast_element_order<p>(e, rays, out, scratch); });
   }
 
   template <int P>
-  void cast_element_order(std::uint32_t e, const AxisRays& rays, std::vector<AxisHit>& out,
+  void cast_element_order(std::uint32_t e, const AxisRays& rays, AxisHits& out,
                           Scratch& scratch) const {
     const View& view = *rays.lattice;
     const ActiveElement& el = active_.elements[e];

@@ -13,6 +13,15 @@
 #include <tbb/partitioner.h>
 
 namespace ldimesh {
+
+void AxisHits::grow() {
+  const std::size_t capacity = std::max<std::size_t>(1024, 2 * capacity_);
+  std::unique_ptr<AxisHit[]> data(new AxisHit[capacity]);
+  std::copy(begin(), end(), data.get());
+  data_ = std::move(data);
+  capacity_ = capacity;
+}
+
 namespace {
 
 // Sorts one ray's hits by depth and merges hits closer than `tolerance` (a root found by both
@@ -69,7 +78,7 @@ std::size_t sort_and_merge(std::span<RayHit> hits, double tolerance, glm::dvec3 
 struct AxisScratch {
   std::vector<AxisRay> rays;
   std::vector<RaySegment> segments;
-  std::vector<AxisHit> hits;
+  AxisHits hits;
   std::vector<RayHit> ray_hits;
   std::vector<std::uint32_t> first, next, order;
 };
