@@ -528,8 +528,7 @@ void intersect(const Element& e, glm::dvec3 o, glm::dvec3 d, double t0, double t
   const RayRef ray{0, o, t0, t1};
   search(e, glm::dvec3(0.0), glm::dvec3(1.0), &e.geometry[0].x, e.field, field_margin(e), d,
          std::span(&ray, 1), out);
-  for (const AxisHit& h : out)
-    hits.push_back(h.hit);
+  hits.insert(hits.end(), out.hits().begin(), out.hits().end());
 }
 
 Pieces::Pieces(const Element& e, double width) {

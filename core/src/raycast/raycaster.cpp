@@ -16,9 +16,12 @@ namespace ldimesh {
 
 void AxisHits::grow() {
   const std::size_t capacity = std::max<std::size_t>(1024, 2 * capacity_);
-  std::unique_ptr<AxisHit[]> data(new AxisHit[capacity]);
-  std::copy(begin(), end(), data.get());
-  data_ = std::move(data);
+  std::unique_ptr<std::uint32_t[]> rays(new std::uint32_t[capacity]);
+  std::unique_ptr<RayHit[]> hits(new RayHit[capacity]);
+  std::copy(rays_.get(), rays_.get() + size_, rays.get());
+  std::copy(hits_.get(), hits_.get() + size_, hits.get());
+  rays_ = std::move(rays);
+  hits_ = std::move(hits);
   capacity_ = capacity;
 }
 
@@ -346,26 +349,25 @@ void RayCaster::cast_axis_rays(const AxisRays& rays, std::span<const RaySegment>
   if (has_scalar_) run.scalar.reserve(run.scalar.size() + x.hits.size());
   // Each ray's hits are sorted by depth below, so the order in which the sources reported them
   // does not matter; grouped by ray first (counting sort) unless they came so.
-  const bool grouped =
-      std::is_sorted(x.hits.begin(), x.hits.end(),
-                     [](const AxisHit& a, const AxisHit& b) { return a.ray < b.ray; });
-  if (!grouped) {
+  const std::span<const std::uint32_t> ray_of = x.hits.rays();
+  const std::span<const RayHit> found = x.hits.hits();
+  if (!std::is_sorted(ray_of.begin(), ray_of.end())) {
     x.first.assign(n + 1, 0);
-    for (const AxisHit& h : x.hits)
-      ++x.first[h.ray + 1];
+    for (const std::uint32_t r : ray_of)
+      ++x.first[r + 1];
     for (std::size_t k = 0; k < n; ++k)
       x.first[k + 1] += x.first[k];
     // The hits' indices by ray (small: the scatter stays in cache), then each ray's hits
     // gathered (independent loads, which overlap) — scattering the hits themselves missed the
     // cache on most writes.
-    x.order.resize(x.hits.size());
+    x.order.resize(found.size());
     x.next.assign(x.first.begin(), x.first.end() - 1);
-    for (std::uint32_t m = 0; m < std::uint32_t(x.hits.size()); ++m)
-      x.order[x.next[x.hits[m].ray]++] = m;
+    for (std::uint32_t m = 0; m < std::uint32_t(found.size()); ++m)
+      x.order[x.next[ray_of[m]]++] = m;
     for (std::size_t k = 0; k < n; ++k) {
       x.ray_hits.clear();
       for (std::uint32_t j = x.first[k]; j < x.first[k + 1]; ++j)
-        x.ray_hits.push_back(x.hits[x.order[j]].hit);
+        x.ray_hits.push_back(found[x.order[j]]);
       const std::span<RayHit> hits(x.ray_hits);
       run.append(hits.first(hits.empty() ? 0 : finish_ray(segments[k], rays.dir, hits)),
                  has_scalar_);
@@ -375,8 +377,8 @@ void RayCaster::cast_axis_rays(const AxisRays& rays, std::span<const RaySegment>
   std::size_t h = 0;
   for (std::size_t k = 0; k < n; ++k) {
     x.ray_hits.clear();
-    for (; h < x.hits.size() && x.hits[h].ray == k; ++h)
-      x.ray_hits.push_back(x.hits[h].hit);
+    for (; h < found.size() && ray_of[h] == k; ++h)
+      x.ray_hits.push_back(found[h]);
     const std::span<RayHit> hits(x.ray_hits);
     run.append(hits.first(hits.empty() ? 0 : finish_ray(segments[k], rays.dir, hits)), has_scalar_);
   }
