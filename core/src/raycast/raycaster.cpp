@@ -443,7 +443,9 @@ std::vector<RayCaster::HitRun> RayCaster::cast_rows(const View& view, Segment se
             cast_task(task);
         },
         tbb::simple_partitioner());
-    return by_columns ? rows_from_column_blocks(view, runs, per_task) : runs;
+    // Not a conditional expression: with `runs` as one of its operands it copied every run.
+    if (by_columns) return rows_from_column_blocks(view, runs, per_task);
+    return runs;
   }
   ensure_scene();
   std::vector<RayCaster::HitRun> rows(view.height);
