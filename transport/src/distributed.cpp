@@ -9,6 +9,8 @@
 #include <string>
 #include <tuple>
 
+#include <tbb/parallel_for.h>
+
 #include "ldimesh/core/base/timing.hpp"
 
 namespace ldimesh {
@@ -75,18 +77,27 @@ Status cast_and_reduce(MPI_Comm comm, const StepBlocks& blocks, std::span<const 
       if (i == 0)
         for (const CastBlock& b : blocks[0])
           nonfinite += b.caster->nonfinite_values();
-      for (std::size_t v = 0; v < nv; ++v) {
+      // The views side by side: a view's tasks are uneven, and its last ones (then putting its
+      // runs together, on one thread) left the other thread idle, where now the next view's
+      // tasks fill it. Each fragment is the same as cast alone. What the casts build on first
+      // use is built before, so that no thread waits on it from inside the parallel loop.
+      for (std::size_t v = 0; v < nv; ++v)
+        for (const CastBlock& b : blocks[i])
+          b.caster->prepare(views[v]);
+      const std::size_t first = fragments.size();
+      fragments.resize(first + nv);
+      tbb::parallel_for(std::size_t(0), nv, [&](std::size_t v) {
         const std::uint32_t index = std::uint32_t(i * nv + v);
         std::vector<LdiFragment> parts;
         for (const CastBlock& b : blocks[i])
           parts.push_back(b.caster->cast_fragment(views[v], index, b.sub));
         if (parts.empty())
-          fragments.push_back(make_empty_fragment(views[v], index));
+          fragments[first + v] = make_empty_fragment(views[v], index);
         else if (parts.size() == 1)
-          fragments.push_back(std::move(parts.front()));
+          fragments[first + v] = std::move(parts.front());
         else
-          fragments.push_back(merge_fragments(parts, 0.0));
-      }
+          fragments[first + v] = merge_fragments(parts, 0.0);
+      });
     }
     return Status::ok();
   });

@@ -234,6 +234,13 @@ void RayCaster::prepare_axis_casters(const View& view) const {
     binding->prepare(exact_axis(view.dir));
 }
 
+void RayCaster::prepare(const View& view) const {
+  if (uses_axis_casters(view))
+    prepare_axis_casters(view);
+  else
+    ensure_scene();
+}
+
 bool RayCaster::uses_axis_casters(const View& view) const {
   return !axis_bindings_.empty() && exact_axis(view.dir) >= 0 && exact_axis(view.u) >= 0 &&
          exact_axis(view.v) >= 0;

@@ -108,6 +108,10 @@ class RayCaster {
   double build_seconds() const;
   // Whether rays along `view` go to the coherent axis casters.
   bool uses_axis_casters(const View& view) const;
+  // Builds what casting along `view` needs (the axis casters' structures for its axis, or the
+  // Embree scene), once; the casts do it themselves. Callers that cast several views at once
+  // call it for each first, so that no thread waits on a build from inside a parallel cast.
+  void prepare(const View& view) const;
 
  private:
   // Hits of a run of consecutive rays, appended in ray order.
