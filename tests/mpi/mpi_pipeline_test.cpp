@@ -10,6 +10,7 @@
 #include <cstring>
 #include <memory>
 #include <random>
+#include <stdexcept>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -456,6 +457,87 @@ TEST(MpiPipeline, RefinementFailingOnTheRootFailsOnEveryRank) {
   // The ranks are in step afterwards: a step without refinement works.
   const Status next = mesh_sphere_step(0, result);
   EXPECT_TRUE(next) << next.message();
+}
+
+// A grid source whose casts along x throw (as a failed allocation would). The step's views are
+// cast side by side: the y view (a grid's, cast in blocks of columns and put back in row order)
+// is under way when the x view fails.
+class FailingAlongX final : public FieldSource {
+ public:
+  explicit FailingAlongX(const FieldSource& inner) : inner_(inner) {}
+  Box bounds() const override { return inner_.bounds(); }
+  std::unique_ptr<GeometryBinding> bind(RTCDevice device, double isovalue) const override {
+    return inner_.bind(device, isovalue);
+  }
+  std::unique_ptr<AxisBinding> bind_axis(double isovalue) const override {
+    return std::make_unique<Binding>(inner_.bind_axis(isovalue));
+  }
+  double duplicate_tolerance() const override { return inner_.duplicate_tolerance(); }
+
+ private:
+  class Binding final : public AxisBinding {
+   public:
+    explicit Binding(std::unique_ptr<AxisBinding> inner) : inner_(std::move(inner)) {}
+    void cast(const AxisRays& rays, AxisHits& hits) const override {
+      if (rays.axis == 0) throw std::runtime_error("no memory left for the x view (test)");
+      inner_->cast(rays, hits);
+    }
+    void prepare(int axis) const override { inner_->prepare(axis); }
+    std::size_t primitive_count() const override { return inner_->primitive_count(); }
+    bool prefers_column_tasks(const View& view) const override {
+      return inner_->prefers_column_tasks(view);
+    }
+    std::uint64_t nonfinite_values() const override { return inner_->nonfinite_values(); }
+
+   private:
+    std::unique_ptr<AxisBinding> inner_;
+  };
+  const FieldSource& inner_;
+};
+
+// A cast that throws fails the step on every rank with the casting's message — no crash, no
+// rank left waiting — and the next step works.
+TEST(MpiPipeline, CastingFailingInOneViewFailsTheStepOnEveryRank) {
+  const int n = 33;
+  std::vector<float> values(std::size_t(n) * n * n);
+  const fields::MarschnerLobb ml;
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i)
+        values[(std::size_t(k) * n + j) * n + i] =
+            float(ml(-1 + 2.0 * i / (n - 1), -1 + 2.0 * j / (n - 1), -1 + 2.0 * k / (n - 1)));
+  GridBlock whole;
+  whole.dims = {n, n, n};
+  whole.values = values.data();
+  whole.origin = glm::dvec3(-1.0);
+  whole.spacing = glm::dvec3(2.0 / (n - 1));
+  const GridSource reference(whole);
+  const std::array<int, 3> blocks = block_grid(reference.bounds(), ranks());
+  const int r = rank_of();
+  const GridPart part = grid_part(
+      whole, blocks, {r % blocks[0], (r / blocks[0]) % blocks[1], r / (blocks[0] * blocks[1])});
+  const GridSource mine(part.block);
+  const FailingAlongX failing(mine);
+  const Subdomain sub{part.owned, reference.bounds()};
+  const std::vector<View> views = make_axis_views(reference.bounds(), 256);
+  DistributedResult result;
+  const Status status = mesh_distributed(MPI_COMM_WORLD, RayCaster(failing, 0.5), sub, views,
+                                         DistributedOptions{}, result);
+  EXPECT_FALSE(status);
+  const bool same = same_error_on_every_rank(status);
+  if (rank_of() == 0) {
+    EXPECT_TRUE(same) << status.message();
+    EXPECT_NE(status.message().find("ray casting: no memory left for the x view (test)"),
+              std::string::npos)
+        << status.message();
+    EXPECT_EQ(result.meshing.mesh.face_count(), 0u);
+  }
+  const Status next = mesh_distributed(MPI_COMM_WORLD, RayCaster(mine, 0.5), sub, views,
+                                       DistributedOptions{}, result);
+  EXPECT_TRUE(next) << next.message();
+  if (rank_of() == 0) {
+    EXPECT_GT(result.meshing.mesh.face_count(), 100u);
+  }
 }
 
 // Ranks that disagree on refinement (a misconfigured job) get an error, not a hang.

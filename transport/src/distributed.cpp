@@ -4,6 +4,7 @@
 #include <chrono>
 #include <climits>
 #include <cstring>
+#include <exception>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -84,20 +85,30 @@ Status cast_and_reduce(MPI_Comm comm, const StepBlocks& blocks, std::span<const 
       for (std::size_t v = 0; v < nv; ++v)
         for (const CastBlock& b : blocks[i])
           b.caster->prepare(views[v]);
+      // A view's failure is kept and rethrown after the loop (the first view's, whatever the
+      // timing), not let out of it: TBB would cancel the other views' nested loops, which then
+      // return without an exception and with tasks not run.
       const std::size_t first = fragments.size();
       fragments.resize(first + nv);
+      std::vector<std::exception_ptr> failures(nv);
       tbb::parallel_for(std::size_t(0), nv, [&](std::size_t v) {
-        const std::uint32_t index = std::uint32_t(i * nv + v);
-        std::vector<LdiFragment> parts;
-        for (const CastBlock& b : blocks[i])
-          parts.push_back(b.caster->cast_fragment(views[v], index, b.sub));
-        if (parts.empty())
-          fragments[first + v] = make_empty_fragment(views[v], index);
-        else if (parts.size() == 1)
-          fragments[first + v] = std::move(parts.front());
-        else
-          fragments[first + v] = merge_fragments(parts, 0.0);
+        try {
+          const std::uint32_t index = std::uint32_t(i * nv + v);
+          std::vector<LdiFragment> parts;
+          for (const CastBlock& b : blocks[i])
+            parts.push_back(b.caster->cast_fragment(views[v], index, b.sub));
+          if (parts.empty())
+            fragments[first + v] = make_empty_fragment(views[v], index);
+          else if (parts.size() == 1)
+            fragments[first + v] = std::move(parts.front());
+          else
+            fragments[first + v] = merge_fragments(parts, 0.0);
+        } catch (...) {
+          failures[v] = std::current_exception();
+        }
       });
+      for (const std::exception_ptr& failure : failures)
+        if (failure) std::rethrow_exception(failure);
     }
     return Status::ok();
   });

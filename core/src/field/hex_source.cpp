@@ -33,7 +33,7 @@ constexpr int kMaxRayDegree = 3 * kMaxHexOrder;  // f along a ray: degree p in e
 // variations is decided by its end values alone: a touching double root is dropped.
 constexpr double kMinWidth = 1e-12;
 // Roots are converged to this width in s, i.e. to 1e-13 of the segment, at most of the element
-// (Newton's last step bounded rather than taken: see converge).
+// (Halley's last step bounded rather than taken: see converge_lanes).
 constexpr double kConverged = 1e-13;
 // Bound on the intervals one element-ray search visits. Only a polynomial that is zero up to
 // rounding over a stretch (a plateau at the isovalue) comes near it: its coefficients are noise
@@ -1406,8 +1406,6 @@ class HexAxisBinding final : public AxisBinding {
     const double* c = active_.coefficients_of(e);
     const glm::dvec3 rd = m * rays.dir;
     const glm::dmat3 to_world_gradient = glm::transpose(m);
-    // The roots of f[0..n] along the clipped stretch [t0, t1] of pixel k's ray, with the
-    // reference gradient at parameter s from `gradient`.
     // The hit at parameter s of pixel k's clipped stretch [t0, t1], with reference gradient g.
     const auto hit_at = [&](std::size_t k, double s, double t0, double t1, glm::dvec3 g) {
       out.push_back({std::uint32_t(k),
