@@ -91,12 +91,14 @@ void evaluate_tensor(int n, const double* c, glm::dvec3 r, double* value, glm::d
 // levels run over whole rows of a slab: the same operations on each line as line by line, so
 // the same values, but independent ones side by side (the vector lanes) instead of one
 // dependent chain per line.
-template <int count, int n>
-void split_fixed(int axis, const double* c, double* left, double* right) {
+// The axis is a constant too, so that the rows' lengths are: copies of a few values inline
+// instead of a call to memmove each (perf: 7 % of a curved cast in memmove).
+template <int count, int n, int axis>
+void split_axis(const double* c, double* left, double* right) {
   constexpr int m = n + 1;
-  const int inner = axis == 0 ? count : axis == 1 ? count * m : count * m * m;
-  const int outer = axis == 0 ? m * m : axis == 1 ? m : 1;
-  double w[m * count * m * m];  // a slab: m rows of `inner` values
+  constexpr int inner = axis == 0 ? count : axis == 1 ? count * m : count * m * m;
+  constexpr int outer = axis == 0 ? m * m : axis == 1 ? m : 1;
+  double w[m * inner];  // a slab: m rows of `inner` values
   for (int o = 0; o < outer; ++o) {
     const int base = o * m * inner;
     std::copy(c + base, c + base + m * inner, w);
@@ -113,6 +115,15 @@ void split_fixed(int axis, const double* c, double* left, double* right) {
       std::copy(w + (n - r) * inner, w + (n - r + 1) * inner, right + base + (n - r) * inner);
     }
   }
+}
+template <int count, int n>
+void split_fixed(int axis, const double* c, double* left, double* right) {
+  if (axis == 0)
+    split_axis<count, n, 0>(c, left, right);
+  else if (axis == 1)
+    split_axis<count, n, 1>(c, left, right);
+  else
+    split_axis<count, n, 2>(c, left, right);
 }
 template <int count>
 void split(int n, int axis, const double* c, double* left, double* right) {
