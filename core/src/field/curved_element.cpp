@@ -131,11 +131,20 @@ void split(int n, int axis, const double* c, double* left, double* right) {
 }
 
 // Minimum and maximum of component k of a tensor with `total` values, `count` interleaved.
+// Four partial minima and maxima side by side, so that their chains overlap; the values are
+// finite (non-finite geometry is refused, a non-finite field deactivates its element), so the
+// order does not change the result.
 template <int count>
 void range(const double* c, int total, int k, double& lo, double& hi) {
-  lo = hi = c[k];
-  for (int i = k; i < total; i += count)
-    lo = std::min(lo, c[i]), hi = std::max(hi, c[i]);
+  double l[4] = {c[k], c[k], c[k], c[k]}, h[4] = {c[k], c[k], c[k], c[k]};
+  int i = k;
+  for (; i + 3 * count < total; i += 4 * count)
+    for (int a = 0; a < 4; ++a)
+      l[a] = std::min(l[a], c[i + a * count]), h[a] = std::max(h[a], c[i + a * count]);
+  for (; i < total; i += count)
+    l[0] = std::min(l[0], c[i]), h[0] = std::max(h[0], c[i]);
+  lo = std::min(std::min(l[0], l[1]), std::min(l[2], l[3]));
+  hi = std::max(std::max(h[0], h[1]), std::max(h[2], h[3]));
 }
 
 // Bounds of ∂/∂s_axis of each of the `count` interleaved components over the box: the
