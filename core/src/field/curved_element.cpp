@@ -156,16 +156,20 @@ void derivative_ranges(int n, int axis, const double* c, double* lo, double* hi)
     const int step[3] = {count, count * m, count * m * m};
     const int stride = step[axis], s1 = step[axis == 0 ? 1 : 0], s2 = step[axis == 2 ? 1 : 2];
     for (int k = 0; k < count; ++k) {
-      double l = std::numeric_limits<double>::infinity(), h = -l;
+      // One partial minimum and maximum per position along the line, so that their chains
+      // overlap (finite values: the order does not change the result).
+      double l[N], h[N];
+      for (int i = 0; i < N; ++i)
+        l[i] = std::numeric_limits<double>::infinity(), h[i] = -l[i];
       for (int a = 0; a < m; ++a)
         for (int b = 0; b < m; ++b) {
           const double* line = c + a * s1 + b * s2 + k;
           for (int i = 0; i < N; ++i) {
             const double v = N * (line[(i + 1) * stride] - line[i * stride]);
-            l = std::min(l, v), h = std::max(h, v);
+            l[i] = std::min(l[i], v), h[i] = std::max(h[i], v);
           }
         }
-      lo[k] = l, hi[k] = h;
+      lo[k] = *std::min_element(l, l + N), hi[k] = *std::max_element(h, h + N);
     }
   });
 }
