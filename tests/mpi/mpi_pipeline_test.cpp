@@ -119,26 +119,37 @@ TEST(MpiPipeline, AnalyticSurfacesGiveTheOneProcessMesh) {
   }
 }
 
-TEST(MpiPipeline, GridBlocksWithGhostLayersSplitAcrossRanks) {
-  const int n = 33;
-  std::vector<float> values(std::size_t(n) * n * n);
-  const fields::MarschnerLobb ml;
-  for (int k = 0; k < n; ++k)
-    for (int j = 0; j < n; ++j)
-      for (int i = 0; i < n; ++i)
-        values[(std::size_t(k) * n + j) * n + i] =
-            float(ml(-1 + 2.0 * i / (n - 1), -1 + 2.0 * j / (n - 1), -1 + 2.0 * k / (n - 1)));
+// Marschner–Lobb on a 33³ float grid over [−1, 1]³, and this rank's block of it (with ghost
+// layers) in a decomposition over the ranks.
+struct MlGrid {
+  static constexpr int n = 33;
+  std::vector<float> values;
   GridBlock whole;
-  whole.dims = {n, n, n};
-  whole.values = values.data();
-  whole.origin = glm::dvec3(-1.0);
-  whole.spacing = glm::dvec3(2.0 / (n - 1));
-  const GridSource reference(whole);
-  const std::array<int, 3> blocks = block_grid(reference.bounds(), ranks());
-  const int r = rank_of();
-  const GridPart part = grid_part(
-      whole, blocks, {r % blocks[0], (r / blocks[0]) % blocks[1], r / (blocks[0] * blocks[1])});
-  const GridSource mine(part.block);
+  GridPart part;
+  MlGrid(const MlGrid&) = delete;  // whole and part point into values
+  MlGrid& operator=(const MlGrid&) = delete;
+  MlGrid() : values(std::size_t(n) * n * n) {
+    const fields::MarschnerLobb ml;
+    for (int k = 0; k < n; ++k)
+      for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i)
+          values[(std::size_t(k) * n + j) * n + i] =
+              float(ml(-1 + 2.0 * i / (n - 1), -1 + 2.0 * j / (n - 1), -1 + 2.0 * k / (n - 1)));
+    whole.dims = {n, n, n};
+    whole.values = values.data();
+    whole.origin = glm::dvec3(-1.0);
+    whole.spacing = glm::dvec3(2.0 / (n - 1));
+    const std::array<int, 3> blocks = block_grid(GridSource(whole).bounds(), ranks());
+    const int r = rank_of();
+    part = grid_part(whole, blocks,
+                     {r % blocks[0], (r / blocks[0]) % blocks[1], r / (blocks[0] * blocks[1])});
+  }
+};
+
+TEST(MpiPipeline, GridBlocksWithGhostLayersSplitAcrossRanks) {
+  const MlGrid grid;
+  const GridSource reference(grid.whole), mine(grid.part.block);
+  const GridPart& part = grid.part;
   expect_distributed_equals_one_process(mine, {part.owned, reference.bounds()}, reference, 0.5, 64);
 }
 
@@ -498,25 +509,9 @@ class FailingAlongX final : public FieldSource {
 // A cast that throws fails the step on every rank with the casting's message — no crash, no
 // rank left waiting — and the next step works.
 TEST(MpiPipeline, CastingFailingInOneViewFailsTheStepOnEveryRank) {
-  const int n = 33;
-  std::vector<float> values(std::size_t(n) * n * n);
-  const fields::MarschnerLobb ml;
-  for (int k = 0; k < n; ++k)
-    for (int j = 0; j < n; ++j)
-      for (int i = 0; i < n; ++i)
-        values[(std::size_t(k) * n + j) * n + i] =
-            float(ml(-1 + 2.0 * i / (n - 1), -1 + 2.0 * j / (n - 1), -1 + 2.0 * k / (n - 1)));
-  GridBlock whole;
-  whole.dims = {n, n, n};
-  whole.values = values.data();
-  whole.origin = glm::dvec3(-1.0);
-  whole.spacing = glm::dvec3(2.0 / (n - 1));
-  const GridSource reference(whole);
-  const std::array<int, 3> blocks = block_grid(reference.bounds(), ranks());
-  const int r = rank_of();
-  const GridPart part = grid_part(
-      whole, blocks, {r % blocks[0], (r / blocks[0]) % blocks[1], r / (blocks[0] * blocks[1])});
-  const GridSource mine(part.block);
+  const MlGrid grid;
+  const GridSource reference(grid.whole), mine(grid.part.block);
+  const GridPart& part = grid.part;
   const FailingAlongX failing(mine);
   const Subdomain sub{part.owned, reference.bounds()};
   const std::vector<View> views = make_axis_views(reference.bounds(), 256);
