@@ -170,8 +170,8 @@ inline RayHit axis_root(const double corner[8], int a, int step, glm::dvec3 loca
                         glm::dvec3 dir) {
   const double s = fa / (fa - fb);
   local[a] = step > 0 ? s : 1.0 - s;
-  return {s == 1.0 ? tb : ta + s * (tb - ta),
-          unit_normal(trilinear_gradient(corner, local, inv_size), dir), 0.0f};
+  return {segment_point(ta, tb, s), unit_normal(trilinear_gradient(corner, local, inv_size), dir),
+          0.0f};
 }
 
 // The roots of one cell c on the ray segment [ta, tb], appended to `hits`: the cell's cubic
@@ -212,8 +212,7 @@ void solve_cell(const GridView<T>& g, double iso, glm::dvec3 org, glm::dvec3 dir
   const glm::dvec3 inv_size = 1.0 / size;
   for (int r = 0; r < n; ++r) {
     const glm::dvec3 p = a + roots[r] * (b - a);
-    // A root at the very end of the segment keeps tb exactly (the half-open rule compares it).
-    const double t = roots[r] == 1.0 ? tb : ta + roots[r] * (tb - ta);
+    const double t = segment_point(ta, tb, roots[r]);
     hits.push_back({t, unit_normal(trilinear_gradient(corner, p, inv_size), dir), 0.0f});
   }
 }
@@ -507,8 +506,7 @@ class GridAxisBinding final : public AxisBinding {
     // world axis is the block's faster one in memory (neighbouring rays then read the same
     // cache lines).
     const View* view = rays.lattice;
-    if (view &&
-        std::abs(g_.strides[exact_axis(view->v)]) < std::abs(g_.strides[exact_axis(view->u)])) {
+    if (view && prefers_column_tasks(*view)) {
       const std::size_t width = std::size_t(rays.width()), rows = rays.rays.size() / width;
       for (std::size_t i = 0; i < width; ++i)
         for (std::size_t j = 0; j < rows; ++j)

@@ -816,11 +816,6 @@ template <int n, class Exact, class Bracket>
   }
 }
 
-// Where in [s0, s1] the root u ∈ [0, 1] of the piece on it lies (its end exactly where u is).
-inline double piece_root(double s0, double s1, double u) {
-  return u == 1.0 ? s1 : s0 + (s1 - s0) * u;
-}
-
 // The tolerance in u of a piece [s0, s1] of a segment.
 inline double piece_tolerance(double s0, double s1) {
   return kConverged / (s1 - s0);
@@ -831,7 +826,7 @@ inline double piece_tolerance(double s0, double s1) {
 template <int n, class Found>
 [[gnu::always_inline]] inline void bernstein_roots(const double* c, Found found) {
   isolate_roots<n>(c, found, [&](const double* piece, double s0, double s1) {
-    found(piece_root(s0, s1, converge<n>(piece, piece_tolerance(s0, s1))));
+    found(segment_point(s0, s1, converge<n>(piece, piece_tolerance(s0, s1))));
   });
 }
 
@@ -895,7 +890,7 @@ void intersect_element(const ActiveElement& e, const double* c, glm::dvec3 org, 
     if constexpr (n > 0)  // else constant along the ray: no crossing
       bernstein_roots<n>(f, [&](double s) {
         const glm::dvec3 g = to_world_gradient * evaluate_tensor<P>(c, a + s * (b - a)).gradient;
-        hits.push_back({s == 1.0 ? t1 : t0 + s * (t1 - t0), unit_normal(g, dir), 0.0f});
+        hits.push_back({segment_point(t0, t1, s), unit_normal(g, dir), 0.0f});
       });
   });
 }
@@ -1195,7 +1190,7 @@ void converge_roots(std::vector<LineRoot<P>>& roots) {
       c[l] = lane[l]->c, tol[l] = piece_tolerance(lane[l]->s0, lane[l]->s1);
     converge_lanes<P, L>(c, tol, u);
     for (int l = 0; l < L; ++l)
-      lane[l]->s = piece_root(lane[l]->s0, lane[l]->s1, u[l]);
+      lane[l]->s = segment_point(lane[l]->s0, lane[l]->s1, u[l]);
   };
   LineRoot<P>* lane[kLanes];
   int filled = 0;
@@ -1408,9 +1403,9 @@ class HexAxisBinding final : public AxisBinding {
     const glm::dmat3 to_world_gradient = glm::transpose(m);
     // The hit at parameter s of pixel k's clipped stretch [t0, t1], with reference gradient g.
     const auto hit_at = [&](std::size_t k, double s, double t0, double t1, glm::dvec3 g) {
-      out.push_back({std::uint32_t(k),
-                     {s == 1.0 ? t1 : t0 + s * (t1 - t0),
-                      unit_normal(to_world_gradient * g, rays.dir), 0.0f}});
+      out.push_back(
+          {std::uint32_t(k),
+           {segment_point(t0, t1, s), unit_normal(to_world_gradient * g, rays.dir), 0.0f}});
     };
     // The roots of f[0..n] along the clipped stretch [t0, t1] of pixel k's ray, with the
     // reference gradient at parameter s from `gradient`.

@@ -562,8 +562,7 @@ RayHitList RayCaster::cast_points(const View& view, std::span<const glm::dvec2> 
     return crosses;
   };
   const bool axis = uses_axis_casters(view);
-  if (!axis && n > 0) ensure_scene();
-  if (axis) prepare_axis_casters(view);
+  if (n > 0) prepare(view);
   constexpr std::size_t kChunk = 256;
   std::vector<RayCaster::HitRun> chunks((n + kChunk - 1) / kChunk);
   tbb::parallel_for(std::size_t(0), chunks.size(), [&](std::size_t c) {

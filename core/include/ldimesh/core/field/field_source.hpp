@@ -65,6 +65,13 @@ inline bool positive(double v) {
   return v >= 0.0;
 }
 
+// The point at parameter s ∈ [0, 1] of the stretch [a, b] (a ray's depths, a piece of one): b
+// exactly at s = 1, so that a root on a stretch's end keeps the end's exact value (the half-open
+// rules compare it).
+inline double segment_point(double a, double b, double s) {
+  return s == 1.0 ? b : a + s * (b - a);
+}
+
 // The unit normal for a gradient at a hit of a ray along `dir`; at singular points (∇f = 0) it
 // faces the viewer.
 inline glm::vec3 unit_normal(glm::dvec3 grad, glm::dvec3 dir) {

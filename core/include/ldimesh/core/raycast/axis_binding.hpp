@@ -54,7 +54,6 @@ class AxisHits {
   }
   void clear() { size_ = 0; }
   std::size_t size() const { return size_; }
-  bool empty() const { return size_ == 0; }
   // Hit k's ray (its index in AxisRays::rays) and the hit.
   std::span<const std::uint32_t> rays() const { return {rays_.get(), size_}; }
   std::span<const RayHit> hits() const { return {hits_.get(), size_}; }
