@@ -179,27 +179,12 @@ struct Interval {
 };
 
 // One box of a subdivision: its extent in ξ. Its coefficients lie in a pool at its position in
-// the stack: geometry values interleaved (degree q), then the field (degree p).
+// the stack.
 struct Box {
   glm::dvec3 lo, hi;
 };
 
-// Splits the coefficients of the box in pool slot `slot` (just popped from the top of its
-// stack: `components` geometry values per coefficient interleaved, then the field) in half along
-// `axis`: the right half keeps the slot (it is looked at after the left one's whole subtree), the
-// left one takes the next; the caller pushes both, the left on top.
-template <int components>
-void split_coefficients(const Element& e, int axis, std::size_t slot, std::vector<double>& pool) {
-  const int qm = e.q + 1, pm = e.p + 1, gq = qm * qm * qm;
-  const std::size_t size = std::size_t(components * gq + pm * pm * pm);
-  const std::size_t left = (slot + 1) * size;
-  if (pool.size() < left + size) pool.resize(left + size);
-  double* own = &pool[slot * size];
-  split<components>(e.q, axis, own, &pool[left], own);
-  split<1>(e.p, axis, own + components * gq, &pool[left + components * gq], own + components * gq);
-}
-
-// The halves of box b along `axis`, left then right (their coefficients: split_coefficients).
+// The halves of box b along `axis`, left then right.
 std::pair<Box, Box> halves(const Box& b, int axis) {
   Box left = b, right = b;
   const double mid = 0.5 * (b.lo[axis] + b.hi[axis]);
@@ -233,6 +218,114 @@ double field_margin(const Element& e) {
   for (int m = 0; m < pm * pm * pm; ++m)
     scale = std::max(scale, std::abs(e.field[m]));
   return kSignMargin * scale;
+}
+
+// Raises the degree of the tensor c (degree a per axis, `count` interleaved components) to n ≥ a
+// along every axis (out: (n + 1)³ coefficients of `count` components): the same polynomial.
+// Coefficient i of degree n is Σ_j C(a, j) C(n − a, i − j) / C(n, i) c_j along each axis.
+void elevate(const double* c, int a, int n, int count, double* out) {
+  const auto binomial = [](int top, int k) {
+    double r = 1.0;
+    for (int i = 1; i <= k; ++i)
+      r = r * double(top - k + i) / double(i);
+    return r;
+  };
+  const int am = a + 1, nm = n + 1;
+  std::array<double, kMaxNodes * kMaxNodes> matrix{};  // [i][j]
+  for (int i = 0; i <= n; ++i)
+    for (int j = std::max(0, i - (n - a)); j <= std::min(a, i); ++j)
+      matrix[i * kMaxNodes + j] = binomial(a, j) * binomial(n - a, i - j) / binomial(n, i);
+  // Axis by axis: sizes (along ξ, η, ζ) grow from am to nm one axis at a time.
+  std::vector<double> from(c, c + std::size_t(count) * am * am * am), to;
+  int size[3] = {am, am, am};
+  for (int axis = 0; axis < 3; ++axis) {
+    int next[3] = {size[0], size[1], size[2]};
+    next[axis] = nm;
+    to.assign(std::size_t(count) * next[0] * next[1] * next[2], 0.0);
+    for (int k = 0; k < next[2]; ++k)
+      for (int j = 0; j < next[1]; ++j)
+        for (int i = 0; i < next[0]; ++i) {
+          const int at[3] = {i, j, k};
+          for (int l = 0; l < am; ++l) {
+            const double w = matrix[at[axis] * kMaxNodes + l];
+            if (w == 0.0) continue;
+            int src[3] = {i, j, k};
+            src[axis] = l;
+            const std::size_t from_index =
+                std::size_t(count) * (src[0] + size[0] * (src[1] + size[1] * src[2]));
+            const std::size_t to_index = std::size_t(count) * (i + next[0] * (j + next[1] * k));
+            for (int v = 0; v < count; ++v)
+              to[to_index + v] += w * from[from_index + v];
+          }
+        }
+    from.swap(to);
+    std::copy(next, next + 3, size);
+  }
+  std::copy(from.begin(), from.end(), out);
+}
+
+// H(ξ) = (n₁·(x − o), n₂·(x − o), f) of the rays of one direction d, Newton's method on it and
+// the hit at a solution.
+struct RaySystem {
+  const Element& e;
+  glm::dvec3 d, n1, n2;
+  double dd;  // |d|²: t = d·(x − o) / |d|², for any length of d
+
+  RaySystem(const Element& element, glm::dvec3 dir) : e(element), d(dir), dd(glm::dot(dir, dir)) {
+    ray_frame(d, n1, n2);
+  }
+
+  // H at ξ for the ray from o, and its Jacobian in ξ (rows n₁ᵀ J, n₂ᵀ J, ∇f ᵀ).
+  void system(glm::dvec3 o, glm::dvec3 xi, glm::dvec3& h, glm::dmat3& jac, Sample& s) const {
+    s = evaluate(e, xi);
+    const glm::dvec3 r = s.x - o;
+    h = glm::dvec3(glm::dot(n1, r), glm::dot(n2, r), s.f);
+    // glm is column-major: jac[col][row].
+    const glm::dvec3 row1 = glm::transpose(s.jacobian) * n1, row2 = glm::transpose(s.jacobian) * n2;
+    for (int c = 0; c < 3; ++c)
+      jac[c] = glm::dvec3(row1[c], row2[c], s.gradient[c]);
+  }
+
+  // Newton's method from xi until the next step would fall below 10⁻¹⁵ (in ξ): the step itself
+  // does, or quadratic convergence predicts it (the next step ≈ C |step|², C estimated from the
+  // last two steps), or the steps stop shrinking (rounding's floor near an ill-conditioned
+  // solution) — or 30 steps. s is the sample at the last point. False where the Jacobian is
+  // singular on the way.
+  bool newton(glm::dvec3 o, glm::dvec3& xi, Sample& s) const {
+    glm::dvec3 h;
+    glm::dmat3 jac;
+    double previous = std::numeric_limits<double>::infinity();
+    for (int iter = 0; iter < 30; ++iter) {
+      system(o, xi, h, jac, s);
+      if (!(std::abs(glm::determinant(jac)) > 0.0)) return false;
+      const glm::dvec3 step = glm::inverse(jac) * h;
+      xi -= step;
+      const double size = std::max({std::abs(step.x), std::abs(step.y), std::abs(step.z)});
+      if (!(size > 1e-15)) break;
+      if (size < 1e-6 && size * size * size < 1e-15 * previous * previous) break;
+      if (size < 1e-9 && size > 0.9 * previous) break;
+      previous = size;
+    }
+    system(o, xi, h, jac, s);
+    return true;
+  }
+
+  // The hit at the solution sampled by s of the ray from o, if its depth lies in [t0, t1]:
+  // ∇ₓf = J⁻ᵀ ∇ξf.
+  bool hit(const RayRef& ray, const Sample& s, RayHit& out) const {
+    const double t = glm::dot(d, s.x - ray.org) / dd;
+    if (!(t >= ray.t0 && t <= ray.t1)) return false;
+    const glm::dvec3 g = glm::transpose(glm::inverse(s.jacobian)) * s.gradient;
+    out = {t, unit_normal(g, d), 0.0f};
+    return true;
+  }
+};
+
+// Whether ξ lies in the box [lo, hi] grown by kBoxMargin of its width (and 10⁻¹²).
+bool inside(glm::dvec3 xi, glm::dvec3 lo, glm::dvec3 hi) {
+  const glm::dvec3 pad = kBoxMargin * (hi - lo) + 1e-12;
+  return glm::all(glm::greaterThanEqual(xi, lo - pad)) &&
+         glm::all(glm::lessThanEqual(xi, hi + pad));
 }
 
 }  // namespace
@@ -281,28 +374,35 @@ namespace {
 
 // The search from one box [lo, hi] of the reference cube for many rays of one direction d,
 // given the geometry's ((x, y, z) triples) and the field's coefficients on the box (the whole
-// element, or a piece), and the margin of the field's sign tests. Hits go to `out` with their
-// ray's index, per ray in increasing t, a solution found from two boxes (on their shared face)
-// once.
+// element, or a piece), both of degree n, and the margin of the field's sign tests. Hits go to
+// `out` with their ray's index, per ray in increasing t, a solution found from two boxes (on
+// their shared face) once.
 //
 // The rays share the search's boxes: the subdivision does not depend on the ray (the split axis
-// comes from the Jacobian's ranges over the box, and the planes' derivatives do not depend on
-// where the ray passes), so each box's coefficients, ranges, Jacobian and centre value are
-// found once for all the rays still in it, and each ray only takes its own tests — its planes
-// against the box's ranges, the Krawczyk test with its own H(m), Newton (its depth range is
-// tested on the root box). Every ray visits the boxes its own search would.
-void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double* geometry,
+// comes from the box's coefficients, and the planes' derivatives do not depend on where the ray
+// passes), so each box's coefficients, ranges and preconditioned system are found once for all
+// the rays still in it, and each ray only takes its own tests — its planes against the box's
+// ranges, the preconditioned ranges and the Krawczyk test shifted by its offsets, Newton (its
+// depth range is tested on the root box).
+//
+// Preconditioning (as in Bernstein subdivision solvers, e.g. Mourrain & Pavone 2009): on each
+// box the system's components are replaced by G = Y H, Y the inverse of H's Jacobian at the
+// box's centre, whose coefficients on the box are those combinations of the components'. Near
+// a solution G is close to the identity map, so its ranges bound it tightly: a box far from a
+// ray's solution is excluded by them, and the Krawczyk test — with the ranges of ∂G/∂s, not
+// the product of Y with H's Jacobian ranges taken apart — proves one solution in a box much
+// larger than without.
+void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, int n, const double* geometry,
             const double* field, double f_margin, glm::dvec3 d, std::span<const RayRef> rays,
             AxisHits& out) {
-  const int qm = e.q + 1, pm = e.p + 1;
-  const int gq = qm * qm * qm, fp = pm * pm * pm;
-  // A box's coefficients: the geometry's two plane components n₁·x, n₂·x interleaved, then the
-  // field. The depth d·x is tested on the root box only (pruning; a solution outside [t0, t1]
-  // is dropped where it is recorded), which saves a third of the geometry's splits.
-  const std::size_t box_size = std::size_t(2 * gq + fp);
-  glm::dvec3 n1, n2;
-  ray_frame(d, n1, n2);
-  const double dd = glm::dot(d, d);  // t = d·(x − o) / |d|², for any length of d
+  const int m = n + 1, total = m * m * m;
+  // A box's coefficients: the geometry's two plane components n₁·x, n₂·x and the field,
+  // interleaved. The depth d·x is tested on the root box only (pruning; a solution outside
+  // [t0, t1] is dropped where it is recorded), which saves a quarter of the splits.
+  const std::size_t box_size = std::size_t(3 * total);
+  const RaySystem sys(e, d);
+  const glm::dvec3 n1 = sys.n1, n2 = sys.n2;
+  const double dd = sys.dd;
 
   // A box of the search and the rays still in it (lists[begin, end)).
   struct Entry {
@@ -316,32 +416,32 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
     double g_margin = 0.0, g_scale = 0.0;
     std::size_t boxes = 0;
   };
-  thread_local std::vector<double> pool;
+  thread_local std::vector<double> pool, combined;
   thread_local std::vector<Entry> stack;
   thread_local std::vector<std::uint32_t> lists;
   thread_local std::vector<State> state;
   thread_local std::vector<std::pair<std::uint32_t, RayHit>> found;
   pool.resize(box_size);
+  combined.resize(box_size);
   stack.clear();
   lists.clear();
   found.clear();
   state.assign(rays.size(), State{});
   double depth_lo = std::numeric_limits<double>::infinity(), depth_hi = -depth_lo;
-  for (int m = 0; m < gq; ++m) {
-    const glm::dvec3 x(geometry[3 * m], geometry[3 * m + 1], geometry[3 * m + 2]);
-    pool[2 * m] = glm::dot(n1, x), pool[2 * m + 1] = glm::dot(n2, x);
+  for (int k = 0; k < total; ++k) {
+    const glm::dvec3 x(geometry[3 * k], geometry[3 * k + 1], geometry[3 * k + 2]);
+    pool[3 * k] = glm::dot(n1, x), pool[3 * k + 1] = glm::dot(n2, x), pool[3 * k + 2] = field[k];
     const double depth = glm::dot(d, x) / dd;
     depth_lo = std::min(depth_lo, depth), depth_hi = std::max(depth_hi, depth);
   }
-  std::copy(field, field + fp, pool.begin() + 2 * gq);
   for (std::size_t r = 0; r < rays.size(); ++r) {
     const glm::dvec3 o = rays[r].org;
     State& st = state[r];
     st.offset = glm::dvec3(glm::dot(n1, o), glm::dot(n2, o), glm::dot(d, o) / dd);
-    for (int m = 0; m < gq; ++m)
+    for (int k = 0; k < total; ++k)
       st.g_scale = std::max(
           st.g_scale,
-          glm::length(glm::dvec3(geometry[3 * m], geometry[3 * m + 1], geometry[3 * m + 2]) - o));
+          glm::length(glm::dvec3(geometry[3 * k], geometry[3 * k + 1], geometry[3 * k + 2]) - o));
     st.g_margin = kSignMargin * st.g_scale;
     // The depth range of the root box against the ray's [t0, t1].
     if (depth_hi - st.offset[2] < rays[r].t0 - st.g_margin ||
@@ -351,39 +451,9 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
   }
   if (!lists.empty()) stack.push_back({{lo_box, hi_box}, 0, lists.size()});
 
-  // H, and its Jacobian in global ξ, at a reference point: Newton's iteration for ray r.
-  const auto system = [&](glm::dvec3 o, glm::dvec3 xi, glm::dvec3& h, glm::dmat3& jac, Sample& s) {
-    s = evaluate(e, xi);
-    const glm::dvec3 r = s.x - o;
-    h = glm::dvec3(glm::dot(n1, r), glm::dot(n2, r), s.f);
-    // Rows: n₁ᵀ J, n₂ᵀ J, ∇f ᵀ (glm is column-major: jac[col][row]).
-    const glm::dvec3 row1 = glm::transpose(s.jacobian) * n1, row2 = glm::transpose(s.jacobian) * n2;
-    for (int c = 0; c < 3; ++c)
-      jac[c] = glm::dvec3(row1[c], row2[c], s.gradient[c]);
-  };
   const auto record = [&](std::uint32_t r, const Sample& s) {
-    const double t = glm::dot(d, s.x - rays[r].org) / dd;
-    if (!(t >= rays[r].t0 && t <= rays[r].t1)) return;
-    // ∇ₓf = J⁻ᵀ ∇ξf.
-    const glm::dvec3 g = glm::transpose(glm::inverse(s.jacobian)) * s.gradient;
-    found.push_back({r, {t, unit_normal(g, d), 0.0f}});
-  };
-  // Newton from the box centre; true with the converged point inside the box (with margin).
-  const auto newton = [&](glm::dvec3 o, const Box& b, glm::dvec3& xi, Sample& s) {
-    xi = 0.5 * (b.lo + b.hi);
-    glm::dvec3 h;
-    glm::dmat3 jac;
-    for (int iter = 0; iter < 30; ++iter) {
-      system(o, xi, h, jac, s);
-      if (!(std::abs(glm::determinant(jac)) > 0.0)) return false;
-      const glm::dvec3 step = glm::inverse(jac) * h;
-      xi -= step;
-      if (!(std::max({std::abs(step.x), std::abs(step.y), std::abs(step.z)}) > 1e-15)) break;
-    }
-    system(o, xi, h, jac, s);
-    const glm::dvec3 pad = kBoxMargin * (b.hi - b.lo) + 1e-12;
-    return glm::all(glm::greaterThanEqual(xi, b.lo - pad)) &&
-           glm::all(glm::lessThanEqual(xi, b.hi + pad));
+    RayHit h;
+    if (sys.hit(rays[r], s, h)) found.push_back({r, h});
   };
 
   while (!stack.empty()) {
@@ -392,114 +462,106 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
     const Box b = entry.box;
     stack.pop_back();  // pushed back below when it is split
     const double* c = &pool[slot * box_size];
-    const double* f = c + 2 * gq;
-    for (std::size_t m = entry.begin; m < entry.end; ++m)
-      ++state[lists[m]].boxes;
+    for (std::size_t k = entry.begin; k < entry.end; ++k)
+      ++state[lists[k]].boxes;
     // The convex hull tests: the field (the same for every ray), then each ray's two planes.
-    double lo, hi;
-    range<1>(f, fp, 0, lo, hi);
-    if (lo > f_margin || hi < -f_margin) continue;
-    double plo[2], phi[2];
-    for (int k = 0; k < 2; ++k)
-      range<2>(c, 2 * gq, k, plo[k], phi[k]);
+    double lo[3], hi[3];
+    range<3>(c, 3 * total, 2, lo[2], hi[2]);
+    if (lo[2] > f_margin || hi[2] < -f_margin) continue;
+    range<3>(c, 3 * total, 0, lo[0], hi[0]);
+    range<3>(c, 3 * total, 1, lo[1], hi[1]);
     const std::size_t in_box = lists.size();
-    for (std::size_t m = entry.begin; m < entry.end; ++m) {
-      const std::uint32_t r = lists[m];
+    for (std::size_t k = entry.begin; k < entry.end; ++k) {
+      const std::uint32_t r = lists[k];
       const State& st = state[r];
-      const bool misses =
-          plo[0] - st.offset[0] > st.g_margin || phi[0] - st.offset[0] < -st.g_margin ||
-          plo[1] - st.offset[1] > st.g_margin || phi[1] - st.offset[1] < -st.g_margin;
+      const bool misses = lo[0] - st.offset[0] > st.g_margin ||
+                          hi[0] - st.offset[0] < -st.g_margin ||
+                          lo[1] - st.offset[1] > st.g_margin || hi[1] - st.offset[1] < -st.g_margin;
       if (!misses) lists.push_back(r);
     }
     if (lists.size() == in_box) continue;
 
-    // The Jacobian of H over the box in its own coordinates s ∈ [0, 1]³, as intervals
-    // [row][col]: the derivatives' Bernstein coefficients.
-    Interval jbox[3][3];
-    for (int col = 0; col < 3; ++col) {
-      double glo[2], ghi[2];
-      derivative_ranges<2>(e.q, col, c, glo, ghi);
-      for (int row = 0; row < 2; ++row)
-        jbox[row][col] = {glo[row], ghi[row]};
-      derivative_ranges<1>(e.p, col, f, &jbox[2][col].lo, &jbox[2][col].hi);
-    }
-    // The Krawczyk test (centre m = ½): with Y = J(m)⁻¹, K = m − Y H(m) + (I − Y J(box))
-    // (box − m). K ⊂ box: exactly one solution in the box; K ∩ box = ∅: none. It can only
-    // succeed where each row of J(box) is narrow beside its size, so it is tried only there.
-    // Only H(m) depends on the ray.
-    bool narrow = true;
-    for (int row = 0; row < 3 && narrow; ++row) {
-      double spread = 0.0, size = 0.0;
-      for (int col = 0; col < 3; ++col)
-        spread += jbox[row][col].hi - jbox[row][col].lo,
-            size = std::max({size, std::abs(jbox[row][col].lo), std::abs(jbox[row][col].hi)});
-      narrow = spread < size;
-    }
-    bool krawczyk = false;
-    double centre_value[3], radius[3] = {0.0, 0.0, 0.0};
-    glm::dmat3 y(0.0);
-    if (narrow) {
-      glm::dvec3 hg[3];
-      double gv[2];
-      glm::dvec3 gg[2];
-      evaluate_tensor<2>(e.q, c, glm::dvec3(0.5), gv, gg);
-      centre_value[0] = gv[0], centre_value[1] = gv[1], hg[0] = gg[0], hg[1] = gg[1];
-      evaluate_tensor<1>(e.p, f, glm::dvec3(0.5), &centre_value[2], &hg[2]);
-      glm::dmat3 jm;  // rows: the components' gradients in s
-      for (int col = 0; col < 3; ++col)
-        jm[col] = glm::dvec3(hg[0][col], hg[1][col], hg[2][col]);
-      const double det = glm::determinant(jm);
-      const double norms = glm::length(hg[0]) * glm::length(hg[1]) * glm::length(hg[2]);
-      if (std::abs(det) > 1e-12 * norms) {
-        krawczyk = true;
-        y = glm::inverse(jm);
-        for (int i = 0; i < 3; ++i)
-          for (int j = 0; j < 3; ++j) {
-            // (I − Y J)_ij as an interval.
-            double mlo = i == j ? 1.0 : 0.0, mhi = mlo;
-            for (int k = 0; k < 3; ++k) {
-              const double yik = y[k][i];
-              const double a = yik * jbox[k][j].lo, bb = yik * jbox[k][j].hi;
-              mlo -= std::max(a, bb), mhi -= std::min(a, bb);
-            }
-            radius[i] += 0.5 * std::max(std::abs(mlo), std::abs(mhi));
-          }
+    // The preconditioned system G = Y H on the box, in its coordinates s ∈ [0, 1]³.
+    double value[3];
+    glm::dvec3 gradient[3];
+    evaluate_tensor<3>(n, c, glm::dvec3(0.5), value, gradient);
+    glm::dmat3 jm;  // rows: the components' gradients in s (glm: jm[col][row])
+    for (int col = 0; col < 3; ++col)
+      jm[col] = glm::dvec3(gradient[0][col], gradient[1][col], gradient[2][col]);
+    const double norms =
+        glm::length(gradient[0]) * glm::length(gradient[1]) * glm::length(gradient[2]);
+    const bool preconditioned = std::abs(glm::determinant(jm)) > 1e-12 * norms;
+    glm::dmat3 y(1.0);
+    Interval g_range[3], g_jacobian[3][3];  // G's ranges and ∂G_row/∂s_col's
+    double radius[3] = {0.0, 0.0, 0.0}, plane_weight[3], field_weight[3];
+    glm::dvec3 yh(0.0);  // Y H(m) without the ray's offsets
+    if (preconditioned) {
+      y = glm::inverse(jm);
+      for (int k = 0; k < total; ++k) {
+        const glm::dvec3 g = y * glm::dvec3(c[3 * k], c[3 * k + 1], c[3 * k + 2]);
+        combined[3 * k] = g.x, combined[3 * k + 1] = g.y, combined[3 * k + 2] = g.z;
+      }
+      yh = y * glm::dvec3(value[0], value[1], value[2]);
+      for (int row = 0; row < 3; ++row) {
+        range<3>(combined.data(), 3 * total, row, g_range[row].lo, g_range[row].hi);
+        // Rounding in the combinations scales with the parts combined.
+        plane_weight[row] = std::abs(y[0][row]) + std::abs(y[1][row]);
+        field_weight[row] = std::abs(y[2][row]);
+      }
+      for (int col = 0; col < 3; ++col) {
+        double dlo[3], dhi[3];
+        derivative_ranges<3>(n, col, combined.data(), dlo, dhi);
+        for (int row = 0; row < 3; ++row) {
+          g_jacobian[row][col] = {dlo[row], dhi[row]};
+          // (I − ∂G/∂s)_row,col over the box, times the half-width ½ of B − m.
+          const double identity = row == col ? 1.0 : 0.0;
+          radius[row] +=
+              0.5 * std::max(std::abs(identity - dlo[row]), std::abs(identity - dhi[row]));
+        }
       }
     }
     const glm::dvec3 width = b.hi - b.lo;
     const bool narrowest = std::max({width.x, width.y, width.z}) < kMinWidth;
     const std::size_t split_begin = lists.size();
-    for (std::size_t m = in_box; m < split_begin; ++m) {
-      const std::uint32_t r = lists[m];
-      const glm::dvec3 o = rays[r].org;
-      bool unique = false, none = false;
-      if (krawczyk) {
-        const glm::dvec3 yh = y * glm::dvec3(centre_value[0] - state[r].offset[0],
-                                             centre_value[1] - state[r].offset[1], centre_value[2]);
+    for (std::size_t k = in_box; k < split_begin; ++k) {
+      const std::uint32_t r = lists[k];
+      const State& st = state[r];
+      bool unique = false;
+      glm::dvec3 centre(0.5);
+      if (preconditioned) {
+        // G for this ray: Y (H − (n₁·o, n₂·o, 0)); its ranges exclude 0 (beyond the margins):
+        // no solution in the box.
+        bool none = false;
         unique = true;
-        for (int i = 0; i < 3 && !none; ++i) {
-          const double klo = 0.5 - yh[i] - radius[i], khi = 0.5 - yh[i] + radius[i];
-          // None: K misses the box grown by the margin; one: K lies inside the box shrunk by
-          // it (no outward rounding in K, so the margin stands in for it).
+        for (int row = 0; row < 3 && !none; ++row) {
+          const double shift = y[0][row] * st.offset[0] + y[1][row] * st.offset[1];
+          const double margin = plane_weight[row] * st.g_margin + field_weight[row] * f_margin +
+                                kSignMargin * std::abs(shift);
+          if (g_range[row].lo - shift > margin || g_range[row].hi - shift < -margin) none = true;
+          // The Krawczyk operator K = m − G(m) + (I − ∂G/∂s(B)) (B − m): disjoint from the box
+          // grown by kBoxMargin, no solution; inside it shrunk by that, exactly one (no outward
+          // rounding in K: the margin stands in for it).
+          centre[row] = 0.5 - (yh[row] - shift);
+          const double klo = centre[row] - radius[row], khi = centre[row] + radius[row];
           if (khi < -kBoxMargin || klo > 1.0 + kBoxMargin) none = true;
           if (!(klo > kBoxMargin && khi < 1.0 - kBoxMargin)) unique = false;
         }
+        if (none) continue;
       }
-      if (none) continue;
       // Out of budget, the boxes still pending are not split again (each gets Newton's point
       // or its centre), so that no solution that was still pending is lost.
-      const bool smallest = narrowest || state[r].boxes > std::size_t(kMaxBoxes);
+      const bool smallest = narrowest || st.boxes > std::size_t(kMaxBoxes);
       if (unique || smallest) {
-        glm::dvec3 xi;
+        // Newton from K's centre (one Newton step from the box's centre; within the box when
+        // unique), its point kept when it converges inside the box (with margin).
+        glm::dvec3 xi = b.lo + glm::clamp(centre, 0.0, 1.0) * width;
         Sample s;
-        if (newton(o, b, xi, s)) {
+        if (sys.newton(rays[r].org, xi, s) && inside(xi, b.lo, b.hi)) {
           record(r, s);
           continue;
         }
         if (smallest) {
-          xi = 0.5 * (b.lo + b.hi);
-          s = evaluate(e, xi);
-          record(r, s);
+          record(r, evaluate(e, 0.5 * (b.lo + b.hi)));
           continue;
         }
         // Proved but Newton left the box (rounding at its edge): split it like any other.
@@ -508,22 +570,24 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
     }
     if (lists.size() == split_begin) continue;
 
-    // Split along the axis the components vary most along (each row of J(box) weighed by its
-    // own size, so that the planes and the field count alike): the left half is looked at next.
-    double score[3] = {0.0, 0.0, 0.0};
-    for (int row = 0; row < 3; ++row) {
-      double mag[3], total = 0.0;
-      for (int col = 0; col < 3; ++col)
-        total += mag[col] = std::max(std::abs(jbox[row][col].lo), std::abs(jbox[row][col].hi));
-      if (total > 0.0)
-        for (int col = 0; col < 3; ++col)
-          score[col] += mag[col] / total;
-    }
-    int axis = score[0] >= score[1] && score[0] >= score[2] ? 0 : score[1] >= score[2] ? 1 : 2;
-    // Never one axis alone down to nothing (every box must shrink to kMinWidth).
+    // Split along the axis along which G is furthest from linear (the widest ranges of its
+    // derivatives along it; without preconditioning, the widest axis), never leaving one axis a
+    // thousand times wider than the split one (every box must shrink to kMinWidth). The left
+    // half is looked at next.
     const int widest = width.x >= width.y && width.x >= width.z ? 0 : width.y >= width.z ? 1 : 2;
-    if (width[axis] < 1e-3 * width[widest]) axis = widest;
-    split_coefficients<2>(e, axis, slot, pool);
+    int axis = widest;
+    if (preconditioned) {
+      double score[3] = {0.0, 0.0, 0.0};
+      for (int col = 0; col < 3; ++col)
+        for (int row = 0; row < 3; ++row)
+          score[col] += g_jacobian[row][col].hi - g_jacobian[row][col].lo;
+      axis = score[0] >= score[1] && score[0] >= score[2] ? 0 : score[1] >= score[2] ? 1 : 2;
+      if (width[axis] < 1e-3 * width[widest]) axis = widest;
+    }
+    const std::size_t left = (slot + 1) * box_size;
+    if (pool.size() < left + box_size) pool.resize(left + box_size);
+    double* own = &pool[slot * box_size];
+    split<3>(n, axis, own, &pool[left], own);
     const auto [lb, rb] = halves(b, axis);
     stack.push_back({rb, split_begin, lists.size()});
     stack.push_back({lb, split_begin, lists.size()});
@@ -546,50 +610,69 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
 
 void intersect(const Element& e, glm::dvec3 o, glm::dvec3 d, double t0, double t1,
                std::vector<RayHit>& hits) {
-  // The search with one ray (the Embree path's callback, any direction).
+  // The search with one ray (the Embree path's callback, any direction), on the element's
+  // coefficients raised to one degree.
+  const int n = std::max(e.p, e.q), nm = n + 1;
+  thread_local std::vector<double> geometry, field;
+  geometry.resize(std::size_t(3 * nm * nm * nm));
+  field.resize(std::size_t(nm * nm * nm));
+  elevate(&e.geometry[0].x, e.q, n, 3, geometry.data());
+  elevate(e.field, e.p, n, 1, field.data());
   thread_local AxisHits out;
   out.clear();
   const RayRef ray{0, o, t0, t1};
-  search(e, glm::dvec3(0.0), glm::dvec3(1.0), &e.geometry[0].x, e.field, field_margin(e), d,
+  search(e, glm::dvec3(0.0), glm::dvec3(1.0), n, geometry.data(), field.data(), field_margin(e), d,
          std::span(&ray, 1), out);
   hits.insert(hits.end(), out.hits().begin(), out.hits().end());
 }
 
 Pieces::Pieces(const Element& e, double width) {
-  const int qm = e.q + 1, pm = e.p + 1;
-  gq_ = qm * qm * qm, fp_ = pm * pm * pm;
-  const std::size_t size = std::size_t(3 * gq_ + fp_);
+  n_ = std::max(e.p, e.q);
+  const int nm = n_ + 1;
+  total_ = nm * nm * nm;
+  const std::size_t size = std::size_t(4 * total_);
   field_margin_ = field_margin(e);
   const double margin = field_margin_;
-  // Depth first over boxes as in the search; a box's coefficients at its stack position.
+  // Depth first over boxes as in the search; a box's coefficients at its stack position:
+  // geometry and field interleaved, raised to one degree.
   std::vector<Box> stack{{glm::dvec3(0.0), glm::dvec3(1.0)}};
-  std::vector<double> pool(size);
-  for (int m = 0; m < gq_; ++m)
+  std::vector<double> pool(size), geometry(3 * std::size_t(total_)),
+      values(total_ + std::size_t(0));
+  elevate(&e.geometry[0].x, e.q, n_, 3, geometry.data());
+  elevate(e.field, e.p, n_, 1, values.data());
+  for (int k = 0; k < total_; ++k) {
     for (int a = 0; a < 3; ++a)
-      pool[3 * m + a] = e.geometry[m][a];
-  std::copy(e.field, e.field + fp_, pool.begin() + 3 * gq_);
+      pool[4 * k + a] = geometry[3 * k + a];
+    pool[4 * k + 3] = values[k];
+  }
   while (!stack.empty()) {
     const std::size_t slot = stack.size() - 1;
     const Box b = stack.back();
     stack.pop_back();
     const double* c = &pool[slot * size];
     double lo, hi;
-    range<1>(c + 3 * gq_, fp_, 0, lo, hi);
+    range<4>(c, 4 * total_, 3, lo, hi);
     if (lo > margin || hi < -margin) continue;  // no point of the box is on the isosurface
     const glm::dvec3 w = b.hi - b.lo;
     const int axis = w.x >= w.y && w.x >= w.z ? 0 : w.y >= w.z ? 1 : 2;
     if (w[axis] <= width) {
-      Piece piece{b.lo, b.hi, glm::dvec3(0.0), glm::dvec3(0.0)};
-      piece.world_lo = piece.world_hi = glm::dvec3(c[0], c[1], c[2]);
-      for (int m = 0; m < gq_; ++m) {  // the geometry's convex hull
-        const glm::dvec3 x(c[3 * m], c[3 * m + 1], c[3 * m + 2]);
+      Piece piece{b.lo, b.hi, glm::dvec3(c[0], c[1], c[2]), glm::dvec3(c[0], c[1], c[2])};
+      for (int k = 0; k < total_; ++k) {  // the geometry's convex hull
+        const glm::dvec3 x(c[4 * k], c[4 * k + 1], c[4 * k + 2]);
         piece.world_lo = glm::min(piece.world_lo, x), piece.world_hi = glm::max(piece.world_hi, x);
       }
       pieces_.push_back(piece);
-      coefficients_.insert(coefficients_.end(), c, c + size);
+      // Stored apart: the geometry's triples, then the field.
+      for (int k = 0; k < total_; ++k)
+        coefficients_.insert(coefficients_.end(), c + 4 * k, c + 4 * k + 3);
+      for (int k = 0; k < total_; ++k)
+        coefficients_.push_back(c[4 * k + 3]);
       continue;
     }
-    split_coefficients<3>(e, axis, slot, pool);
+    const std::size_t left = (slot + 1) * size;
+    if (pool.size() < left + size) pool.resize(left + size);
+    double* own = &pool[slot * size];
+    split<4>(n_, axis, own, &pool[left], own);
     const auto [lb, rb] = halves(b, axis);
     stack.push_back(rb);
     stack.push_back(lb);
@@ -598,8 +681,8 @@ Pieces::Pieces(const Element& e, double width) {
 
 void Pieces::intersect(const Element& e, std::size_t k, std::span<const RayRef> rays, glm::dvec3 d,
                        AxisHits& hits) const {
-  const double* c = &coefficients_[k * std::size_t(3 * gq_ + fp_)];
-  search(e, pieces_[k].lo, pieces_[k].hi, c, c + 3 * gq_, field_margin_, d, rays, hits);
+  const double* c = &coefficients_[k * std::size_t(4 * total_)];
+  search(e, pieces_[k].lo, pieces_[k].hi, n_, c, c + 3 * total_, field_margin_, d, rays, hits);
 }
 
 }  // namespace ldimesh::curved
