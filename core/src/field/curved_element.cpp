@@ -431,17 +431,23 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, int n, const
   for (int k = 0; k < total; ++k) {
     const glm::dvec3 x(geometry[3 * k], geometry[3 * k + 1], geometry[3 * k + 2]);
     pool[3 * k] = glm::dot(n1, x), pool[3 * k + 1] = glm::dot(n2, x), pool[3 * k + 2] = field[k];
-    const double depth = glm::dot(d, x) / dd;
+    const double depth = glm::dot(d, x);
     depth_lo = std::min(depth_lo, depth), depth_hi = std::max(depth_hi, depth);
   }
+  depth_lo /= dd, depth_hi /= dd;  // the same values: division by dd > 0 is monotone
   for (std::size_t r = 0; r < rays.size(); ++r) {
     const glm::dvec3 o = rays[r].org;
     State& st = state[r];
     st.offset = glm::dvec3(glm::dot(n1, o), glm::dot(n2, o), glm::dot(d, o) / dd);
-    for (int k = 0; k < total; ++k)
-      st.g_scale = std::max(
-          st.g_scale,
-          glm::length(glm::dvec3(geometry[3 * k], geometry[3 * k + 1], geometry[3 * k + 2]) - o));
+    // The largest distance from o to a coefficient: the root of the largest square (the same
+    // value, the root being monotone).
+    double square = 0.0;
+    for (int k = 0; k < total; ++k) {
+      const double x = geometry[3 * k] - o.x, y = geometry[3 * k + 1] - o.y,
+                   z = geometry[3 * k + 2] - o.z;
+      square = std::max(square, x * x + y * y + z * z);
+    }
+    st.g_scale = std::sqrt(square);
     st.g_margin = kSignMargin * st.g_scale;
     // The depth range of the root box against the ray's [t0, t1].
     if (depth_hi - st.offset[2] < rays[r].t0 - st.g_margin ||
