@@ -220,50 +220,6 @@ double field_margin(const Element& e) {
   return kSignMargin * scale;
 }
 
-// Raises the degree of the tensor c (degree a per axis, `count` interleaved components) to n ≥ a
-// along every axis (out: (n + 1)³ coefficients of `count` components): the same polynomial.
-// Coefficient i of degree n is Σ_j C(a, j) C(n − a, i − j) / C(n, i) c_j along each axis.
-void elevate(const double* c, int a, int n, int count, double* out) {
-  const auto binomial = [](int top, int k) {
-    double r = 1.0;
-    for (int i = 1; i <= k; ++i)
-      r = r * double(top - k + i) / double(i);
-    return r;
-  };
-  const int am = a + 1, nm = n + 1;
-  std::array<double, kMaxNodes * kMaxNodes> matrix{};  // [i][j]
-  for (int i = 0; i <= n; ++i)
-    for (int j = std::max(0, i - (n - a)); j <= std::min(a, i); ++j)
-      matrix[i * kMaxNodes + j] = binomial(a, j) * binomial(n - a, i - j) / binomial(n, i);
-  // Axis by axis: sizes (along ξ, η, ζ) grow from am to nm one axis at a time.
-  std::vector<double> from(c, c + std::size_t(count) * am * am * am), to;
-  int size[3] = {am, am, am};
-  for (int axis = 0; axis < 3; ++axis) {
-    int next[3] = {size[0], size[1], size[2]};
-    next[axis] = nm;
-    to.assign(std::size_t(count) * next[0] * next[1] * next[2], 0.0);
-    for (int k = 0; k < next[2]; ++k)
-      for (int j = 0; j < next[1]; ++j)
-        for (int i = 0; i < next[0]; ++i) {
-          const int at[3] = {i, j, k};
-          for (int l = 0; l < am; ++l) {
-            const double w = matrix[at[axis] * kMaxNodes + l];
-            if (w == 0.0) continue;
-            int src[3] = {i, j, k};
-            src[axis] = l;
-            const std::size_t from_index =
-                std::size_t(count) * (src[0] + size[0] * (src[1] + size[1] * src[2]));
-            const std::size_t to_index = std::size_t(count) * (i + next[0] * (j + next[1] * k));
-            for (int v = 0; v < count; ++v)
-              to[to_index + v] += w * from[from_index + v];
-          }
-        }
-    from.swap(to);
-    std::copy(next, next + 3, size);
-  }
-  std::copy(from.begin(), from.end(), out);
-}
-
 // H(ξ) = (n₁·(x − o), n₂·(x − o), f) of the rays of one direction d, Newton's method on it and
 // the hit at a solution.
 struct RaySystem {
@@ -392,14 +348,16 @@ namespace {
 // ray's solution is excluded by them, and the Krawczyk test — with the ranges of ∂G/∂s, not
 // the product of Y with H's Jacobian ranges taken apart — proves one solution in a box much
 // larger than without.
-void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, int n, const double* geometry,
+void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double* geometry,
             const double* field, double f_margin, glm::dvec3 d, std::span<const RayRef> rays,
             AxisHits& out) {
-  const int m = n + 1, total = m * m * m;
-  // A box's coefficients: the geometry's two plane components n₁·x, n₂·x and the field,
-  // interleaved. The depth d·x is tested on the root box only (pruning; a solution outside
-  // [t0, t1] is dropped where it is recorded), which saves a quarter of the splits.
-  const std::size_t box_size = std::size_t(3 * total);
+  const int qm = e.q + 1, pm = e.p + 1;
+  const int gq = qm * qm * qm, fp = pm * pm * pm;
+  // A box's coefficients: the geometry's two plane components n₁·x, n₂·x interleaved, then the
+  // field, each of its own degree. The depth d·x is tested on the root box only (pruning; a
+  // solution outside [t0, t1] is dropped where it is recorded), which saves a third of the
+  // geometry's splits.
+  const std::size_t box_size = std::size_t(2 * gq + fp);
   const RaySystem sys(e, d);
   const glm::dvec3 n1 = sys.n1, n2 = sys.n2;
   const double dd = sys.dd;
@@ -422,19 +380,20 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, int n, const
   thread_local std::vector<State> state;
   thread_local std::vector<std::pair<std::uint32_t, RayHit>> found;
   pool.resize(box_size);
-  combined.resize(box_size);
+  combined.resize(std::size_t(3 * gq));
   stack.clear();
   lists.clear();
   found.clear();
   state.assign(rays.size(), State{});
   double depth_lo = std::numeric_limits<double>::infinity(), depth_hi = -depth_lo;
-  for (int k = 0; k < total; ++k) {
+  for (int k = 0; k < gq; ++k) {
     const glm::dvec3 x(geometry[3 * k], geometry[3 * k + 1], geometry[3 * k + 2]);
-    pool[3 * k] = glm::dot(n1, x), pool[3 * k + 1] = glm::dot(n2, x), pool[3 * k + 2] = field[k];
+    pool[2 * k] = glm::dot(n1, x), pool[2 * k + 1] = glm::dot(n2, x);
     const double depth = glm::dot(d, x);
     depth_lo = std::min(depth_lo, depth), depth_hi = std::max(depth_hi, depth);
   }
   depth_lo /= dd, depth_hi /= dd;  // the same values: division by dd > 0 is monotone
+  std::copy(field, field + fp, pool.begin() + 2 * gq);
   for (std::size_t r = 0; r < rays.size(); ++r) {
     const glm::dvec3 o = rays[r].org;
     State& st = state[r];
@@ -442,7 +401,7 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, int n, const
     // The largest distance from o to a coefficient: the root of the largest square (the same
     // value, the root being monotone).
     double square = 0.0;
-    for (int k = 0; k < total; ++k) {
+    for (int k = 0; k < gq; ++k) {
       const double x = geometry[3 * k] - o.x, y = geometry[3 * k + 1] - o.y,
                    z = geometry[3 * k + 2] - o.z;
       square = std::max(square, x * x + y * y + z * z);
@@ -468,14 +427,15 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, int n, const
     const Box b = entry.box;
     stack.pop_back();  // pushed back below when it is split
     const double* c = &pool[slot * box_size];
+    const double* f = c + 2 * gq;
     for (std::size_t k = entry.begin; k < entry.end; ++k)
       ++state[lists[k]].boxes;
     // The convex hull tests: the field (the same for every ray), then each ray's two planes.
     double lo[3], hi[3];
-    range<3>(c, 3 * total, 2, lo[2], hi[2]);
+    range<1>(f, fp, 0, lo[2], hi[2]);
     if (lo[2] > f_margin || hi[2] < -f_margin) continue;
-    range<3>(c, 3 * total, 0, lo[0], hi[0]);
-    range<3>(c, 3 * total, 1, lo[1], hi[1]);
+    range<2>(c, 2 * gq, 0, lo[0], hi[0]);
+    range<2>(c, 2 * gq, 1, lo[1], hi[1]);
     const std::size_t in_box = lists.size();
     for (std::size_t k = entry.begin; k < entry.end; ++k) {
       const std::uint32_t r = lists[k];
@@ -490,7 +450,8 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, int n, const
     // The preconditioned system G = Y H on the box, in its coordinates s ∈ [0, 1]³.
     double value[3];
     glm::dvec3 gradient[3];
-    evaluate_tensor<3>(n, c, glm::dvec3(0.5), value, gradient);
+    evaluate_tensor<2>(e.q, c, glm::dvec3(0.5), value, gradient);
+    evaluate_tensor<1>(e.p, f, glm::dvec3(0.5), &value[2], &gradient[2]);
     glm::dmat3 jm;  // rows: the components' gradients in s (glm: jm[col][row])
     for (int col = 0; col < 3; ++col)
       jm[col] = glm::dvec3(gradient[0][col], gradient[1][col], gradient[2][col]);
@@ -503,28 +464,58 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, int n, const
     glm::dvec3 yh(0.0);  // Y H(m) without the ray's offsets
     if (preconditioned) {
       y = glm::inverse(jm);
-      for (int k = 0; k < total; ++k) {
-        const glm::dvec3 g = y * glm::dvec3(c[3 * k], c[3 * k + 1], c[3 * k + 2]);
-        combined[3 * k] = g.x, combined[3 * k + 1] = g.y, combined[3 * k + 2] = g.z;
-      }
       yh = y * glm::dvec3(value[0], value[1], value[2]);
       for (int row = 0; row < 3; ++row) {
-        range<3>(combined.data(), 3 * total, row, g_range[row].lo, g_range[row].hi);
         // Rounding in the combinations scales with the parts combined.
         plane_weight[row] = std::abs(y[0][row]) + std::abs(y[1][row]);
         field_weight[row] = std::abs(y[2][row]);
       }
-      for (int col = 0; col < 3; ++col) {
-        double dlo[3], dhi[3];
-        derivative_ranges<3>(n, col, combined.data(), dlo, dhi);
+      if (e.p == e.q) {
+        // G's coefficients: each row's combination of the box's three.
+        for (int k = 0; k < gq; ++k)
+          for (int row = 0; row < 3; ++row)
+            combined[3 * k + row] =
+                y[0][row] * c[2 * k] + y[1][row] * c[2 * k + 1] + y[2][row] * f[k];
+        for (int row = 0; row < 3; ++row)
+          range<3>(combined.data(), 3 * gq, row, g_range[row].lo, g_range[row].hi);
+        for (int col = 0; col < 3; ++col) {
+          double dlo[3], dhi[3];
+          derivative_ranges<3>(e.q, col, combined.data(), dlo, dhi);
+          for (int row = 0; row < 3; ++row)
+            g_jacobian[row][col] = {dlo[row], dhi[row]};
+        }
+      } else {
+        // Degrees apart: the planes' part of each row, Y_r0 n₁·x + Y_r1 n₂·x (degree q), and
+        // its field part Y_r2 f (degree p) bounded apart and the bounds added. (Raising one
+        // to the other's degree per box cost more than the tighter bounds saved.)
+        for (int k = 0; k < gq; ++k)
+          for (int row = 0; row < 3; ++row)
+            combined[3 * k + row] = y[0][row] * c[2 * k] + y[1][row] * c[2 * k + 1];
+        const auto scaled = [](double w, double lo, double hi) {
+          return w >= 0.0 ? Interval{w * lo, w * hi} : Interval{w * hi, w * lo};
+        };
         for (int row = 0; row < 3; ++row) {
-          g_jacobian[row][col] = {dlo[row], dhi[row]};
-          // (I − ∂G/∂s)_row,col over the box, times the half-width ½ of B − m.
-          const double identity = row == col ? 1.0 : 0.0;
-          radius[row] +=
-              0.5 * std::max(std::abs(identity - dlo[row]), std::abs(identity - dhi[row]));
+          range<3>(combined.data(), 3 * gq, row, g_range[row].lo, g_range[row].hi);
+          const Interval part = scaled(y[2][row], lo[2], hi[2]);
+          g_range[row].lo += part.lo, g_range[row].hi += part.hi;
+        }
+        for (int col = 0; col < 3; ++col) {
+          double dlo[3], dhi[3], flo, fhi;
+          derivative_ranges<3>(e.q, col, combined.data(), dlo, dhi);
+          derivative_ranges<1>(e.p, col, f, &flo, &fhi);
+          for (int row = 0; row < 3; ++row) {
+            const Interval part = scaled(y[2][row], flo, fhi);
+            g_jacobian[row][col] = {dlo[row] + part.lo, dhi[row] + part.hi};
+          }
         }
       }
+      // (I − ∂G/∂s)_row,col over the box, times the half-width ½ of B − m.
+      for (int row = 0; row < 3; ++row)
+        for (int col = 0; col < 3; ++col) {
+          const double identity = row == col ? 1.0 : 0.0;
+          radius[row] += 0.5 * std::max(std::abs(identity - g_jacobian[row][col].lo),
+                                        std::abs(identity - g_jacobian[row][col].hi));
+        }
     }
     const glm::dvec3 width = b.hi - b.lo;
     const bool narrowest = std::max({width.x, width.y, width.z}) < kMinWidth;
@@ -536,7 +527,9 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, int n, const
       glm::dvec3 centre(0.5);
       if (preconditioned) {
         // G for this ray: Y (H − (n₁·o, n₂·o, 0)); its ranges exclude 0 (beyond the margins):
-        // no solution in the box.
+        // no solution in the box. The margin bounds the rounding in G's values, which the
+        // preconditioner scales with the box: in a box 10⁻⁹ wide, rounding of 10⁻¹⁶ in x is
+        // 10⁻⁷ in G.
         bool none = false;
         unique = true;
         for (int row = 0; row < 3 && !none; ++row) {
@@ -545,12 +538,13 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, int n, const
                                 kSignMargin * std::abs(shift);
           if (g_range[row].lo - shift > margin || g_range[row].hi - shift < -margin) none = true;
           // The Krawczyk operator K = m − G(m) + (I − ∂G/∂s(B)) (B − m): disjoint from the box
-          // grown by kBoxMargin, no solution; inside it shrunk by that, exactly one (no outward
-          // rounding in K: the margin stands in for it).
+          // grown by kBoxMargin (and G(m)'s rounding), no solution; inside it shrunk by that,
+          // exactly one (no outward rounding in K: the margin stands in for it).
           centre[row] = 0.5 - (yh[row] - shift);
           const double klo = centre[row] - radius[row], khi = centre[row] + radius[row];
-          if (khi < -kBoxMargin || klo > 1.0 + kBoxMargin) none = true;
-          if (!(klo > kBoxMargin && khi < 1.0 - kBoxMargin)) unique = false;
+          const double pad = kBoxMargin + margin;
+          if (khi < -pad || klo > 1.0 + pad) none = true;
+          if (!(klo > pad && khi < 1.0 - pad)) unique = false;
         }
         if (none) continue;
       }
@@ -590,10 +584,13 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, int n, const
       axis = score[0] >= score[1] && score[0] >= score[2] ? 0 : score[1] >= score[2] ? 1 : 2;
       if (width[axis] < 1e-3 * width[widest]) axis = widest;
     }
+    // The right half keeps the slot (it is looked at after the left one's whole subtree), the
+    // left one takes the next.
     const std::size_t left = (slot + 1) * box_size;
     if (pool.size() < left + box_size) pool.resize(left + box_size);
     double* own = &pool[slot * box_size];
-    split<3>(n, axis, own, &pool[left], own);
+    split<2>(e.q, axis, own, &pool[left], own);
+    split<1>(e.p, axis, own + 2 * gq, &pool[left + 2 * gq], own + 2 * gq);
     const auto [lb, rb] = halves(b, axis);
     stack.push_back({rb, split_begin, lists.size()});
     stack.push_back({lb, split_begin, lists.size()});
@@ -616,69 +613,54 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, int n, const
 
 void intersect(const Element& e, glm::dvec3 o, glm::dvec3 d, double t0, double t1,
                std::vector<RayHit>& hits) {
-  // The search with one ray (the Embree path's callback, any direction), on the element's
-  // coefficients raised to one degree.
-  const int n = std::max(e.p, e.q), nm = n + 1;
-  thread_local std::vector<double> geometry, field;
-  geometry.resize(std::size_t(3 * nm * nm * nm));
-  field.resize(std::size_t(nm * nm * nm));
-  elevate(&e.geometry[0].x, e.q, n, 3, geometry.data());
-  elevate(e.field, e.p, n, 1, field.data());
+  // The search with one ray (the Embree path's callback, any direction).
   thread_local AxisHits out;
   out.clear();
   const RayRef ray{0, o, t0, t1};
-  search(e, glm::dvec3(0.0), glm::dvec3(1.0), n, geometry.data(), field.data(), field_margin(e), d,
+  search(e, glm::dvec3(0.0), glm::dvec3(1.0), &e.geometry[0].x, e.field, field_margin(e), d,
          std::span(&ray, 1), out);
   hits.insert(hits.end(), out.hits().begin(), out.hits().end());
 }
 
 Pieces::Pieces(const Element& e, double width) {
-  n_ = std::max(e.p, e.q);
-  const int nm = n_ + 1;
-  total_ = nm * nm * nm;
-  const std::size_t size = std::size_t(4 * total_);
+  const int qm = e.q + 1, pm = e.p + 1;
+  gq_ = qm * qm * qm, fp_ = pm * pm * pm;
+  const std::size_t size = std::size_t(3 * gq_ + fp_);
   field_margin_ = field_margin(e);
   const double margin = field_margin_;
-  // Depth first over boxes as in the search; a box's coefficients at its stack position:
-  // geometry and field interleaved, raised to one degree.
+  // Depth first over boxes as in the search; a box's coefficients at its stack position.
   std::vector<Box> stack{{glm::dvec3(0.0), glm::dvec3(1.0)}};
-  std::vector<double> pool(size), geometry(3 * std::size_t(total_)),
-      values(total_ + std::size_t(0));
-  elevate(&e.geometry[0].x, e.q, n_, 3, geometry.data());
-  elevate(e.field, e.p, n_, 1, values.data());
-  for (int k = 0; k < total_; ++k) {
+  std::vector<double> pool(size);
+  for (int m = 0; m < gq_; ++m)
     for (int a = 0; a < 3; ++a)
-      pool[4 * k + a] = geometry[3 * k + a];
-    pool[4 * k + 3] = values[k];
-  }
+      pool[3 * m + a] = e.geometry[m][a];
+  std::copy(e.field, e.field + fp_, pool.begin() + 3 * gq_);
   while (!stack.empty()) {
     const std::size_t slot = stack.size() - 1;
     const Box b = stack.back();
     stack.pop_back();
     const double* c = &pool[slot * size];
     double lo, hi;
-    range<4>(c, 4 * total_, 3, lo, hi);
+    range<1>(c + 3 * gq_, fp_, 0, lo, hi);
     if (lo > margin || hi < -margin) continue;  // no point of the box is on the isosurface
     const glm::dvec3 w = b.hi - b.lo;
     const int axis = w.x >= w.y && w.x >= w.z ? 0 : w.y >= w.z ? 1 : 2;
     if (w[axis] <= width) {
       Piece piece{b.lo, b.hi, glm::dvec3(c[0], c[1], c[2]), glm::dvec3(c[0], c[1], c[2])};
-      for (int k = 0; k < total_; ++k) {  // the geometry's convex hull
-        const glm::dvec3 x(c[4 * k], c[4 * k + 1], c[4 * k + 2]);
+      for (int m = 0; m < gq_; ++m) {  // the geometry's convex hull
+        const glm::dvec3 x(c[3 * m], c[3 * m + 1], c[3 * m + 2]);
         piece.world_lo = glm::min(piece.world_lo, x), piece.world_hi = glm::max(piece.world_hi, x);
       }
       pieces_.push_back(piece);
-      // Stored apart: the geometry's triples, then the field.
-      for (int k = 0; k < total_; ++k)
-        coefficients_.insert(coefficients_.end(), c + 4 * k, c + 4 * k + 3);
-      for (int k = 0; k < total_; ++k)
-        coefficients_.push_back(c[4 * k + 3]);
+      coefficients_.insert(coefficients_.end(), c, c + size);
       continue;
     }
+    // The right half keeps the slot, the left one takes the next (looked at first).
     const std::size_t left = (slot + 1) * size;
     if (pool.size() < left + size) pool.resize(left + size);
     double* own = &pool[slot * size];
-    split<4>(n_, axis, own, &pool[left], own);
+    split<3>(e.q, axis, own, &pool[left], own);
+    split<1>(e.p, axis, own + 3 * gq_, &pool[left + 3 * gq_], own + 3 * gq_);
     const auto [lb, rb] = halves(b, axis);
     stack.push_back(rb);
     stack.push_back(lb);
@@ -687,8 +669,8 @@ Pieces::Pieces(const Element& e, double width) {
 
 void Pieces::intersect(const Element& e, std::size_t k, std::span<const RayRef> rays, glm::dvec3 d,
                        AxisHits& hits) const {
-  const double* c = &coefficients_[k * std::size_t(4 * total_)];
-  search(e, pieces_[k].lo, pieces_[k].hi, n_, c, c + 3 * total_, field_margin_, d, rays, hits);
+  const double* c = &coefficients_[k * std::size_t(3 * gq_ + fp_)];
+  search(e, pieces_[k].lo, pieces_[k].hi, c, c + 3 * gq_, field_margin_, d, rays, hits);
 }
 
 }  // namespace ldimesh::curved

@@ -66,11 +66,10 @@ class Pieces {
                  AxisHits& hits) const;
 
  private:
-  int n_ = 0;                  // the degree of the pieces' coefficients: max(p, q)
-  int total_ = 0;              // (n + 1)³
+  int gq_ = 0, fp_ = 0;
   double field_margin_ = 0.0;  // the sign tests' margin, from the whole element's field
   std::vector<Piece> pieces_;
-  std::vector<double> coefficients_;  // per piece: 3 (n + 1)³ geometry, then (n + 1)³ field
+  std::vector<double> coefficients_;  // per piece: 3 (q + 1)³ geometry, then (p + 1)³ field
 };
 
 // x(ξ), the Jacobian ∂x/∂ξ (columns ∂x/∂ξ_k) and f(ξ), ∇ξf at a reference point (f and
