@@ -462,6 +462,14 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
     Interval g_range[3], g_jacobian[3][3];  // G's ranges and ∂G_row/∂s_col's
     double radius[3] = {0.0, 0.0, 0.0}, plane_weight[3], field_weight[3];
     glm::dvec3 yh(0.0);  // Y H(m) without the ray's offsets
+    const auto scaled = [](double w, double lo, double hi) {
+      return w >= 0.0 ? Interval{w * lo, w * hi} : Interval{w * hi, w * lo};
+    };
+    // The rounding in row r of G for a ray, whose plane offsets add `shift` to it.
+    const auto g_margin = [&](int row, const State& st, double shift) {
+      return plane_weight[row] * st.g_margin + field_weight[row] * f_margin +
+             kSignMargin * std::abs(shift);
+    };
     if (preconditioned) {
       y = glm::inverse(jm);
       yh = y * glm::dvec3(value[0], value[1], value[2]);
@@ -478,12 +486,6 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
                 y[0][row] * c[2 * k] + y[1][row] * c[2 * k + 1] + y[2][row] * f[k];
         for (int row = 0; row < 3; ++row)
           range<3>(combined.data(), 3 * gq, row, g_range[row].lo, g_range[row].hi);
-        for (int col = 0; col < 3; ++col) {
-          double dlo[3], dhi[3];
-          derivative_ranges<3>(e.q, col, combined.data(), dlo, dhi);
-          for (int row = 0; row < 3; ++row)
-            g_jacobian[row][col] = {dlo[row], dhi[row]};
-        }
       } else {
         // Degrees apart: the planes' part of each row, Y_r0 n₁·x + Y_r1 n₂·x (degree q), and
         // its field part Y_r2 f (degree p) bounded apart and the bounds added. (Raising one
@@ -491,14 +493,37 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
         for (int k = 0; k < gq; ++k)
           for (int row = 0; row < 3; ++row)
             combined[3 * k + row] = y[0][row] * c[2 * k] + y[1][row] * c[2 * k + 1];
-        const auto scaled = [](double w, double lo, double hi) {
-          return w >= 0.0 ? Interval{w * lo, w * hi} : Interval{w * hi, w * lo};
-        };
         for (int row = 0; row < 3; ++row) {
           range<3>(combined.data(), 3 * gq, row, g_range[row].lo, g_range[row].hi);
           const Interval part = scaled(y[2][row], lo[2], hi[2]);
           g_range[row].lo += part.lo, g_range[row].hi += part.hi;
         }
+      }
+      // G for each ray: Y (H − (n₁·o, n₂·o, 0)); its ranges exclude 0 (beyond the margins): no
+      // solution in the box. The margin bounds the rounding in G's values, which the
+      // preconditioner scales with the box: in a box 10⁻⁹ wide, rounding of 10⁻¹⁶ in x is 10⁻⁷
+      // in G. Tested before G's derivatives are bounded: often no ray is left.
+      std::size_t kept = in_box;
+      for (std::size_t k = in_box; k < lists.size(); ++k) {
+        const State& st = state[lists[k]];
+        bool none = false;
+        for (int row = 0; row < 3; ++row) {
+          const double shift = y[0][row] * st.offset[0] + y[1][row] * st.offset[1];
+          const double margin = g_margin(row, st, shift);
+          none = none || g_range[row].lo - shift > margin || g_range[row].hi - shift < -margin;
+        }
+        if (!none) lists[kept++] = lists[k];
+      }
+      lists.resize(kept);
+      if (kept == in_box) continue;
+      if (e.p == e.q) {
+        for (int col = 0; col < 3; ++col) {
+          double dlo[3], dhi[3];
+          derivative_ranges<3>(e.q, col, combined.data(), dlo, dhi);
+          for (int row = 0; row < 3; ++row)
+            g_jacobian[row][col] = {dlo[row], dhi[row]};
+        }
+      } else {
         for (int col = 0; col < 3; ++col) {
           double dlo[3], dhi[3], flo, fhi;
           derivative_ranges<3>(e.q, col, combined.data(), dlo, dhi);
@@ -526,17 +551,11 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
       bool unique = false;
       glm::dvec3 centre(0.5);
       if (preconditioned) {
-        // G for this ray: Y (H − (n₁·o, n₂·o, 0)); its ranges exclude 0 (beyond the margins):
-        // no solution in the box. The margin bounds the rounding in G's values, which the
-        // preconditioner scales with the box: in a box 10⁻⁹ wide, rounding of 10⁻¹⁶ in x is
-        // 10⁻⁷ in G.
         bool none = false;
         unique = true;
         for (int row = 0; row < 3 && !none; ++row) {
           const double shift = y[0][row] * st.offset[0] + y[1][row] * st.offset[1];
-          const double margin = plane_weight[row] * st.g_margin + field_weight[row] * f_margin +
-                                kSignMargin * std::abs(shift);
-          if (g_range[row].lo - shift > margin || g_range[row].hi - shift < -margin) none = true;
+          const double margin = g_margin(row, st, shift);
           // The Krawczyk operator K = m − G(m) + (I − ∂G/∂s(B)) (B − m): disjoint from the box
           // grown by kBoxMargin (and G(m)'s rounding), no solution; inside it shrunk by that,
           // exactly one (no outward rounding in K: the margin stands in for it).
