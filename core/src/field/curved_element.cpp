@@ -245,8 +245,8 @@ struct RaySystem {
   // Newton's method from xi until the next step would fall below 10⁻¹⁵ (in ξ): the step itself
   // does, or quadratic convergence predicts it (the next step ≈ C |step|², C estimated from the
   // last two steps), or the steps stop shrinking (rounding's floor near an ill-conditioned
-  // solution) — or 30 steps. s is the sample at the last point. False where the Jacobian is
-  // singular on the way.
+  // solution) — or 30 steps. s is the sample at the last point (see below). False where the
+  // Jacobian is singular on the way.
   bool newton(glm::dvec3 o, glm::dvec3& xi, Sample& s) const {
     glm::dvec3 h;
     glm::dmat3 jac;
@@ -257,9 +257,15 @@ struct RaySystem {
       const glm::dvec3 step = glm::inverse(jac) * h;
       xi -= step;
       const double size = std::max({std::abs(step.x), std::abs(step.y), std::abs(step.z)});
-      if (!(size > 1e-15)) break;
-      if (size < 1e-6 && size * size * size < 1e-15 * previous * previous) break;
-      if (size < 1e-9 && size > 0.9 * previous) break;
+      if (!(size > 1e-15) || (size < 1e-6 && size * size * size < 1e-15 * previous * previous) ||
+          (size < 1e-9 && size > 0.9 * previous)) {
+        // The sample moved along with the last step to first order (its error is of the order
+        // of the step squared, below 10⁻¹² of the element), instead of evaluated again; the
+        // derivatives are those before the step.
+        s.x -= s.jacobian * step;
+        s.f -= glm::dot(s.gradient, step);
+        return true;
+      }
       previous = size;
     }
     system(o, xi, h, jac, s);
