@@ -192,6 +192,12 @@ std::pair<Box, Box> halves(const Box& b, int axis) {
   return {left, right};
 }
 
+// Whether ξ lies in the box [lo, hi] shrunk by kBoxMargin of its width.
+bool strictly_inside(glm::dvec3 xi, glm::dvec3 lo, glm::dvec3 hi) {
+  const glm::dvec3 pad = kBoxMargin * (hi - lo);
+  return glm::all(glm::greaterThan(xi, lo + pad)) && glm::all(glm::lessThan(xi, hi - pad));
+}
+
 // The ray's frame: d and two unit normals to it.
 void ray_frame(glm::dvec3 d, glm::dvec3& n1, glm::dvec3& n2) {
   const glm::dvec3 a = std::abs(d.x) <= std::abs(d.y) && std::abs(d.x) <= std::abs(d.z)
@@ -245,9 +251,10 @@ struct RaySystem {
   // Newton's method from xi until the next step would fall below 10⁻¹⁵ (in ξ): the step itself
   // does, or quadratic convergence predicts it (the next step ≈ C |step|², C estimated from the
   // last two steps), or the steps stop shrinking (rounding's floor near an ill-conditioned
-  // solution) — or 30 steps. s is the sample at the last point (see below). False where the
-  // Jacobian is singular on the way.
-  bool newton(glm::dvec3 o, glm::dvec3& xi, Sample& s) const {
+  // solution) — or 30 steps (then `converged`, if given, is false). s is the sample at the last
+  // point (see below). False where the Jacobian is singular on the way.
+  bool newton(glm::dvec3 o, glm::dvec3& xi, Sample& s, bool* converged = nullptr) const {
+    if (converged) *converged = false;
     glm::dvec3 h;
     glm::dmat3 jac;
     double previous = std::numeric_limits<double>::infinity();
@@ -264,6 +271,7 @@ struct RaySystem {
         // derivatives are those before the step.
         s.x -= s.jacobian * step;
         s.f -= glm::dot(s.gradient, step);
+        if (converged) *converged = true;
         return true;
       }
       previous = size;
@@ -548,6 +556,13 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
                                         std::abs(identity - g_jacobian[row][col].hi));
         }
     }
+    // G is one-to-one on the box when every matrix in ∂G/∂s(B) is within less than 1 of the
+    // identity (row sums, the ∞-norm: all of them regular; G(a) − G(b) = M (a − b) with M's
+    // rows from ∂G/∂s at points between a and b), so it has at most one solution there — a
+    // weaker condition than K inside the box, which also asks the solution to keep away from
+    // the box's faces.
+    const bool one_to_one =
+        preconditioned && 2.0 * std::max({radius[0], radius[1], radius[2]}) < 1.0 - 1e-9;
     const glm::dvec3 width = b.hi - b.lo;
     const bool narrowest = std::max({width.x, width.y, width.z}) < kMinWidth;
     const std::size_t split_begin = lists.size();
@@ -590,6 +605,16 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
           continue;
         }
         // Proved but Newton left the box (rounding at its edge): split it like any other.
+      } else if (one_to_one) {
+        // At most one solution in the box: Newton's, if it converges strictly inside.
+        glm::dvec3 xi = b.lo + glm::clamp(centre, 0.0, 1.0) * width;
+        Sample s;
+        bool converged = false;
+        if (sys.newton(rays[r].org, xi, s, &converged) && converged &&
+            strictly_inside(xi, b.lo, b.hi)) {
+          record(r, s);
+          continue;
+        }
       }
       lists.push_back(r);
     }
