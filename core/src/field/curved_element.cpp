@@ -226,6 +226,67 @@ double field_margin(const Element& e) {
   return kSignMargin * scale;
 }
 
+// Raises the degree of tensors of degree a per axis (`count` interleaved components) to n ≥ a
+// along every axis: the same polynomial. Coefficient i of degree n is
+// Σ_j C(a, j) C(n − a, i − j) / C(n, i) c_j along each axis, applied axis by axis to whole
+// rows of the slabs [outer][i][inner] (as split_axis).
+class Elevation {
+ public:
+  Elevation(int a, int n) : a_(a), n_(n) {
+    const auto binomial = [](int top, int k) {
+      double r = 1.0;
+      for (int i = 1; i <= k; ++i)
+        r = r * double(top - k + i) / double(i);
+      return r;
+    };
+    for (int i = 0; i <= n; ++i)
+      for (int j = 0; j <= a; ++j)
+        matrix_[i][j] = j <= i && i - j <= n - a
+                            ? binomial(a, j) * binomial(n - a, i - j) / binomial(n, i)
+                            : 0.0;
+  }
+  // in: (a + 1)³ coefficients, out: (n + 1)³ (out may not be in).
+  void apply(const double* in, int count, double* out) const {
+    const int am = a_ + 1, nm = n_ + 1;
+    if (a_ == n_) {
+      std::copy(in, in + std::size_t(count) * am * am * am, out);
+      return;
+    }
+    int size[3] = {am, am, am};
+    thread_local std::vector<double> buffer[2];
+    const double* from = in;
+    for (int axis = 0; axis < 3; ++axis) {
+      int inner = count, outer = 1;
+      for (int k = 0; k < axis; ++k)
+        inner *= size[k];
+      for (int k = axis + 1; k < 3; ++k)
+        outer *= size[k];
+      double* to = out;
+      if (axis < 2) {
+        buffer[axis].resize(std::size_t(outer) * nm * inner);
+        to = buffer[axis].data();
+      }
+      for (int o = 0; o < outer; ++o)
+        for (int i = 0; i < nm; ++i) {
+          double* row = to + (std::size_t(o) * nm + i) * inner;
+          std::fill(row, row + inner, 0.0);
+          for (int l = 0; l < am; ++l)
+            if (const double w = matrix_[i][l]; w != 0.0) {
+              const double* source = from + (std::size_t(o) * am + l) * inner;
+              for (int j = 0; j < inner; ++j)
+                row[j] += w * source[j];
+            }
+        }
+      size[axis] = nm;
+      from = to;
+    }
+  }
+
+ private:
+  int a_, n_;
+  double matrix_[kMaxNodes][kMaxNodes] = {};
+};
+
 // H(ξ) = (n₁·(x − o), n₂·(x − o), f) of the rays of one direction d, Newton's method on it and
 // the hit at a solution.
 struct RaySystem {
@@ -365,7 +426,15 @@ namespace {
 void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double* geometry,
             const double* field, double f_margin, glm::dvec3 d, std::span<const RayRef> rays,
             AxisHits& out) {
-  const int qm = e.q + 1, pm = e.p + 1;
+  // The degrees the search works in: both raised to the larger one where that paid (then G's
+  // coefficients are exact combinations for p ≠ q too; the lower-degree part costs more to
+  // split), else the element's own. Measured (docs/benchmarks.md): raising is faster for
+  // max(p, q) ≤ 4 and where the lower degree is at least half the higher (p = 6, q = 3:
+  // 1.06 → 0.8–1.0 s; p = 8, q = 6: 6.7 → 3.8 s), slower for p = 8, q = 2 (3.1 → 4.2 s).
+  const int high = std::max(e.p, e.q), low = std::min(e.p, e.q);
+  const bool raise = low < high && (high <= 4 || 2 * low >= high);
+  const int gd = raise ? high : e.q, fd = raise ? high : e.p;
+  const int qm = gd + 1, pm = fd + 1;
   const int gq = qm * qm * qm, fp = pm * pm * pm;
   // A box's coefficients: the geometry's two plane components n₁·x, n₂·x interleaved, then the
   // field, each of its own degree. The depth d·x is tested on the root box only (pruning; a
@@ -400,14 +469,18 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
   found.clear();
   state.assign(rays.size(), State{});
   double depth_lo = std::numeric_limits<double>::infinity(), depth_hi = -depth_lo;
-  for (int k = 0; k < gq; ++k) {
+  const int eq = e.q + 1, own_gq = eq * eq * eq;
+  thread_local std::vector<double> own_planes;
+  own_planes.resize(std::size_t(2 * own_gq));
+  for (int k = 0; k < own_gq; ++k) {
     const glm::dvec3 x(geometry[3 * k], geometry[3 * k + 1], geometry[3 * k + 2]);
-    pool[2 * k] = glm::dot(n1, x), pool[2 * k + 1] = glm::dot(n2, x);
+    own_planes[2 * k] = glm::dot(n1, x), own_planes[2 * k + 1] = glm::dot(n2, x);
     const double depth = glm::dot(d, x);
     depth_lo = std::min(depth_lo, depth), depth_hi = std::max(depth_hi, depth);
   }
   depth_lo /= dd, depth_hi /= dd;  // the same values: division by dd > 0 is monotone
-  std::copy(field, field + fp, pool.begin() + 2 * gq);
+  Elevation(e.q, gd).apply(own_planes.data(), 2, pool.data());
+  Elevation(e.p, fd).apply(field, 1, pool.data() + 2 * gq);
   for (std::size_t r = 0; r < rays.size(); ++r) {
     const glm::dvec3 o = rays[r].org;
     State& st = state[r];
@@ -415,7 +488,7 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
     // The largest distance from o to a coefficient: the root of the largest square (the same
     // value, the root being monotone).
     double square = 0.0;
-    for (int k = 0; k < gq; ++k) {
+    for (int k = 0; k < own_gq; ++k) {
       const double x = geometry[3 * k] - o.x, y = geometry[3 * k + 1] - o.y,
                    z = geometry[3 * k + 2] - o.z;
       square = std::max(square, x * x + y * y + z * z);
@@ -464,8 +537,8 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
     // The preconditioned system G = Y H on the box, in its coordinates s ∈ [0, 1]³.
     double value[3];
     glm::dvec3 gradient[3];
-    evaluate_tensor<2>(e.q, c, glm::dvec3(0.5), value, gradient);
-    evaluate_tensor<1>(e.p, f, glm::dvec3(0.5), &value[2], &gradient[2]);
+    evaluate_tensor<2>(gd, c, glm::dvec3(0.5), value, gradient);
+    evaluate_tensor<1>(fd, f, glm::dvec3(0.5), &value[2], &gradient[2]);
     glm::dmat3 jm;  // rows: the components' gradients in s (glm: jm[col][row])
     for (int col = 0; col < 3; ++col)
       jm[col] = glm::dvec3(gradient[0][col], gradient[1][col], gradient[2][col]);
@@ -492,7 +565,7 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
         plane_weight[row] = std::abs(y[0][row]) + std::abs(y[1][row]);
         field_weight[row] = std::abs(y[2][row]);
       }
-      if (e.p == e.q) {
+      if (fd == gd) {
         // G's coefficients: each row's combination of the box's three.
         for (int k = 0; k < gq; ++k)
           for (int row = 0; row < 3; ++row)
@@ -530,18 +603,18 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
       }
       lists.resize(kept);
       if (kept == in_box) continue;
-      if (e.p == e.q) {
+      if (fd == gd) {
         for (int col = 0; col < 3; ++col) {
           double dlo[3], dhi[3];
-          derivative_ranges<3>(e.q, col, combined.data(), dlo, dhi);
+          derivative_ranges<3>(gd, col, combined.data(), dlo, dhi);
           for (int row = 0; row < 3; ++row)
             g_jacobian[row][col] = {dlo[row], dhi[row]};
         }
       } else {
         for (int col = 0; col < 3; ++col) {
           double dlo[3], dhi[3], flo, fhi;
-          derivative_ranges<3>(e.q, col, combined.data(), dlo, dhi);
-          derivative_ranges<1>(e.p, col, f, &flo, &fhi);
+          derivative_ranges<3>(gd, col, combined.data(), dlo, dhi);
+          derivative_ranges<1>(fd, col, f, &flo, &fhi);
           for (int row = 0; row < 3; ++row) {
             const Interval part = scaled(y[2][row], flo, fhi);
             g_jacobian[row][col] = {dlo[row] + part.lo, dhi[row] + part.hi};
@@ -639,8 +712,8 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
     const std::size_t left = (slot + 1) * box_size;
     if (pool.size() < left + box_size) pool.resize(left + box_size);
     double* own = &pool[slot * box_size];
-    split<2>(e.q, axis, own, &pool[left], own);
-    split<1>(e.p, axis, own + 2 * gq, &pool[left + 2 * gq], own + 2 * gq);
+    split<2>(gd, axis, own, &pool[left], own);
+    split<1>(fd, axis, own + 2 * gq, &pool[left + 2 * gq], own + 2 * gq);
     const auto [lb, rb] = halves(b, axis);
     stack.push_back({rb, split_begin, lists.size()});
     stack.push_back({lb, split_begin, lists.size()});
