@@ -472,11 +472,13 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
   const int eq = e.q + 1, own_gq = eq * eq * eq;
   thread_local std::vector<double> own_planes;
   own_planes.resize(std::size_t(2 * own_gq));
+  glm::dvec3 box_lo(std::numeric_limits<double>::infinity()), box_hi(-box_lo);
   for (int k = 0; k < own_gq; ++k) {
     const glm::dvec3 x(geometry[3 * k], geometry[3 * k + 1], geometry[3 * k + 2]);
     own_planes[2 * k] = glm::dot(n1, x), own_planes[2 * k + 1] = glm::dot(n2, x);
     const double depth = glm::dot(d, x);
     depth_lo = std::min(depth_lo, depth), depth_hi = std::max(depth_hi, depth);
+    box_lo = glm::min(box_lo, x), box_hi = glm::max(box_hi, x);
   }
   depth_lo /= dd, depth_hi /= dd;  // the same values: division by dd > 0 is monotone
   Elevation(e.q, gd).apply(own_planes.data(), 2, pool.data());
@@ -485,15 +487,9 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
     const glm::dvec3 o = rays[r].org;
     State& st = state[r];
     st.offset = glm::dvec3(glm::dot(n1, o), glm::dot(n2, o), glm::dot(d, o) / dd);
-    // The largest distance from o to a coefficient: the root of the largest square (the same
-    // value, the root being monotone).
-    double square = 0.0;
-    for (int k = 0; k < own_gq; ++k) {
-      const double x = geometry[3 * k] - o.x, y = geometry[3 * k + 1] - o.y,
-                   z = geometry[3 * k + 2] - o.z;
-      square = std::max(square, x * x + y * y + z * z);
-    }
-    st.g_scale = std::sqrt(square);
+    // The scale of the geometry's values seen from o, for the margins: the largest distance
+    // from o to the coefficients' box (at least the largest to a coefficient).
+    st.g_scale = glm::length(glm::max(glm::abs(box_lo - o), glm::abs(box_hi - o)));
     st.g_margin = kSignMargin * st.g_scale;
     // The depth range of the root box against the ray's [t0, t1].
     if (depth_hi - st.offset[2] < rays[r].t0 - st.g_margin ||
