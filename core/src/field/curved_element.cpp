@@ -3,7 +3,6 @@
 #include "bernstein_basis.hpp"
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -184,18 +183,27 @@ struct Box {
   glm::dvec3 lo, hi;
 };
 
+// Splits the box in pool slot `slot` (just popped from the top of its stack: `components`
+// geometry values per coefficient interleaved, degree gd, then the field, degree fd) in half
+// along `axis`: the right half keeps the slot (it is looked at after the left one's whole
+// subtree), the left one takes the next; the caller pushes both, the left on top.
+template <int components>
+void split_box(int gd, int fd, int axis, std::size_t slot, std::vector<double>& pool) {
+  const int gm = gd + 1, fm = fd + 1, geometry = components * gm * gm * gm;
+  const std::size_t size = std::size_t(geometry + fm * fm * fm);
+  const std::size_t left = (slot + 1) * size;
+  if (pool.size() < left + size) pool.resize(left + size);
+  double* own = &pool[slot * size];
+  split<components>(gd, axis, own, &pool[left], own);
+  split<1>(fd, axis, own + geometry, &pool[left + geometry], own + geometry);
+}
+
 // The halves of box b along `axis`, left then right.
 std::pair<Box, Box> halves(const Box& b, int axis) {
   Box left = b, right = b;
   const double mid = 0.5 * (b.lo[axis] + b.hi[axis]);
   left.hi[axis] = mid, right.lo[axis] = mid;
   return {left, right};
-}
-
-// Whether ξ lies in the box [lo, hi] shrunk by kBoxMargin of its width.
-bool strictly_inside(glm::dvec3 xi, glm::dvec3 lo, glm::dvec3 hi) {
-  const glm::dvec3 pad = kBoxMargin * (hi - lo);
-  return glm::all(glm::greaterThan(xi, lo + pad)) && glm::all(glm::lessThan(xi, hi - pad));
 }
 
 // The ray's frame: d and two unit normals to it.
@@ -248,10 +256,6 @@ class Elevation {
   // in: (a + 1)³ coefficients, out: (n + 1)³ (out may not be in).
   void apply(const double* in, int count, double* out) const {
     const int am = a_ + 1, nm = n_ + 1;
-    if (a_ == n_) {
-      std::copy(in, in + std::size_t(count) * am * am * am, out);
-      return;
-    }
     int size[3] = {am, am, am};
     thread_local std::vector<double> buffer[2];
     const double* from = in;
@@ -310,22 +314,27 @@ struct RaySystem {
   }
 
   // Newton's method from xi until the next step would fall below 10⁻¹⁵ (in ξ): the step itself
-  // does, or quadratic convergence predicts it (the next step ≈ C |step|², C estimated from the
-  // last two steps), or the steps stop shrinking (rounding's floor near an ill-conditioned
-  // solution) — or 30 steps (then `converged`, if given, is false). s is the sample at the last
-  // point (see below). False where the Jacobian is singular on the way.
-  bool newton(glm::dvec3 o, glm::dvec3& xi, Sample& s, bool* converged = nullptr) const {
+  // does, or quadratic convergence predicts it (a step below 10⁻⁶ whose successor
+  // ≈ |step|³ / |previous step|² would be — from the second step on, or from the first given the
+  // size of the step that led to xi), or the steps stop shrinking below 10⁻⁹ (rounding's floor
+  // near an ill-conditioned solution) — or 30 steps. `converged` (if given) says whether it
+  // stopped so, `last` (if given) the size of its last step. s is the sample at the last point
+  // (see below). False where the Jacobian is singular on the way.
+  bool newton(glm::dvec3 o, glm::dvec3& xi, Sample& s, bool* converged = nullptr,
+              double* last = nullptr,
+              double previous = std::numeric_limits<double>::infinity()) const {
     if (converged) *converged = false;
     glm::dvec3 h;
     glm::dmat3 jac;
-    double previous = std::numeric_limits<double>::infinity();
     for (int iter = 0; iter < 30; ++iter) {
       system(o, xi, h, jac, s);
       if (!(std::abs(glm::determinant(jac)) > 0.0)) return false;
       const glm::dvec3 step = glm::inverse(jac) * h;
       xi -= step;
       const double size = std::max({std::abs(step.x), std::abs(step.y), std::abs(step.z)});
-      if (!(size > 1e-15) || (size < 1e-6 && size * size * size < 1e-15 * previous * previous) ||
+      if (last) *last = size;
+      if (!(size > 1e-15) ||
+          (size < 1e-6 && previous < 1.0 && size * size * size < 1e-15 * previous * previous) ||
           (size < 1e-9 && size > 0.9 * previous)) {
         // The sample moved along with the last step to first order (its error is of the order
         // of the step squared, below 10⁻¹² of the element), instead of evaluated again; the
@@ -357,6 +366,11 @@ bool inside(glm::dvec3 xi, glm::dvec3 lo, glm::dvec3 hi) {
   const glm::dvec3 pad = kBoxMargin * (hi - lo) + 1e-12;
   return glm::all(glm::greaterThanEqual(xi, lo - pad)) &&
          glm::all(glm::lessThanEqual(xi, hi + pad));
+}
+// Whether ξ lies in the box [lo, hi] shrunk by kBoxMargin of its width.
+bool strictly_inside(glm::dvec3 xi, glm::dvec3 lo, glm::dvec3 hi) {
+  const glm::dvec3 pad = kBoxMargin * (hi - lo);
+  return glm::all(glm::greaterThan(xi, lo + pad)) && glm::all(glm::lessThan(xi, hi - pad));
 }
 
 }  // namespace
@@ -404,8 +418,8 @@ bool invert(const Element& e, glm::dvec3 world, glm::dvec3& xi) {
 namespace {
 
 // The search from one box [lo, hi] of the reference cube for many rays of one direction d,
-// given the geometry's ((x, y, z) triples) and the field's coefficients on the box (the whole
-// element, or a piece), both of degree n, and the margin of the field's sign tests. Hits go to
+// given the geometry's ((x, y, z) triples, degree q) and the field's (degree p) coefficients on
+// the box (the whole element, or a piece), and the margin of the field's sign tests. Hits go to
 // `out` with their ray's index, per ray in increasing t, a solution found from two boxes (on
 // their shared face) once.
 //
@@ -436,8 +450,8 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
   const int gd = raise ? high : e.q, fd = raise ? high : e.p;
   const int qm = gd + 1, pm = fd + 1;
   const int gq = qm * qm * qm, fp = pm * pm * pm;
-  // A box's coefficients: the geometry's two plane components n₁·x, n₂·x interleaved, then the
-  // field, each of its own degree. The depth d·x is tested on the root box only (pruning; a
+  // A box's coefficients: the geometry's two plane components n₁·x, n₂·x interleaved (degree
+  // gd), then the field (degree fd). The depth d·x is tested on the root box only (pruning; a
   // solution outside [t0, t1] is dropped where it is recorded), which saves a third of the
   // geometry's splits.
   const std::size_t box_size = std::size_t(2 * gq + fp);
@@ -481,8 +495,14 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
     box_lo = glm::min(box_lo, x), box_hi = glm::max(box_hi, x);
   }
   depth_lo /= dd, depth_hi /= dd;  // the same values: division by dd > 0 is monotone
-  Elevation(e.q, gd).apply(own_planes.data(), 2, pool.data());
-  Elevation(e.p, fd).apply(field, 1, pool.data() + 2 * gq);
+  if (gd == e.q)
+    std::copy(own_planes.begin(), own_planes.end(), pool.begin());
+  else
+    Elevation(e.q, gd).apply(own_planes.data(), 2, pool.data());
+  if (fd == e.p)
+    std::copy(field, field + fp, pool.begin() + 2 * gq);
+  else
+    Elevation(e.p, fd).apply(field, 1, pool.data() + 2 * gq);
   for (std::size_t r = 0; r < rays.size(); ++r) {
     const glm::dvec3 o = rays[r].org;
     State& st = state[r];
@@ -543,22 +563,26 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
     const bool preconditioned = std::abs(glm::determinant(jm)) > 1e-12 * norms;
     glm::dmat3 y(1.0);
     Interval g_range[3], g_jacobian[3][3];  // G's ranges and ∂G_row/∂s_col's
-    double radius[3] = {0.0, 0.0, 0.0}, plane_weight[3], field_weight[3];
-    glm::dvec3 yh(0.0);  // Y H(m) without the ray's offsets
+    double radius[3] = {0.0, 0.0, 0.0};
+    double plane_weight[3][2] = {}, field_weight[3] = {};  // |Y_r0|, |Y_r1| and |Y_r2|
+    glm::dvec3 yh(0.0);                                    // Y H(m) without the ray's offsets
     const auto scaled = [](double w, double lo, double hi) {
       return w >= 0.0 ? Interval{w * lo, w * hi} : Interval{w * hi, w * lo};
     };
-    // The rounding in row r of G for a ray, whose plane offsets add `shift` to it.
-    const auto g_margin = [&](int row, const State& st, double shift) {
-      return plane_weight[row] * st.g_margin + field_weight[row] * f_margin +
-             kSignMargin * std::abs(shift);
+    // The rounding in row r of G for a ray: its plane parts' coefficients are at most
+    // |n_k·o| + g_scale in size (g_scale, the coefficients' box seen from o), its field part's
+    // at most the field's magnitude, each weighed by its entry of Y (which scales with 1 / the
+    // box's width: in a box 10⁻⁹ wide, rounding of 10⁻¹⁶ in x is 10⁻⁷ in G).
+    const auto g_margin = [&](int row, const State& st) {
+      return plane_weight[row][0] * (std::abs(st.offset[0]) * kSignMargin + st.g_margin) +
+             plane_weight[row][1] * (std::abs(st.offset[1]) * kSignMargin + st.g_margin) +
+             field_weight[row] * f_margin;
     };
     if (preconditioned) {
       y = glm::inverse(jm);
       yh = y * glm::dvec3(value[0], value[1], value[2]);
       for (int row = 0; row < 3; ++row) {
-        // Rounding in the combinations scales with the parts combined.
-        plane_weight[row] = std::abs(y[0][row]) + std::abs(y[1][row]);
+        plane_weight[row][0] = std::abs(y[0][row]), plane_weight[row][1] = std::abs(y[1][row]);
         field_weight[row] = std::abs(y[2][row]);
       }
       if (fd == gd) {
@@ -570,9 +594,9 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
         for (int row = 0; row < 3; ++row)
           range<3>(combined.data(), 3 * gq, row, g_range[row].lo, g_range[row].hi);
       } else {
-        // Degrees apart: the planes' part of each row, Y_r0 n₁·x + Y_r1 n₂·x (degree q), and
-        // its field part Y_r2 f (degree p) bounded apart and the bounds added. (Raising one
-        // to the other's degree per box cost more than the tighter bounds saved.)
+        // Degrees kept apart (not raised, above): the planes' part of each row,
+        // Y_r0 n₁·x + Y_r1 n₂·x (degree q), and its field part Y_r2 f (degree p) bounded apart
+        // and the bounds added.
         for (int k = 0; k < gq; ++k)
           for (int row = 0; row < 3; ++row)
             combined[3 * k + row] = y[0][row] * c[2 * k] + y[1][row] * c[2 * k + 1];
@@ -583,16 +607,14 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
         }
       }
       // G for each ray: Y (H − (n₁·o, n₂·o, 0)); its ranges exclude 0 (beyond the margins): no
-      // solution in the box. The margin bounds the rounding in G's values, which the
-      // preconditioner scales with the box: in a box 10⁻⁹ wide, rounding of 10⁻¹⁶ in x is 10⁻⁷
-      // in G. Tested before G's derivatives are bounded: often no ray is left.
+      // solution in the box. Tested before G's derivatives are bounded: often no ray is left.
       std::size_t kept = in_box;
       for (std::size_t k = in_box; k < lists.size(); ++k) {
         const State& st = state[lists[k]];
         bool none = false;
         for (int row = 0; row < 3; ++row) {
           const double shift = y[0][row] * st.offset[0] + y[1][row] * st.offset[1];
-          const double margin = g_margin(row, st, shift);
+          const double margin = g_margin(row, st);
           none = none || g_range[row].lo - shift > margin || g_range[row].hi - shift < -margin;
         }
         if (!none) lists[kept++] = lists[k];
@@ -630,39 +652,46 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
     // rows from ∂G/∂s at points between a and b), so it has at most one solution there — a
     // weaker condition than K inside the box, which also asks the solution to keep away from
     // the box's faces.
-    const bool one_to_one =
-        preconditioned && 2.0 * std::max({radius[0], radius[1], radius[2]}) < 1.0 - 1e-9;
+    // (Per ray below: the rounding of G's derivative coefficients, 2n times its values', is
+    // added.)
+    const double contraction = 2.0 * std::max({radius[0], radius[1], radius[2]});
+    const int degree = std::max(gd, fd);
     const glm::dvec3 width = b.hi - b.lo;
     const bool narrowest = std::max({width.x, width.y, width.z}) < kMinWidth;
     const std::size_t split_begin = lists.size();
     for (std::size_t k = in_box; k < split_begin; ++k) {
       const std::uint32_t r = lists[k];
       const State& st = state[r];
-      bool unique = false;
+      bool unique = false, one_to_one = false;
       glm::dvec3 centre(0.5);
       if (preconditioned) {
         bool none = false;
         unique = true;
+        double largest = 0.0;  // the largest margin of the three rows
         for (int row = 0; row < 3 && !none; ++row) {
           const double shift = y[0][row] * st.offset[0] + y[1][row] * st.offset[1];
-          const double margin = g_margin(row, st, shift);
+          const double margin = g_margin(row, st);
+          largest = std::max(largest, margin);
           // The Krawczyk operator K = m − G(m) + (I − ∂G/∂s(B)) (B − m): disjoint from the box
-          // grown by kBoxMargin (and G(m)'s rounding), no solution; inside it shrunk by that,
-          // exactly one (no outward rounding in K: the margin stands in for it).
+          // grown by kBoxMargin (and the rounding of G(m) and of K's radius, whose derivative
+          // coefficients carry 2n times G's), no solution; inside it shrunk by that, exactly one
+          // (no outward rounding in K: the margins stand in for it).
           centre[row] = 0.5 - (yh[row] - shift);
           const double klo = centre[row] - radius[row], khi = centre[row] + radius[row];
-          const double pad = kBoxMargin + margin;
+          const double pad = kBoxMargin + (1.0 + 3.0 * degree) * margin;
           if (khi < -pad || klo > 1.0 + pad) none = true;
           if (!(klo > pad && khi < 1.0 - pad)) unique = false;
         }
         if (none) continue;
+        one_to_one = contraction + 6.0 * degree * largest < 1.0 - 1e-9;
       }
       // Out of budget, the boxes still pending are not split again (each gets Newton's point
       // or its centre), so that no solution that was still pending is lost.
       const bool smallest = narrowest || st.boxes > std::size_t(kMaxBoxes);
       if (unique || smallest) {
         // Newton from K's centre (one Newton step from the box's centre; within the box when
-        // unique), its point kept when it converges inside the box (with margin).
+        // unique), its point kept when it ends inside the box (with margin) — converged, where
+        // K proved the solution.
         glm::dvec3 xi = b.lo + glm::clamp(centre, 0.0, 1.0) * width;
         Sample s;
         if (sys.newton(rays[r].org, xi, s) && inside(xi, b.lo, b.hi)) {
@@ -675,11 +704,16 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
         }
         // Proved but Newton left the box (rounding at its edge): split it like any other.
       } else if (one_to_one) {
-        // At most one solution in the box: Newton's, if it converges strictly inside.
+        // At most one solution in the box: Newton's, if it converges (with a last step far
+        // below the box's width) strictly inside. Its first step follows K's centre, one
+        // Newton step from m.
         glm::dvec3 xi = b.lo + glm::clamp(centre, 0.0, 1.0) * width;
+        const glm::dvec3 lead = glm::abs(centre - 0.5) * width;
         Sample s;
         bool converged = false;
-        if (sys.newton(rays[r].org, xi, s, &converged) && converged &&
+        double last = 0.0;
+        if (sys.newton(rays[r].org, xi, s, &converged, &last, std::max({lead.x, lead.y, lead.z})) &&
+            converged && last <= 1e-6 * std::max({width.x, width.y, width.z}) &&
             strictly_inside(xi, b.lo, b.hi)) {
           record(r, s);
           continue;
@@ -703,13 +737,7 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
       axis = score[0] >= score[1] && score[0] >= score[2] ? 0 : score[1] >= score[2] ? 1 : 2;
       if (width[axis] < 1e-3 * width[widest]) axis = widest;
     }
-    // The right half keeps the slot (it is looked at after the left one's whole subtree), the
-    // left one takes the next.
-    const std::size_t left = (slot + 1) * box_size;
-    if (pool.size() < left + box_size) pool.resize(left + box_size);
-    double* own = &pool[slot * box_size];
-    split<2>(gd, axis, own, &pool[left], own);
-    split<1>(fd, axis, own + 2 * gq, &pool[left + 2 * gq], own + 2 * gq);
+    split_box<2>(gd, fd, axis, slot, pool);
     const auto [lb, rb] = halves(b, axis);
     stack.push_back({rb, split_begin, lists.size()});
     stack.push_back({lb, split_begin, lists.size()});
@@ -774,12 +802,7 @@ Pieces::Pieces(const Element& e, double width) {
       coefficients_.insert(coefficients_.end(), c, c + size);
       continue;
     }
-    // The right half keeps the slot, the left one takes the next (looked at first).
-    const std::size_t left = (slot + 1) * size;
-    if (pool.size() < left + size) pool.resize(left + size);
-    double* own = &pool[slot * size];
-    split<3>(e.q, axis, own, &pool[left], own);
-    split<1>(e.p, axis, own + 3 * gq_, &pool[left + 3 * gq_], own + 3 * gq_);
+    split_box<3>(e.q, e.p, axis, slot, pool);
     const auto [lb, rb] = halves(b, axis);
     stack.push_back(rb);
     stack.push_back(lb);

@@ -4,11 +4,13 @@
 //
 // A hit is a solution ξ of the system H(ξ) = (n₁·(x(ξ) − o), n₂·(x(ξ) − o), f(ξ)) = 0, with
 // n₁, n₂ ⊥ d (the ray is the intersection of two planes), and its depth t = d·(x(ξ) − o). The
-// reference cube is subdivided; a box is dropped when one component's Bernstein coefficients on
-// it have one strict sign (the convex hull property: no zero there) or its depth range misses
-// [t0, t1]; a box in which the Krawczyk operator maps the box into itself holds exactly one
-// solution, which Newton's method then converges to; otherwise the box is split in half along
-// the axis the components vary most along. docs/method.md ("Curved elements") gives the
+// reference cube is subdivided. On each box the system is preconditioned, G = Y H with Y the
+// inverse of H's Jacobian at the box's centre; a box is dropped when one component's or one of
+// G's Bernstein ranges has one strict sign (the convex hull property: no zero there), its depth
+// range misses [t0, t1], or the Krawczyk operator of G misses it; a box that the operator maps
+// into itself, or on which G is one-to-one (∂G/∂s within 1 of the identity) and Newton's method
+// converges inside, holds exactly that one solution; otherwise the box is split in half along
+// the axis along which G is furthest from linear. docs/method.md ("Curved elements") gives the
 // guarantees and tolerances.
 #pragma once
 
