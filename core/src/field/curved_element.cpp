@@ -705,8 +705,11 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
         // Proved but Newton left the box (rounding at its edge): split it like any other.
       } else if (one_to_one) {
         // At most one solution in the box: Newton's, if it converges (with a last step far
-        // below the box's width) strictly inside. Its first step follows K's centre, one
-        // Newton step from m.
+        // below the box's width) inside it, to within the 10⁻⁹ margin — a root on the box's
+        // face (an element's or a piece's: the shell's seams) is taken here instead of at the
+        // smallest width; its neighbour finds it too, and the caster merges the two (the
+        // one-to-one test's slack covers the margin's sliver). Its first step follows K's
+        // centre, one Newton step from m.
         glm::dvec3 xi = b.lo + glm::clamp(centre, 0.0, 1.0) * width;
         const glm::dvec3 lead = glm::abs(centre - 0.5) * width;
         Sample s;
@@ -714,7 +717,7 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
         double last = 0.0;
         if (sys.newton(rays[r].org, xi, s, &converged, &last, std::max({lead.x, lead.y, lead.z})) &&
             converged && last <= 1e-6 * std::max({width.x, width.y, width.z}) &&
-            strictly_inside(xi, b.lo, b.hi)) {
+            inside(xi, b.lo, b.hi)) {
           record(r, s);
           continue;
         }
