@@ -234,62 +234,45 @@ double field_margin(const Element& e) {
   return kSignMargin * scale;
 }
 
-// Raises the degree of tensors of degree a per axis (`count` interleaved components) to n ≥ a
-// along every axis: the same polynomial. Coefficient i of degree n is
+// The tensor `in` of degree a per axis (`count` interleaved components) as one of degree n ≥ a
+// (the same polynomial) in `out` (not `in`): coefficient i of degree n is
 // Σ_j C(a, j) C(n − a, i − j) / C(n, i) c_j along each axis, applied axis by axis to whole
 // rows of the slabs [outer][i][inner] (as split_axis).
-class Elevation {
- public:
-  Elevation(int a, int n) : a_(a), n_(n) {
-    const auto binomial = [](int top, int k) {
-      double r = 1.0;
-      for (int i = 1; i <= k; ++i)
-        r = r * double(top - k + i) / double(i);
-      return r;
-    };
-    for (int i = 0; i <= n; ++i)
-      for (int j = 0; j <= a; ++j)
-        matrix_[i][j] = j <= i && i - j <= n - a
-                            ? binomial(a, j) * binomial(n - a, i - j) / binomial(n, i)
-                            : 0.0;
+void elevate(const double* in, int a, int n, int count, double* out) {
+  const int am = a + 1, nm = n + 1;
+  if (a == n) {
+    std::copy(in, in + std::size_t(count) * am * am * am, out);
+    return;
   }
-  // in: (a + 1)³ coefficients, out: (n + 1)³ (out may not be in).
-  void apply(const double* in, int count, double* out) const {
-    const int am = a_ + 1, nm = n_ + 1;
-    int size[3] = {am, am, am};
-    thread_local std::vector<double> buffer[2];
-    const double* from = in;
-    for (int axis = 0; axis < 3; ++axis) {
-      int inner = count, outer = 1;
-      for (int k = 0; k < axis; ++k)
-        inner *= size[k];
-      for (int k = axis + 1; k < 3; ++k)
-        outer *= size[k];
-      double* to = out;
-      if (axis < 2) {
-        buffer[axis].resize(std::size_t(outer) * nm * inner);
-        to = buffer[axis].data();
-      }
-      for (int o = 0; o < outer; ++o)
-        for (int i = 0; i < nm; ++i) {
-          double* row = to + (std::size_t(o) * nm + i) * inner;
-          std::fill(row, row + inner, 0.0);
-          for (int l = 0; l < am; ++l)
-            if (const double w = matrix_[i][l]; w != 0.0) {
-              const double* source = from + (std::size_t(o) * am + l) * inner;
-              for (int j = 0; j < inner; ++j)
-                row[j] += w * source[j];
-            }
-        }
-      size[axis] = nm;
-      from = to;
+  int size[3] = {am, am, am};
+  thread_local std::vector<double> buffer[2];
+  const double* from = in;
+  for (int axis = 0; axis < 3; ++axis) {
+    int inner = count, outer = 1;
+    for (int k = 0; k < axis; ++k)
+      inner *= size[k];
+    for (int k = axis + 1; k < 3; ++k)
+      outer *= size[k];
+    double* to = out;
+    if (axis < 2) {
+      buffer[axis].resize(std::size_t(outer) * nm * inner);
+      to = buffer[axis].data();
     }
+    for (int o = 0; o < outer; ++o)
+      for (int i = 0; i < nm; ++i) {
+        double* row = to + (std::size_t(o) * nm + i) * inner;
+        std::fill(row, row + inner, 0.0);
+        for (int j = std::max(0, i - (n - a)); j <= std::min(a, i); ++j) {
+          const double w = kBinomial[a][j] * kBinomial[n - a][i - j] / kBinomial[n][i];
+          const double* source = from + (std::size_t(o) * am + j) * inner;
+          for (int l = 0; l < inner; ++l)
+            row[l] += w * source[l];
+        }
+      }
+    size[axis] = nm;
+    from = to;
   }
-
- private:
-  int a_, n_;
-  double matrix_[kMaxNodes][kMaxNodes] = {};
-};
+}
 
 // H(ξ) = (n₁·(x − o), n₂·(x − o), f) of the rays of one direction d, Newton's method on it and
 // the hit at a solution.
@@ -315,15 +298,14 @@ struct RaySystem {
 
   // Newton's method from xi until the next step would fall below 10⁻¹⁵ (in ξ): the step itself
   // does, or quadratic convergence predicts it (a step below 10⁻⁶ whose successor
-  // ≈ |step|³ / |previous step|² would be — from the second step on, or from the first given the
-  // size of the step that led to xi), or the steps stop shrinking below 10⁻⁹ (rounding's floor
-  // near an ill-conditioned solution) — or 30 steps. `converged` (if given) says whether it
-  // stopped so, `last` (if given) the size of its last step. s is the sample at the last point
-  // (see below). False where the Jacobian is singular on the way.
-  bool newton(glm::dvec3 o, glm::dvec3& xi, Sample& s, bool* converged = nullptr,
-              double* last = nullptr,
-              double previous = std::numeric_limits<double>::infinity()) const {
-    if (converged) *converged = false;
+  // ≈ |step|³ / |previous step|² would be; `previous` is the size of the step that led to xi),
+  // or the steps stop shrinking below 10⁻⁹ (rounding's floor near an ill-conditioned solution)
+  // — or 30 steps. `converged` says whether it stopped so, `last` is the size of its last
+  // step. s is the sample at the last point (see below). False where the Jacobian is singular
+  // on the way.
+  bool newton(glm::dvec3 o, glm::dvec3& xi, Sample& s, bool& converged, double& last,
+              double previous) const {
+    converged = false;
     glm::dvec3 h;
     glm::dmat3 jac;
     for (int iter = 0; iter < 30; ++iter) {
@@ -332,7 +314,7 @@ struct RaySystem {
       const glm::dvec3 step = glm::inverse(jac) * h;
       xi -= step;
       const double size = std::max({std::abs(step.x), std::abs(step.y), std::abs(step.z)});
-      if (last) *last = size;
+      last = size;
       if (!(size > 1e-15) ||
           (size < 1e-6 && previous < 1.0 && size * size * size < 1e-15 * previous * previous) ||
           (size < 1e-9 && size > 0.9 * previous)) {
@@ -341,7 +323,7 @@ struct RaySystem {
         // derivatives are those before the step.
         s.x -= s.jacobian * step;
         s.f -= glm::dot(s.gradient, step);
-        if (converged) *converged = true;
+        converged = true;
         return true;
       }
       previous = size;
@@ -366,11 +348,6 @@ bool inside(glm::dvec3 xi, glm::dvec3 lo, glm::dvec3 hi) {
   const glm::dvec3 pad = kBoxMargin * (hi - lo) + 1e-12;
   return glm::all(glm::greaterThanEqual(xi, lo - pad)) &&
          glm::all(glm::lessThanEqual(xi, hi + pad));
-}
-// Whether ξ lies in the box [lo, hi] shrunk by kBoxMargin of its width.
-bool strictly_inside(glm::dvec3 xi, glm::dvec3 lo, glm::dvec3 hi) {
-  const glm::dvec3 pad = kBoxMargin * (hi - lo);
-  return glm::all(glm::greaterThan(xi, lo + pad)) && glm::all(glm::lessThan(xi, hi - pad));
 }
 
 }  // namespace
@@ -495,14 +472,8 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
     box_lo = glm::min(box_lo, x), box_hi = glm::max(box_hi, x);
   }
   depth_lo /= dd, depth_hi /= dd;  // the same values: division by dd > 0 is monotone
-  if (gd == e.q)
-    std::copy(own_planes.begin(), own_planes.end(), pool.begin());
-  else
-    Elevation(e.q, gd).apply(own_planes.data(), 2, pool.data());
-  if (fd == e.p)
-    std::copy(field, field + fp, pool.begin() + 2 * gq);
-  else
-    Elevation(e.p, fd).apply(field, 1, pool.data() + 2 * gq);
+  elevate(own_planes.data(), e.q, gd, 2, pool.data());
+  elevate(field, e.p, fd, 1, pool.data() + 2 * gq);
   for (std::size_t r = 0; r < rays.size(); ++r) {
     const glm::dvec3 o = rays[r].org;
     State& st = state[r];
@@ -688,13 +659,23 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
       // Out of budget, the boxes still pending are not split again (each gets Newton's point
       // or its centre), so that no solution that was still pending is lost.
       const bool smallest = narrowest || st.boxes > std::size_t(kMaxBoxes);
-      if (unique || smallest) {
-        // Newton from K's centre (one Newton step from the box's centre; within the box when
-        // unique), its point kept when it ends inside the box (with margin) — converged, where
-        // K proved the solution.
+      if (unique || smallest || one_to_one) {
+        // Newton from K's centre (one Newton step from the box's centre, which gives its first
+        // step a predecessor), its point kept when it ends inside the box (to within the 10⁻⁹
+        // margin): where K proved the solution or the box is the smallest, as it ends; where G
+        // is one-to-one, only converged, with a last step far below the box's width — a root on
+        // the box's face (an element's or a piece's: the shell's seams) is taken there instead
+        // of at the smallest width; its neighbour finds it too, and the caster merges the two
+        // (the one-to-one test's slack covers the margin's sliver).
         glm::dvec3 xi = b.lo + glm::clamp(centre, 0.0, 1.0) * width;
+        const glm::dvec3 lead = glm::abs(centre - 0.5) * width;
         Sample s;
-        if (sys.newton(rays[r].org, xi, s) && inside(xi, b.lo, b.hi)) {
+        bool converged = false;
+        double last = 0.0;
+        if (sys.newton(rays[r].org, xi, s, converged, last, std::max({lead.x, lead.y, lead.z})) &&
+            inside(xi, b.lo, b.hi) &&
+            (unique || smallest ||
+             (converged && last <= 1e-6 * std::max({width.x, width.y, width.z})))) {
           record(r, s);
           continue;
         }
@@ -702,25 +683,7 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
           record(r, evaluate(e, 0.5 * (b.lo + b.hi)));
           continue;
         }
-        // Proved but Newton left the box (rounding at its edge): split it like any other.
-      } else if (one_to_one) {
-        // At most one solution in the box: Newton's, if it converges (with a last step far
-        // below the box's width) inside it, to within the 10⁻⁹ margin — a root on the box's
-        // face (an element's or a piece's: the shell's seams) is taken here instead of at the
-        // smallest width; its neighbour finds it too, and the caster merges the two (the
-        // one-to-one test's slack covers the margin's sliver). Its first step follows K's
-        // centre, one Newton step from m.
-        glm::dvec3 xi = b.lo + glm::clamp(centre, 0.0, 1.0) * width;
-        const glm::dvec3 lead = glm::abs(centre - 0.5) * width;
-        Sample s;
-        bool converged = false;
-        double last = 0.0;
-        if (sys.newton(rays[r].org, xi, s, &converged, &last, std::max({lead.x, lead.y, lead.z})) &&
-            converged && last <= 1e-6 * std::max({width.x, width.y, width.z}) &&
-            inside(xi, b.lo, b.hi)) {
-          record(r, s);
-          continue;
-        }
+        // Proved but Newton left the box (rounding at its edge), or not proved: split it.
       }
       lists.push_back(r);
     }

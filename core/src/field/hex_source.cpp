@@ -40,16 +40,6 @@ constexpr double kConverged = 1e-13;
 // whose sign variations would otherwise be split down to kMinWidth everywhere.
 constexpr int kMaxIntervals = 4096;
 
-constexpr std::array<std::array<double, kMaxRayDegree + 1>, kMaxRayDegree + 1> kBinomial = [] {
-  std::array<std::array<double, kMaxRayDegree + 1>, kMaxRayDegree + 1> c{};
-  for (int n = 0; n <= kMaxRayDegree; ++n) {
-    c[n][0] = c[n][n] = 1.0;
-    for (int k = 1; k < n; ++k)
-      c[n][k] = c[n - 1][k - 1] + c[n - 1][k];
-  }
-  return c;
-}();
-
 int nodes_per_element(int order) {
   return (order + 1) * (order + 1) * (order + 1);
 }
