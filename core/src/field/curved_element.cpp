@@ -3,8 +3,10 @@
 #include "bernstein_basis.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <span>
 #include <type_traits>
@@ -83,120 +85,150 @@ void evaluate_tensor(int n, const double* c, glm::dvec3 r, double* value, glm::d
   });
 }
 
-// Splits the tensor c (degree n, `count` interleaved components) at the middle of `axis`
-// into left and right halves (de Casteljau along every line of that axis). `right` may be
-// `c` (each slab is read before its halves are written). The tensor is taken as slabs
-// [outer][i][inner] (i along `axis`, inner the contiguous values below it), and de Casteljau's
-// levels run over whole rows of a slab: the same operations on each line as line by line, so
-// the same values, but independent ones side by side (the vector lanes) instead of one
-// dependent chain per line.
-// The axis is a constant too, so that the rows' lengths are: copies of a few values inline
-// instead of a call to memmove each (perf: 7 % of a curved cast in memmove).
-template <int count, int n, int axis>
-void split_axis(const double* c, double* left, double* right) {
-  constexpr int m = n + 1;
-  constexpr int inner = axis == 0 ? count : axis == 1 ? count * m : count * m * m;
+// Four doubles side by side: one coefficient's components — an element's (x, y, z, f), a
+// search box's (n₁·x, n₂·x, f, d·x / |d|²) — so that one operation on all four is one vector
+// operation (GCC's and Clang's vector extensions: two SSE2 halves, or one AVX2 register in the
+// search's AVX2 copy below). Each component sees the same operations in the same order as
+// one scalar at a time would, so every copy gives the same bits. Passed by pointer or
+// reference only: a 32-byte vector by value changes the calling convention between the copies.
+using Quad = double __attribute__((vector_size(32), aligned(32)));
+
+// A growable array of quads on 32-byte boundaries (std::vector<Quad> would drop the type's
+// alignment attribute, and the type alone is 16-byte aligned where AVX is off).
+class Quads {
+ public:
+  Quad* data() { return &slots_.data()->q; }
+  Quad& operator[](std::size_t k) { return slots_[k].q; }
+  std::size_t size() const { return slots_.size(); }
+  void resize(std::size_t n) { slots_.resize(n); }
+
+ private:
+  struct alignas(32) Slot {
+    Quad q;
+  };
+  std::vector<Slot> slots_;
+};
+
+// The quad at p (any alignment).
+[[gnu::always_inline]] inline void load_quad(const double* p, Quad& q) {
+  std::memcpy(&q, p, sizeof q);
+}
+
+[[gnu::always_inline]] inline void min_max(const Quad& v, Quad& lo, Quad& hi) {
+  lo = v < lo ? v : lo;
+  hi = v > hi ? v : hi;
+}
+
+// Value (out[0]) and derivatives along ξ, η, ζ (out[1..3]) at r of the tensor c of degree N,
+// all four components at once, by sum factorisation: ξ contracted first (value and
+// ξ-derivative per row), then η, then ζ.
+template <int N>
+[[gnu::always_inline]] inline void evaluate_quads(const Quad* c, const glm::dvec3& r, Quad* out) {
+  constexpr int m = N + 1;
+  double bx[m], dx[m], by[m], dy[m], bz[m], dz[m];
+  bernstein_basis<N>(r.x, bx, dx);
+  bernstein_basis<N>(r.y, by, dy);
+  bernstein_basis<N>(r.z, bz, dz);
+  Quad f{}, fx{}, fy{}, fz{};
+  for (int kz = 0; kz < m; ++kz) {
+    Quad g{}, gx{}, gy{};  // the ζ-layer kz contracted over ξ and η
+    for (int jy = 0; jy < m; ++jy) {
+      const Quad* row = c + m * (jy + m * kz);
+      Quad h{}, hx{};
+      for (int ix = 0; ix < m; ++ix)
+        h += row[ix] * bx[ix], hx += row[ix] * dx[ix];
+      g += h * by[jy], gx += hx * by[jy], gy += h * dy[jy];
+    }
+    f += g * bz[kz], fx += gx * bz[kz], fy += gy * bz[kz], fz += g * dz[kz];
+  }
+  out[0] = f, out[1] = fx, out[2] = fy, out[3] = fz;
+}
+
+// Splits the tensor c (degree N) at the middle of `axis` into left and right halves (de
+// Casteljau along every line of that axis). `right` may be `c` (each slab is read before its
+// halves are written). The tensor is taken as slabs [outer][i][inner] (i along `axis`, inner
+// the contiguous quads below it), and de Casteljau's levels run over whole rows of a slab:
+// independent operations side by side instead of one dependent chain per line.
+template <int N, int axis>
+[[gnu::always_inline]] inline void split_quads_along(const Quad* c, Quad* left, Quad* right) {
+  constexpr int m = N + 1;
+  constexpr int inner = axis == 0 ? 1 : axis == 1 ? m : m * m;
   constexpr int outer = axis == 0 ? m * m : axis == 1 ? m : 1;
-  double w[m * inner];  // a slab: m rows of `inner` values
+  Quad w[m * inner];  // a slab: m rows of `inner` quads
   for (int o = 0; o < outer; ++o) {
     const int base = o * m * inner;
     std::copy(c + base, c + base + m * inner, w);
     std::copy(w, w + inner, left + base);
-    std::copy(w + n * inner, w + m * inner, right + base + n * inner);
-    for (int r = 1; r <= n; ++r) {
-      for (int i = 0; i <= n - r; ++i) {
-        double* row = w + i * inner;
-        const double* next = row + inner;
+    std::copy(w + N * inner, w + m * inner, right + base + N * inner);
+    for (int r = 1; r <= N; ++r) {
+      for (int i = 0; i <= N - r; ++i) {
+        Quad* row = w + i * inner;
+        const Quad* next = row + inner;
         for (int j = 0; j < inner; ++j)
           row[j] = 0.5 * (row[j] + next[j]);
       }
       std::copy(w, w + inner, left + base + r * inner);
-      std::copy(w + (n - r) * inner, w + (n - r + 1) * inner, right + base + (n - r) * inner);
+      std::copy(w + (N - r) * inner, w + (N - r + 1) * inner, right + base + (N - r) * inner);
     }
   }
 }
-template <int count, int n>
-void split_fixed(int axis, const double* c, double* left, double* right) {
+template <int N>
+[[gnu::always_inline]] inline void split_quads(int axis, const Quad* c, Quad* left, Quad* right) {
   if (axis == 0)
-    split_axis<count, n, 0>(c, left, right);
+    split_quads_along<N, 0>(c, left, right);
   else if (axis == 1)
-    split_axis<count, n, 1>(c, left, right);
+    split_quads_along<N, 1>(c, left, right);
   else
-    split_axis<count, n, 2>(c, left, right);
-}
-template <int count>
-void split(int n, int axis, const double* c, double* left, double* right) {
-  with_degree(n, [&](auto degree) { split_fixed<count, degree>(axis, c, left, right); });
+    split_quads_along<N, 2>(c, left, right);
 }
 
-// Minimum and maximum of component k of a tensor with `total` values, `count` interleaved.
-// Four partial minima and maxima side by side, so that their chains overlap; the values are
-// finite (non-finite geometry is refused, a non-finite field deactivates its element), so the
-// order does not change the result.
-template <int count>
-void range(const double* c, int total, int k, double& lo, double& hi) {
-  double l[4] = {c[k], c[k], c[k], c[k]}, h[4] = {c[k], c[k], c[k], c[k]};
-  int i = k;
-  for (; i + 3 * count < total; i += 4 * count)
+// Minimum and maximum of each component over the tensor c (degree N). Four partial minima and
+// maxima side by side, so that their chains overlap; the values are finite (non-finite geometry
+// is refused, a non-finite field deactivates its element), so the order does not change the
+// result.
+template <int N>
+[[gnu::always_inline]] inline void range_quads(const Quad* c, Quad& lo, Quad& hi) {
+  constexpr int total = (N + 1) * (N + 1) * (N + 1);
+  Quad l[4] = {c[0], c[0], c[0], c[0]}, h[4] = {c[0], c[0], c[0], c[0]};
+  int i = 0;
+  for (; i + 3 < total; i += 4)
     for (int a = 0; a < 4; ++a)
-      l[a] = std::min(l[a], c[i + a * count]), h[a] = std::max(h[a], c[i + a * count]);
-  for (; i < total; i += count)
-    l[0] = std::min(l[0], c[i]), h[0] = std::max(h[0], c[i]);
-  lo = std::min(std::min(l[0], l[1]), std::min(l[2], l[3]));
-  hi = std::max(std::max(h[0], h[1]), std::max(h[2], h[3]));
+      min_max(c[i + a], l[a], h[a]);
+  for (; i < total; ++i)
+    min_max(c[i], l[0], h[0]);
+  for (int a = 1; a < 4; ++a)
+    min_max(l[a], l[0], h[0]), min_max(h[a], l[0], h[0]);
+  lo = l[0], hi = h[0];
 }
 
-// Bounds of ∂/∂s_axis of each of the `count` interleaved components over the box: the
-// derivative's Bernstein coefficients n (c_{i+1} − c_i) along that axis.
-template <int count>
-void derivative_ranges(int n, int axis, const double* c, double* lo, double* hi) {
-  with_degree(n, [&](auto degree) {
-    constexpr int N = degree, m = N + 1;
-    const int step[3] = {count, count * m, count * m * m};
-    const int stride = step[axis], s1 = step[axis == 0 ? 1 : 0], s2 = step[axis == 2 ? 1 : 2];
-    for (int k = 0; k < count; ++k) {
-      // One partial minimum and maximum per position along the line, so that their chains
-      // overlap (finite values: the order does not change the result).
-      double l[N], h[N];
+// Bounds of ∂/∂s_axis of each component of c (degree N) over the box: the derivative's
+// Bernstein coefficients N (c_{i+1} − c_i) along that axis.
+template <int N>
+[[gnu::always_inline]] inline void derivative_range_quads(int axis, const Quad* c, Quad& lo,
+                                                          Quad& hi) {
+  constexpr int m = N + 1;
+  const int stride = axis == 0 ? 1 : axis == 1 ? m : m * m;
+  const int inner = stride, outer = m * m * m / (stride * m);
+  // One partial minimum and maximum per position along the lines, so that their chains overlap.
+  Quad l[N], h[N];
+  for (int i = 0; i < N; ++i)
+    l[i] = h[i] = N * (c[(i + 1) * stride] - c[i * stride]);
+  for (int o = 0; o < outer; ++o)
+    for (int j = 0; j < inner; ++j) {
+      const Quad* line = c + o * m * inner + j;
       for (int i = 0; i < N; ++i)
-        l[i] = std::numeric_limits<double>::infinity(), h[i] = -l[i];
-      for (int a = 0; a < m; ++a)
-        for (int b = 0; b < m; ++b) {
-          const double* line = c + a * s1 + b * s2 + k;
-          for (int i = 0; i < N; ++i) {
-            const double v = N * (line[(i + 1) * stride] - line[i * stride]);
-            l[i] = std::min(l[i], v), h[i] = std::max(h[i], v);
-          }
-        }
-      lo[k] = *std::min_element(l, l + N), hi[k] = *std::max_element(h, h + N);
+        min_max(N * (line[(i + 1) * stride] - line[i * stride]), l[i], h[i]);
     }
-  });
+  for (int i = 1; i < N; ++i)
+    min_max(l[i], l[0], h[0]), min_max(h[i], l[0], h[0]);
+  lo = l[0], hi = h[0];
 }
-
-struct Interval {
-  double lo = 0.0, hi = 0.0;
-};
 
 // One box of a subdivision: its extent in ξ. Its coefficients lie in a pool at its position in
 // the stack.
 struct Box {
   glm::dvec3 lo, hi;
 };
-
-// Splits the box in pool slot `slot` (just popped from the top of its stack: `components`
-// geometry values per coefficient interleaved, degree gd, then the field, degree fd) in half
-// along `axis`: the right half keeps the slot (it is looked at after the left one's whole
-// subtree), the left one takes the next; the caller pushes both, the left on top.
-template <int components>
-void split_box(int gd, int fd, int axis, std::size_t slot, std::vector<double>& pool) {
-  const int gm = gd + 1, fm = fd + 1, geometry = components * gm * gm * gm;
-  const std::size_t size = std::size_t(geometry + fm * fm * fm);
-  const std::size_t left = (slot + 1) * size;
-  if (pool.size() < left + size) pool.resize(left + size);
-  double* own = &pool[slot * size];
-  split<components>(gd, axis, own, &pool[left], own);
-  split<1>(fd, axis, own + geometry, &pool[left + geometry], own + geometry);
-}
 
 // The halves of box b along `axis`, left then right.
 std::pair<Box, Box> halves(const Box& b, int axis) {
@@ -274,82 +306,6 @@ void elevate(const double* in, int a, int n, int count, double* out) {
   }
 }
 
-// H(ξ) = (n₁·(x − o), n₂·(x − o), f) of the rays of one direction d, Newton's method on it and
-// the hit at a solution.
-struct RaySystem {
-  const Element& e;
-  glm::dvec3 d, n1, n2;
-  double dd;  // |d|²: t = d·(x − o) / |d|², for any length of d
-
-  RaySystem(const Element& element, glm::dvec3 dir) : e(element), d(dir), dd(glm::dot(dir, dir)) {
-    ray_frame(d, n1, n2);
-  }
-
-  // H at ξ for the ray from o, and its Jacobian in ξ (rows n₁ᵀ J, n₂ᵀ J, ∇f ᵀ).
-  void system(glm::dvec3 o, glm::dvec3 xi, glm::dvec3& h, glm::dmat3& jac, Sample& s) const {
-    s = evaluate(e, xi);
-    const glm::dvec3 r = s.x - o;
-    h = glm::dvec3(glm::dot(n1, r), glm::dot(n2, r), s.f);
-    // glm is column-major: jac[col][row].
-    const glm::dvec3 row1 = glm::transpose(s.jacobian) * n1, row2 = glm::transpose(s.jacobian) * n2;
-    for (int c = 0; c < 3; ++c)
-      jac[c] = glm::dvec3(row1[c], row2[c], s.gradient[c]);
-  }
-
-  // Newton's method from xi until the next step would fall below 10⁻¹⁵ (in ξ): the step itself
-  // does, or quadratic convergence predicts it (a step below 10⁻⁶ whose successor
-  // ≈ |step|³ / |previous step|² would be; `previous` is the size of the step that led to xi),
-  // or the steps stop shrinking below 10⁻⁹ (rounding's floor near an ill-conditioned solution)
-  // — or 30 steps. `converged` says whether it stopped so, `last` is the size of its last
-  // step. s is the sample at the last point (see below). False where the Jacobian is singular
-  // on the way.
-  bool newton(glm::dvec3 o, glm::dvec3& xi, Sample& s, bool& converged, double& last,
-              double previous) const {
-    converged = false;
-    glm::dvec3 h;
-    glm::dmat3 jac;
-    for (int iter = 0; iter < 30; ++iter) {
-      system(o, xi, h, jac, s);
-      if (!(std::abs(glm::determinant(jac)) > 0.0)) return false;
-      const glm::dvec3 step = glm::inverse(jac) * h;
-      xi -= step;
-      const double size = std::max({std::abs(step.x), std::abs(step.y), std::abs(step.z)});
-      last = size;
-      if (!(size > 1e-15) ||
-          (size < 1e-6 && previous < 1.0 && size * size * size < 1e-15 * previous * previous) ||
-          (size < 1e-9 && size > 0.9 * previous)) {
-        // The sample moved along with the last step to first order (its error is of the order
-        // of the step squared, below 10⁻¹² of the element), instead of evaluated again; the
-        // derivatives are those before the step.
-        s.x -= s.jacobian * step;
-        s.f -= glm::dot(s.gradient, step);
-        converged = true;
-        return true;
-      }
-      previous = size;
-    }
-    system(o, xi, h, jac, s);
-    return true;
-  }
-
-  // The hit at the solution sampled by s of the ray from o, if its depth lies in [t0, t1]:
-  // ∇ₓf = J⁻ᵀ ∇ξf.
-  bool hit(const RayRef& ray, const Sample& s, RayHit& out) const {
-    const double t = glm::dot(d, s.x - ray.org) / dd;
-    if (!(t >= ray.t0 && t <= ray.t1)) return false;
-    const glm::dvec3 g = glm::transpose(glm::inverse(s.jacobian)) * s.gradient;
-    out = {t, unit_normal(g, d), 0.0f};
-    return true;
-  }
-};
-
-// Whether ξ lies in the box [lo, hi] grown by kBoxMargin of its width (and 10⁻¹²).
-bool inside(glm::dvec3 xi, glm::dvec3 lo, glm::dvec3 hi) {
-  const glm::dvec3 pad = kBoxMargin * (hi - lo) + 1e-12;
-  return glm::all(glm::greaterThanEqual(xi, lo - pad)) &&
-         glm::all(glm::lessThanEqual(xi, hi + pad));
-}
-
 }  // namespace
 
 Sample evaluate(const Element& e, glm::dvec3 xi) {
@@ -394,18 +350,102 @@ bool invert(const Element& e, glm::dvec3 world, glm::dvec3& xi) {
 
 namespace {
 
+// Whether the box coordinate s lies in [0, 1] grown by kBoxMargin (and 10⁻¹² in ξ, the box
+// `width` wide).
+bool inside(const glm::dvec3& s, const glm::dvec3& width) {
+  for (int k = 0; k < 3; ++k) {
+    const double pad = kBoxMargin + 1e-12 / width[k];
+    if (!(s[k] >= -pad && s[k] <= 1.0 + pad)) return false;
+  }
+  return true;
+}
+
+// A sample of a search box's tensor (components n₁·x, n₂·x, f, d·x / |d|²): values and
+// derivatives along the box's s.
+struct BoxSample {
+  Quad q[4];
+};
+
+// The ray's depth and the unit normal ∇ₓf / |∇ₓf| at a sample: with u = (n₁·x, n₂·x, d·x / |d|²)
+// and M = ∂u/∂s, ∇_u f = M⁻ᵀ ∇_s f and ∇ₓf = n₁ ∇_u f₀ + n₂ ∇_u f₁ + d / |d|² ∇_u f₂ (n₁, n₂, d
+// orthogonal, n₁ and n₂ of unit length).
+bool box_hit(const BoxSample& s, const RayRef& ray, double offset, glm::dvec3 d, double dd,
+             glm::dvec3 n1, glm::dvec3 n2, RayHit& out) {
+  const double t = s.q[0][3] - offset;
+  if (!(t >= ray.t0 && t <= ray.t1)) return false;
+  glm::dmat3 mt;  // Mᵀ (glm: mt[col][row]; row k: ∂/∂s_k of u)
+  for (int k = 0; k < 3; ++k)
+    mt[0][k] = s.q[k + 1][0], mt[1][k] = s.q[k + 1][1], mt[2][k] = s.q[k + 1][3];
+  const glm::dvec3 gradient(s.q[1][2], s.q[2][2], s.q[3][2]);
+  const glm::dvec3 gu = glm::inverse(mt) * gradient;
+  out = {t, unit_normal(n1 * gu.x + n2 * gu.y + d * (gu.z / dd), d), 0.0f};
+  return true;
+}
+
+// Newton's method on H(s) = (n₁·x − n₁·o, n₂·x − n₂·o, f) in the coordinates s of a box
+// `width` wide (its tensor c), from s, until the next step would fall below 10⁻¹⁵ (in ξ): the
+// step itself does, or quadratic convergence predicts it (a step below 10⁻⁶ whose successor
+// ≈ |step|³ / |previous step|² would be; `previous` is the size of the step that led to s), or
+// the steps stop shrinking below 10⁻⁹ (rounding's floor near an ill-conditioned solution) — or
+// 30 steps. `converged` says whether it stopped so, `last` is the size of its last step. The
+// sample is at the last point (see below). False where the Jacobian is singular on the way.
+template <int N>
+[[gnu::always_inline]] inline bool newton(const Quad* c, const glm::dvec3& width,
+                                          const glm::dvec3& offset, glm::dvec3& s,
+                                          BoxSample& sample, bool& converged, double& last,
+                                          double previous) {
+  converged = false;
+  for (int iter = 0; iter < 30; ++iter) {
+    evaluate_quads<N>(c, s, sample.q);
+    const glm::dvec3 h(sample.q[0][0] - offset.x, sample.q[0][1] - offset.y, sample.q[0][2]);
+    glm::dmat3 jac;  // rows: H's components' gradients in s (glm: jac[col][row])
+    for (int col = 0; col < 3; ++col)
+      jac[col] = glm::dvec3(sample.q[col + 1][0], sample.q[col + 1][1], sample.q[col + 1][2]);
+    if (!(std::abs(glm::determinant(jac)) > 0.0)) return false;
+    const glm::dvec3 step = glm::inverse(jac) * h;
+    s -= step;
+    const glm::dvec3 moved = glm::abs(step) * width;  // in ξ
+    const double size = std::max({moved.x, moved.y, moved.z});
+    last = size;
+    if (!(size > 1e-15) ||
+        (size < 1e-6 && previous < 1.0 && size * size * size < 1e-15 * previous * previous) ||
+        (size < 1e-9 && size > 0.9 * previous)) {
+      // The sample moved along with the last step to first order (its error is of the order of
+      // the step squared, below 10⁻¹² of the element), instead of evaluated again; the
+      // derivatives are those before the step.
+      sample.q[0] -= sample.q[1] * step.x + sample.q[2] * step.y + sample.q[3] * step.z;
+      converged = true;
+      return true;
+    }
+    previous = size;
+  }
+  evaluate_quads<N>(c, s, sample.q);
+  return true;
+}
+
+// What the search needs besides the element: its box in ξ, the field's sign margin, the rays'
+// direction, the rays and where their hits go.
+struct SearchTask {
+  const double* root;  // the box's coefficients: (x, y, z, f) quads, degree N
+  glm::dvec3 lo_box, hi_box;
+  double f_margin;
+  glm::dvec3 d;
+  std::span<const RayRef> rays;
+  AxisHits* out;
+};
+
 // The search from one box [lo, hi] of the reference cube for many rays of one direction d,
-// given the geometry's ((x, y, z) triples, degree q) and the field's (degree p) coefficients on
-// the box (the whole element, or a piece), and the margin of the field's sign tests. Hits go to
-// `out` with their ray's index, per ray in increasing t, a solution found from two boxes (on
-// their shared face) once.
+// given the element's coefficients on the box (the whole element, or a piece) as quads of
+// degree N — geometry and field raised to the same degree: the preconditioned system's
+// coefficients are then exact combinations of the components' — and the margin of the field's
+// sign tests. Hits go to `out` with their ray's index, per ray in increasing t, a solution found
+// from two boxes (on their shared face) once.
 //
 // The rays share the search's boxes: the subdivision does not depend on the ray (the split axis
 // comes from the box's coefficients, and the planes' derivatives do not depend on where the ray
 // passes), so each box's coefficients, ranges and preconditioned system are found once for all
-// the rays still in it, and each ray only takes its own tests — its planes against the box's
-// ranges, the preconditioned ranges and the Krawczyk test shifted by its offsets, Newton (its
-// depth range is tested on the root box).
+// the rays still in it, and each ray only takes its own tests — its planes and depth against the
+// box's ranges, the preconditioned ranges and the Krawczyk test shifted by its offsets, Newton.
 //
 // Preconditioning (as in Bernstein subdivision solvers, e.g. Mourrain & Pavone 2009): on each
 // box the system's components are replaced by G = Y H, Y the inverse of H's Jacobian at the
@@ -414,66 +454,48 @@ namespace {
 // ray's solution is excluded by them, and the Krawczyk test — with the ranges of ∂G/∂s, not
 // the product of Y with H's Jacobian ranges taken apart — proves one solution in a box much
 // larger than without.
-void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double* geometry,
-            const double* field, double f_margin, glm::dvec3 d, std::span<const RayRef> rays,
-            AxisHits& out) {
-  // The degrees the search works in: both raised to the larger one where that paid (then G's
-  // coefficients are exact combinations for p ≠ q too; the lower-degree part costs more to
-  // split), else the element's own. Measured (docs/benchmarks.md): raising is faster for
-  // max(p, q) ≤ 4 and where the lower degree is at least half the higher (p = 6, q = 3:
-  // 1.06 → 0.8–1.0 s; p = 8, q = 6: 6.7 → 3.8 s), slower for p = 8, q = 2 (3.1 → 4.2 s).
-  const int high = std::max(e.p, e.q), low = std::min(e.p, e.q);
-  const bool raise = low < high && (high <= 4 || 2 * low >= high);
-  const int gd = raise ? high : e.q, fd = raise ? high : e.p;
-  const int qm = gd + 1, pm = fd + 1;
-  const int gq = qm * qm * qm, fp = pm * pm * pm;
-  // A box's coefficients: the geometry's two plane components n₁·x, n₂·x interleaved (degree
-  // gd), then the field (degree fd). The depth d·x is tested on the root box only (pruning; a
-  // solution outside [t0, t1] is dropped where it is recorded), which saves a third of the
-  // geometry's splits.
-  const std::size_t box_size = std::size_t(2 * gq + fp);
-  const RaySystem sys(e, d);
-  const glm::dvec3 n1 = sys.n1, n2 = sys.n2;
-  const double dd = sys.dd;
+template <int N>
+[[gnu::always_inline]] inline void search_body(const SearchTask& task) {
+  constexpr int m = N + 1, size = m * m * m;
+  const std::span<const RayRef> rays = task.rays;
+  const double f_margin = task.f_margin;
+  const glm::dvec3 d = task.d;
+  glm::dvec3 n1, n2;
+  ray_frame(d, n1, n2);
+  const double dd = glm::dot(d, d);  // t = d·(x − o) / |d|², for any length of d
 
   // A box of the search and the rays still in it (lists[begin, end)).
   struct Entry {
     Box box;
     std::size_t begin, end;
   };
-  // What each ray carries: its components (n₁, n₂, d)·o (the box's coefficients are the
-  // geometry's components, the ray's subtracted in the tests), its margins, its box count.
+  // What each ray carries: its components (n₁, n₂, d / |d|²)·o (the box's coefficients are the
+  // element's components, the ray's subtracted in the tests), its margins, its box count.
   struct State {
     glm::dvec3 offset;
     double g_margin = 0.0, g_scale = 0.0;
     std::size_t boxes = 0;
   };
-  thread_local std::vector<double> pool, combined;
+  thread_local Quads pool, combined;
   thread_local std::vector<Entry> stack;
   thread_local std::vector<std::uint32_t> lists;
   thread_local std::vector<State> state;
   thread_local std::vector<std::pair<std::uint32_t, RayHit>> found;
-  pool.resize(box_size);
-  combined.resize(std::size_t(3 * gq));
+  pool.resize(size);
+  combined.resize(size);
   stack.clear();
   lists.clear();
   found.clear();
   state.assign(rays.size(), State{});
-  double depth_lo = std::numeric_limits<double>::infinity(), depth_hi = -depth_lo;
-  const int eq = e.q + 1, own_gq = eq * eq * eq;
-  thread_local std::vector<double> own_planes;
-  own_planes.resize(std::size_t(2 * own_gq));
+  // The root box's coefficients in the rays' frame, and the box around its geometry.
   glm::dvec3 box_lo(std::numeric_limits<double>::infinity()), box_hi(-box_lo);
-  for (int k = 0; k < own_gq; ++k) {
-    const glm::dvec3 x(geometry[3 * k], geometry[3 * k + 1], geometry[3 * k + 2]);
-    own_planes[2 * k] = glm::dot(n1, x), own_planes[2 * k + 1] = glm::dot(n2, x);
-    const double depth = glm::dot(d, x);
-    depth_lo = std::min(depth_lo, depth), depth_hi = std::max(depth_hi, depth);
+  for (int k = 0; k < size; ++k) {
+    Quad q;
+    load_quad(task.root + 4 * k, q);
+    const glm::dvec3 x(q[0], q[1], q[2]);
+    pool[k] = Quad{glm::dot(n1, x), glm::dot(n2, x), q[3], glm::dot(d, x) / dd};
     box_lo = glm::min(box_lo, x), box_hi = glm::max(box_hi, x);
   }
-  depth_lo /= dd, depth_hi /= dd;  // the same values: division by dd > 0 is monotone
-  elevate(own_planes.data(), e.q, gd, 2, pool.data());
-  elevate(field, e.p, fd, 1, pool.data() + 2 * gq);
   for (std::size_t r = 0; r < rays.size(); ++r) {
     const glm::dvec3 o = rays[r].org;
     State& st = state[r];
@@ -482,64 +504,52 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
     // from o to the coefficients' box (at least the largest to a coefficient).
     st.g_scale = glm::length(glm::max(glm::abs(box_lo - o), glm::abs(box_hi - o)));
     st.g_margin = kSignMargin * st.g_scale;
-    // The depth range of the root box against the ray's [t0, t1].
-    if (depth_hi - st.offset[2] < rays[r].t0 - st.g_margin ||
-        depth_lo - st.offset[2] > rays[r].t1 + st.g_margin)
-      continue;
     lists.push_back(std::uint32_t(r));
   }
-  if (!lists.empty()) stack.push_back({{lo_box, hi_box}, 0, lists.size()});
-
-  const auto record = [&](std::uint32_t r, const Sample& s) {
-    RayHit h;
-    if (sys.hit(rays[r], s, h)) found.push_back({r, h});
-  };
+  if (!lists.empty()) stack.push_back({{task.lo_box, task.hi_box}, 0, lists.size()});
 
   while (!stack.empty()) {
     const std::size_t slot = stack.size() - 1;
     const Entry entry = stack.back();
     const Box b = entry.box;
     stack.pop_back();  // pushed back below when it is split
-    const double* c = &pool[slot * box_size];
-    const double* f = c + 2 * gq;
+    Quad* c = &pool[slot * size];
     for (std::size_t k = entry.begin; k < entry.end; ++k)
       ++state[lists[k]].boxes;
-    // The convex hull tests: the field (the same for every ray), then each ray's two planes.
-    double lo[3], hi[3];
-    range<1>(f, fp, 0, lo[2], hi[2]);
+    // The convex hull tests: the field (the same for every ray), then each ray's two planes
+    // and its depth range [t0, t1].
+    Quad lo, hi;
+    range_quads<N>(c, lo, hi);
     if (lo[2] > f_margin || hi[2] < -f_margin) continue;
-    range<2>(c, 2 * gq, 0, lo[0], hi[0]);
-    range<2>(c, 2 * gq, 1, lo[1], hi[1]);
     const std::size_t in_box = lists.size();
     for (std::size_t k = entry.begin; k < entry.end; ++k) {
       const std::uint32_t r = lists[k];
       const State& st = state[r];
-      const bool misses = lo[0] - st.offset[0] > st.g_margin ||
-                          hi[0] - st.offset[0] < -st.g_margin ||
-                          lo[1] - st.offset[1] > st.g_margin || hi[1] - st.offset[1] < -st.g_margin;
+      const bool misses =
+          lo[0] - st.offset[0] > st.g_margin || hi[0] - st.offset[0] < -st.g_margin ||
+          lo[1] - st.offset[1] > st.g_margin || hi[1] - st.offset[1] < -st.g_margin ||
+          hi[3] - st.offset[2] < rays[r].t0 - st.g_margin ||
+          lo[3] - st.offset[2] > rays[r].t1 + st.g_margin;
       if (!misses) lists.push_back(r);
     }
     if (lists.size() == in_box) continue;
 
     // The preconditioned system G = Y H on the box, in its coordinates s ∈ [0, 1]³.
-    double value[3];
-    glm::dvec3 gradient[3];
-    evaluate_tensor<2>(gd, c, glm::dvec3(0.5), value, gradient);
-    evaluate_tensor<1>(fd, f, glm::dvec3(0.5), &value[2], &gradient[2]);
+    BoxSample mid;
+    evaluate_quads<N>(c, glm::dvec3(0.5), mid.q);
     glm::dmat3 jm;  // rows: the components' gradients in s (glm: jm[col][row])
     for (int col = 0; col < 3; ++col)
-      jm[col] = glm::dvec3(gradient[0][col], gradient[1][col], gradient[2][col]);
-    const double norms =
-        glm::length(gradient[0]) * glm::length(gradient[1]) * glm::length(gradient[2]);
+      jm[col] = glm::dvec3(mid.q[col + 1][0], mid.q[col + 1][1], mid.q[col + 1][2]);
+    double norms = 1.0;  // the product of the components' gradients' lengths
+    for (int row = 0; row < 3; ++row)
+      norms *= glm::length(glm::dvec3(jm[0][row], jm[1][row], jm[2][row]));
     const bool preconditioned = std::abs(glm::determinant(jm)) > 1e-12 * norms;
     glm::dmat3 y(1.0);
-    Interval g_range[3], g_jacobian[3][3];  // G's ranges and ∂G_row/∂s_col's
-    double radius[3] = {0.0, 0.0, 0.0};
+    Quad g_lo{}, g_hi{};                                   // G's ranges (lane: row)
+    Quad dg_lo[3] = {}, dg_hi[3] = {};                     // ∂G/∂s_col's ranges (lane: row)
+    double radius[3] = {0.0, 0.0, 0.0};                    // K's half-widths
     double plane_weight[3][2] = {}, field_weight[3] = {};  // |Y_r0|, |Y_r1| and |Y_r2|
     glm::dvec3 yh(0.0);                                    // Y H(m) without the ray's offsets
-    const auto scaled = [](double w, double lo, double hi) {
-      return w >= 0.0 ? Interval{w * lo, w * hi} : Interval{w * hi, w * lo};
-    };
     // The rounding in row r of G for a ray: its plane parts' coefficients are at most
     // |n_k·o| + g_scale in size (g_scale, the coefficients' box seen from o), its field part's
     // at most the field's magnitude, each weighed by its entry of Y (which scales with 1 / the
@@ -551,32 +561,17 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
     };
     if (preconditioned) {
       y = glm::inverse(jm);
-      yh = y * glm::dvec3(value[0], value[1], value[2]);
+      yh = y * glm::dvec3(mid.q[0][0], mid.q[0][1], mid.q[0][2]);
       for (int row = 0; row < 3; ++row) {
         plane_weight[row][0] = std::abs(y[0][row]), plane_weight[row][1] = std::abs(y[1][row]);
         field_weight[row] = std::abs(y[2][row]);
       }
-      if (fd == gd) {
-        // G's coefficients: each row's combination of the box's three.
-        for (int k = 0; k < gq; ++k)
-          for (int row = 0; row < 3; ++row)
-            combined[3 * k + row] =
-                y[0][row] * c[2 * k] + y[1][row] * c[2 * k + 1] + y[2][row] * f[k];
-        for (int row = 0; row < 3; ++row)
-          range<3>(combined.data(), 3 * gq, row, g_range[row].lo, g_range[row].hi);
-      } else {
-        // Degrees kept apart (not raised, above): the planes' part of each row,
-        // Y_r0 n₁·x + Y_r1 n₂·x (degree q), and its field part Y_r2 f (degree p) bounded apart
-        // and the bounds added.
-        for (int k = 0; k < gq; ++k)
-          for (int row = 0; row < 3; ++row)
-            combined[3 * k + row] = y[0][row] * c[2 * k] + y[1][row] * c[2 * k + 1];
-        for (int row = 0; row < 3; ++row) {
-          range<3>(combined.data(), 3 * gq, row, g_range[row].lo, g_range[row].hi);
-          const Interval part = scaled(y[2][row], lo[2], hi[2]);
-          g_range[row].lo += part.lo, g_range[row].hi += part.hi;
-        }
-      }
+      // G's coefficients: each row's combination of the box's three components (lane: row).
+      const Quad y0{y[0][0], y[0][1], y[0][2], 0.0}, y1{y[1][0], y[1][1], y[1][2], 0.0},
+          y2{y[2][0], y[2][1], y[2][2], 0.0};
+      for (int k = 0; k < size; ++k)
+        combined[k] = y0 * c[k][0] + y1 * c[k][1] + y2 * c[k][2];
+      range_quads<N>(combined.data(), g_lo, g_hi);
       // G for each ray: Y (H − (n₁·o, n₂·o, 0)); its ranges exclude 0 (beyond the margins): no
       // solution in the box. Tested before G's derivatives are bounded: often no ray is left.
       std::size_t kept = in_box;
@@ -586,36 +581,20 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
         for (int row = 0; row < 3; ++row) {
           const double shift = y[0][row] * st.offset[0] + y[1][row] * st.offset[1];
           const double margin = g_margin(row, st);
-          none = none || g_range[row].lo - shift > margin || g_range[row].hi - shift < -margin;
+          none = none || g_lo[row] - shift > margin || g_hi[row] - shift < -margin;
         }
         if (!none) lists[kept++] = lists[k];
       }
       lists.resize(kept);
       if (kept == in_box) continue;
-      if (fd == gd) {
-        for (int col = 0; col < 3; ++col) {
-          double dlo[3], dhi[3];
-          derivative_ranges<3>(gd, col, combined.data(), dlo, dhi);
-          for (int row = 0; row < 3; ++row)
-            g_jacobian[row][col] = {dlo[row], dhi[row]};
-        }
-      } else {
-        for (int col = 0; col < 3; ++col) {
-          double dlo[3], dhi[3], flo, fhi;
-          derivative_ranges<3>(gd, col, combined.data(), dlo, dhi);
-          derivative_ranges<1>(fd, col, f, &flo, &fhi);
-          for (int row = 0; row < 3; ++row) {
-            const Interval part = scaled(y[2][row], flo, fhi);
-            g_jacobian[row][col] = {dlo[row] + part.lo, dhi[row] + part.hi};
-          }
-        }
-      }
+      for (int col = 0; col < 3; ++col)
+        derivative_range_quads<N>(col, combined.data(), dg_lo[col], dg_hi[col]);
       // (I − ∂G/∂s)_row,col over the box, times the half-width ½ of B − m.
       for (int row = 0; row < 3; ++row)
         for (int col = 0; col < 3; ++col) {
           const double identity = row == col ? 1.0 : 0.0;
-          radius[row] += 0.5 * std::max(std::abs(identity - g_jacobian[row][col].lo),
-                                        std::abs(identity - g_jacobian[row][col].hi));
+          radius[row] += 0.5 * std::max(std::abs(identity - dg_lo[col][row]),
+                                        std::abs(identity - dg_hi[col][row]));
         }
     }
     // G is one-to-one on the box when every matrix in ∂G/∂s(B) is within less than 1 of the
@@ -626,9 +605,9 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
     // (Per ray below: the rounding of G's derivative coefficients, 2n times its values', is
     // added.)
     const double contraction = 2.0 * std::max({radius[0], radius[1], radius[2]});
-    const int degree = std::max(gd, fd);
     const glm::dvec3 width = b.hi - b.lo;
-    const bool narrowest = std::max({width.x, width.y, width.z}) < kMinWidth;
+    const double widest_width = std::max({width.x, width.y, width.z});
+    const bool narrowest = widest_width < kMinWidth;
     const std::size_t split_begin = lists.size();
     for (std::size_t k = in_box; k < split_begin; ++k) {
       const std::uint32_t r = lists[k];
@@ -649,12 +628,12 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
           // (no outward rounding in K: the margins stand in for it).
           centre[row] = 0.5 - (yh[row] - shift);
           const double klo = centre[row] - radius[row], khi = centre[row] + radius[row];
-          const double pad = kBoxMargin + (1.0 + 3.0 * degree) * margin;
+          const double pad = kBoxMargin + (1.0 + 3.0 * N) * margin;
           if (khi < -pad || klo > 1.0 + pad) none = true;
           if (!(klo > pad && khi < 1.0 - pad)) unique = false;
         }
         if (none) continue;
-        one_to_one = contraction + 6.0 * degree * largest < 1.0 - 1e-9;
+        one_to_one = contraction + 6.0 * N * largest < 1.0 - 1e-9;
       }
       // Out of budget, the boxes still pending are not split again (each gets Newton's point
       // or its centre), so that no solution that was still pending is lost.
@@ -667,20 +646,21 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
         // the box's face (an element's or a piece's: the shell's seams) is taken there instead
         // of at the smallest width; its neighbour finds it too, and the caster merges the two
         // (the one-to-one test's slack covers the margin's sliver).
-        glm::dvec3 xi = b.lo + glm::clamp(centre, 0.0, 1.0) * width;
+        glm::dvec3 s = glm::clamp(centre, 0.0, 1.0);
         const glm::dvec3 lead = glm::abs(centre - 0.5) * width;
-        Sample s;
+        BoxSample sample;
         bool converged = false;
         double last = 0.0;
-        if (sys.newton(rays[r].org, xi, s, converged, last, std::max({lead.x, lead.y, lead.z})) &&
-            inside(xi, b.lo, b.hi) &&
-            (unique || smallest ||
-             (converged && last <= 1e-6 * std::max({width.x, width.y, width.z})))) {
-          record(r, s);
+        RayHit hit;
+        if (newton<N>(c, width, st.offset, s, sample, converged, last,
+                      std::max({lead.x, lead.y, lead.z})) &&
+            inside(s, width) &&
+            (unique || smallest || (converged && last <= 1e-6 * widest_width))) {
+          if (box_hit(sample, rays[r], st.offset[2], d, dd, n1, n2, hit)) found.push_back({r, hit});
           continue;
         }
         if (smallest) {
-          record(r, evaluate(e, 0.5 * (b.lo + b.hi)));
+          if (box_hit(mid, rays[r], st.offset[2], d, dd, n1, n2, hit)) found.push_back({r, hit});
           continue;
         }
         // Proved but Newton left the box (rounding at its edge), or not proved: split it.
@@ -692,18 +672,21 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
     // Split along the axis along which G is furthest from linear (the widest ranges of its
     // derivatives along it; without preconditioning, the widest axis), never leaving one axis a
     // thousand times wider than the split one (every box must shrink to kMinWidth). The left
-    // half is looked at next.
+    // half is looked at next: the right one keeps the slot (it is looked at after the left
+    // one's whole subtree), the left one takes the next.
     const int widest = width.x >= width.y && width.x >= width.z ? 0 : width.y >= width.z ? 1 : 2;
     int axis = widest;
     if (preconditioned) {
       double score[3] = {0.0, 0.0, 0.0};
       for (int col = 0; col < 3; ++col)
         for (int row = 0; row < 3; ++row)
-          score[col] += g_jacobian[row][col].hi - g_jacobian[row][col].lo;
+          score[col] += dg_hi[col][row] - dg_lo[col][row];
       axis = score[0] >= score[1] && score[0] >= score[2] ? 0 : score[1] >= score[2] ? 1 : 2;
       if (width[axis] < 1e-3 * width[widest]) axis = widest;
     }
-    split_box<2>(gd, fd, axis, slot, pool);
+    if (pool.size() < (slot + 2) * size) pool.resize((slot + 2) * size);
+    c = &pool[slot * size];
+    split_quads<N>(axis, c, c + size, c);
     const auto [lb, rb] = halves(b, axis);
     stack.push_back({rb, split_begin, lists.size()});
     stack.push_back({lb, split_begin, lists.size()});
@@ -718,67 +701,125 @@ void search(const Element& e, glm::dvec3 lo_box, glm::dvec3 hi_box, const double
     if (i > 0 && found[i - 1].first == r &&
         found[i].second.t - found[i - 1].second.t <= 1e-12 * state[r].g_scale)
       continue;
-    out.push_back({rays[r].index, found[i].second});
+    task.out->push_back({rays[r].index, found[i].second});
   }
 }
 
+// The search's copies: one per degree, and on x86-64 one compiled for AVX2 beside the baseline
+// one (the same operations, so the same bits), taken where the processor has it.
+template <int N>
+void search_baseline(const SearchTask& task) {
+  search_body<N>(task);
+}
+#if defined(__x86_64__)
+template <int N>
+[[gnu::target("avx2")]] void search_avx2(const SearchTask& task) {
+  search_body<N>(task);
+}
+#endif
+
+bool processor_has_avx2() {
+#if defined(__x86_64__)
+  return __builtin_cpu_supports("avx2");
+#else
+  return false;
+#endif
+}
+std::atomic<bool> use_avx2{processor_has_avx2()};
+
+void search(int n, const SearchTask& task) {
+  const bool avx2 = use_avx2.load(std::memory_order_relaxed);
+  with_degree(n, [&](auto degree) {
+#if defined(__x86_64__)
+    if (avx2) return search_avx2<degree>(task);
+#endif
+    search_baseline<degree>(task);
+  });
+}
+
+// The element's geometry and field as (x, y, z, f) quads of degree max(p, q) (the lower one
+// raised) in `out`.
+int element_quads(const Element& e, std::vector<double>& out) {
+  const int n = std::max(e.p, e.q), nm = n + 1, size = nm * nm * nm;
+  thread_local std::vector<double> geometry, field;
+  geometry.resize(std::size_t(3 * size));
+  field.resize(std::size_t(size));
+  elevate(&e.geometry[0].x, e.q, n, 3, geometry.data());
+  elevate(e.field, e.p, n, 1, field.data());
+  out.resize(std::size_t(4 * size));
+  for (int k = 0; k < size; ++k) {
+    std::copy(&geometry[3 * k], &geometry[3 * k] + 3, &out[4 * k]);
+    out[4 * k + 3] = field[k];
+  }
+  return n;
+}
+
 }  // namespace
+
+bool prefer_avx2(bool prefer) {
+  use_avx2 = prefer && processor_has_avx2();
+  return use_avx2;
+}
 
 void intersect(const Element& e, glm::dvec3 o, glm::dvec3 d, double t0, double t1,
                std::vector<RayHit>& hits) {
   // The search with one ray (the Embree path's callback, any direction).
   thread_local AxisHits out;
+  thread_local std::vector<double> quads;
   out.clear();
+  const int n = element_quads(e, quads);
   const RayRef ray{0, o, t0, t1};
-  search(e, glm::dvec3(0.0), glm::dvec3(1.0), &e.geometry[0].x, e.field, field_margin(e), d,
-         std::span(&ray, 1), out);
+  search(n, {quads.data(), glm::dvec3(0.0), glm::dvec3(1.0), field_margin(e), d, std::span(&ray, 1),
+             &out});
   hits.insert(hits.end(), out.hits().begin(), out.hits().end());
 }
 
 Pieces::Pieces(const Element& e, double width) {
-  const int qm = e.q + 1, pm = e.p + 1;
-  gq_ = qm * qm * qm, fp_ = pm * pm * pm;
-  const std::size_t size = std::size_t(3 * gq_ + fp_);
+  std::vector<double> root;
+  degree_ = element_quads(e, root);
+  const int nm = degree_ + 1;
+  size_ = nm * nm * nm;
   field_margin_ = field_margin(e);
   const double margin = field_margin_;
   // Depth first over boxes as in the search; a box's coefficients at its stack position.
   std::vector<Box> stack{{glm::dvec3(0.0), glm::dvec3(1.0)}};
-  std::vector<double> pool(size);
-  for (int m = 0; m < gq_; ++m)
-    for (int a = 0; a < 3; ++a)
-      pool[3 * m + a] = e.geometry[m][a];
-  std::copy(e.field, e.field + fp_, pool.begin() + 3 * gq_);
-  while (!stack.empty()) {
-    const std::size_t slot = stack.size() - 1;
-    const Box b = stack.back();
-    stack.pop_back();
-    const double* c = &pool[slot * size];
-    double lo, hi;
-    range<1>(c + 3 * gq_, fp_, 0, lo, hi);
-    if (lo > margin || hi < -margin) continue;  // no point of the box is on the isosurface
-    const glm::dvec3 w = b.hi - b.lo;
-    const int axis = w.x >= w.y && w.x >= w.z ? 0 : w.y >= w.z ? 1 : 2;
-    if (w[axis] <= width) {
-      Piece piece{b.lo, b.hi, glm::dvec3(c[0], c[1], c[2]), glm::dvec3(c[0], c[1], c[2])};
-      for (int m = 0; m < gq_; ++m) {  // the geometry's convex hull
-        const glm::dvec3 x(c[3 * m], c[3 * m + 1], c[3 * m + 2]);
-        piece.world_lo = glm::min(piece.world_lo, x), piece.world_hi = glm::max(piece.world_hi, x);
+  Quads pool;
+  pool.resize(std::size_t(size_));
+  for (int k = 0; k < size_; ++k)
+    load_quad(&root[4 * k], pool[k]);
+  with_degree(degree_, [&](auto degree) {
+    while (!stack.empty()) {
+      const std::size_t slot = stack.size() - 1;
+      const Box b = stack.back();
+      stack.pop_back();
+      Quad lo, hi;
+      range_quads<degree>(&pool[slot * size_], lo, hi);
+      if (lo[3] > margin || hi[3] < -margin) continue;  // no point of the box is on the isosurface
+      const glm::dvec3 w = b.hi - b.lo;
+      const int axis = w.x >= w.y && w.x >= w.z ? 0 : w.y >= w.z ? 1 : 2;
+      if (w[axis] <= width) {
+        // The geometry's convex hull: the box's (x, y, z) ranges.
+        pieces_.push_back(
+            {b.lo, b.hi, glm::dvec3(lo[0], lo[1], lo[2]), glm::dvec3(hi[0], hi[1], hi[2])});
+        const std::size_t at = coefficients_.size();
+        coefficients_.resize(at + std::size_t(4 * size_));
+        std::memcpy(&coefficients_[at], &pool[slot * size_], sizeof(Quad) * std::size_t(size_));
+        continue;
       }
-      pieces_.push_back(piece);
-      coefficients_.insert(coefficients_.end(), c, c + size);
-      continue;
+      if (pool.size() < (slot + 2) * size_) pool.resize((slot + 2) * size_);
+      Quad* c = &pool[slot * size_];
+      split_quads<degree>(axis, c, c + size_, c);
+      const auto [lb, rb] = halves(b, axis);
+      stack.push_back(rb);
+      stack.push_back(lb);
     }
-    split_box<3>(e.q, e.p, axis, slot, pool);
-    const auto [lb, rb] = halves(b, axis);
-    stack.push_back(rb);
-    stack.push_back(lb);
-  }
+  });
 }
 
-void Pieces::intersect(const Element& e, std::size_t k, std::span<const RayRef> rays, glm::dvec3 d,
+void Pieces::intersect(const Element&, std::size_t k, std::span<const RayRef> rays, glm::dvec3 d,
                        AxisHits& hits) const {
-  const double* c = &coefficients_[k * std::size_t(3 * gq_ + fp_)];
-  search(e, pieces_[k].lo, pieces_[k].hi, c, c + 3 * gq_, field_margin_, d, rays, hits);
+  search(degree_, {&coefficients_[k * std::size_t(4 * size_)], pieces_[k].lo, pieces_[k].hi,
+                   field_margin_, d, rays, &hits});
 }
 
 }  // namespace ldimesh::curved

@@ -42,6 +42,12 @@ struct RayRef {
   double t0 = 0.0, t1 = 0.0;
 };
 
+// The search runs in a copy compiled for AVX2 where the processor has it (x86-64), else in the
+// baseline one; both do the same operations in the same order, so they give the same bits.
+// prefer_avx2(false) switches to the baseline copy (for tests; not while a search runs),
+// prefer_avx2(true) back. Returns whether the AVX2 copy is used now.
+bool prefer_avx2(bool prefer);
+
 // Appends every hit of the ray o + t·d (d of any length), t ∈ [t0, t1] (closed), with element e to
 // `hits`, in increasing t, with the unit normal ∇ₓf/|∇ₓf| (towards −d where the gradient vanishes).
 void intersect(const Element& e, glm::dvec3 o, glm::dvec3 d, double t0, double t1,
@@ -68,10 +74,11 @@ class Pieces {
                  AxisHits& hits) const;
 
  private:
-  int gq_ = 0, fp_ = 0;
+  int degree_ = 1;             // max(p, q): the lower of the two raised to it
+  int size_ = 0;               // (degree_ + 1)³
   double field_margin_ = 0.0;  // the sign tests' margin, from the whole element's field
   std::vector<Piece> pieces_;
-  std::vector<double> coefficients_;  // per piece: 3 (q + 1)³ geometry, then (p + 1)³ field
+  std::vector<double> coefficients_;  // per piece: size_ quads (x, y, z, f)
 };
 
 // x(ξ), the Jacobian ∂x/∂ξ (columns ∂x/∂ξ_k) and f(ξ), ∇ξf at a reference point (f and

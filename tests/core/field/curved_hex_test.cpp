@@ -16,6 +16,8 @@
 #include "ldimesh/core/field/hex_source.hpp"
 #include "ldimesh/core/raycast/raycaster.hpp"
 
+#include "field/curved_element.hpp"  // the search's copies (internal)
+
 namespace ldimesh {
 namespace {
 
@@ -371,6 +373,74 @@ TEST(CurvedHex, AxisAndEmbreeCastersGiveTheSameHits) {
   }
 }
 
+// The search's AVX2 copy and its baseline copy give the same bits (double depths, normals): on
+// random elements of mixed degrees, for batches of axis rays through an element's pieces and
+// for single oblique rays.
+TEST(CurvedHex, SearchCopiesGiveTheSameBits) {
+  if (!curved::prefer_avx2(true)) GTEST_SKIP() << "no AVX2 on this processor: one copy only";
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> jitter(-0.06, 0.06), value(-1.0, 1.0);
+  std::size_t compared = 0;
+  for (const auto& [p, q] : {std::pair{4, 4}, std::pair{2, 3}, std::pair{6, 2}}) {
+    // Geometry: the unit cube's Bernstein coefficients (i / q per axis) moved at random; field:
+    // random coefficients.
+    std::vector<glm::dvec3> geometry;
+    for (int k = 0; k <= q; ++k)
+      for (int j = 0; j <= q; ++j)
+        for (int i = 0; i <= q; ++i)
+          geometry.push_back(glm::dvec3(i, j, k) / double(q) +
+                             glm::dvec3(jitter(rng), jitter(rng), jitter(rng)));
+    std::vector<double> field(std::size_t((p + 1) * (p + 1) * (p + 1)));
+    for (double& f : field)
+      f = value(rng);
+    const curved::Element e{p, q, field.data(), geometry.data()};
+    const curved::Pieces pieces(e, 0.25);
+    const auto run = [&](bool avx2, std::vector<std::uint32_t>& ids, std::vector<RayHit>& hits) {
+      EXPECT_EQ(curved::prefer_avx2(avx2), avx2);
+      ids.clear(), hits.clear();
+      AxisHits out;
+      for (int axis = 0; axis < 3; ++axis) {
+        glm::dvec3 d(0.0);
+        d[axis] = axis == 1 ? -1.0 : 1.0;
+        std::vector<curved::RayRef> rays;
+        for (int j = 0; j < 24; ++j)
+          for (int i = 0; i < 24; ++i) {
+            glm::dvec3 o(0.0);
+            o[(axis + 1) % 3] = (i + 0.5) / 24.0, o[(axis + 2) % 3] = (j + 0.5) / 24.0;
+            o[axis] = axis == 1 ? 2.0 : -1.0;
+            rays.push_back({std::uint32_t(rays.size()), o, 0.0, 3.0});
+          }
+        for (std::size_t k = 0; k < pieces.pieces().size(); ++k) {
+          out.clear();
+          pieces.intersect(e, k, rays, d, out);
+          ids.insert(ids.end(), out.rays().begin(), out.rays().end());
+          hits.insert(hits.end(), out.hits().begin(), out.hits().end());
+        }
+      }
+      for (int r = 0; r < 200; ++r) {
+        const glm::dvec3 o(value(rng), value(rng), -1.5), d(0.2 * value(rng), 0.3, 1.0);
+        curved::intersect(e, o, d, 0.0, 5.0, hits);
+      }
+    };
+    std::vector<std::uint32_t> ids_a, ids_b;
+    std::vector<RayHit> a, b;
+    const std::mt19937 start = rng;
+    run(true, ids_a, a);
+    rng = start;  // the same oblique rays
+    run(false, ids_b, b);
+    curved::prefer_avx2(true);
+    EXPECT_EQ(ids_a, ids_b) << p << " " << q;
+    ASSERT_EQ(a.size(), b.size()) << p << " " << q;
+    EXPECT_GT(a.size(), 200u) << p << " " << q;
+    for (std::size_t h = 0; h < a.size(); ++h) {
+      EXPECT_EQ(a[h].t, b[h].t) << p << " " << q << " hit " << h;
+      EXPECT_EQ(a[h].normal, b[h].normal) << p << " " << q << " hit " << h;
+    }
+    compared += a.size();
+  }
+  EXPECT_GT(compared, 1000u);
+}
+
 // The roots along one ray by dense sampling: in each element whose box the ray passes, the
 // field at 1000 depths, each mapped to reference coordinates by the source's inversion, sign
 // changes between samples inside the element refined by bisection. nullopt where the scan
@@ -439,8 +509,7 @@ std::optional<std::vector<double>> dense_scan(const HexElementSource& source, gl
 TEST(CurvedHex, RootsMatchADenseScan) {
   std::mt19937 rng(11);
   int rays = 0, roots = 0;
-  // (3, 2) and (2, 4): the search raises the lower degree to the higher; (6, 2): it bounds the
-  // plane and field parts of its preconditioned system apart.
+  // p > q, p < q, and a high p over a low q: the search raises the lower degree to the higher.
   for (const auto& [p, q, nodes] :
        {std::tuple{3, 2, NodeSet::gauss_lobatto_legendre}, std::tuple{2, 4, NodeSet::equispaced},
         std::tuple{6, 2, NodeSet::gauss_legendre}}) {
