@@ -25,6 +25,8 @@
 #include "ldimesh/core/field/hex_source.hpp"
 #include "ldimesh/core/raycast/raycaster.hpp"
 
+#include "field/curved_element.hpp"  // the curved search's copies (internal)
+
 namespace {
 
 using ldimesh::bench::seconds_since;
@@ -104,7 +106,12 @@ int main(int argc, char** argv) {
   std::string only;
   app.add_option("--only", only, "cast only this source (to profile one)")
       ->check(CLI::IsMember({"grid", "elements"}));
+  bool baseline = false;
+  app.add_flag("--baseline", baseline,
+               "curved elements: run the search's baseline copy (as on a processor without AVX2) "
+               "instead of its AVX2 one");
   CLI11_PARSE(app, argc, argv);
+  if (baseline) ldimesh::curved::prefer_avx2(false);
   const int all = tbb::info::default_concurrency();
   const ldimesh::fields::MarschnerLobb ml;
 

@@ -114,9 +114,22 @@ class Quads {
   std::memcpy(&q, p, sizeof q);
 }
 
+// lo = min(lo, v), hi = max(hi, v) per component. `wide`: as one 32-byte select (the AVX2
+// copy); else as two 16-byte ones (GCC splits a 32-byte select into scalars through memory
+// where AVX is off: 15× slower). Finite values: the same result either way.
+template <bool wide>
 [[gnu::always_inline]] inline void min_max(const Quad& v, Quad& lo, Quad& hi) {
-  lo = v < lo ? v : lo;
-  hi = v > hi ? v : hi;
+  if constexpr (wide) {
+    lo = v < lo ? v : lo;
+    hi = v > hi ? v : hi;
+  } else {
+    using Half = double __attribute__((vector_size(16)));
+    const Half v0{v[0], v[1]}, v1{v[2], v[3]};
+    Half l0{lo[0], lo[1]}, l1{lo[2], lo[3]}, h0{hi[0], hi[1]}, h1{hi[2], hi[3]};
+    l0 = v0 < l0 ? v0 : l0, l1 = v1 < l1 ? v1 : l1;
+    h0 = v0 > h0 ? v0 : h0, h1 = v1 > h1 ? v1 : h1;
+    lo = Quad{l0[0], l0[1], l1[0], l1[1]}, hi = Quad{h0[0], h0[1], h1[0], h1[1]};
+  }
 }
 
 // Value (out[0]) and derivatives along ξ, η, ζ (out[1..3]) at r of the tensor c of degree N,
@@ -186,24 +199,24 @@ template <int N>
 // maxima side by side, so that their chains overlap; the values are finite (non-finite geometry
 // is refused, a non-finite field deactivates its element), so the order does not change the
 // result.
-template <int N>
+template <int N, bool wide>
 [[gnu::always_inline]] inline void range_quads(const Quad* c, Quad& lo, Quad& hi) {
   constexpr int total = (N + 1) * (N + 1) * (N + 1);
   Quad l[4] = {c[0], c[0], c[0], c[0]}, h[4] = {c[0], c[0], c[0], c[0]};
   int i = 0;
   for (; i + 3 < total; i += 4)
     for (int a = 0; a < 4; ++a)
-      min_max(c[i + a], l[a], h[a]);
+      min_max<wide>(c[i + a], l[a], h[a]);
   for (; i < total; ++i)
-    min_max(c[i], l[0], h[0]);
+    min_max<wide>(c[i], l[0], h[0]);
   for (int a = 1; a < 4; ++a)
-    min_max(l[a], l[0], h[0]), min_max(h[a], l[0], h[0]);
+    min_max<wide>(l[a], l[0], h[0]), min_max<wide>(h[a], l[0], h[0]);
   lo = l[0], hi = h[0];
 }
 
 // Bounds of ∂/∂s_axis of each component of c (degree N) over the box: the derivative's
 // Bernstein coefficients N (c_{i+1} − c_i) along that axis.
-template <int N>
+template <int N, bool wide>
 [[gnu::always_inline]] inline void derivative_range_quads(int axis, const Quad* c, Quad& lo,
                                                           Quad& hi) {
   constexpr int m = N + 1;
@@ -217,10 +230,10 @@ template <int N>
     for (int j = 0; j < inner; ++j) {
       const Quad* line = c + o * m * inner + j;
       for (int i = 0; i < N; ++i)
-        min_max(N * (line[(i + 1) * stride] - line[i * stride]), l[i], h[i]);
+        min_max<wide>(N * (line[(i + 1) * stride] - line[i * stride]), l[i], h[i]);
     }
   for (int i = 1; i < N; ++i)
-    min_max(l[i], l[0], h[0]), min_max(h[i], l[0], h[0]);
+    min_max<wide>(l[i], l[0], h[0]), min_max<wide>(h[i], l[0], h[0]);
   lo = l[0], hi = h[0];
 }
 
@@ -454,7 +467,7 @@ struct SearchTask {
 // ray's solution is excluded by them, and the Krawczyk test — with the ranges of ∂G/∂s, not
 // the product of Y with H's Jacobian ranges taken apart — proves one solution in a box much
 // larger than without.
-template <int N>
+template <int N, bool wide>
 [[gnu::always_inline]] inline void search_body(const SearchTask& task) {
   constexpr int m = N + 1, size = m * m * m;
   const std::span<const RayRef> rays = task.rays;
@@ -519,7 +532,7 @@ template <int N>
     // The convex hull tests: the field (the same for every ray), then each ray's two planes
     // and its depth range [t0, t1].
     Quad lo, hi;
-    range_quads<N>(c, lo, hi);
+    range_quads<N, wide>(c, lo, hi);
     if (lo[2] > f_margin || hi[2] < -f_margin) continue;
     const std::size_t in_box = lists.size();
     for (std::size_t k = entry.begin; k < entry.end; ++k) {
@@ -571,7 +584,7 @@ template <int N>
           y2{y[2][0], y[2][1], y[2][2], 0.0};
       for (int k = 0; k < size; ++k)
         combined[k] = y0 * c[k][0] + y1 * c[k][1] + y2 * c[k][2];
-      range_quads<N>(combined.data(), g_lo, g_hi);
+      range_quads<N, wide>(combined.data(), g_lo, g_hi);
       // G for each ray: Y (H − (n₁·o, n₂·o, 0)); its ranges exclude 0 (beyond the margins): no
       // solution in the box. Tested before G's derivatives are bounded: often no ray is left.
       std::size_t kept = in_box;
@@ -588,7 +601,7 @@ template <int N>
       lists.resize(kept);
       if (kept == in_box) continue;
       for (int col = 0; col < 3; ++col)
-        derivative_range_quads<N>(col, combined.data(), dg_lo[col], dg_hi[col]);
+        derivative_range_quads<N, wide>(col, combined.data(), dg_lo[col], dg_hi[col]);
       // (I − ∂G/∂s)_row,col over the box, times the half-width ½ of B − m.
       for (int row = 0; row < 3; ++row)
         for (int col = 0; col < 3; ++col) {
@@ -705,16 +718,17 @@ template <int N>
   }
 }
 
-// The search's copies: one per degree, and on x86-64 one compiled for AVX2 beside the baseline
-// one (the same operations, so the same bits), taken where the processor has it.
-template <int N>
-void search_baseline(const SearchTask& task) {
-  search_body<N>(task);
+// The kernels' copies: one per degree, and on x86-64 one compiled for AVX2 beside the baseline
+// one (the same operations, so the same bits), taken where the processor has it. Kernel::run<N>
+// (always inlined) is the work.
+template <class Kernel, int N, class Task>
+void run_baseline(const Task& task) {
+  Kernel::template run<N, false>(task);
 }
 #if defined(__x86_64__)
-template <int N>
-[[gnu::target("avx2")]] void search_avx2(const SearchTask& task) {
-  search_body<N>(task);
+template <class Kernel, int N, class Task>
+[[gnu::target("avx2")]] void run_avx2(const Task& task) {
+  Kernel::template run<N, true>(task);
 }
 #endif
 
@@ -727,14 +741,25 @@ bool processor_has_avx2() {
 }
 std::atomic<bool> use_avx2{processor_has_avx2()};
 
-void search(int n, const SearchTask& task) {
+template <class Kernel, class Task>
+void run(int n, const Task& task) {
   const bool avx2 = use_avx2.load(std::memory_order_relaxed);
   with_degree(n, [&](auto degree) {
 #if defined(__x86_64__)
-    if (avx2) return search_avx2<degree>(task);
+    if (avx2) return run_avx2<Kernel, degree>(task);
 #endif
-    search_baseline<degree>(task);
+    run_baseline<Kernel, degree>(task);
   });
+}
+
+struct Search {
+  template <int N, bool wide>
+  [[gnu::always_inline]] static void run(const SearchTask& task) {
+    search_body<N, wide>(task);
+  }
+};
+void search(int n, const SearchTask& task) {
+  run<Search>(n, task);
 }
 
 // The element's geometry and field as (x, y, z, f) quads of degree max(p, q) (the lower one
@@ -753,6 +778,51 @@ int element_quads(const Element& e, std::vector<double>& out) {
   }
   return n;
 }
+
+// The pieces of an element: its quads (degree N) split depth first, as in the search, down to
+// `width`, where the field's range holds the isovalue.
+struct PiecesTask {
+  const double* root;
+  double width, margin;
+  std::vector<Piece>* pieces;
+  std::vector<double>* coefficients;
+};
+struct SplitIntoPieces {
+  template <int N, bool wide>
+  [[gnu::always_inline]] static void run(const PiecesTask& task) {
+    constexpr int size = (N + 1) * (N + 1) * (N + 1);
+    std::vector<Box> stack{{glm::dvec3(0.0), glm::dvec3(1.0)}};
+    Quads pool;  // a box's coefficients at its stack position
+    pool.resize(std::size_t(size));
+    for (int k = 0; k < size; ++k)
+      load_quad(task.root + 4 * k, pool[k]);
+    while (!stack.empty()) {
+      const std::size_t slot = stack.size() - 1;
+      const Box b = stack.back();
+      stack.pop_back();
+      Quad lo, hi;
+      range_quads<N, wide>(&pool[slot * size], lo, hi);
+      if (lo[3] > task.margin || hi[3] < -task.margin) continue;  // no point on the isosurface
+      const glm::dvec3 w = b.hi - b.lo;
+      const int axis = w.x >= w.y && w.x >= w.z ? 0 : w.y >= w.z ? 1 : 2;
+      if (w[axis] <= task.width) {
+        // The geometry's convex hull: the box's (x, y, z) ranges.
+        task.pieces->push_back(
+            {b.lo, b.hi, glm::dvec3(lo[0], lo[1], lo[2]), glm::dvec3(hi[0], hi[1], hi[2])});
+        const std::size_t at = task.coefficients->size();
+        task.coefficients->resize(at + std::size_t(4 * size));
+        std::memcpy(&(*task.coefficients)[at], &pool[slot * size], sizeof(Quad) * size);
+        continue;
+      }
+      if (pool.size() < (slot + 2) * size) pool.resize((slot + 2) * size);
+      Quad* c = &pool[slot * size];
+      split_quads<N>(axis, c, c + size, c);
+      const auto [lb, rb] = halves(b, axis);
+      stack.push_back(rb);
+      stack.push_back(lb);
+    }
+  }
+};
 
 }  // namespace
 
@@ -780,40 +850,8 @@ Pieces::Pieces(const Element& e, double width) {
   const int nm = degree_ + 1;
   size_ = nm * nm * nm;
   field_margin_ = field_margin(e);
-  const double margin = field_margin_;
-  // Depth first over boxes as in the search; a box's coefficients at its stack position.
-  std::vector<Box> stack{{glm::dvec3(0.0), glm::dvec3(1.0)}};
-  Quads pool;
-  pool.resize(std::size_t(size_));
-  for (int k = 0; k < size_; ++k)
-    load_quad(&root[4 * k], pool[k]);
-  with_degree(degree_, [&](auto degree) {
-    while (!stack.empty()) {
-      const std::size_t slot = stack.size() - 1;
-      const Box b = stack.back();
-      stack.pop_back();
-      Quad lo, hi;
-      range_quads<degree>(&pool[slot * size_], lo, hi);
-      if (lo[3] > margin || hi[3] < -margin) continue;  // no point of the box is on the isosurface
-      const glm::dvec3 w = b.hi - b.lo;
-      const int axis = w.x >= w.y && w.x >= w.z ? 0 : w.y >= w.z ? 1 : 2;
-      if (w[axis] <= width) {
-        // The geometry's convex hull: the box's (x, y, z) ranges.
-        pieces_.push_back(
-            {b.lo, b.hi, glm::dvec3(lo[0], lo[1], lo[2]), glm::dvec3(hi[0], hi[1], hi[2])});
-        const std::size_t at = coefficients_.size();
-        coefficients_.resize(at + std::size_t(4 * size_));
-        std::memcpy(&coefficients_[at], &pool[slot * size_], sizeof(Quad) * std::size_t(size_));
-        continue;
-      }
-      if (pool.size() < (slot + 2) * size_) pool.resize((slot + 2) * size_);
-      Quad* c = &pool[slot * size_];
-      split_quads<degree>(axis, c, c + size_, c);
-      const auto [lb, rb] = halves(b, axis);
-      stack.push_back(rb);
-      stack.push_back(lb);
-    }
-  });
+  run<SplitIntoPieces>(degree_,
+                       PiecesTask{root.data(), width, field_margin_, &pieces_, &coefficients_});
 }
 
 void Pieces::intersect(const Element&, std::size_t k, std::span<const RayRef> rays, glm::dvec3 d,
