@@ -157,22 +157,22 @@ template <int N>
   out[0] = f, out[1] = fx, out[2] = fy, out[3] = fz;
 }
 
-// Splits the tensor c (degree N) at the middle of `axis` into left and right halves (de
-// Casteljau along every line of that axis). `right` may be `c` (each slab is read before its
-// halves are written). The tensor is taken as slabs [outer][i][inner] (i along `axis`, inner
-// the contiguous quads below it), and de Casteljau's levels run over whole rows of a slab:
-// independent operations side by side instead of one dependent chain per line.
+// Splits the tensor c (degree N) at the middle of `axis`: c becomes the right half, `left` the
+// left one (de Casteljau along every line of that axis, in place: after level r, row i holds
+// level r's point i, and the rows at the end of each level are the right half's; the left
+// half's row r is row 0 after level r). The tensor is taken as slabs [outer][i][inner] (i along
+// `axis`, inner the contiguous quads below it), and de Casteljau's levels run over whole rows of
+// a slab: independent operations side by side instead of one dependent chain per line.
 template <int N, int axis>
-[[gnu::always_inline]] inline void split_quads_along(const Quad* c, Quad* left, Quad* right) {
+[[gnu::always_inline]] inline void split_quads_along(Quad* c, Quad* left) {
   constexpr int m = N + 1;
   constexpr int inner = axis == 0 ? 1 : axis == 1 ? m : m * m;
   constexpr int outer = axis == 0 ? m * m : axis == 1 ? m : 1;
-  Quad w[m * inner];  // a slab: m rows of `inner` quads
   for (int o = 0; o < outer; ++o) {
-    const int base = o * m * inner;
-    std::copy(c + base, c + base + m * inner, w);
-    std::copy(w, w + inner, left + base);
-    std::copy(w + N * inner, w + m * inner, right + base + N * inner);
+    Quad* w = c + o * m * inner;  // the slab: m rows of `inner` quads
+    Quad* l = left + o * m * inner;
+    for (int j = 0; j < inner; ++j)
+      l[j] = w[j];
     for (int r = 1; r <= N; ++r) {
       for (int i = 0; i <= N - r; ++i) {
         Quad* row = w + i * inner;
@@ -180,19 +180,19 @@ template <int N, int axis>
         for (int j = 0; j < inner; ++j)
           row[j] = 0.5 * (row[j] + next[j]);
       }
-      std::copy(w, w + inner, left + base + r * inner);
-      std::copy(w + (N - r) * inner, w + (N - r + 1) * inner, right + base + (N - r) * inner);
+      for (int j = 0; j < inner; ++j)
+        l[r * inner + j] = w[j];
     }
   }
 }
 template <int N>
-[[gnu::always_inline]] inline void split_quads(int axis, const Quad* c, Quad* left, Quad* right) {
+[[gnu::always_inline]] inline void split_quads(int axis, Quad* c, Quad* left) {
   if (axis == 0)
-    split_quads_along<N, 0>(c, left, right);
+    split_quads_along<N, 0>(c, left);
   else if (axis == 1)
-    split_quads_along<N, 1>(c, left, right);
+    split_quads_along<N, 1>(c, left);
   else
-    split_quads_along<N, 2>(c, left, right);
+    split_quads_along<N, 2>(c, left);
 }
 
 // Minimum and maximum of each component over the tensor c (degree N). Four partial minima and
@@ -699,7 +699,7 @@ template <int N, bool wide>
     }
     if (pool.size() < (slot + 2) * size) pool.resize((slot + 2) * size);
     c = &pool[slot * size];
-    split_quads<N>(axis, c, c + size, c);
+    split_quads<N>(axis, c, c + size);
     const auto [lb, rb] = halves(b, axis);
     stack.push_back({rb, split_begin, lists.size()});
     stack.push_back({lb, split_begin, lists.size()});
@@ -816,7 +816,7 @@ struct SplitIntoPieces {
       }
       if (pool.size() < (slot + 2) * size) pool.resize((slot + 2) * size);
       Quad* c = &pool[slot * size];
-      split_quads<N>(axis, c, c + size, c);
+      split_quads<N>(axis, c, c + size);
       const auto [lb, rb] = halves(b, axis);
       stack.push_back(rb);
       stack.push_back(lb);
