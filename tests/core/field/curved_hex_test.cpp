@@ -542,6 +542,85 @@ TEST(CurvedHex, RootsMatchADenseScan) {
   EXPECT_GT(roots, 150);
 }
 
+// Rays exactly along element faces, through element edges and through a vertex of a curved
+// mesh: 2³ elements over [0, 2]³ whose interiors are bent while their faces stay the planes of
+// integer coordinates (the bend vanishes there), and the field 0.3 x + 0.5 y + z, represented
+// exactly, at the isovalue whose plane passes through the mesh's middle vertex (1, 1, 1). Each
+// ray meets the plane once, however many elements share the point where it does — by both
+// casters.
+TEST(CurvedHex, RaysAlongFacesEdgesAndThroughAVertexHitOnce) {
+  const glm::dvec3 normal(0.3, 0.5, 1.0);
+  const double iso = glm::dot(normal, glm::dvec3(1.0));
+  for (const auto& [p, q] : {std::pair{2, 2}, std::pair{3, 2}, std::pair{4, 3}}) {
+    const CurvedMesh m = mesh_of(
+        8, p, q, NodeSet::gauss_lobatto_legendre,
+        [](std::size_t e, glm::dvec3 xi) {
+          const glm::dvec3 x = glm::dvec3(double(e % 2), double(e / 2 % 2), double(e / 4)) + xi;
+          const double bump = std::sin(kPi * x.x) * std::sin(kPi * x.y) * std::sin(kPi * x.z);
+          return x + 0.08 * bump * glm::dvec3(1.0, -0.7, 0.4);
+        },
+        [&](glm::dvec3 x) { return glm::dot(normal, x); });
+    const HexElementSource source(m.block);
+    for (std::size_t e = 0; e < 8; ++e)
+      ASSERT_TRUE(source.is_curved(e)) << describe(p, q, NodeSet::gauss_lobatto_legendre);
+    const Box domain{glm::dvec3(0.0), glm::dvec3(2.0)};
+    const RayCaster fast(source, iso), reference(source, iso, RayCasterOptions{CastPath::embree});
+    std::size_t checked = 0;
+    for (int axis = 0; axis < 3; ++axis) {
+      glm::dvec3 dir(0.0);
+      dir[axis] = 1.0;
+      const View view = make_view(domain, dir, 8);
+      // The rays' two coordinates across: on element faces (1), edges (both 1) and between, in
+      // the interior of the mesh's cross-section.
+      std::vector<glm::dvec2> positions;
+      std::vector<glm::dvec3> across;  // the world point of each ray at depth 0
+      for (double a : {0.25, 0.5, 1.0, 1.375, 1.75})
+        for (double b : {0.25, 0.625, 1.0, 1.5, 1.75}) {
+          glm::dvec3 x = view.origin;
+          x[(axis + 1) % 3] = a, x[(axis + 2) % 3] = b;
+          const glm::dvec3 r = x - view.origin;
+          const glm::dvec2 image(glm::dot(r, view.u) / view.spacing,
+                                 glm::dot(r, view.v) / view.spacing);
+          const glm::dvec3 back = view.point(image.x, image.y, 0.0);
+          // The ray passes exactly there.
+          ASSERT_EQ(back[(axis + 1) % 3], a);
+          ASSERT_EQ(back[(axis + 2) % 3], b);
+          positions.push_back(image);
+          across.push_back(back);
+        }
+      for (const RayCaster* caster : {&fast, &reference}) {
+        const std::string what = describe(p, q, NodeSet::gauss_lobatto_legendre) + " axis " +
+                                 std::to_string(axis) + (caster == &fast ? " coherent" : " Embree");
+        EXPECT_EQ(caster->uses_axis_casters(view), caster == &fast) << what;
+        const RayHitList hits = caster->cast_points(view, positions);
+        for (std::size_t r = 0; r < positions.size(); ++r) {
+          // Where the ray meets the plane, along the axis.
+          const glm::dvec3 o = across[r];
+          const double along = (iso - glm::dot(normal, o) + normal[axis] * o[axis]) / normal[axis];
+          const std::uint32_t count = hits.offsets[r + 1] - hits.offsets[r];
+          if (along < -1e-3 || along > 2.0 + 1e-3) {
+            EXPECT_EQ(count, 0u) << what << " ray " << r;
+            continue;
+          }
+          if (along < 1e-3 || along > 2.0 - 1e-3) continue;  // on the mesh's boundary
+          EXPECT_EQ(count, 1u) << what << " ray " << r << " at (" << o.x << ", " << o.y << ", "
+                               << o.z << ")";
+          if (count != 1u) continue;
+          const glm::dvec3 x =
+              view.point(positions[r].x, positions[r].y, hits.depth[hits.offsets[r]]);
+          EXPECT_NEAR(x[axis], along, 1e-6) << what;
+          EXPECT_NEAR(
+              glm::length(glm::dvec3(hits.normal[hits.offsets[r]]) - glm::normalize(normal)), 0.0,
+              1e-5)
+              << what;
+          ++checked;
+        }
+      }
+    }
+    EXPECT_GE(checked, 80u) << describe(p, q, NodeSet::gauss_lobatto_legendre);
+  }
+}
+
 TEST(CurvedHex, InvalidCurvedBlocksAreRejected) {
   // One element: only its centre node is off the box's faces, and the distortion moves it.
   const CurvedMesh good =
