@@ -147,9 +147,10 @@ class AdaptorImpl final : public Adaptor {
       o.bind_address = options_.bind;
       o.port = options_.port;
       o.token = options_.token;
-      // The viewer's files, from the checkout the library was built in.
-      o.static_dir = std::filesystem::path(LDIMESH_SOURCE_DIR) / "viewer" / "web";
-      o.vendor_three_dir = std::filesystem::path(LDIMESH_SOURCE_DIR) / "node_modules" / "three";
+      // The viewer's files: the checkout the library was built in, or where it is installed.
+      const ViewerFiles files = find_viewer_files();
+      o.static_dir = files.static_dir;
+      o.vendor_three_dir = files.vendor_three_dir;
       server_ = std::make_unique<HttpServer>(*store_, o);
       if (Status s = server_->start(); !s) return s;
     }

@@ -8,6 +8,7 @@
 #include <atomic>
 #include <cerrno>
 #include <charconv>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <optional>
@@ -16,6 +17,7 @@
 #include <thread>
 #include <tuple>
 #include <utility>
+#include <vector>
 
 #include <httplib.h>
 #include <nlohmann/json.hpp>
@@ -551,6 +553,27 @@ bool tokens_equal(std::string_view given, std::string_view expected) {
     difference |= g ^ static_cast<unsigned char>(expected[i]);
   }
   return difference == 0;
+}
+
+ViewerFiles find_viewer_files() {
+  std::vector<fs::path> roots;
+  std::error_code ec;
+  if (const char* env = std::getenv("LDIMESH_DATA_DIR"); env && *env) {
+    roots.emplace_back(env);  // the only place then
+  } else {
+    roots.emplace_back(LDIMESH_SOURCE_DIR);
+    roots.emplace_back(LDIMESH_INSTALL_DATA_DIR);
+    if (const fs::path exe = fs::read_symlink("/proc/self/exe", ec); !ec)
+      roots.push_back(exe.parent_path().parent_path() / "share" / "ldimesh");
+  }
+  for (const fs::path& root : roots) {
+    if (!fs::is_regular_file(root / "viewer" / "web" / "index.html", ec)) continue;
+    ViewerFiles files{root / "viewer" / "web", {}};
+    if (fs::is_directory(root / "node_modules" / "three" / "build", ec))
+      files.vendor_three_dir = root / "node_modules" / "three";
+    return files;
+  }
+  return {};
 }
 
 }  // namespace ldimesh

@@ -5,7 +5,6 @@
 
 #include <cstdio>
 #include <filesystem>
-#include <optional>
 #include <stdexcept>
 #include <string>
 
@@ -17,27 +16,16 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// The checkout this binary was built in: build/bin/<program> → the repository root.
-std::optional<fs::path> repository_root() {
-  std::error_code ec;
-  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
-  if (ec) return std::nullopt;
-  return exe.parent_path().parent_path().parent_path();
-}
-
-// `given` when set; otherwise `relative` below the repository root if it is there, or empty
-// with a warning (the API works without the viewer).
-fs::path locate(const std::string& given, const fs::path& relative, const char* option,
-                const std::string& program) {
+// `given` when set; otherwise `found` (find_viewer_files: the checkout, the installation), or
+// empty with a warning (the API works without the viewer).
+fs::path locate(const std::string& given, const fs::path& found, const char* what,
+                const char* option, const std::string& program) {
   if (!given.empty()) return given;
-  if (const auto root = repository_root()) {
-    std::error_code ec;
-    if (fs::is_directory(*root / relative, ec)) return *root / relative;
-  }
+  if (!found.empty()) return found;
   std::fprintf(stderr,
-               "%s: warning: %s not found next to this binary; the API works, the viewer "
-               "needs %s\n",
-               program.c_str(), relative.string().c_str(), option);
+               "%s: warning: %s not found (neither in the checkout nor installed, nor in "
+               "$LDIMESH_DATA_DIR); the API works, the viewer needs %s\n",
+               program.c_str(), what, option);
   return {};
 }
 
@@ -73,8 +61,11 @@ int run_serve(const ServeArgs& args, const std::string& program) {
   options.bind_address = args.bind;
   options.port = args.port;
   options.token = args.token;
-  options.static_dir = locate(args.static_dir, "viewer/web", "--static-dir", program);
-  options.vendor_three_dir = locate(args.vendor_dir, "node_modules/three", "--vendor-dir", program);
+  const ldimesh::ViewerFiles files = ldimesh::find_viewer_files();
+  options.static_dir =
+      locate(args.static_dir, files.static_dir, "viewer/web", "--static-dir", program);
+  options.vendor_three_dir =
+      locate(args.vendor_dir, files.vendor_three_dir, "node_modules/three", "--vendor-dir", program);
   ldimesh::HttpServer server(store, options);
   if (ldimesh::Status s = server.start(); !s) throw std::runtime_error(s.message());
   std::printf("%s: serving %zu step(s) from %s at %s\n", program.c_str(), store.list().size(),

@@ -46,6 +46,17 @@ struct HttpServerOptions {
   std::chrono::milliseconds event_keep_alive{15000};
 };
 
+// Where the web viewer's files lie: the first of these folders that holds viewer/web/index.html
+// — the checkout the library was built in, the installed share/ldimesh (`cmake --install`, at
+// the prefix configured at build time), share/ldimesh beside the running program's bin/ (an
+// installation moved elsewhere); or only $LDIMESH_DATA_DIR where that is set — with its
+// viewer/web and, where present, node_modules/three. Empty paths (the API works without the
+// viewer) when none holds it.
+struct ViewerFiles {
+  std::filesystem::path static_dir, vendor_three_dir;
+};
+ViewerFiles find_viewer_files();
+
 // Serves `store` over HTTP. start() and stop() from one thread; port(), token() and url() from
 // any thread after start().
 class HttpServer {
