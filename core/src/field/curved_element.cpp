@@ -282,7 +282,7 @@ double field_margin(const Element& e) {
 // The tensor `in` of degree a per axis (`count` interleaved components) as one of degree n ≥ a
 // (the same polynomial) in `out` (not `in`): coefficient i of degree n is
 // Σ_j C(a, j) C(n − a, i − j) / C(n, i) c_j along each axis, applied axis by axis to whole
-// rows of the slabs [outer][i][inner] (as split_axis).
+// rows of the slabs [outer][i][inner] (as split_quads_along).
 void elevate(const double* in, int a, int n, int count, double* out) {
   const int am = a + 1, nm = n + 1;
   if (a == n) {
@@ -487,6 +487,7 @@ template <int N, bool wide>
   struct State {
     glm::dvec3 offset;
     double g_margin = 0.0, g_scale = 0.0;
+    double t_margin = 0.0;  // the depth's (in t, length / |d|)
     std::size_t boxes = 0;
   };
   thread_local Quads pool, combined;
@@ -517,6 +518,9 @@ template <int N, bool wide>
     // from o to the coefficients' box (at least the largest to a coefficient).
     st.g_scale = glm::length(glm::max(glm::abs(box_lo - o), glm::abs(box_hi - o)));
     st.g_margin = kSignMargin * st.g_scale;
+    // The depth's coefficients d·x / |d|² round with their size, d·o / |d|² plus the geometry
+    // seen from o over |d|.
+    st.t_margin = kSignMargin * (st.g_scale / std::sqrt(dd) + std::abs(st.offset[2]));
     lists.push_back(std::uint32_t(r));
   }
   if (!lists.empty()) stack.push_back({{task.lo_box, task.hi_box}, 0, lists.size()});
@@ -541,8 +545,8 @@ template <int N, bool wide>
       const bool misses =
           lo[0] - st.offset[0] > st.g_margin || hi[0] - st.offset[0] < -st.g_margin ||
           lo[1] - st.offset[1] > st.g_margin || hi[1] - st.offset[1] < -st.g_margin ||
-          hi[3] - st.offset[2] < rays[r].t0 - st.g_margin ||
-          lo[3] - st.offset[2] > rays[r].t1 + st.g_margin;
+          hi[3] - st.offset[2] < rays[r].t0 - st.t_margin ||
+          lo[3] - st.offset[2] > rays[r].t1 + st.t_margin;
       if (!misses) lists.push_back(r);
     }
     if (lists.size() == in_box) continue;

@@ -3,8 +3,8 @@
 // reference cube [0, 1]³ (degrees q and p per axis). Internal to the element source.
 //
 // A hit is a solution ξ of the system H(ξ) = (n₁·(x(ξ) − o), n₂·(x(ξ) − o), f(ξ)) = 0, with
-// n₁, n₂ ⊥ d (the ray is the intersection of two planes), and its depth t = d·(x(ξ) − o). The
-// reference cube is subdivided. On each box the system is preconditioned, G = Y H with Y the
+// n₁, n₂ ⊥ d (the ray is the intersection of two planes), and its depth t = d·(x(ξ) − o) / |d|².
+// The reference cube is subdivided. On each box the system is preconditioned, G = Y H with Y the
 // inverse of H's Jacobian at the box's centre; a box is dropped when one component's or one of
 // G's Bernstein ranges has one strict sign (the convex hull property: no zero there), its depth
 // range misses [t0, t1], or the Krawczyk operator of G misses it; a box that the operator maps

@@ -394,9 +394,12 @@ TEST(CurvedHex, SearchCopiesGiveTheSameBits) {
     for (double& f : field)
       f = value(rng);
     const curved::Element e{p, q, field.data(), geometry.data()};
-    const curved::Pieces pieces(e, 0.25);
+    // Each copy splits the element into its pieces too.
+    std::vector<curved::Piece> boxes[2];
     const auto run = [&](bool avx2, std::vector<std::uint32_t>& ids, std::vector<RayHit>& hits) {
       EXPECT_EQ(curved::prefer_avx2(avx2), avx2);
+      const curved::Pieces pieces(e, 0.25);
+      boxes[avx2] = pieces.pieces();
       ids.clear(), hits.clear();
       AxisHits out;
       for (int axis = 0; axis < 3; ++axis) {
@@ -429,6 +432,12 @@ TEST(CurvedHex, SearchCopiesGiveTheSameBits) {
     rng = start;  // the same oblique rays
     run(false, ids_b, b);
     curved::prefer_avx2(true);
+    ASSERT_EQ(boxes[0].size(), boxes[1].size()) << p << " " << q;
+    for (std::size_t k = 0; k < boxes[0].size(); ++k) {
+      EXPECT_EQ(boxes[0][k].lo, boxes[1][k].lo);
+      EXPECT_EQ(boxes[0][k].world_lo, boxes[1][k].world_lo);
+      EXPECT_EQ(boxes[0][k].world_hi, boxes[1][k].world_hi);
+    }
     EXPECT_EQ(ids_a, ids_b) << p << " " << q;
     ASSERT_EQ(a.size(), b.size()) << p << " " << q;
     EXPECT_GT(a.size(), 200u) << p << " " << q;
@@ -545,13 +554,15 @@ TEST(CurvedHex, RootsMatchADenseScan) {
 // Rays exactly along element faces, through element edges and through a vertex of a curved
 // mesh: 2³ elements over [0, 2]³ whose interiors are bent while their faces stay the planes of
 // integer coordinates (the bend vanishes there), and the field 0.3 x + 0.5 y + z, represented
-// exactly, at the isovalue whose plane passes through the mesh's middle vertex (1, 1, 1). Each
-// ray meets the plane once, however many elements share the point where it does — by both
-// casters.
+// exactly, at the isovalues whose planes pass through the mesh's middle vertex (1, 1, 1) and
+// through the middle of its edge from (1, 1, 0) to (1, 1, 1). Each ray meets the plane once,
+// however many elements share the point where it does — by both casters.
 TEST(CurvedHex, RaysAlongFacesEdgesAndThroughAVertexHitOnce) {
   const glm::dvec3 normal(0.3, 0.5, 1.0);
-  const double iso = glm::dot(normal, glm::dvec3(1.0));
-  for (const auto& [p, q] : {std::pair{2, 2}, std::pair{3, 2}, std::pair{4, 3}}) {
+  for (const auto& [p, q, iso] : {std::tuple{2, 2, glm::dot(normal, glm::dvec3(1.0))},
+                                  std::tuple{3, 2, glm::dot(normal, glm::dvec3(1.0, 1.0, 0.5))},
+                                  std::tuple{4, 3, glm::dot(normal, glm::dvec3(1.0))},
+                                  std::tuple{4, 3, glm::dot(normal, glm::dvec3(1.0, 1.0, 0.5))}}) {
     const CurvedMesh m = mesh_of(
         8, p, q, NodeSet::gauss_lobatto_legendre,
         [](std::size_t e, glm::dvec3 xi) {
