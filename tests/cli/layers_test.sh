@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Clean layers, as a user meets them:
-# 1. a C++ program that includes only the adaptor's header (ldimesh/adaptor.hpp), and a C one
-#    that includes ldimesh.h, compile without Embree's or TBB's headers (none is even read);
+# 1. a C++ program that includes only the adaptor's header (ldimesh/adaptor.hpp), as C++20 and
+#    as C++17, and a C one that includes ldimesh.h, compile without Embree's or TBB's headers
+#    (none is even read);
 # 2. a client-only configuration (LDIMESH_CLIENT_ONLY, with MPI, Embree, TBB and OpenMesh
 #    unfindable) builds ldimesh-fetch, whose link line names none of them, and it runs.
 # Usage: layers_test.sh SOURCE_DIR CXX CC "MPI_INCLUDE_DIRS" [BUILD_DIR]
@@ -31,6 +32,9 @@ cat >"$work/solver.c" <<'C'
 int main(void) { ldimesh_grid_block b; ldimesh_grid_block_init(&b); return 0; }
 C
 "$cxx" -std=c++20 -fsyntax-only "${includes[@]}" "$work/solver.cpp" || fail "adaptor.hpp does not compile alone"
+# Solvers' codes are often C++17 (deal.II 9.4 compiles its users as C++17).
+"$cxx" -std=c++17 -pedantic -fsyntax-only "${includes[@]}" "$work/solver.cpp" ||
+  fail "adaptor.hpp does not compile as C++17"
 "$cc" -fsyntax-only "${includes[@]}" "$work/solver.c" || fail "ldimesh.h does not compile alone"
 for f in solver.cpp solver.c; do
   comp=$cxx; flags=(-std=c++20)

@@ -119,7 +119,7 @@ bool MergeState::faces_its_normals(std::initializer_list<VH> vs) const {
     p[count++] = point(v);
     n += to_glm(mesh_.normal(v));
   }
-  const glm::dvec3 face = newell_normal(std::span(p.data(), count));
+  const glm::dvec3 face = newell_normal(p.data(), count);
   const double a = glm::length(face), b = glm::length(n);
   return a > 0.0 && b > 0.0 && glm::dot(face, n) >= options_.min_facing * a * b;
 }
@@ -209,7 +209,7 @@ glm::dvec3 MergeState::face_normal(FH f) const {
   std::size_t count = 0;
   for (const auto& v : mesh_.fv_range(f))
     if (count < p.size()) p[count++] = point(v);
-  return newell_normal(std::span(p.data(), count));
+  return newell_normal(p.data(), count);
 }
 
 void MergeState::set_point(VH v, glm::dvec3 p, glm::dvec3 n) {

@@ -17,7 +17,7 @@ namespace {
 // Shortest over longest edge of the quad p[0..3] if it is convex seen along its (Newell) normal
 // and that normal points the way of `normals` (the sum of its vertex normals); 0 otherwise.
 double quad_quality(const std::array<glm::dvec3, 4>& p, const glm::dvec3& normals) {
-  const glm::dvec3 n = newell_normal(p);
+  const glm::dvec3 n = newell_normal(p.data(), p.size());
   if (!(glm::dot(n, normals) > 0.0)) return 0.0;
   double shortest = std::numeric_limits<double>::infinity(), longest = 0.0;
   for (int i = 0; i < 4; ++i) {
@@ -141,7 +141,8 @@ double QuadState::quality(const std::array<std::uint32_t, 4>& v) const {
 
 bool QuadState::faces_its_normals(const std::array<std::uint32_t, 4>& v) const {
   const std::array<glm::dvec3, 4> p{pos_[v[0]], pos_[v[1]], pos_[v[2]], pos_[v[3]]};
-  return glm::dot(newell_normal(p), nrm_[v[0]] + nrm_[v[1]] + nrm_[v[2]] + nrm_[v[3]]) > 0.0;
+  return glm::dot(newell_normal(p.data(), p.size()),
+                  nrm_[v[0]] + nrm_[v[1]] + nrm_[v[2]] + nrm_[v[3]]) > 0.0;
 }
 
 glm::dvec3 QuadState::centroid(std::uint32_t f) const {

@@ -1,10 +1,10 @@
-// Small geometric value types shared by the whole core.
+// Small geometric value types shared by the whole core. C++17: the adaptor's public header
+// includes it, and solvers' codes (deal.II 9.4's, for one) compile as C++17.
 #pragma once
 
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
-#include <span>
 
 #include <glm/glm.hpp>
 
@@ -21,12 +21,13 @@ struct Box {
   bool is_valid() const { return lo.x < hi.x && lo.y < hi.y && lo.z < hi.z; }
 };
 
-// Newell's normal of the polygon p[0], p[1], … (counter-clockwise seen from where it points), not
-// normalised: twice its area vector when it is planar, a robust mean normal when it is not.
-inline glm::dvec3 newell_normal(std::span<const glm::dvec3> p) {
+// Newell's normal of the polygon p[0], …, p[count − 1] (counter-clockwise seen from where it
+// points), not normalised: twice its area vector when it is planar, a robust mean normal when it
+// is not.
+inline glm::dvec3 newell_normal(const glm::dvec3* p, std::size_t count) {
   glm::dvec3 n(0.0);
-  for (std::size_t i = 0; i < p.size(); ++i)
-    n += glm::cross(p[i], p[(i + 1) % p.size()]);
+  for (std::size_t i = 0; i < count; ++i)
+    n += glm::cross(p[i], p[(i + 1) % count]);
   return n;
 }
 
