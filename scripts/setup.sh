@@ -16,6 +16,7 @@ packages=(
   libdraco-dev libeigen3-dev draco  # GLB meshes (Draco glTF encoder; draco_decoder CLI)
   libopenmpi-dev openmpi-bin    # the distributed pipeline
   libgtest-dev                  # tests
+  libdeal.ii-dev                # the deal.II mini-app (miniapps/dealii: a real FEM library)
   clang libclang-rt-14-dev      # libFuzzer target for the fragment decoder
   clang-format                  # formatting (.clang-format)
   python3 curl                  # test data generation and HTTP checks in tests/cli

@@ -24,20 +24,20 @@ namespace ldimesh {
 // once: no duplicate and no missing surface where blocks meet. Blocks that instead share
 // their interface points (no ghosts) tile it as well.
 struct GridBlock {
-  std::array<std::int64_t, 3> dims{0, 0, 0};  // points per axis, ghost layers included
+  std::array<std::int64_t, 3> dims{{0, 0, 0}};  // points per axis, ghost layers included
   const void* values = nullptr;
   ScalarType type = ScalarType::float32;
   // Distance in values between neighbouring points along x, y, z; {0, 0, 0} means contiguous
   // with x fastest: {1, nx, nx·ny}.
-  std::array<std::int64_t, 3> strides{0, 0, 0};
+  std::array<std::int64_t, 3> strides{{0, 0, 0}};
   // Uniform geometry: point (i, j, k) at origin + (i, j, k)·spacing (ghost points included).
   glm::dvec3 origin{0.0};
   glm::dvec3 spacing{1.0};
   // Rectilinear geometry, used instead when all three are set: dims[a] strictly increasing
   // coordinates per axis.
-  std::array<const double*, 3> coords{nullptr, nullptr, nullptr};
-  std::array<int, 3> ghost_lo{0, 0, 0};
-  std::array<int, 3> ghost_hi{0, 0, 0};
+  std::array<const double*, 3> coords{{nullptr, nullptr, nullptr}};
+  std::array<int, 3> ghost_lo{{0, 0, 0}};
+  std::array<int, 3> ghost_hi{{0, 0, 0}};
 };
 
 // Where an element's p + 1 nodes per axis lie.

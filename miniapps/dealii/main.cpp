@@ -1,0 +1,361 @@
+// ldimesh-dealii: a deal.II program that hands its solution to the in situ adaptor, as a deal.II
+// user would add ldimesh to their own code (miniapps/dealii/README.md).
+//
+// The heat equation ∂u/∂t = κ Δu (insulated walls) on the spherical shell 0.5 ≤ |x| ≤ 1:
+// GridGenerator::hyper_shell (6 cells, refined --refinements times), a
+// parallel::distributed::Triangulation over the ranks (p4est), FE_Q(p) with MappingQ(p) (the
+// cells follow the spheres), the stiffness matrix assembled into a Trilinos matrix, the mass
+// matrix lumped by Gauss–Lobatto quadrature (collocated with FE_Q's nodes: diagonal), explicit
+// Euler with a time step from the largest eigenvalue of M⁻¹K (power iteration). Initially two
+// Gaussian blobs on the sphere r = 0.75 (--initial blobs): the isosurface u = 0.5 shows them
+// spread and fade. --initial radius starts from u = |x|² instead (a field with a known level
+// set, for the tests: the isosurface u = c² of step 0 is the sphere of radius c up to FE_Q's
+// interpolation of |x|²).
+//
+// What the adaptor gets, every --output-every steps: each rank's locally owned cells as
+// high-order hexahedra. Geometry and solution are taken at the (p + 1)³ Gauss–Lobatto points of
+// the reference cell through FEValues — QGaussLobatto<3> lists them lexicographically (x
+// fastest), so the block's ordering is `lexicographic` with node set GLL. MappingQ(p) is the
+// degree-p polynomial through the mapped Gauss–Lobatto points and FE_Q(p)'s shape functions are
+// the degree-p Lagrange polynomials on them, so these samples give the adaptor the cell's
+// geometry and solution exactly (no reordering of deal.II's hierarchical DoF numbering needed).
+//
+// Usage: mpiexec -n R ldimesh-dealii [--order P] [--refinements L] [--steps S]
+//          [--output-every K] [--initial blobs|radius] [--isovalue V] [--options FILE]
+#include <deal.II/base/conditional_ostream.h>
+#include <deal.II/base/function.h>
+#include <deal.II/base/index_set.h>
+#include <deal.II/base/mpi.h>
+#include <deal.II/base/quadrature_lib.h>
+#include <deal.II/base/utilities.h>
+#include <deal.II/distributed/tria.h>
+#include <deal.II/dofs/dof_handler.h>
+#include <deal.II/dofs/dof_tools.h>
+#include <deal.II/fe/fe_q.h>
+#include <deal.II/fe/fe_values.h>
+#include <deal.II/fe/mapping_q.h>
+#include <deal.II/grid/grid_generator.h>
+#include <deal.II/lac/affine_constraints.h>
+#include <deal.II/lac/dynamic_sparsity_pattern.h>
+#include <deal.II/lac/full_matrix.h>
+#include <deal.II/lac/sparsity_tools.h>
+#include <deal.II/lac/trilinos_sparse_matrix.h>
+#include <deal.II/lac/trilinos_vector.h>
+#include <deal.II/numerics/vector_tools.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "ldimesh/adaptor.hpp"
+
+namespace {
+
+using namespace dealii;
+constexpr int dim = 3;
+
+struct Args {
+  unsigned int order = 4, refinements = 1;
+  unsigned long steps = 200, output_every = 10;
+  std::string initial = "blobs", options_path;
+  double isovalue = 0.5;
+  bool isovalue_given = false;
+};
+
+// Parses the command line; throws std::invalid_argument with a one-line message.
+Args parse(int argc, char** argv) {
+  Args a;
+  const auto number = [&](int& i) {
+    if (i + 1 >= argc) throw std::invalid_argument(std::string(argv[i]) + " needs a value");
+    const std::string option = argv[i], text = argv[++i];
+    std::size_t used = 0;
+    double v = 0.0;
+    try {
+      v = std::stod(text, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used != text.size()) throw std::invalid_argument(option + ": not a number: '" + text + "'");
+    return v;
+  };
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    if (arg == "--order") {
+      const double v = number(i);
+      if (v < 1 || v > 8 || v != std::floor(v)) throw std::invalid_argument("--order: 1 to 8");
+      a.order = unsigned(v);
+    } else if (arg == "--refinements") {
+      const double v = number(i);
+      if (v < 0 || v > 4 || v != std::floor(v))
+        throw std::invalid_argument("--refinements: 0 to 4");
+      a.refinements = unsigned(v);
+    } else if (arg == "--steps" || arg == "--output-every") {
+      const double v = number(i);
+      if (v < 1 || v != std::floor(v)) throw std::invalid_argument(arg + ": a positive integer");
+      (arg == "--steps" ? a.steps : a.output_every) = (unsigned long)v;
+    } else if (arg == "--isovalue") {
+      a.isovalue = number(i), a.isovalue_given = true;
+    } else if (arg == "--initial" && i + 1 < argc) {
+      a.initial = argv[++i];
+      if (a.initial != "blobs" && a.initial != "radius")
+        throw std::invalid_argument("--initial: blobs or radius, not '" + a.initial + "'");
+    } else if (arg == "--options" && i + 1 < argc) {
+      a.options_path = argv[++i];
+    } else {
+      throw std::invalid_argument("unknown or incomplete option '" + arg +
+                                  "' (--order, --refinements, --steps, --output-every, "
+                                  "--initial, --isovalue, --options)");
+    }
+  }
+  if (a.initial == "radius" && !a.isovalue_given) a.isovalue = 0.5625;  // the sphere r = 0.75
+  return a;
+}
+
+// The initial field.
+class Initial : public Function<dim> {
+ public:
+  explicit Initial(std::string kind) : kind_(std::move(kind)) {}
+  double value(const Point<dim>& x, unsigned int = 0) const override {
+    if (kind_ == "radius") return x.norm_square();
+    const Point<dim> a(0.75, 0.0, 0.0), b(0.0, 0.75 * std::sqrt(0.5), 0.75 * std::sqrt(0.5));
+    const double s2 = 0.22 * 0.22;
+    return 2.5 * (std::exp(-(x - a).norm_square() / s2) + std::exp(-(x - b).norm_square() / s2));
+  }
+
+ private:
+  std::string kind_;
+};
+
+// The adaptor's options document: the file (or "{}"), with "isovalues" set.
+std::string options_document(const Args& a) {
+  std::string text = "{}";
+  if (!a.options_path.empty()) {
+    std::ifstream in(a.options_path);
+    if (!in) throw std::invalid_argument("--options: cannot read '" + a.options_path + "'");
+    std::stringstream buffer;
+    buffer << in.rdbuf();
+    text = buffer.str();
+  }
+  // Insert the isovalue as the document's first key (the adaptor reports a repeated key).
+  const std::size_t brace = text.find('{');
+  if (brace == std::string::npos) throw std::invalid_argument("--options: not a JSON object");
+  std::ostringstream iso;
+  iso.precision(17);
+  iso << "\"isovalues\": [" << a.isovalue << "]";
+  const std::size_t next = text.find_first_not_of(" \t\r\n", brace + 1);
+  const bool empty = next != std::string::npos && text[next] == '}';
+  return text.substr(0, brace + 1) + iso.str() + (empty ? "" : ", ") + text.substr(brace + 1);
+}
+
+class HeatSolver {
+ public:
+  HeatSolver(const Args& args, MPI_Comm comm)
+      : args_(args),
+        comm_(comm),
+        triangulation_(comm),
+        fe_(args.order),
+        mapping_(args.order),
+        dof_handler_(triangulation_),
+        out_(std::cout, Utilities::MPI::this_mpi_process(comm) == 0) {}
+
+  void setup() {
+    GridGenerator::hyper_shell(triangulation_, Point<dim>(), 0.5, 1.0, 6);
+    triangulation_.refine_global(args_.refinements);
+    dof_handler_.distribute_dofs(fe_);
+    const IndexSet owned = dof_handler_.locally_owned_dofs();
+    IndexSet relevant;
+    DoFTools::extract_locally_relevant_dofs(dof_handler_, relevant);
+    constraints_.reinit(relevant);
+    DoFTools::make_hanging_node_constraints(dof_handler_, constraints_);
+    constraints_.close();
+    DynamicSparsityPattern dsp(relevant);
+    DoFTools::make_sparsity_pattern(dof_handler_, dsp, constraints_, false);
+    SparsityTools::distribute_sparsity_pattern(dsp, owned, comm_, relevant);
+    stiffness_.reinit(owned, owned, dsp, comm_);
+    solution_.reinit(owned, comm_);
+    ghosted_.reinit(owned, relevant, comm_);
+    inverse_mass_.reinit(owned, comm_);
+    work_.reinit(owned, comm_);
+    assemble();
+    VectorTools::interpolate(mapping_, dof_handler_, Initial(args_.initial), solution_);
+    time_step_ = stable_time_step();
+    out_ << "ldimesh-dealii: " << triangulation_.n_global_active_cells() << " cells of FE_Q("
+         << args_.order << ") with MappingQ(" << args_.order << "), " << dof_handler_.n_dofs()
+         << " unknowns on " << Utilities::MPI::n_mpi_processes(comm_) << " rank(s), dt "
+         << time_step_ << std::endl;
+  }
+
+  // One explicit Euler step: u ← u − dt κ M⁻¹ K u.
+  void advance() {
+    stiffness_.vmult(work_, solution_);
+    work_.scale(inverse_mass_);
+    solution_.add(-time_step_ * kKappa, work_);
+    time_ += time_step_;
+  }
+
+  double time() const { return time_; }
+
+  // The locally owned cells as one block of curved elements (see the file's comment).
+  void hand_over(ldimesh::Adaptor& adaptor) {
+    ghosted_ = solution_;
+    const unsigned int p = args_.order;
+    const QGaussLobatto<dim> nodes(p + 1);
+    FEValues<dim> values(mapping_, fe_, nodes, update_values | update_quadrature_points);
+    std::vector<double> cell_values(nodes.size());
+    geometry_.clear();
+    nodal_.clear();
+    std::size_t cells = 0;
+    for (const auto& cell : dof_handler_.active_cell_iterators()) {
+      if (!cell->is_locally_owned()) continue;
+      values.reinit(cell);
+      values.get_function_values(ghosted_, cell_values);
+      for (unsigned int q = 0; q < nodes.size(); ++q) {
+        const Point<dim>& x = values.quadrature_point(q);
+        geometry_.insert(geometry_.end(), {x[0], x[1], x[2]});
+        nodal_.push_back(cell_values[q]);
+      }
+      ++cells;
+    }
+    ldimesh::HexBlock block;
+    block.order = int(p);
+    block.nodes = ldimesh::NodeSet::gauss_lobatto_legendre;
+    block.ordering = ldimesh::NodeOrdering::lexicographic;
+    block.element_count = cells;
+    block.values = nodal_.data();
+    block.type = ldimesh::ScalarType::float64;
+    block.geometry_order = int(p);
+    block.geometry = geometry_.data();
+    adaptor.clear_blocks();
+    if (cells > 0) check(adaptor.add_hex_block(block), "add_hex_block");
+  }
+
+  void check(const ldimesh::Status& s, const char* what) const {
+    if (!s) std::cerr << "ldimesh-dealii: " << what << ": " << s.message() << std::endl;
+  }
+
+ private:
+  static constexpr double kKappa = 0.02;
+
+  // The stiffness matrix K, and the lumped mass matrix's inverse diagonal (Gauss–Lobatto
+  // quadrature at FE_Q's nodes: the mass matrix is diagonal).
+  void assemble() {
+    const QGauss<dim> quadrature(fe_.degree + 1);
+    const QGaussLobatto<dim> lobatto(fe_.degree + 1);
+    FEValues<dim> fv(mapping_, fe_, quadrature, update_gradients | update_JxW_values);
+    FEValues<dim> mv(mapping_, fe_, lobatto, update_values | update_JxW_values);
+    const unsigned int n = fe_.n_dofs_per_cell();
+    FullMatrix<double> local(n, n);
+    Vector<double> local_mass(n);
+    std::vector<types::global_dof_index> indices(n);
+    TrilinosWrappers::MPI::Vector mass(dof_handler_.locally_owned_dofs(), comm_);
+    for (const auto& cell : dof_handler_.active_cell_iterators()) {
+      if (!cell->is_locally_owned()) continue;
+      fv.reinit(cell);
+      mv.reinit(cell);
+      local = 0.0;
+      local_mass = 0.0;
+      for (unsigned int q = 0; q < quadrature.size(); ++q)
+        for (unsigned int i = 0; i < n; ++i)
+          for (unsigned int j = 0; j < n; ++j)
+            local(i, j) += fv.shape_grad(i, q) * fv.shape_grad(j, q) * fv.JxW(q);
+      for (unsigned int q = 0; q < lobatto.size(); ++q)
+        for (unsigned int i = 0; i < n; ++i)
+          local_mass(i) += mv.shape_value(i, q) * mv.JxW(q);
+      cell->get_dof_indices(indices);
+      constraints_.distribute_local_to_global(local, indices, stiffness_);
+      constraints_.distribute_local_to_global(local_mass, indices, mass);
+    }
+    stiffness_.compress(VectorOperation::add);
+    mass.compress(VectorOperation::add);
+    for (const auto i : mass.locally_owned_elements())
+      inverse_mass_[i] = 1.0 / mass[i];
+    inverse_mass_.compress(VectorOperation::insert);
+  }
+
+  // Explicit Euler is stable for dt κ λ_max(M⁻¹K) < 2: λ_max by power iteration, dt at 40 % of
+  // the limit.
+  double stable_time_step() {
+    TrilinosWrappers::MPI::Vector v(work_), w(work_);
+    for (const auto i : v.locally_owned_elements())
+      v[i] = 1.0 + 0.37 * std::sin(double(i));
+    v.compress(VectorOperation::insert);
+    double lambda = 0.0;
+    for (int k = 0; k < 40; ++k) {
+      v /= v.l2_norm();
+      stiffness_.vmult(w, v);
+      w.scale(inverse_mass_);
+      lambda = w * v;
+      v = w;
+    }
+    return 0.4 * 2.0 / (kKappa * 1.1 * lambda);
+  }
+
+  Args args_;
+  MPI_Comm comm_;
+  parallel::distributed::Triangulation<dim> triangulation_;
+  FE_Q<dim> fe_;
+  MappingQ<dim> mapping_;
+  DoFHandler<dim> dof_handler_;
+  AffineConstraints<double> constraints_;
+  TrilinosWrappers::SparseMatrix stiffness_;
+  TrilinosWrappers::MPI::Vector solution_, ghosted_, inverse_mass_, work_;
+  double time_ = 0.0, time_step_ = 0.0;
+  std::vector<double> geometry_, nodal_;
+  ConditionalOStream out_;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  // deal.II's MPI start-up asks for MPI_THREAD_SERIALIZED: the adaptor then takes its
+  // synchronous path (the solver waits for the step's cast and reduction; its log says so).
+  // The background path needs MPI_THREAD_MULTIPLE (docs/adaptor.md).
+  Utilities::MPI::MPI_InitFinalize mpi(argc, argv, numbers::invalid_unsigned_int);
+  const MPI_Comm comm = MPI_COMM_WORLD;
+  const bool root = Utilities::MPI::this_mpi_process(comm) == 0;
+  Args args;
+  std::string options;
+  try {
+    args = parse(argc, argv);
+    options = options_document(args);
+  } catch (const std::exception& e) {
+    if (root) std::cerr << "ldimesh-dealii: " << e.what() << std::endl;
+    return 1;
+  }
+  std::unique_ptr<ldimesh::Adaptor> adaptor;
+  if (ldimesh::Status s = ldimesh::Adaptor::create(comm, options, adaptor); !s) {
+    if (root) std::cerr << "ldimesh-dealii: options: " << s.message() << std::endl;
+    return 2;
+  }
+  if (root && !adaptor->url().empty())
+    std::cout << "ldimesh-dealii: viewer at " << adaptor->url() << std::endl;
+  try {
+    HeatSolver solver(args, comm);
+    solver.setup();
+    solver.check(adaptor->set_domain({{-1.0, -1.0, -1.0}, {1.0, 1.0, 1.0}}), "set_domain");
+    for (unsigned long step = 0; step <= args.steps; ++step) {
+      if (step % args.output_every == 0) {
+        solver.hand_over(*adaptor);
+        solver.check(adaptor->execute(step, solver.time()), "execute");
+      }
+      if (step < args.steps) solver.advance();
+    }
+  } catch (const std::exception& e) {
+    std::cerr << "ldimesh-dealii: " << e.what() << std::endl;
+    adaptor->finalize();
+    return 3;
+  }
+  if (ldimesh::Status s = adaptor->finalize(); !s && root)
+    std::cerr << "ldimesh-dealii: finalize: " << s.message() << std::endl;
+  if (root)
+    std::cout << "ldimesh-dealii: " << adaptor->published_steps() << " step(s) published"
+              << std::endl;
+  return 0;
+}

@@ -1,0 +1,68 @@
+#!/usr/bin/env bash
+# The deal.II mini-app as a user runs it: on 2 ranks from u = |x|² (a field with a known level
+# set), steps written to a folder (server off); step 0's published mesh, decoded, lies on the
+# sphere |x| = 0.75 (ldimesh distance against the exact surface); the default run (two heat
+# blobs) on 3 ranks publishes steps with triangles; a bad option is one line and exit 1.
+#   dealii_test.sh LDIMESH_DEALII LDIMESH MPIEXEC
+set -u
+app=$1
+ldimesh=$2
+mpiexec=$3
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+failures=0
+fail() { echo "FAIL: $*"; failures=$((failures + 1)); }
+mpirun=("$mpiexec" --oversubscribe)
+[ "$(id -u)" = 0 ] && mpirun+=(--allow-run-as-root)
+options() {
+  printf '{"server": {"enabled": false}, "output_dir": "%s", "resolution": 128, "busy": "coalesce"}\n' \
+    "$1" >"$1.json"
+  echo "$1.json"
+}
+
+# |x|² on 2 ranks: the isosurface u = 0.5625 is the sphere of radius 0.75 (FE_Q(4)'s
+# interpolation of |x|² on MappingQ(4) cells is all that separates them).
+opts=$(options "$tmp/radius")
+if ! timeout 300 "${mpirun[@]}" -n 2 "$app" --initial radius --order 4 --steps 20 --output-every 10 \
+  --options "$opts" >"$tmp/radius.log" 2>&1; then
+  cat "$tmp/radius.log"
+  fail "ldimesh-dealii --initial radius on 2 ranks"
+fi
+grep -q "48 cells of FE_Q(4) with MappingQ(4)" "$tmp/radius.log" || fail "the mesh is not the refined shell"
+published=$(sed -n 's/^ldimesh-dealii: \([0-9]*\) step(s) published$/\1/p' "$tmp/radius.log")
+[ "${published:-0}" -ge 1 ] || fail "no step published (${published:-none})"
+if [ -s "$tmp/radius/step_000000.glb" ]; then
+  triangles=$(sed -n 's/.*"triangles": *\([0-9]*\).*/\1/p' "$tmp/radius/step_000000.json")
+  [ "${triangles:-0}" -gt 20000 ] || fail "step 0 has ${triangles:-no} triangles"
+  "$ldimesh" distance "$tmp/radius/step_000000.glb" --surface sphere --iso 0.5625 --json \
+    >"$tmp/distance.json" || fail "ldimesh distance on step 0"
+  python3 - "$tmp/distance.json" <<'PY' || fail "step 0's mesh is not on the sphere |x| = 0.75"
+import json, sys
+d = json.load(open(sys.argv[1]))["forward"]
+print(f"step 0 against the sphere r = 0.75: mean {d['mean']:.2e}, max {d['max']:.2e}")
+sys.exit(0 if d["mean"] < 1e-3 and d["max"] < 5e-3 else 1)
+PY
+else
+  fail "step 0 was not written"
+fi
+
+# The default run: two heat blobs, 3 ranks.
+opts=$(options "$tmp/blobs")
+if ! timeout 300 "${mpirun[@]}" -n 3 "$app" --order 3 --steps 30 --output-every 10 --options "$opts" \
+  >"$tmp/blobs.log" 2>&1; then
+  cat "$tmp/blobs.log"
+  fail "ldimesh-dealii (blobs) on 3 ranks"
+fi
+steps=$(find "$tmp/blobs" -name 'step_*.glb' -size +1k | wc -l)
+[ "$steps" -ge 1 ] || fail "the blobs run wrote no step"
+echo "radius run: ${published:-0} step(s); blobs run: $steps step(s) written"
+
+# A bad option: one line, exit 1.
+"$app" --order 12 >"$tmp/bad.log" 2>&1
+rc=$?
+[ "$rc" -eq 1 ] || fail "--order 12: exit $rc, not 1"
+[ "$(wc -l <"$tmp/bad.log")" -eq 1 ] && grep -q -- "--order" "$tmp/bad.log" ||
+  { cat "$tmp/bad.log"; fail "--order 12: not one line naming the option"; }
+
+[ "$failures" -eq 0 ] || { echo "$failures failure(s)"; exit 1; }
+echo "PASS"
