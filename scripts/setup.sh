@@ -17,6 +17,7 @@ packages=(
   libopenmpi-dev openmpi-bin    # the distributed pipeline
   libgtest-dev                  # tests
   libdeal.ii-dev                # the deal.II mini-app (miniapps/dealii: a real FEM library)
+  python3-vtk9 python3-numpy    # VTK's own readers check the high-order VTU files we meet
   clang libclang-rt-14-dev      # libFuzzer target for the fragment decoder
   clang-format                  # formatting (.clang-format)
   python3 curl                  # test data generation and HTTP checks in tests/cli

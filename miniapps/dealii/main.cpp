@@ -22,6 +22,10 @@
 //
 // Usage: mpiexec -n R ldimesh-dealii [--order P] [--refinements L] [--steps S]
 //          [--output-every K] [--initial blobs|radius] [--isovalue V] [--options FILE]
+//          [--vtu DIR]
+// --vtu DIR also writes every output step as VTK XML files the way deal.II users write them
+// (DataOut with write_higher_order_cells: VTK_LAGRANGE_HEXAHEDRON cells of order p, curved;
+// DIR/solution_NNNN.pvtu over one .vtu per rank), the field named "u".
 #include <deal.II/base/conditional_ostream.h>
 #include <deal.II/base/function.h>
 #include <deal.II/base/index_set.h>
@@ -41,11 +45,13 @@
 #include <deal.II/lac/sparsity_tools.h>
 #include <deal.II/lac/trilinos_sparse_matrix.h>
 #include <deal.II/lac/trilinos_vector.h>
+#include <deal.II/numerics/data_out.h>
 #include <deal.II/numerics/vector_tools.h>
 
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <memory>
@@ -64,7 +70,7 @@ constexpr int dim = 3;
 struct Args {
   unsigned int order = 4, refinements = 1;
   unsigned long steps = 200, output_every = 10;
-  std::string initial = "blobs", options_path;
+  std::string initial = "blobs", options_path, vtu_dir;
   double isovalue = 0.5;
   bool isovalue_given = false;
 };
@@ -108,10 +114,12 @@ Args parse(int argc, char** argv) {
         throw std::invalid_argument("--initial: blobs or radius, not '" + a.initial + "'");
     } else if (arg == "--options" && i + 1 < argc) {
       a.options_path = argv[++i];
+    } else if (arg == "--vtu" && i + 1 < argc) {
+      a.vtu_dir = argv[++i];
     } else {
       throw std::invalid_argument("unknown or incomplete option '" + arg +
                                   "' (--order, --refinements, --steps, --output-every, "
-                                  "--initial, --isovalue, --options)");
+                                  "--initial, --isovalue, --options, --vtu)");
     }
   }
   if (a.initial == "radius" && !a.isovalue_given) a.isovalue = 0.5625;  // the sphere r = 0.75
@@ -236,6 +244,21 @@ class HeatSolver {
     if (cells > 0) check(adaptor.add_hex_block(block), "add_hex_block");
   }
 
+  // The solution as VTK Lagrange hexahedra of order p (curved by the mapping), one .vtu per rank
+  // and a .pvtu record: DIR/solution_NNNN.*
+  void write_vtu(const std::string& dir, unsigned int counter) {
+    ghosted_ = solution_;
+    DataOut<dim> data_out;
+    DataOutBase::VtkFlags flags;
+    flags.time = time_;
+    flags.write_higher_order_cells = true;
+    data_out.set_flags(flags);
+    data_out.attach_dof_handler(dof_handler_);
+    data_out.add_data_vector(ghosted_, "u");
+    data_out.build_patches(mapping_, fe_.degree, DataOut<dim>::curved_inner_cells);
+    data_out.write_vtu_with_pvtu_record(dir + "/", "solution", counter, comm_, 4);
+  }
+
   void check(const ldimesh::Status& s, const char* what) const {
     if (!s) std::cerr << "ldimesh-dealii: " << what << ": " << s.message() << std::endl;
   }
@@ -337,6 +360,10 @@ int main(int argc, char** argv) {
   if (root && !adaptor->url().empty())
     std::cout << "ldimesh-dealii: viewer at " << adaptor->url() << std::endl;
   try {
+    if (!args.vtu_dir.empty()) {
+      if (root) std::filesystem::create_directories(args.vtu_dir);
+      MPI_Barrier(comm);
+    }
     HeatSolver solver(args, comm);
     solver.setup();
     solver.check(adaptor->set_domain({{-1.0, -1.0, -1.0}, {1.0, 1.0, 1.0}}), "set_domain");
@@ -344,6 +371,8 @@ int main(int argc, char** argv) {
       if (step % args.output_every == 0) {
         solver.hand_over(*adaptor);
         solver.check(adaptor->execute(step, solver.time()), "execute");
+        if (!args.vtu_dir.empty())
+          solver.write_vtu(args.vtu_dir, unsigned(step / args.output_every));
       }
       if (step < args.steps) solver.advance();
     }

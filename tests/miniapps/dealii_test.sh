@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # The deal.II mini-app as a user runs it: on 2 ranks from u = |x|² (a field with a known level
 # set), steps written to a folder (server off); step 0's published mesh, decoded, lies on the
-# sphere |x| = 0.75 (ldimesh distance against the exact surface); the default run (two heat
-# blobs) on 3 ranks publishes steps with triangles; a bad option is one line and exit 1.
+# sphere |x| = 0.75 (ldimesh distance against the exact surface); the steps' VTU files (DataOut,
+# Lagrange cells) read by VTK; the default run (two heat blobs) on 3 ranks publishes steps with
+# triangles; a bad option is one line and exit 1.
 #   dealii_test.sh LDIMESH_DEALII LDIMESH MPIEXEC
 set -u
 app=$1
@@ -21,10 +22,11 @@ options() {
 }
 
 # |x|² on 2 ranks: the isosurface u = 0.5625 is the sphere of radius 0.75 (FE_Q(4)'s
-# interpolation of |x|² on MappingQ(4) cells is all that separates them).
+# interpolation of |x|² on MappingQ(4) cells is all that separates them). Its steps also go to
+# VTU files (--vtu).
 opts=$(options "$tmp/radius")
 if ! timeout 300 "${mpirun[@]}" -n 2 "$app" --initial radius --order 4 --steps 20 --output-every 10 \
-  --options "$opts" >"$tmp/radius.log" 2>&1; then
+  --options "$opts" --vtu "$tmp/vtu" >"$tmp/radius.log" 2>&1; then
   cat "$tmp/radius.log"
   fail "ldimesh-dealii --initial radius on 2 ranks"
 fi
@@ -45,6 +47,27 @@ PY
 else
   fail "step 0 was not written"
 fi
+
+# The VTU files, read by VTK's own reader: every cell a Lagrange hexahedron of order 4 (125
+# points), u = |x|² at the points (float32).
+/usr/bin/python3 - "$tmp/vtu/solution_0000.pvtu" <<'PY' || fail "VTK does not read the mini-app's VTU as order-4 Lagrange hexahedra carrying u = |x|²"
+import sys
+import numpy as np
+from vtkmodules.util.numpy_support import vtk_to_numpy
+from vtkmodules.vtkIOXML import vtkXMLPUnstructuredGridReader
+reader = vtkXMLPUnstructuredGridReader()
+reader.SetFileName(sys.argv[1])
+reader.Update()
+grid = reader.GetOutput()
+cells = grid.GetNumberOfCells()
+types = {grid.GetCellType(c) for c in range(cells)}
+sizes = {grid.GetCell(c).GetNumberOfPoints() for c in range(cells)}
+x = vtk_to_numpy(grid.GetPoints().GetData()).astype(float)
+u = vtk_to_numpy(grid.GetPointData().GetArray("u")).astype(float)
+error = np.abs(u - (x * x).sum(axis=1)).max()
+print(f"VTU: {cells} cells, types {types}, points per cell {sizes}, max |u - |x|²| {error:.1e}")
+sys.exit(0 if cells == 48 and types == {72} and sizes == {125} and error < 1e-4 else 1)
+PY
 
 # The default run: two heat blobs, 3 ranks.
 opts=$(options "$tmp/blobs")
