@@ -17,7 +17,8 @@ packages=(
   libopenmpi-dev openmpi-bin    # the distributed pipeline
   libgtest-dev                  # tests
   libdeal.ii-dev                # the deal.II mini-app (miniapps/dealii: a real FEM library)
-  python3-vtk9 python3-numpy    # VTK's own readers check the high-order VTU files we meet
+  libvtk9-dev                   # ldimesh mesh --vtu: VTK's XML readers
+  python3-vtk9 python3-numpy    # VTK writes and reads the tests' high-order VTU files
   clang libclang-rt-14-dev      # libFuzzer target for the fragment decoder
   clang-format                  # formatting (.clang-format)
   python3 curl                  # test data generation and HTTP checks in tests/cli

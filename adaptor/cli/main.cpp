@@ -31,6 +31,10 @@
 #include "ldimesh/core/field/surfaces.hpp"
 #include "ldimesh/core/io/mesh_io.hpp"
 #include "ldimesh/core/io/raw_volume.hpp"
+#ifdef LDIMESH_WITH_VTU
+#include "ldimesh/core/field/hex_source.hpp"
+#include "ldimesh/core/io/vtu.hpp"
+#endif
 #include "ldimesh/core/metrics/distance.hpp"
 #include "ldimesh/core/pipeline.hpp"
 #include "ldimesh/core/raycast/decomposition.hpp"
@@ -47,7 +51,9 @@ using ldimesh::seconds_since;
 
 struct MeshArgs {
   std::string surface;
-  std::string grid;  // raw volume file
+  std::string grid;   // raw volume file
+  std::string vtu;    // VTK XML unstructured grid (.vtu, .pvtu)
+  std::string field;  // its point array
   std::vector<std::int64_t> dims;
   std::string type = "float32";
   std::vector<double> spacing{1.0, 1.0, 1.0};
@@ -107,26 +113,56 @@ int run_surfaces() {
   return 0;
 }
 
-// What this rank meshes: a built-in surface or a raw volume, its source (for a volume: this
-// rank's part of it), its subdomain and the default isovalue.
+// What this rank meshes: a built-in surface, a raw volume or a VTU file's elements, its sources
+// (for a volume: this rank's part of it; elements: one source per order), its subdomain and the
+// default isovalue.
 struct Input {
   std::string name;
-  std::unique_ptr<ldimesh::FieldSource> source;
+  std::vector<std::unique_ptr<ldimesh::FieldSource>> sources;
   ldimesh::Subdomain subdomain;
   double default_isovalue = 0.0;
   ldimesh::RawVolume volume;  // owns the values of a --grid input
+#ifdef LDIMESH_WITH_VTU
+  ldimesh::VtuElements elements;  // owns the arrays of a --vtu input
+#endif
+  std::vector<const ldimesh::FieldSource*> source_list() const {
+    std::vector<const ldimesh::FieldSource*> list;
+    for (const auto& s : sources)
+      list.push_back(s.get());
+    return list;
+  }
 };
 
 void load_input(const MeshArgs& args, int rank, int ranks, Input& input) {
-  if (args.surface.empty() == args.grid.empty())
-    throw std::runtime_error("give either --surface NAME or --grid FILE --dims NX,NY,NZ");
+  if (int(!args.surface.empty()) + int(!args.grid.empty()) + int(!args.vtu.empty()) != 1)
+    throw std::runtime_error(
+        "give one of --surface NAME, --grid FILE --dims NX,NY,NZ, --vtu FILE --field NAME");
+  if (!args.vtu.empty()) {
+#ifdef LDIMESH_WITH_VTU
+    const ldimesh::Status status = ldimesh::read_vtu(args.vtu, args.field, input.elements);
+    if (!status) throw std::runtime_error(status.message());
+    input.name = args.vtu;
+    // Every rank holds every element (the file's); it casts only its block of the domain.
+    for (const ldimesh::VtuElements::Group& g : input.elements.groups)
+      input.sources.push_back(std::make_unique<ldimesh::HexElementSource>(g.block()));
+    // The sources' bounds hold the curved cells (their Bernstein hulls), not only the points.
+    ldimesh::Box whole = input.sources.front()->bounds();
+    for (const auto& source : input.sources)
+      whole = {glm::min(whole.lo, source->bounds().lo), glm::max(whole.hi, source->bounds().hi)};
+    input.subdomain = {ldimesh::decompose_box(whole, ranks)[rank], whole};
+    input.default_isovalue = 0.5 * (input.elements.min_value + input.elements.max_value);
+    return;
+#else
+    throw std::runtime_error("--vtu: this ldimesh was built without VTK (libvtk9-dev)");
+#endif
+  }
   if (!args.surface.empty()) {
     const ldimesh::SurfaceInfo* surface = ldimesh::find_surface(args.surface);
     if (!surface)
       throw std::runtime_error("unknown surface '" + args.surface + "' (see 'ldimesh surfaces')");
     input.name = surface->name;
     // Every rank can evaluate the whole field; it casts only its block of the domain.
-    input.source = ldimesh::make_surface_source(surface->name, args.bricks);
+    input.sources.push_back(ldimesh::make_surface_source(surface->name, args.bricks));
     input.subdomain = {ldimesh::decompose_box(surface->domain, ranks)[rank], surface->domain};
     input.default_isovalue = surface->isovalue;
     return;
@@ -147,7 +183,7 @@ void load_input(const MeshArgs& args, int rank, int ranks, Input& input) {
   const std::array<int, 3> index{rank % blocks[0], (rank / blocks[0]) % blocks[1],
                                  rank / (blocks[0] * blocks[1])};
   const ldimesh::GridPart part = ldimesh::grid_part(input.volume.block, blocks, index);
-  input.source = std::make_unique<ldimesh::GridSource>(part.block);
+  input.sources.push_back(std::make_unique<ldimesh::GridSource>(part.block));
   input.subdomain = {part.owned, whole};
   // Without --iso: the middle of the value range.
   input.default_isovalue = 0.5 * (input.volume.min_value + input.volume.max_value);
@@ -209,7 +245,8 @@ int run_mesh(const MeshArgs& args) {
     ldimesh::RayCasterOptions caster_options;
     caster_options.path =
         args.caster == "embree" ? ldimesh::CastPath::embree : ldimesh::CastPath::automatic;
-    caster = std::make_unique<ldimesh::RayCaster>(*input.source, iso, caster_options);
+    const std::vector<const ldimesh::FieldSource*> sources = input.source_list();
+    caster = std::make_unique<ldimesh::RayCaster>(sources, iso, caster_options);
     scene_seconds = seconds_since(start);
   };
   on_all_ranks(comm, [&] {
@@ -658,6 +695,10 @@ int main(int argc, char** argv) {
   mesh->add_option("--origin", args.origin, "position of the first point of --grid (default 0,0,0)")
       ->delimiter(',')
       ->expected(3);
+  mesh->add_option("--vtu", args.vtu,
+                   "VTK XML unstructured grid (.vtu, .pvtu) of VTK_LAGRANGE_HEXAHEDRON or "
+                   "VTK_HEXAHEDRON cells, meshed exactly (needs --field)");
+  mesh->add_option("--field", args.field, "point array of --vtu to mesh");
   mesh->add_option("--res", args.res, "pixels along the longer side of each view")
       ->check(CLI::Range(1, 16384))
       ->capture_default_str();

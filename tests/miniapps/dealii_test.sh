@@ -2,7 +2,8 @@
 # The deal.II mini-app as a user runs it: on 2 ranks from u = |x|² (a field with a known level
 # set), steps written to a folder (server off); step 0's published mesh, decoded, lies on the
 # sphere |x| = 0.75 (ldimesh distance against the exact surface); the steps' VTU files (DataOut,
-# Lagrange cells) read by VTK; the default run (two heat blobs) on 3 ranks publishes steps with
+# Lagrange cells) read by VTK, and meshed by ldimesh mesh --vtu onto the same sphere; the
+# default run (two heat blobs) on 3 ranks publishes steps with
 # triangles; a bad option is one line and exit 1.
 #   dealii_test.sh LDIMESH_DEALII LDIMESH MPIEXEC
 set -u
@@ -68,6 +69,20 @@ error = np.abs(u - (x * x).sum(axis=1)).max()
 print(f"VTU: {cells} cells, types {types}, points per cell {sizes}, max |u - |x|²| {error:.1e}")
 sys.exit(0 if cells == 48 and types == {72} and sizes == {125} and error < 1e-4 else 1)
 PY
+
+# The CLI meshes the same VTU file exactly: its mesh of u = 0.5625 lies on the sphere too.
+if [ -x "$(dirname "$ldimesh")/ldimesh" ] && "$ldimesh" mesh --help | grep -q -- "--vtu"; then
+  "$ldimesh" mesh --vtu "$tmp/vtu/solution_0000.pvtu" --field u --iso 0.5625 --res 128 \
+    --out "$tmp/vtu.ply" >"$tmp/vtu.log" 2>&1 || { cat "$tmp/vtu.log"; fail "ldimesh mesh --vtu on the mini-app's .pvtu"; }
+  "$ldimesh" distance "$tmp/vtu.ply" --surface sphere --iso 0.5625 --json >"$tmp/vtu-distance.json" ||
+    fail "ldimesh distance on the --vtu mesh"
+  /usr/bin/python3 - "$tmp/vtu-distance.json" <<'PY' || fail "ldimesh mesh --vtu's mesh is not on the sphere"
+import json, sys
+d = json.load(open(sys.argv[1]))["forward"]
+print(f"ldimesh mesh --vtu (deal.II's .pvtu) against the sphere: mean {d['mean']:.2e}, max {d['max']:.2e}")
+sys.exit(0 if d["mean"] < 1e-3 and d["max"] < 5e-3 else 1)
+PY
+fi
 
 # The default run: two heat blobs, 3 ranks.
 opts=$(options "$tmp/blobs")

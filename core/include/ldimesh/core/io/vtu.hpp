@@ -1,0 +1,45 @@
+// High-order hexahedra from VTK XML unstructured grids (.vtu, or a .pvtu record and its pieces),
+// read by VTK's own readers (vtkXMLUnstructuredGridReader, vtkXMLPUnstructuredGridReader):
+// VTK_LAGRANGE_HEXAHEDRON cells of order 1–8 — what deal.II's DataOut with
+// write_higher_order_cells, MFEM and ParaView write — and linear VTK_HEXAHEDRON cells. Built
+// into the library `ldimesh::vtu` where VTK 9 is installed.
+#pragma once
+
+#include <cstddef>
+#include <string>
+#include <vector>
+
+#include "ldimesh/core/base/geometry.hpp"
+#include "ldimesh/core/base/status.hpp"
+#include "ldimesh/core/field/blocks.hpp"
+
+namespace ldimesh {
+
+// A file's cells as high-order elements, one group per order (each cell may have its own): VTK
+// Lagrange cells place their (p + 1)³ nodes equispaced in the reference cube, numbered in VTK's
+// order, and the geometry has the cell's order too — the group's block says so (equispaced,
+// vtk_lagrange, geometry_order = order). A linear hexahedron is the Lagrange cell of order 1.
+struct VtuElements {
+  struct Group {
+    int order = 1;
+    std::size_t cells = 0;
+    std::vector<double> geometry;  // (order + 1)³ points × (x, y, z) per cell
+    std::vector<double> values;    // (order + 1)³ field values per cell
+    // The block over this group's arrays (valid while the group lives and is not resized).
+    HexBlock block() const;
+  };
+  std::vector<Group> groups;                // increasing order
+  std::size_t cells = 0;                    // over all groups
+  Box bounds;                               // of every cell's points
+  double min_value = 0.0, max_value = 0.0;  // of the field at the cells' points
+};
+
+// Reads the point array `field` (one component) of every cell of `path` (.vtu or .pvtu). A
+// cell's order comes from the cell data array "HigherOrderDegrees" where the file has it (equal
+// along the three axes), else from its point count ((p + 1)³). Errors (one line, naming the
+// file, and the cell or the field): a file VTK cannot read, a cell type other than the two
+// above, an order outside 1–8 or different along the axes or not matching the point count, a
+// missing or multi-component field, non-finite points.
+Status read_vtu(const std::string& path, const std::string& field, VtuElements& out);
+
+}  // namespace ldimesh

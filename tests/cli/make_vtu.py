@@ -1,0 +1,86 @@
+#!/usr/bin/python3
+"""Writes test VTU files with VTK itself (tests/cli/vtu_test.sh):
+
+  make_vtu.py sphere OUT.vtu   n³ order-2 Lagrange hexahedra over [-1, 1]³ carrying r = |x|²
+                               (exact: degree 2 per axis on straight cells), plus linear
+                               VTK_HEXAHEDRON cells beyond x = 1 (r > 1 there: no surface), as
+                               mixed-order files have them; a second point array "vec" with 3
+                               components.
+  make_vtu.py tetra OUT.vtu    one VTK_TETRA beside one Lagrange hexahedron
+  make_vtu.py degrees OUT.vtu  one order-2 Lagrange hexahedron whose HigherOrderDegrees say 2, 2, 3
+"""
+import sys
+
+from vtkmodules.vtkCommonCore import vtkDoubleArray, vtkPoints
+from vtkmodules.vtkCommonDataModel import (VTK_HEXAHEDRON, VTK_LAGRANGE_HEXAHEDRON, VTK_TETRA,
+                                           vtkLagrangeHexahedron, vtkUnstructuredGrid)
+from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridWriter
+
+
+def lagrange_cell(grid, points, values, lo, size, order, field):
+    """Adds one Lagrange hexahedron of `order` over the box lo + [0, size]³."""
+    m = order + 1
+    ids = [0] * m ** 3
+    for k in range(m):
+        for j in range(m):
+            for i in range(m):
+                x = [lo[0] + size * i / order, lo[1] + size * j / order, lo[2] + size * k / order]
+                ids[vtkLagrangeHexahedron.PointIndexFromIJK(i, j, k, [order] * 3)] = \
+                    points.InsertNextPoint(x)
+                values.InsertNextValue(field(x))
+    return grid.InsertNextCell(VTK_LAGRANGE_HEXAHEDRON, len(ids), ids)
+
+
+def main():
+    kind, out = sys.argv[1], sys.argv[2]
+    grid, points = vtkUnstructuredGrid(), vtkPoints()
+    values = vtkDoubleArray()
+    values.SetName("r")
+    r2 = lambda x: x[0] ** 2 + x[1] ** 2 + x[2] ** 2
+    if kind == "sphere":
+        n = 4
+        for k in range(n):
+            for j in range(n):
+                for i in range(n):
+                    lagrange_cell(grid, points, values, [-1 + 2 * i / n, -1 + 2 * j / n,
+                                                         -1 + 2 * k / n], 2 / n, 2, r2)
+        for k in range(2):  # linear hexahedra in VTK's corner order
+            corners = [(1.0, -0.5, -0.5 + 0.5 * k), (1.5, -0.5, -0.5 + 0.5 * k),
+                       (1.5, 0.0, -0.5 + 0.5 * k), (1.0, 0.0, -0.5 + 0.5 * k)]
+            corners += [(x, y, z + 0.5) for (x, y, z) in corners]
+            ids = []
+            for c in corners:
+                ids.append(points.InsertNextPoint(c))
+                values.InsertNextValue(r2(c))
+            grid.InsertNextCell(VTK_HEXAHEDRON, 8, ids)
+        vec = vtkDoubleArray()
+        vec.SetName("vec")
+        vec.SetNumberOfComponents(3)
+        for p in range(points.GetNumberOfPoints()):
+            vec.InsertNextTuple(points.GetPoint(p))
+        grid.GetPointData().AddArray(vec)
+    elif kind == "tetra":
+        lagrange_cell(grid, points, values, [0, 0, 0], 1, 2, r2)
+        ids = [points.InsertNextPoint(x) for x in [(2, 0, 0), (3, 0, 0), (2, 1, 0), (2, 0, 1)]]
+        for _ in ids:
+            values.InsertNextValue(1.0)
+        grid.InsertNextCell(VTK_TETRA, 4, ids)
+    elif kind == "degrees":
+        lagrange_cell(grid, points, values, [0, 0, 0], 1, 2, r2)
+        degrees = vtkDoubleArray()
+        degrees.SetName("HigherOrderDegrees")
+        degrees.SetNumberOfComponents(3)
+        degrees.InsertNextTuple((2, 2, 3))
+        grid.GetCellData().AddArray(degrees)
+    else:
+        sys.exit(f"make_vtu.py: unknown kind {kind}")
+    grid.SetPoints(points)
+    grid.GetPointData().AddArray(values)
+    writer = vtkXMLUnstructuredGridWriter()
+    writer.SetFileName(out)
+    writer.SetInputData(grid)
+    if not writer.Write():
+        sys.exit("make_vtu.py: VTK could not write " + out)
+
+
+main()

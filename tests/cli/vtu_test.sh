@@ -1,0 +1,51 @@
+#!/usr/bin/env bash
+# `ldimesh mesh --vtu` on files written by VTK itself (tests/cli/make_vtu.py): order-2 Lagrange
+# hexahedra carrying |x|² beside linear hexahedra, meshed at |x|² = 0.49 — the mesh lies on the
+# sphere of radius 0.7; one-line errors naming the field or the cell for a missing field, a
+# vector field, an unsupported cell type and orders that differ along the axes.
+#   vtu_test.sh LDIMESH SOURCE_DIR
+set -u
+ldimesh=$1
+src=$2
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+failures=0
+fail() { echo "FAIL: $*"; failures=$((failures + 1)); }
+for kind in sphere tetra degrees; do
+  /usr/bin/python3 "$src/tests/cli/make_vtu.py" $kind "$tmp/$kind.vtu" || fail "make_vtu.py $kind"
+done
+
+"$ldimesh" mesh --vtu "$tmp/sphere.vtu" --field r --iso 0.49 --res 128 --out "$tmp/sphere.ply" \
+  --json >"$tmp/sphere.json" 2>"$tmp/sphere.err" || { cat "$tmp/sphere.err"; fail "--vtu sphere.vtu"; }
+"$ldimesh" distance "$tmp/sphere.ply" --surface sphere --iso 0.49 --json >"$tmp/distance.json" ||
+  fail "ldimesh distance"
+/usr/bin/python3 - "$tmp/distance.json" "$tmp/sphere.json" <<'PY' || fail "the mesh of the VTK-written file is not on the sphere r = 0.7"
+import json, sys
+d = json.load(open(sys.argv[1]))["forward"]
+summary = json.load(open(sys.argv[2]))
+triangles = summary.get("triangles", summary.get("mesh", {}).get("triangles", 0))
+print(f"sphere.vtu at r² = 0.49: {triangles} triangles, mean {d['mean']:.1e}, max {d['max']:.1e}")
+# the hits are exact (|x|² is degree 2 per axis); the rest is the triangles between them
+sys.exit(0 if d["mean"] < 3e-4 and d["max"] < 2e-3 and triangles > 10000 else 1)
+PY
+
+# Errors: one line on stderr, naming what is wrong, and a non-zero exit.
+expect_error() {  # expect_error PATTERN ARGS...
+  local pattern=$1
+  shift
+  if "$ldimesh" mesh "$@" --out "$tmp/x.ply" >"$tmp/out" 2>"$tmp/err"; then
+    fail "ldimesh mesh $* succeeded"
+  elif [ "$(wc -l <"$tmp/err")" -ne 1 ] || ! grep -q -- "$pattern" "$tmp/err"; then
+    cat "$tmp/err"
+    fail "ldimesh mesh $*: not one line with '$pattern'"
+  fi
+}
+expect_error "no point array 'u' (point arrays: " --vtu "$tmp/sphere.vtu" --field u
+expect_error "'vec' has 3 components" --vtu "$tmp/sphere.vtu" --field vec
+expect_error "cell 1 is VTK_TETRA" --vtu "$tmp/tetra.vtu" --field r
+expect_error "cell 0: orders 2, 2, 3 differ" --vtu "$tmp/degrees.vtu" --field r
+expect_error "no such file" --vtu "$tmp/none.vtu" --field r
+expect_error "VTK cannot read it" --vtu "$src/README.md" --field r
+
+[ "$failures" -eq 0 ] || { echo "$failures failure(s)"; exit 1; }
+echo "PASS"
