@@ -139,6 +139,7 @@ void load_input(const MeshArgs& args, int rank, int ranks, Input& input) {
         "give one of --surface NAME, --grid FILE --dims NX,NY,NZ, --vtu FILE --field NAME");
   if (!args.vtu.empty()) {
 #ifdef LDIMESH_WITH_VTU
+    ldimesh::quiet_vtk_logging();  // the error comes back as one line
     const ldimesh::Status status = ldimesh::read_vtu(args.vtu, args.field, input.elements);
     if (!status) throw std::runtime_error(status.message());
     input.name = args.vtu;

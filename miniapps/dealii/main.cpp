@@ -360,9 +360,9 @@ int main(int argc, char** argv) {
   if (root && !adaptor->url().empty())
     std::cout << "ldimesh-dealii: viewer at " << adaptor->url() << std::endl;
   try {
-    if (!args.vtu_dir.empty()) {
-      if (root) std::filesystem::create_directories(args.vtu_dir);
-      MPI_Barrier(comm);
+    if (!args.vtu_dir.empty()) {  // every rank (one may run elsewhere); write_vtu reports failure
+      std::error_code ec;
+      std::filesystem::create_directories(args.vtu_dir, ec);
     }
     HeatSolver solver(args, comm);
     solver.setup();
@@ -377,9 +377,11 @@ int main(int argc, char** argv) {
       if (step < args.steps) solver.advance();
     }
   } catch (const std::exception& e) {
-    std::cerr << "ldimesh-dealii: " << e.what() << std::endl;
-    adaptor->finalize();
-    return 3;
+    // Possibly on this rank alone (a file it cannot write): the others may wait in a collective
+    // call, so the job stops here, as deal.II programs do on an error.
+    std::cerr << "ldimesh-dealii: rank " << Utilities::MPI::this_mpi_process(comm) << ": "
+              << e.what() << std::endl;
+    MPI_Abort(comm, 3);
   }
   if (ldimesh::Status s = adaptor->finalize(); !s && root)
     std::cerr << "ldimesh-dealii: finalize: " << s.message() << std::endl;

@@ -8,12 +8,14 @@
                                components.
   make_vtu.py tetra OUT.vtu    one VTK_TETRA beside one Lagrange hexahedron
   make_vtu.py degrees OUT.vtu  one order-2 Lagrange hexahedron whose HigherOrderDegrees say 2, 2, 3
+  make_vtu.py pieces OUT.pvtu  the sphere's cells as a .pvtu record over two .vtu pieces
 """
 import sys
 
 from vtkmodules.vtkCommonCore import vtkDoubleArray, vtkPoints
 from vtkmodules.vtkCommonDataModel import (VTK_HEXAHEDRON, VTK_LAGRANGE_HEXAHEDRON, VTK_TETRA,
                                            vtkLagrangeHexahedron, vtkUnstructuredGrid)
+from vtkmodules.vtkIOParallelXML import vtkXMLPUnstructuredGridWriter
 from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridWriter
 
 
@@ -37,7 +39,7 @@ def main():
     values = vtkDoubleArray()
     values.SetName("r")
     r2 = lambda x: x[0] ** 2 + x[1] ** 2 + x[2] ** 2
-    if kind == "sphere":
+    if kind in ("sphere", "pieces"):
         n = 4
         for k in range(n):
             for j in range(n):
@@ -76,7 +78,13 @@ def main():
         sys.exit(f"make_vtu.py: unknown kind {kind}")
     grid.SetPoints(points)
     grid.GetPointData().AddArray(values)
-    writer = vtkXMLUnstructuredGridWriter()
+    if kind == "pieces":
+        writer = vtkXMLPUnstructuredGridWriter()
+        writer.SetNumberOfPieces(2)
+        writer.SetStartPiece(0)
+        writer.SetEndPiece(1)
+    else:
+        writer = vtkXMLUnstructuredGridWriter()
     writer.SetFileName(out)
     writer.SetInputData(grid)
     if not writer.Write():

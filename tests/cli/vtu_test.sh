@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # `ldimesh mesh --vtu` on files written by VTK itself (tests/cli/make_vtu.py): order-2 Lagrange
 # hexahedra carrying |x|² beside linear hexahedra, meshed at |x|² = 0.49 — the mesh lies on the
-# sphere of radius 0.7; one-line errors naming the field or the cell for a missing field, a
-# vector field, an unsupported cell type and orders that differ along the axes.
+# sphere of radius 0.7, also from a .pvtu over two pieces; one-line errors naming the field or
+# the cell for a missing field, a vector field, an unsupported cell type, orders that differ
+# along the axes, a missing piece.
 #   vtu_test.sh LDIMESH SOURCE_DIR
 set -u
 ldimesh=$1
@@ -14,6 +15,7 @@ fail() { echo "FAIL: $*"; failures=$((failures + 1)); }
 for kind in sphere tetra degrees; do
   /usr/bin/python3 "$src/tests/cli/make_vtu.py" $kind "$tmp/$kind.vtu" || fail "make_vtu.py $kind"
 done
+/usr/bin/python3 "$src/tests/cli/make_vtu.py" pieces "$tmp/pieces.pvtu" || fail "make_vtu.py pieces"
 
 "$ldimesh" mesh --vtu "$tmp/sphere.vtu" --field r --iso 0.49 --res 128 --out "$tmp/sphere.ply" \
   --json >"$tmp/sphere.json" 2>"$tmp/sphere.err" || { cat "$tmp/sphere.err"; fail "--vtu sphere.vtu"; }
@@ -28,6 +30,11 @@ print(f"sphere.vtu at r² = 0.49: {triangles} triangles, mean {d['mean']:.1e}, m
 # the hits are exact (|x|² is degree 2 per axis); the rest is the triangles between them
 sys.exit(0 if d["mean"] < 3e-4 and d["max"] < 2e-3 and triangles > 10000 else 1)
 PY
+
+# The same cells as a .pvtu over two pieces: the same mesh.
+"$ldimesh" mesh --vtu "$tmp/pieces.pvtu" --field r --iso 0.49 --res 128 --out "$tmp/pieces.ply" \
+  >/dev/null 2>"$tmp/pieces.err" || { cat "$tmp/pieces.err"; fail "--vtu pieces.pvtu"; }
+cmp -s "$tmp/sphere.ply" "$tmp/pieces.ply" || fail "the .pvtu's mesh differs from the .vtu's"
 
 # Errors: one line on stderr, naming what is wrong, and a non-zero exit.
 expect_error() {  # expect_error PATTERN ARGS...
@@ -46,6 +53,8 @@ expect_error "cell 1 is VTK_TETRA" --vtu "$tmp/tetra.vtu" --field r
 expect_error "cell 0: orders 2, 2, 3 differ" --vtu "$tmp/degrees.vtu" --field r
 expect_error "no such file" --vtu "$tmp/none.vtu" --field r
 expect_error "VTK cannot read it" --vtu "$src/README.md" --field r
+rm -f "$tmp"/pieces_1.vtu "$tmp"/pieces/pieces_1.vtu
+expect_error "piece 1 cannot be read" --vtu "$tmp/pieces.pvtu" --field r
 
 [ "$failures" -eq 0 ] || { echo "$failures failure(s)"; exit 1; }
 echo "PASS"

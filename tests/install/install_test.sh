@@ -3,8 +3,8 @@
 # a fresh prefix; a separate project (tests/install/consumer) finds the package there and
 # builds a C++ program and the C and Fortran heat mini-apps' sources against ldimesh::adaptor and
 # ldimesh::fortran, with nothing of the build or source tree on its include paths; each
-# program runs on 2 ranks and writes steps. The installed ldimesh-serve, pointed at the
-# installed viewer ($LDIMESH_DATA_DIR), serves the page and three.js.
+# program runs on 2 ranks and writes steps. The installed ldimesh-serve finds the installed
+# viewer and serves the page and three.js.
 #   install_test.sh SOURCE_DIR BUILD_DIR MPIEXEC
 set -u
 src=$1
@@ -81,9 +81,8 @@ for lang in c fortran; do
 done
 echo "C++, C and Fortran consumers ran on 2 ranks and wrote steps"
 
-# The installed server with the installed viewer files.
-LDIMESH_DATA_DIR="$prefix/share/ldimesh" "$prefix/bin/ldimesh-serve" --dir "$tmp/cxx" --port 0 \
-  >"$tmp/serve.out" 2>"$tmp/serve.err" &
+# The installed server finds the installed viewer files itself (beside its bin/).
+"$prefix/bin/ldimesh-serve" --dir "$tmp/cxx" --port 0 >"$tmp/serve.out" 2>"$tmp/serve.err" &
 server_pid=$!
 url=
 for _ in $(seq 100); do

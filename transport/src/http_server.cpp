@@ -561,19 +561,26 @@ ViewerFiles find_viewer_files() {
   if (const char* env = std::getenv("LDIMESH_DATA_DIR"); env && *env) {
     roots.emplace_back(env);  // the only place then
   } else {
-    roots.emplace_back(LDIMESH_SOURCE_DIR);
+    // A program run from the build tree takes the checkout's files (the ones being worked on);
+    // an installed one (or a solver) those installed beside its bin/, then under the prefix
+    // configured at build time, then the checkout.
+    const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+    const fs::path beside = ec ? fs::path() : exe.parent_path().parent_path() / "share" / "ldimesh";
+    const bool in_build_tree =
+        !ec && exe.string().rfind(std::string(LDIMESH_BINARY_DIR) + "/", 0) == 0;
+    if (in_build_tree) roots.emplace_back(LDIMESH_SOURCE_DIR);
+    if (!beside.empty()) roots.push_back(beside);
     roots.emplace_back(LDIMESH_INSTALL_DATA_DIR);
-    if (const fs::path exe = fs::read_symlink("/proc/self/exe", ec); !ec)
-      roots.push_back(exe.parent_path().parent_path() / "share" / "ldimesh");
+    if (!in_build_tree) roots.emplace_back(LDIMESH_SOURCE_DIR);
   }
+  ViewerFiles files;
   for (const fs::path& root : roots) {
-    if (!fs::is_regular_file(root / "viewer" / "web" / "index.html", ec)) continue;
-    ViewerFiles files{root / "viewer" / "web", {}};
-    if (fs::is_directory(root / "node_modules" / "three" / "build", ec))
+    if (files.static_dir.empty() && fs::is_regular_file(root / "viewer/web/index.html", ec))
+      files.static_dir = root / "viewer" / "web";
+    if (files.vendor_three_dir.empty() && fs::is_directory(root / "node_modules/three/build", ec))
       files.vendor_three_dir = root / "node_modules" / "three";
-    return files;
   }
-  return {};
+  return files;
 }
 
 }  // namespace ldimesh

@@ -76,6 +76,10 @@ const char* type_name(int type) {
 
 }  // namespace
 
+void quiet_vtk_logging() {
+  vtkLogger::SetStderrVerbosity(vtkLogger::VERBOSITY_OFF);
+}
+
 HexBlock VtuElements::Group::block() const {
   HexBlock b;
   b.order = order;
@@ -101,14 +105,6 @@ Status read_vtu(const std::string& path, const std::string& field, VtuElements& 
     reader = vtkSmartPointer<vtkXMLPUnstructuredGridReader>::New();
   else
     reader = vtkSmartPointer<vtkXMLUnstructuredGridReader>::New();
-  // VTK's logger off on stderr while reading (the parser's and the pipeline's reports go there):
-  // the reader's error comes back as one line in the Status instead.
-  const vtkLogger::Verbosity verbosity = vtkLogger::GetCurrentVerbosityCutoff();
-  vtkLogger::SetStderrVerbosity(vtkLogger::VERBOSITY_OFF);
-  struct Restore {
-    vtkLogger::Verbosity verbosity;
-    ~Restore() { vtkLogger::SetStderrVerbosity(verbosity); }
-  } restore{verbosity};
   vtkNew<ErrorCollector> errors;
   reader->AddObserver(vtkCommand::ErrorEvent, errors);
   reader->SetFileName(path.c_str());

@@ -46,12 +46,12 @@ struct HttpServerOptions {
   std::chrono::milliseconds event_keep_alive{15000};
 };
 
-// Where the web viewer's files lie: the first of these folders that holds viewer/web/index.html
-// — the checkout the library was built in, the installed share/ldimesh (`cmake --install`, at
-// the prefix configured at build time), share/ldimesh beside the running program's bin/ (an
-// installation moved elsewhere); or only $LDIMESH_DATA_DIR where that is set — with its
-// viewer/web and, where present, node_modules/three. Empty paths (the API works without the
-// viewer) when none holds it.
+// Where the web viewer's files lie: viewer/web (with index.html) and node_modules/three, each
+// from the first of these folders that has it — share/ldimesh beside the running program's bin/
+// (an installed program), share/ldimesh under the install prefix configured at build time, the
+// checkout the library was built in (first instead for a program run from the build tree); or
+// only $LDIMESH_DATA_DIR where that is set. Empty paths (the API works without the viewer) when
+// none has them.
 struct ViewerFiles {
   std::filesystem::path static_dir, vendor_three_dir;
 };

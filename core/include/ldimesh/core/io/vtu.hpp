@@ -42,4 +42,9 @@ struct VtuElements {
 // missing or multi-component field, non-finite points.
 Status read_vtu(const std::string& path, const std::string& field, VtuElements& out);
 
+// Turns VTK's own logging to stderr off for the whole process: its XML parser and pipeline
+// report a bad file there besides the error read_vtu returns. For programs that print their
+// errors themselves (the command line).
+void quiet_vtk_logging();
+
 }  // namespace ldimesh
