@@ -4,7 +4,8 @@
 # builds a C++ program and the C and Fortran heat mini-apps' sources against ldimesh::adaptor and
 # ldimesh::fortran, with nothing of the build or source tree on its include paths; each
 # program runs on 2 ranks and writes steps. The installed ldimesh-serve finds the installed
-# viewer and serves the page and three.js.
+# viewer and serves the page and three.js. With WITH_DEALII=1 the deal.II mini-app is built on
+# its own against the package too, as miniapps/dealii/README.md says.
 #   install_test.sh SOURCE_DIR BUILD_DIR MPIEXEC
 set -u
 src=$1
@@ -80,6 +81,26 @@ for lang in c fortran; do
   [ "$(steps_in "$tmp/$lang")" -ge 1 ] || fail "consumer-$lang wrote no step"
 done
 echo "C++, C and Fortran consumers ran on 2 ranks and wrote steps"
+
+# The deal.II mini-app as its README builds it: on its own, find_package(deal.II) and
+# find_package(ldimesh) from the prefix (where deal.II is installed).
+if [ "${WITH_DEALII:-0}" = 1 ]; then
+  if cmake -S "$src/miniapps/dealii" -B "$tmp/dealii" -DCMAKE_BUILD_TYPE=Release \
+    -DCMAKE_PREFIX_PATH="$prefix" >"$tmp/dealii-configure.log" 2>&1 &&
+    cmake --build "$tmp/dealii" -j 2 >"$tmp/dealii-build.log" 2>&1; then
+    grep -q "$prefix" "$tmp"/dealii/CMakeFiles/ldimesh-dealii.dir/link.txt ||
+      fail "the stand-alone deal.II mini-app does not link the installed libraries"
+    opts=$(options "$tmp/dealii-steps")
+    timeout 300 "${mpirun[@]}" -n 2 "$tmp/dealii/ldimesh-dealii" --refinements 0 --steps 2 \
+      --output-every 2 --options "$opts" >"$tmp/dealii.log" 2>&1 ||
+      { cat "$tmp/dealii.log"; fail "the stand-alone deal.II mini-app on 2 ranks"; }
+    [ "$(steps_in "$tmp/dealii-steps")" -ge 1 ] || fail "the stand-alone deal.II mini-app wrote no step"
+    echo "the deal.II mini-app built on its own against the installed package, and ran"
+  else
+    tail -n 30 "$tmp/dealii-configure.log" "$tmp/dealii-build.log"
+    fail "the deal.II mini-app does not build on its own against the installed package"
+  fi
+fi
 
 # The installed server finds the installed viewer files itself (beside its bin/).
 "$prefix/bin/ldimesh-serve" --dir "$tmp/cxx" --port 0 >"$tmp/serve.out" 2>"$tmp/serve.err" &
