@@ -6,15 +6,8 @@
 set -u
 ldimesh=$1
 fetch=$2
-tmp=$(mktemp -d)
-server_pid=
-cleanup() {
-  [ -n "$server_pid" ] && kill "$server_pid" 2>/dev/null && wait "$server_pid" 2>/dev/null
-  rm -rf "$tmp"
-}
-trap cleanup EXIT
-failures=0
-fail() { echo "FAIL: $*"; failures=$((failures + 1)); }
+. "$(dirname "$0")/../lib.sh"
+test_setup
 
 "$ldimesh" mesh --surface torus --res 48 --steps-dir "$tmp/steps" --step 7 --time 0.5 >/dev/null \
   || fail "ldimesh mesh --steps-dir"
@@ -24,12 +17,7 @@ triangles=$(sed -n 's/.*"triangles": *\([0-9]*\).*/\1/p' "$tmp/steps/step_000007
 
 "$ldimesh" serve --dir "$tmp/steps" --port 0 >"$tmp/serve.out" 2>"$tmp/serve.err" &
 server_pid=$!
-url=
-for _ in $(seq 100); do
-  url=$(grep -o 'http://[^ ]*' "$tmp/serve.out" 2>/dev/null | head -n 1)
-  [ -n "$url" ] && break
-  sleep 0.1
-done
+url=$(wait_for_url "$tmp/serve.out")
 [ -n "$url" ] || { fail "ldimesh serve printed no URL"; cat "$tmp/serve.err"; exit 1; }
 
 timeout 30 "$fetch" --url "$url" --latest --ply -o "$tmp/got" >"$tmp/fetch.out" || fail "ldimesh-fetch --latest --ply"

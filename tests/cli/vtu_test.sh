@@ -8,10 +8,8 @@
 set -u
 ldimesh=$1
 src=$2
-tmp=$(mktemp -d)
-trap 'rm -rf "$tmp"' EXIT
-failures=0
-fail() { echo "FAIL: $*"; failures=$((failures + 1)); }
+. "$(dirname "$0")/../lib.sh"
+test_setup
 for kind in sphere tetra degrees; do
   /usr/bin/python3 "$src/tests/cli/make_vtu.py" $kind "$tmp/$kind.vtu" || fail "make_vtu.py $kind"
 done
@@ -56,5 +54,4 @@ expect_error "VTK cannot read it" --vtu "$src/README.md" --field r
 rm -f "$tmp"/pieces_1.vtu "$tmp"/pieces/pieces_1.vtu
 expect_error "piece 1 cannot be read" --vtu "$tmp/pieces.pvtu" --field r
 
-[ "$failures" -eq 0 ] || { echo "$failures failure(s)"; exit 1; }
-echo "PASS"
+finish

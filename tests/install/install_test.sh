@@ -10,18 +10,8 @@
 set -u
 src=$1
 build=$2
-mpiexec=$3
-tmp=$(mktemp -d)
-server_pid=
-cleanup() {
-  [ -n "$server_pid" ] && kill "$server_pid" 2>/dev/null && wait "$server_pid" 2>/dev/null
-  rm -rf "$tmp"
-}
-trap cleanup EXIT
-failures=0
-fail() { echo "FAIL: $*"; failures=$((failures + 1)); }
-mpirun=("$mpiexec" --oversubscribe)
-[ "$(id -u)" = 0 ] && mpirun+=(--allow-run-as-root)
+. "$(dirname "$0")/../lib.sh"
+test_setup "$3"
 
 prefix=$tmp/prefix
 cmake --install "$build" --prefix "$prefix" >"$tmp/install.log" 2>&1 ||
@@ -64,11 +54,7 @@ grep -q "$prefix" "$tmp"/consumer/CMakeFiles/consumer-cxx.dir/link.txt ||
 echo "consumer project built against find_package(ldimesh)"
 
 # Each program on 2 ranks, steps written to a folder (server off).
-options() {
-  printf '{"server": {"enabled": false}, "output_dir": "%s", "resolution": 64, "busy": "coalesce"%s}\n' \
-    "$1" "${2:-}" >"$1.json"
-  echo "$1.json"
-}
+options() { RESOLUTION=64 writing_options "$@"; }
 steps_in() { find "$1" -name 'step_*.glb' -size +0 2>/dev/null | wc -l; }
 opts=$(options "$tmp/cxx" ', "isovalues": [0]')
 timeout 120 "${mpirun[@]}" -n 2 "$tmp/consumer/consumer-cxx" "$(cat "$opts")" 3 >"$tmp/cxx.log" 2>&1 ||
@@ -105,12 +91,7 @@ fi
 # The installed server finds the installed viewer files itself (beside its bin/).
 "$prefix/bin/ldimesh-serve" --dir "$tmp/cxx" --port 0 >"$tmp/serve.out" 2>"$tmp/serve.err" &
 server_pid=$!
-url=
-for _ in $(seq 100); do
-  url=$(grep -o 'http://[^ ]*' "$tmp/serve.out" 2>/dev/null | head -n 1)
-  [ -n "$url" ] && break
-  sleep 0.1
-done
+url=$(wait_for_url "$tmp/serve.out")
 if [ -z "$url" ]; then
   cat "$tmp/serve.err"
   fail "the installed ldimesh-serve printed no URL"
@@ -126,5 +107,4 @@ except Exception as e: print(getattr(e, "code", e))' "$base$path")
   echo "the installed ldimesh-serve serves the installed viewer and three.js"
 fi
 
-[ "$failures" -eq 0 ] || { echo "$failures failure(s)"; exit 1; }
-echo "PASS"
+finish

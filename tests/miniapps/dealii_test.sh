@@ -9,18 +9,9 @@
 set -u
 app=$1
 ldimesh=$2
-mpiexec=$3
-tmp=$(mktemp -d)
-trap 'rm -rf "$tmp"' EXIT
-failures=0
-fail() { echo "FAIL: $*"; failures=$((failures + 1)); }
-mpirun=("$mpiexec" --oversubscribe)
-[ "$(id -u)" = 0 ] && mpirun+=(--allow-run-as-root)
-options() {
-  printf '{"server": {"enabled": false}, "output_dir": "%s", "resolution": 128, "busy": "coalesce"}\n' \
-    "$1" >"$1.json"
-  echo "$1.json"
-}
+. "$(dirname "$0")/../lib.sh"
+test_setup "$3"
+options() { writing_options "$@"; }
 
 # |x|² on 2 ranks: the isosurface u = 0.5625 is the sphere of radius 0.75 (FE_Q(4)'s
 # interpolation of |x|² on MappingQ(4) cells is all that separates them). Its steps also go to
@@ -104,5 +95,4 @@ rc=$?
 [ "$(wc -l <"$tmp/bad.log")" -eq 1 ] && grep -q -- "--order" "$tmp/bad.log" ||
   { cat "$tmp/bad.log"; fail "--order 12: not one line naming the option"; }
 
-[ "$failures" -eq 0 ] || { echo "$failures failure(s)"; exit 1; }
-echo "PASS"
+finish

@@ -64,8 +64,8 @@ int run_serve(const ServeArgs& args, const std::string& program) {
   const ldimesh::ViewerFiles files = ldimesh::find_viewer_files();
   options.static_dir =
       locate(args.static_dir, files.static_dir, "viewer/web", "--static-dir", program);
-  options.vendor_three_dir =
-      locate(args.vendor_dir, files.vendor_three_dir, "node_modules/three", "--vendor-dir", program);
+  options.vendor_three_dir = locate(args.vendor_dir, files.vendor_three_dir, "node_modules/three",
+                                    "--vendor-dir", program);
   ldimesh::HttpServer server(store, options);
   if (ldimesh::Status s = server.start(); !s) throw std::runtime_error(s.message());
   std::printf("%s: serving %zu step(s) from %s at %s\n", program.c_str(), store.list().size(),

@@ -858,7 +858,7 @@ Pieces::Pieces(const Element& e, double width) {
                        PiecesTask{root.data(), width, field_margin_, &pieces_, &coefficients_});
 }
 
-void Pieces::intersect(const Element&, std::size_t k, std::span<const RayRef> rays, glm::dvec3 d,
+void Pieces::intersect(std::size_t k, std::span<const RayRef> rays, glm::dvec3 d,
                        AxisHits& hits) const {
   search(degree_, {&coefficients_[k * std::size_t(4 * size_)], pieces_[k].lo, pieces_[k].hi,
                    field_margin_, d, rays, &hits});

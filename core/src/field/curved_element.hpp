@@ -69,9 +69,9 @@ class Pieces {
   // intersect() for the part of the element in piece k, for many rays of one direction at once
   // (the pixel rays through the piece): the search's boxes, their coefficients and their
   // Jacobians are shared by the rays, each ray's hits the same as its own search's (up to
-  // rounding in the planes' offsets), reported with its index, per ray in increasing t.
-  void intersect(const Element& e, std::size_t k, std::span<const RayRef> rays, glm::dvec3 d,
-                 AxisHits& hits) const;
+  // rounding in the planes' offsets), reported with its index, per ray in increasing t. The
+  // pieces hold all they need of the element.
+  void intersect(std::size_t k, std::span<const RayRef> rays, glm::dvec3 d, AxisHits& hits) const;
 
  private:
   int degree_ = 1;             // max(p, q): the lower of the two raised to it

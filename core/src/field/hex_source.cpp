@@ -1353,7 +1353,6 @@ class HexAxisBinding final : public AxisBinding {
       // Each piece of the element that may hold the isosurface, with the pixel rays of its box
       // at once (they share the search's boxes).
       std::vector<curved::RayRef>& batch = scratch.batch;
-      const curved::Element ce = active_.curved_element(e);
       const curved::Pieces& pieces = *pieces_[e];
       for (std::size_t piece = 0; piece < pieces.pieces().size(); ++piece) {
         const curved::Piece& box = pieces.pieces()[piece];
@@ -1365,7 +1364,7 @@ class HexAxisBinding final : public AxisBinding {
             const AxisRay& ray = rays.rays[k];
             if (ray.t0 <= ray.t1) batch.push_back({std::uint32_t(k), ray.org, ray.t0, ray.t1});
           }
-        if (!batch.empty()) pieces.intersect(ce, piece, batch, rays.dir, out);
+        if (!batch.empty()) pieces.intersect(piece, batch, rays.dir, out);
       }
       return;
     }

@@ -415,7 +415,7 @@ TEST(CurvedHex, SearchCopiesGiveTheSameBits) {
           }
         for (std::size_t k = 0; k < pieces.pieces().size(); ++k) {
           out.clear();
-          pieces.intersect(e, k, rays, d, out);
+          pieces.intersect(k, rays, d, out);
           ids.insert(ids.end(), out.rays().begin(), out.rays().end());
           hits.insert(hits.end(), out.hits().begin(), out.hits().end());
         }

@@ -64,7 +64,8 @@ int main(int argc, char** argv) {
   block.geometry = geometry.data();
   int failures = 0;
   const auto check = [&](const ldimesh::Status& s, const char* what) {
-    if (!s) std::fprintf(stderr, "consumer-cxx: rank %d: %s: %s\n", rank, what, s.message().c_str());
+    if (!s)
+      std::fprintf(stderr, "consumer-cxx: rank %d: %s: %s\n", rank, what, s.message().c_str());
     failures += !s;
   };
   check(adaptor->set_domain({{0.0, -2.0, -2.0}, {double(ranks), 2.0, 2.0}}), "set_domain");
@@ -73,7 +74,8 @@ int main(int argc, char** argv) {
     check(adaptor->execute(std::uint64_t(step), double(step)), "execute");
   check(adaptor->finalize(), "finalize");
   const std::uint64_t published = adaptor->published_steps();
-  if (rank == 0) std::printf("consumer-cxx: %llu step(s) published\n", (unsigned long long)published);
+  if (rank == 0)
+    std::printf("consumer-cxx: %llu step(s) published\n", (unsigned long long)published);
   const bool ok = failures == 0 && (rank != 0 || published == std::uint64_t(steps));
   adaptor.reset();
   MPI_Finalize();
