@@ -1,11 +1,13 @@
-// Moves every vertex of a mesh onto a built-in analytic surface by Newton steps along the field's
-// gradient, keeping the faces: bench/evaluate turns a fine Marching Cubes mesh into the
-// reference for the backward distances this way, so that its vertices are exact samples of the
-// surface (MC's own error, linear interpolation along grid edges, is gone; what remains is the
-// chord between the vertices, which vertex-only sampling never sees).
+// Moves every vertex of a mesh onto a built-in analytic surface, or onto the exact isosurface of
+// a VTU file's high-order cells, by Newton steps along the field's gradient, keeping the faces:
+// bench/evaluate turns a fine Marching Cubes mesh (for VTU data: VTK's contour of the finely
+// tessellated cells) into the reference for the backward distances this way, so that its
+// vertices are exact samples of the surface (the linear interpolation's error is gone; what
+// remains is the chord between the vertices, which vertex-only sampling never sees).
 //
 //   build/bin/ldimesh_project_mesh --surface marschner-lobb --in ref_mc.ply --out ref.ply
 //       [--max-move D] [--threads N]
+//   build/bin/ldimesh_project_mesh --vtu data.vtu --field f --iso 0.5 --in ref.ply --out ref2.ply
 //
 // p ← p − (f(p) − iso) ∇f(p) / |∇f(p)|², at most 50 steps, until |f − iso| / |∇f| is below
 // 1e-12 of the domain diagonal or the step below 1e-14 of it. A vertex whose projection fails
@@ -16,9 +18,13 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <iostream>
+#include <limits>
+#include <memory>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include <tbb/global_control.h>
 #include <tbb/info.h>
@@ -28,13 +34,26 @@
 
 #include "ldimesh/core/field/surfaces.hpp"
 #include "ldimesh/core/io/mesh_io.hpp"
+#ifdef LDIMESH_WITH_VTU
+#include "ldimesh/core/field/hex_lookup.hpp"
+#include "ldimesh/core/io/vtu.hpp"
+#endif
 
 int main(int argc, char** argv) {
-  CLI::App app{"project a mesh's vertices onto a built-in analytic surface (Newton steps)"};
-  std::string name, in, out;
-  double max_move = 0.0;
+  CLI::App app{
+      "project a mesh's vertices onto a built-in analytic surface or a VTU file's "
+      "isosurface (Newton steps)"};
+  std::string name, vtu, field_name, in, out;
+  double max_move = 0.0, isovalue = std::numeric_limits<double>::quiet_NaN();
   int threads = 0;
-  app.add_option("--surface", name, "built-in surface (ldimesh surfaces)")->required();
+  CLI::Option* surface_option =
+      app.add_option("--surface", name, "built-in surface (ldimesh surfaces)");
+  CLI::Option* vtu_option =
+      app.add_option("--vtu", vtu,
+                     "or a VTU file's cells (VTK_LAGRANGE_HEXAHEDRON, VTK_HEXAHEDRON)")
+          ->excludes(surface_option);
+  app.add_option("--field", field_name, "point array of --vtu")->needs(vtu_option);
+  app.add_option("--iso", isovalue, "isovalue (default: the surface's; needed with --vtu)");
   app.add_option("--in", in, "input PLY")->required();
   app.add_option("--out", out, "output PLY (binary)")->required();
   app.add_option("--max-move", max_move, "largest move kept (default: 1 % of the diagonal)");
@@ -42,11 +61,47 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
 
   try {
-    const ldimesh::SurfaceInfo* s = ldimesh::find_surface(name);
-    if (!s) throw std::runtime_error("unknown surface '" + name + "' (see 'ldimesh surfaces')");
+    // The field: a built-in surface's, or the polynomials of the file's cells at each point.
+    std::function<double(const glm::dvec3&, glm::dvec3&)> field;
+    double diagonal = 0.0, iso = isovalue;
+#ifdef LDIMESH_WITH_VTU
+    ldimesh::VtuElements elements;
+    std::vector<std::unique_ptr<ldimesh::HexElementSource>> sources;
+    std::unique_ptr<ldimesh::HexFieldLookup> lookup;
+#endif
+    if (!vtu.empty()) {
+#ifdef LDIMESH_WITH_VTU
+      if (field_name.empty() || std::isnan(isovalue))
+        throw std::runtime_error("--vtu needs --field NAME and --iso V");
+      ldimesh::quiet_vtk_logging();
+      if (const ldimesh::Status st = ldimesh::read_vtu(vtu, field_name, elements); !st)
+        throw std::runtime_error(st.message());
+      std::vector<const ldimesh::HexElementSource*> list;
+      for (const ldimesh::VtuElements::Group& g : elements.groups) {
+        sources.push_back(std::make_unique<ldimesh::HexElementSource>(g.block()));
+        list.push_back(sources.back().get());
+      }
+      lookup = std::make_unique<ldimesh::HexFieldLookup>(list);
+      field = [l = lookup.get()](const glm::dvec3& p, glm::dvec3& gradient) {
+        ldimesh::PolynomialSample sample;
+        if (!l->sample(p, sample)) return std::numeric_limits<double>::quiet_NaN();
+        gradient = sample.gradient;
+        return sample.value;
+      };
+      diagonal = lookup->bounds().diagonal();
+      name = vtu + ":" + field_name;
+#else
+      throw std::runtime_error("--vtu: built without VTK (libvtk9-dev)");
+#endif
+    } else {
+      const ldimesh::SurfaceInfo* s = ldimesh::find_surface(name);
+      if (!s) throw std::runtime_error("give --surface NAME (see 'ldimesh surfaces') or --vtu");
+      field = s->field;
+      diagonal = s->domain.diagonal();
+      if (std::isnan(iso)) iso = s->isovalue;
+    }
     if (threads == 0) threads = tbb::info::default_concurrency();
     tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
-    const double diagonal = s->domain.diagonal();
     if (max_move <= 0.0) max_move = 0.01 * diagonal;
 
     ldimesh::Mesh mesh;
@@ -56,13 +111,12 @@ int main(int argc, char** argv) {
     const auto start = std::chrono::steady_clock::now();
     std::atomic<std::size_t> failed{0}, too_far{0};
     std::vector<double> moves(mesh.positions.size(), 0.0);
-    const double iso = s->isovalue;
     tbb::parallel_for(std::size_t(0), mesh.positions.size(), [&](std::size_t i) {
       const glm::dvec3 p0(mesh.positions[i]);
       glm::dvec3 p = p0, g;
       bool ok = false;
       for (int it = 0; it < 50; ++it) {
-        const double f = s->field(p, g) - iso;
+        const double f = field(p, g) - iso;
         const double g2 = glm::dot(g, g);
         if (!(g2 > 0.0) || !std::isfinite(f)) break;
         const glm::dvec3 step = (f / g2) * g;
@@ -87,8 +141,8 @@ int main(int argc, char** argv) {
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     // Normals: the field's gradient direction at the (new) position.
     for (std::size_t i = 0; i < mesh.positions.size() && !mesh.normals.empty(); ++i) {
-      glm::dvec3 g;
-      s->field(glm::dvec3(mesh.positions[i]), g);
+      glm::dvec3 g(0.0);
+      if (!std::isfinite(field(glm::dvec3(mesh.positions[i]), g))) continue;
       const double len = glm::length(g);
       if (len > 0.0) mesh.normals[i] = glm::vec3(g / len);
     }
@@ -101,7 +155,7 @@ int main(int argc, char** argv) {
       largest = std::max(largest, m);
     }
     nlohmann::json j;
-    j["surface"] = s->name;
+    j["surface"] = name;
     j["in"] = in;
     j["out"] = out;
     j["vertices"] = mesh.positions.size();

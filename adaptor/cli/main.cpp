@@ -6,6 +6,7 @@
 //   ldimesh serve --dir out/steps [--port 8080] [--bind 127.0.0.1]
 //   ldimesh distance A.ply B.ply [--samples N] [--json]
 //   ldimesh distance A.ply --surface NAME [--isovalue v] [--samples N] [--json]
+//   ldimesh distance A.ply --vtu FILE.vtu --field NAME [--isovalue v] [--samples N] [--json]
 #include <cctype>
 #include <cerrno>
 #include <chrono>
@@ -13,6 +14,7 @@
 #include <cstring>
 #include <filesystem>
 #include <iostream>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <string>
@@ -32,6 +34,7 @@
 #include "ldimesh/core/io/mesh_io.hpp"
 #include "ldimesh/core/io/raw_volume.hpp"
 #ifdef LDIMESH_WITH_VTU
+#include "ldimesh/core/field/hex_lookup.hpp"
 #include "ldimesh/core/field/hex_source.hpp"
 #include "ldimesh/core/io/vtu.hpp"
 #endif
@@ -493,6 +496,7 @@ int run_mesh(const MeshArgs& args) {
 struct DistanceArgs {
   std::vector<std::string> files;  // A, or A and B
   std::string surface;
+  std::string vtu, field;  // or the isosurface of a VTU file's field
   std::optional<double> isovalue;
   std::uint64_t samples = 0;
   int threads = 0;
@@ -551,32 +555,75 @@ std::string describe_mesh(const std::string& path, const ldimesh::Mesh& m) {
 // `ldimesh distance`: Metro-style distances between two meshes (PLY or GLB), or from one to a
 // built-in surface (core/distance.hpp, docs/method.md "Distances").
 int run_distance(const DistanceArgs& args) {
-  const bool to_surface = !args.surface.empty();
+  const bool to_surface = !args.surface.empty() || !args.vtu.empty();
+  if (!args.surface.empty() && !args.vtu.empty())
+    throw std::runtime_error("give --surface NAME or --vtu FILE --field NAME, not both");
+  if (args.isovalue && !to_surface)
+    throw std::runtime_error("--isovalue is the isovalue of --surface or --vtu: give one");
   if (to_surface && args.files.size() != 1)
-    throw std::runtime_error("give one mesh with --surface: ldimesh distance A.ply --surface NAME");
+    throw std::runtime_error(
+        "give one mesh with --surface or --vtu: ldimesh distance A.ply --surface NAME");
   if (!to_surface && args.files.size() != 2)
-    throw std::runtime_error("give two meshes (A.ply B.ply) or one mesh and --surface NAME");
-  const ldimesh::SurfaceInfo* surface = nullptr;
-  if (to_surface) {
-    surface = ldimesh::find_surface(args.surface);
-    if (!surface)
-      throw std::runtime_error("unknown surface '" + args.surface + "' (see 'ldimesh surfaces')");
-  }
+    throw std::runtime_error(
+        "give two meshes (A.ply B.ply), or one mesh and --surface NAME or --vtu FILE --field NAME");
   const int threads = args.threads > 0 ? args.threads : tbb::info::default_concurrency();
   tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
   ldimesh::DistanceOptions options;
   options.samples = args.samples;
 
+  // The surface: a built-in one, or the exact isosurface of a VTU file's cells (their
+  // polynomials, looked up per point).
+  ldimesh::ImplicitSurface surface;
+  double default_isovalue = 0.0;
+#ifdef LDIMESH_WITH_VTU
+  ldimesh::VtuElements elements;
+  std::vector<std::unique_ptr<ldimesh::HexElementSource>> sources;
+  std::unique_ptr<ldimesh::HexFieldLookup> lookup;
+#endif
+  if (!args.vtu.empty()) {
+#ifdef LDIMESH_WITH_VTU
+    if (args.field.empty()) throw std::runtime_error("--vtu needs --field NAME");
+    ldimesh::quiet_vtk_logging();
+    if (const ldimesh::Status st = ldimesh::read_vtu(args.vtu, args.field, elements); !st)
+      throw std::runtime_error(st.message());
+    std::vector<const ldimesh::HexElementSource*> list;
+    for (const ldimesh::VtuElements::Group& g : elements.groups) {
+      sources.push_back(std::make_unique<ldimesh::HexElementSource>(g.block()));
+      list.push_back(sources.back().get());
+    }
+    lookup = std::make_unique<ldimesh::HexFieldLookup>(list);
+    surface.name = args.vtu + ":" + args.field;
+    surface.field = [l = lookup.get()](const glm::dvec3& p, glm::dvec3& gradient) {
+      ldimesh::PolynomialSample s;
+      if (!l->sample(p, s)) return std::numeric_limits<double>::quiet_NaN();
+      gradient = s.gradient;
+      return s.value;
+    };
+    // The cells' boxes, and a little beyond: where the lookup extrapolates.
+    const glm::dvec3 pad = 1e-6 * (lookup->bounds().hi - lookup->bounds().lo);
+    surface.domain = {lookup->bounds().lo - pad, lookup->bounds().hi + pad};
+    default_isovalue = 0.5 * (elements.min_value + elements.max_value);
+#else
+    throw std::runtime_error("--vtu: this ldimesh was built without VTK (libvtk9-dev)");
+#endif
+  } else if (to_surface) {
+    const ldimesh::SurfaceInfo* info = ldimesh::find_surface(args.surface);
+    if (!info)
+      throw std::runtime_error("unknown surface '" + args.surface + "' (see 'ldimesh surfaces')");
+    surface = {info->name, info->field, info->domain, info->clip_radius};
+    default_isovalue = info->isovalue;
+  }
+
   const ldimesh::Mesh a = read_mesh_file(args.files[0]);
   if (to_surface) {
-    const double iso = args.isovalue.value_or(surface->isovalue);
+    const double iso = args.isovalue.value_or(default_isovalue);
     const auto start = std::chrono::steady_clock::now();
-    const ldimesh::SurfaceDistance d = ldimesh::surface_distance(a, *surface, iso, options);
+    const ldimesh::SurfaceDistance d = ldimesh::surface_distance(a, surface, iso, options);
     const double seconds = seconds_since(start);
     if (args.json) {
       nlohmann::json j;
       j["a"] = args.files[0];
-      j["surface"] = surface->name;
+      j["surface"] = surface.name;
       j["isovalue"] = iso;
       j["diagonal"] = d.diagonal;
       j["forward"] = stats_json(d.forward, d.diagonal);
@@ -588,12 +635,13 @@ int run_distance(const DistanceArgs& args) {
       return 0;
     }
     std::printf("ldimesh distance: A = %s to the surface %s, isovalue %g\n",
-                describe_mesh(args.files[0], a).c_str(), surface->name.c_str(), iso);
+                describe_mesh(args.files[0], a).c_str(), surface.name.c_str(), iso);
     std::printf("  relative figures: %% of A's bounding box diagonal %g\n", d.diagonal);
     print_stats("forward A -> surf", d.forward, d.diagonal);
-    std::printf("  %-18s %llu samples left out: %llu not converged, %llu outside the clip region\n",
-                "", (unsigned long long)(d.not_converged + d.outside_clip),
-                (unsigned long long)d.not_converged, (unsigned long long)d.outside_clip);
+    std::printf(
+        "  %-18s %llu samples left out: %llu not converged%s, %llu outside the clip region\n", "",
+        (unsigned long long)(d.not_converged + d.outside_clip), (unsigned long long)d.not_converged,
+        args.vtu.empty() ? "" : " or left the cells", (unsigned long long)d.outside_clip);
     std::printf("  time %.3f s, %d thread%s\n", seconds, threads, threads == 1 ? "" : "s");
     return 0;
   }
@@ -665,12 +713,16 @@ int main(int argc, char** argv) {
   distance->add_option("meshes", distance_args.files, "A [B]: .ply or .glb (a published step) each")
       ->required()
       ->expected(1, 2);
-  CLI::Option* distance_surface = distance->add_option(
-      "--surface", distance_args.surface, "measure A against this built-in surface instead of B");
-  distance
-      ->add_option("--isovalue,--iso", distance_args.isovalue,
-                   "isovalue of --surface (default: the surface's)")
-      ->needs(distance_surface);
+  distance->add_option("--surface", distance_args.surface,
+                       "measure A against this built-in surface instead of B");
+  CLI::Option* distance_vtu = distance->add_option(
+      "--vtu", distance_args.vtu,
+      "measure A against the exact isosurface of a VTU file's cells instead of B (needs --field)");
+  distance->add_option("--field", distance_args.field, "point array of --vtu")->needs(distance_vtu);
+  distance->add_option(
+      "--isovalue,--iso", distance_args.isovalue,
+      "isovalue of --surface or --vtu (default: the surface's; for --vtu the middle "
+      "of the field's range)");
   distance
       ->add_option("--samples", distance_args.samples,
                    "samples per mesh (default: ten per triangle of the larger mesh)")

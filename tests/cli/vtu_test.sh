@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # `ldimesh mesh --vtu` on files written by VTK itself (tests/cli/make_vtu.py): order-2 Lagrange
 # hexahedra carrying |x|² beside linear hexahedra, meshed at |x|² = 0.49 — the mesh lies on the
-# sphere of radius 0.7, also from a .pvtu over two pieces; one-line errors naming the field or
+# sphere of radius 0.7 (`ldimesh distance` to the sphere, and the same figures to the file's own
+# isosurface with `distance --vtu`), also from a .pvtu over two pieces; one-line errors naming the field or
 # the cell for a missing field, a vector field, an unsupported cell type, orders that differ
 # along the axes, a missing piece.
 #   vtu_test.sh LDIMESH SOURCE_DIR
@@ -28,6 +29,31 @@ print(f"sphere.vtu at r² = 0.49: {triangles} triangles, mean {d['mean']:.1e}, m
 # the hits are exact (|x|² is degree 2 per axis); the rest is the triangles between them
 sys.exit(0 if d["mean"] < 3e-4 and d["max"] < 2e-3 and triangles > 10000 else 1)
 PY
+
+# `ldimesh distance --vtu`: the same mesh measured against the file's own isosurface (the cells'
+# polynomials, looked up point by point) — here the sphere itself, so the same figures.
+"$ldimesh" distance "$tmp/sphere.ply" --vtu "$tmp/sphere.vtu" --field r --iso 0.49 --json \
+  >"$tmp/distance_vtu.json" 2>"$tmp/distance_vtu.err" ||
+  { cat "$tmp/distance_vtu.err"; fail "ldimesh distance --vtu"; }
+/usr/bin/python3 - "$tmp/distance.json" "$tmp/distance_vtu.json" <<'PY' || fail "distance --vtu differs from the sphere's"
+import json, sys
+a, b = (json.load(open(f)) for f in sys.argv[1:3])
+print(f"to the sphere: mean {a['forward']['mean']:.6e}; to the file's isosurface: "
+      f"mean {b['forward']['mean']:.6e}, {b['not_converged']} not converged")
+same = all(abs(a["forward"][k] - b["forward"][k]) <= 1e-9 for k in ("mean", "rms", "max"))
+sys.exit(0 if same and b["not_converged"] == 0 and
+         a["forward"]["samples"] == b["forward"]["samples"] else 1)
+PY
+if "$ldimesh" distance "$tmp/sphere.ply" --vtu "$tmp/sphere.vtu" --field u >/dev/null 2>"$tmp/err" ||
+  ! grep -q "no point array 'u'" "$tmp/err"; then
+  cat "$tmp/err"
+  fail "ldimesh distance --vtu with a missing field: no clear error"
+fi
+if "$ldimesh" distance "$tmp/sphere.ply" --vtu "$tmp/sphere.vtu" >/dev/null 2>"$tmp/err" ||
+  ! grep -q "needs --field" "$tmp/err"; then
+  cat "$tmp/err"
+  fail "ldimesh distance --vtu without --field: no clear error"
+fi
 
 # The same cells as a .pvtu over two pieces: the same mesh.
 "$ldimesh" mesh --vtu "$tmp/pieces.pvtu" --field r --iso 0.49 --res 128 --out "$tmp/pieces.ply" \

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -457,7 +458,7 @@ std::uint64_t default_samples(std::size_t triangles) {
 // Projects samples onto field = iso (see surface_distance).
 class SurfaceProbe {
  public:
-  SurfaceProbe(const SurfaceInfo& surface, double iso)
+  SurfaceProbe(const ImplicitSurface& surface, double iso)
       : field_(surface.field),
         iso_(iso),
         clip_(surface.domain),
@@ -519,7 +520,7 @@ class SurfaceProbe {
     return clip_radius_ <= 0.0 || glm::length(y) <= clip_radius_ + slack;
   }
 
-  double (*field_)(const glm::dvec3&, glm::dvec3&);
+  const std::function<double(const glm::dvec3&, glm::dvec3&)>& field_;
   double iso_;
   Box clip_;
   double clip_radius_;
@@ -556,6 +557,15 @@ MeshDistance mesh_distance(const Mesh& a, const Mesh& b, const DistanceOptions& 
 }
 
 SurfaceDistance surface_distance(const Mesh& mesh, const SurfaceInfo& surface, double isovalue,
+                                 const DistanceOptions& options) {
+  if (!surface.field)
+    throw std::invalid_argument("distance: surface " + surface.name + " has no field");
+  return surface_distance(
+      mesh, ImplicitSurface{surface.name, surface.field, surface.domain, surface.clip_radius},
+      isovalue, options);
+}
+
+SurfaceDistance surface_distance(const Mesh& mesh, const ImplicitSurface& surface, double isovalue,
                                  const DistanceOptions& options) {
   if (!surface.field)
     throw std::invalid_argument("distance: surface " + surface.name + " has no field");

@@ -1,4 +1,5 @@
-// Metro-style distances between two meshes, and from a mesh to a built-in analytic surface.
+// Metro-style distances between two meshes, and from a mesh to an implicit surface (a built-in
+// analytic one, or any field given as a function: the polynomials of high-order data).
 //
 // After Cignoni, Rocchini and Scopigno, "Metro: measuring error on simplified surfaces",
 // Computer Graphics Forum 17(2), 1998: the surface of one mesh is sampled (its vertices, points
@@ -9,6 +10,8 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <functional>
+#include <string>
 
 #include <glm/glm.hpp>
 
@@ -77,6 +80,18 @@ struct SurfaceDistance {
 // projection fails (a vanishing gradient, no convergence) in not_converged, both left out of the
 // statistics. Threads and determinism as mesh_distance; throws as mesh_distance.
 SurfaceDistance surface_distance(const Mesh& mesh, const SurfaceInfo& surface, double isovalue,
+                                 const DistanceOptions& options = {});
+
+// The surface field = isovalue of any field: `field` returns its value at p and its gradient
+// into `gradient`, or NaN where it is not defined (outside the data: a sample whose projection
+// leaves the data counts as not converged). Called from several threads at once.
+struct ImplicitSurface {
+  std::string name;
+  std::function<double(const glm::dvec3& p, glm::dvec3& gradient)> field;
+  Box domain;                // the part of the surface measured, as SurfaceInfo::domain
+  double clip_radius = 0.0;  // > 0: and inside this ball around the origin
+};
+SurfaceDistance surface_distance(const Mesh& mesh, const ImplicitSurface& surface, double isovalue,
                                  const DistanceOptions& options = {});
 
 }  // namespace ldimesh

@@ -1,0 +1,53 @@
+// The piecewise-polynomial field of high-order hexahedra at world points: which element holds a
+// point (a uniform grid over the elements' boxes, then each candidate's inverse map), and the
+// field's value and world gradient there. It measures a mesh against the data's own isosurface
+// — the polynomials', not an approximation of them (`ldimesh distance --vtu`, bench/evaluate's
+// high-order section).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "ldimesh/core/base/geometry.hpp"
+#include "ldimesh/core/field/hex_source.hpp"
+
+namespace ldimesh {
+
+class HexFieldLookup {
+ public:
+  // The elements of `sources` (they must outlive the lookup; their current values are read
+  // here, once). Each element's box is its geometry's Bernstein hull (the corners of an affine
+  // element), which holds the whole element. Throws std::invalid_argument without elements.
+  explicit HexFieldLookup(std::span<const HexElementSource* const> sources);
+
+  // The field and its world gradient ∇ₓf = J⁻ᵀ ∇ξf at `world` from the element whose reference
+  // cube holds the point (up to 10⁻⁹ in ξ; the first in source and element order where
+  // several do, as on a face two elements share). Where none does, the element whose cube
+  // the point misses by the least, if by at most 10⁻³ in ξ, extrapolated: a point just
+  // beyond the mesh's boundary still has a value, so a projection onto an isosurface that
+  // meets the boundary converges. False beyond that, or where an element's inverse map does
+  // not converge or its Jacobian is singular. Reentrant.
+  bool sample(glm::dvec3 world, PolynomialSample& out) const;
+
+  Box bounds() const { return bounds_; }
+  std::size_t element_count() const { return elements_.size(); }
+
+ private:
+  struct Element {
+    const HexElementSource* source;
+    std::size_t index;         // in its source
+    std::size_t coefficients;  // offset into bernstein_
+    int order;
+  };
+  std::vector<Element> elements_;
+  std::vector<double> bernstein_;  // the field's coefficients, element after element
+  Box bounds_;
+  // The grid: dims_ cells over bounds_, cell c's elements in items_[begin_[c] .. begin_[c + 1]).
+  glm::ivec3 dims_{1};
+  glm::dvec3 cell_size_{1.0};
+  std::vector<std::uint32_t> begin_, items_;
+};
+
+}  // namespace ldimesh

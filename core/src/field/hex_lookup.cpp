@@ -1,0 +1,168 @@
+#include "ldimesh/core/field/hex_lookup.hpp"
+
+#include "curved_element.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+namespace ldimesh {
+namespace {
+
+// Points this close to an element's reference cube (in ξ) are inside it.
+constexpr double kInside = 1e-9;
+// Points at most this far outside every element's cube (in ξ) take the nearest one's polynomial.
+constexpr double kReach = 1e-3;
+// The grid has at most this many cells per axis, and about one element per cell.
+constexpr int kMaxCells = 256;
+
+Box element_box(const HexElementSource& source, std::size_t e) {
+  Box box{glm::dvec3(std::numeric_limits<double>::infinity()),
+          glm::dvec3(-std::numeric_limits<double>::infinity())};
+  if (source.is_curved(e)) {
+    // The convex hull property: the geometry's Bernstein coefficients hold the element.
+    for (const glm::dvec3& c : source.curved_geometry(e)) {
+      box.lo = glm::min(box.lo, c);
+      box.hi = glm::max(box.hi, c);
+    }
+    return box;
+  }
+  const double* corners = source.corners_of(e);
+  for (int c = 0; c < 8; ++c) {
+    const glm::dvec3 x(corners[3 * c], corners[3 * c + 1], corners[3 * c + 2]);
+    box.lo = glm::min(box.lo, x);
+    box.hi = glm::max(box.hi, x);
+  }
+  return box;
+}
+
+// How far ξ lies outside the reference cube [0, 1]³ (0 inside; +∞ for NaN).
+double miss(glm::dvec3 xi) {
+  double m = 0.0;
+  for (int a = 0; a < 3; ++a) {
+    if (!std::isfinite(xi[a])) return std::numeric_limits<double>::infinity();
+    m = std::max({m, -xi[a], xi[a] - 1.0});
+  }
+  return m;
+}
+
+}  // namespace
+
+HexFieldLookup::HexFieldLookup(std::span<const HexElementSource* const> sources) {
+  std::vector<Box> boxes;
+  bounds_ = {glm::dvec3(std::numeric_limits<double>::infinity()),
+             glm::dvec3(-std::numeric_limits<double>::infinity())};
+  for (const HexElementSource* source : sources) {
+    const HexBlock& block = source->block();
+    const std::size_t n = std::size_t(block.order + 1) * (block.order + 1) * (block.order + 1);
+    for (std::size_t e = 0; e < block.element_count; ++e) {
+      elements_.push_back({source, e, bernstein_.size(), block.order});
+      bernstein_.resize(bernstein_.size() + n);
+      source->element_bernstein(e,
+                                std::span<double>(&bernstein_[elements_.back().coefficients], n));
+      Box box = element_box(*source, e);
+      bounds_.lo = glm::min(bounds_.lo, box.lo);
+      bounds_.hi = glm::max(bounds_.hi, box.hi);
+      boxes.push_back(box);
+    }
+  }
+  if (elements_.empty()) throw std::invalid_argument("hex lookup: no elements");
+
+  // About one element per cell, the cells as cubic as the bounds allow.
+  const glm::dvec3 extent = glm::max(bounds_.hi - bounds_.lo, glm::dvec3(1e-300));
+  const double volume = extent.x * extent.y * extent.z;
+  const double side = std::cbrt(volume / double(elements_.size()));
+  for (int a = 0; a < 3; ++a) {
+    dims_[a] = std::clamp(int(std::ceil(extent[a] / side)), 1, kMaxCells);
+    cell_size_[a] = extent[a] / dims_[a];
+  }
+  // Each element in every cell its box (widened by the reach of the extrapolation and a little
+  // more for rounding) overlaps.
+  const std::size_t cells = std::size_t(dims_.x) * dims_.y * dims_.z;
+  std::vector<std::uint32_t> count(cells + 1, 0);
+  std::vector<std::pair<glm::ivec3, glm::ivec3>> ranges(elements_.size());
+  for (std::size_t e = 0; e < elements_.size(); ++e) {
+    const glm::dvec3 pad = 2.0 * kReach * (boxes[e].hi - boxes[e].lo) + 1e-12 * extent;
+    const glm::dvec3 lo = (boxes[e].lo - pad - bounds_.lo) / cell_size_,
+                     hi = (boxes[e].hi + pad - bounds_.lo) / cell_size_;
+    glm::ivec3 a, b;
+    for (int k = 0; k < 3; ++k) {
+      a[k] = std::clamp(int(std::floor(lo[k])), 0, dims_[k] - 1);
+      b[k] = std::clamp(int(std::floor(hi[k])), 0, dims_[k] - 1);
+    }
+    ranges[e] = {a, b};
+    for (int z = a.z; z <= b.z; ++z)
+      for (int y = a.y; y <= b.y; ++y)
+        for (int x = a.x; x <= b.x; ++x)
+          ++count[std::size_t(x) + dims_.x * (std::size_t(y) + std::size_t(dims_.y) * z) + 1];
+  }
+  for (std::size_t c = 0; c < cells; ++c)
+    count[c + 1] += count[c];
+  begin_ = count;
+  items_.resize(begin_.back());
+  for (std::size_t e = 0; e < elements_.size(); ++e) {
+    const auto& [a, b] = ranges[e];
+    for (int z = a.z; z <= b.z; ++z)
+      for (int y = a.y; y <= b.y; ++y)
+        for (int x = a.x; x <= b.x; ++x)
+          items_[count[std::size_t(x) + dims_.x * (std::size_t(y) + std::size_t(dims_.y) * z)]++] =
+              std::uint32_t(e);
+  }
+}
+
+bool HexFieldLookup::sample(glm::dvec3 world, PolynomialSample& out) const {
+  if (!std::isfinite(world.x) || !std::isfinite(world.y) || !std::isfinite(world.z)) return false;
+  glm::ivec3 c;
+  for (int a = 0; a < 3; ++a) {
+    const double u = (world[a] - bounds_.lo[a]) / cell_size_[a];
+    if (u < -1.0 || u > dims_[a] + 1.0) return false;  // well outside every element's box
+    c[a] = std::clamp(int(std::floor(u)), 0, dims_[a] - 1);
+  }
+  const std::size_t cell =
+      std::size_t(c.x) + dims_.x * (std::size_t(c.y) + std::size_t(dims_.y) * c.z);
+  const Element* best = nullptr;
+  glm::dvec3 best_xi(0.0);
+  double best_miss = kReach;
+  for (std::uint32_t k = begin_[cell]; k < begin_[cell + 1]; ++k) {
+    const Element& e = elements_[items_[k]];
+    const glm::dvec3 xi = e.source->to_reference(e.index, world);
+    const double m = miss(xi);
+    if (m <= kInside) {
+      best = &e;
+      best_xi = xi;
+      break;
+    }
+    if (m <= best_miss) {
+      best = &e;
+      best_xi = xi;
+      best_miss = m;
+    }
+  }
+  if (!best) return false;
+
+  const std::size_t n = std::size_t(best->order + 1) * (best->order + 1) * (best->order + 1);
+  const PolynomialSample s = evaluate_bernstein(
+      best->order, std::span<const double>(&bernstein_[best->coefficients], n), best_xi);
+  glm::dmat3 jacobian;  // columns ∂x/∂ξ_k
+  if (best->source->is_curved(best->index)) {
+    const curved::Element ce{best->order, best->source->geometry_degree(), nullptr,
+                             best->source->curved_geometry(best->index).data()};
+    jacobian = curved::evaluate(ce, best_xi).jacobian;
+  } else {
+    const glm::dvec3 o = best->source->to_world(best->index, glm::dvec3(0.0));
+    for (int a = 0; a < 3; ++a) {
+      glm::dvec3 unit(0.0);
+      unit[a] = 1.0;
+      jacobian[a] = best->source->to_world(best->index, unit) - o;
+    }
+  }
+  const double det = glm::determinant(jacobian);
+  if (!(std::abs(det) > 0.0) || !std::isfinite(det)) return false;
+  out.value = s.value;
+  out.gradient = glm::inverse(glm::transpose(jacobian)) * s.gradient;
+  return std::isfinite(out.value) && std::isfinite(out.gradient.x) &&
+         std::isfinite(out.gradient.y) && std::isfinite(out.gradient.z);
+}
+
+}  // namespace ldimesh
