@@ -12,7 +12,8 @@
 // p ← p − (f(p) − iso) ∇f(p) / |∇f(p)|², at most 50 steps, until |f − iso| / |∇f| is below
 // 1e-12 of the domain diagonal or the step below 1e-14 of it. A vertex whose projection fails
 // (vanishing gradient, no convergence) or would move further than --max-move (default 1 % of the
-// domain diagonal) stays where it was and is counted. One JSON line on stdout.
+// domain diagonal) stays where it was and is counted; with --drop-failed the faces that use it
+// are removed (a reference whose vertices all lie on the surface). One JSON line on stdout.
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -44,6 +45,7 @@ int main(int argc, char** argv) {
       "project a mesh's vertices onto a built-in analytic surface or a VTU file's "
       "isosurface (Newton steps)"};
   std::string name, vtu, field_name, in, out;
+  bool drop_failed = false;
   double max_move = 0.0, isovalue = std::numeric_limits<double>::quiet_NaN();
   int threads = 0;
   CLI::Option* surface_option =
@@ -57,6 +59,8 @@ int main(int argc, char** argv) {
   app.add_option("--in", in, "input PLY")->required();
   app.add_option("--out", out, "output PLY (binary)")->required();
   app.add_option("--max-move", max_move, "largest move kept (default: 1 % of the diagonal)");
+  app.add_flag("--drop-failed", drop_failed,
+               "remove the faces that use a vertex whose projection failed or went too far");
   app.add_option("--threads", threads, "threads (default: all cores)")->check(CLI::Range(1, 4096));
   CLI11_PARSE(app, argc, argv);
 
@@ -83,8 +87,9 @@ int main(int argc, char** argv) {
       }
       lookup = std::make_unique<ldimesh::HexFieldLookup>(list);
       field = [l = lookup.get()](const glm::dvec3& p, glm::dvec3& gradient) {
+        thread_local ldimesh::HexFieldLookup::Hint hint;  // each thread's last element first
         ldimesh::PolynomialSample sample;
-        if (!l->sample(p, sample)) return std::numeric_limits<double>::quiet_NaN();
+        if (!l->sample(p, sample, hint)) return std::numeric_limits<double>::quiet_NaN();
         gradient = sample.gradient;
         return sample.value;
       };
@@ -111,6 +116,7 @@ int main(int argc, char** argv) {
     const auto start = std::chrono::steady_clock::now();
     std::atomic<std::size_t> failed{0}, too_far{0};
     std::vector<double> moves(mesh.positions.size(), 0.0);
+    std::vector<std::uint8_t> kept(mesh.positions.size(), 1);
     tbb::parallel_for(std::size_t(0), mesh.positions.size(), [&](std::size_t i) {
       const glm::dvec3 p0(mesh.positions[i]);
       glm::dvec3 p = p0, g;
@@ -130,8 +136,10 @@ int main(int argc, char** argv) {
       const double move = glm::length(p - p0);
       if (!ok || !std::isfinite(move)) {
         ++failed;
+        kept[i] = 0;
       } else if (move > max_move) {
         ++too_far;
+        kept[i] = 0;
       } else {
         mesh.positions[i] = glm::vec3(p);
         moves[i] = move;
@@ -145,6 +153,27 @@ int main(int argc, char** argv) {
       if (!std::isfinite(field(glm::dvec3(mesh.positions[i]), g))) continue;
       const double len = glm::length(g);
       if (len > 0.0) mesh.normals[i] = glm::vec3(g / len);
+    }
+    std::size_t dropped = 0;
+    if (drop_failed) {
+      const auto keep_faces = [&](std::vector<std::uint32_t>& faces,
+                                  std::vector<std::uint8_t>& view, std::size_t corners) {
+        std::vector<std::uint32_t> kept_faces;
+        std::vector<std::uint8_t> kept_view;
+        for (std::size_t f = 0; f * corners < faces.size(); ++f) {
+          const std::uint32_t* v = &faces[f * corners];
+          if (!std::all_of(v, v + corners, [&](std::uint32_t i) { return kept[i] != 0; })) {
+            ++dropped;
+            continue;
+          }
+          kept_faces.insert(kept_faces.end(), v, v + corners);
+          if (f < view.size()) kept_view.push_back(view[f]);
+        }
+        faces = std::move(kept_faces);
+        view = std::move(kept_view);
+      };
+      keep_faces(mesh.triangles, mesh.triangle_view, 3);
+      keep_faces(mesh.quads, mesh.quad_view, 4);
     }
     if (const ldimesh::Status st = ldimesh::write_ply(out, mesh); !st)
       throw std::runtime_error(st.message());
@@ -162,6 +191,7 @@ int main(int argc, char** argv) {
     j["faces"] = mesh.face_count();
     j["failed"] = failed.load();
     j["too_far"] = too_far.load();
+    j["dropped_faces"] = dropped;
     j["mean_move"] = mesh.positions.empty() ? 0.0 : sum / double(mesh.positions.size());
     j["max_move"] = largest;
     j["threads"] = threads;

@@ -594,8 +594,10 @@ int run_distance(const DistanceArgs& args) {
     lookup = std::make_unique<ldimesh::HexFieldLookup>(list);
     surface.name = args.vtu + ":" + args.field;
     surface.field = [l = lookup.get()](const glm::dvec3& p, glm::dvec3& gradient) {
+      // Each thread's last element first: a projection's points move little.
+      thread_local ldimesh::HexFieldLookup::Hint hint;
       ldimesh::PolynomialSample s;
-      if (!l->sample(p, s)) return std::numeric_limits<double>::quiet_NaN();
+      if (!l->sample(p, s, hint)) return std::numeric_limits<double>::quiet_NaN();
       gradient = s.gradient;
       return s.value;
     };

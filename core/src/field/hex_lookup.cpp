@@ -14,6 +14,8 @@ namespace {
 constexpr double kInside = 1e-9;
 // Points at most this far outside every element's cube (in ξ) take the nearest one's polynomial.
 constexpr double kReach = 1e-3;
+// The hinted element is taken without a search for points this far inside it (in ξ).
+constexpr double kInterior = 1e-7;
 // The grid has at most this many cells per axis, and about one element per cell.
 constexpr int kMaxCells = 256;
 
@@ -37,9 +39,10 @@ Box element_box(const HexElementSource& source, std::size_t e) {
   return box;
 }
 
-// How far ξ lies outside the reference cube [0, 1]³ (0 inside; +∞ for NaN).
+// How far ξ lies outside the reference cube [0, 1]³ (negative inside: minus the distance to the
+// nearest face; +∞ for NaN).
 double miss(glm::dvec3 xi) {
-  double m = 0.0;
+  double m = -std::numeric_limits<double>::infinity();
   for (int a = 0; a < 3; ++a) {
     if (!std::isfinite(xi[a])) return std::numeric_limits<double>::infinity();
     m = std::max({m, -xi[a], xi[a] - 1.0});
@@ -82,10 +85,12 @@ HexFieldLookup::HexFieldLookup(std::span<const HexElementSource* const> sources)
   const std::size_t cells = std::size_t(dims_.x) * dims_.y * dims_.z;
   std::vector<std::uint32_t> count(cells + 1, 0);
   std::vector<std::pair<glm::ivec3, glm::ivec3>> ranges(elements_.size());
+  boxes_.resize(elements_.size());
   for (std::size_t e = 0; e < elements_.size(); ++e) {
     const glm::dvec3 pad = 2.0 * kReach * (boxes[e].hi - boxes[e].lo) + 1e-12 * extent;
-    const glm::dvec3 lo = (boxes[e].lo - pad - bounds_.lo) / cell_size_,
-                     hi = (boxes[e].hi + pad - bounds_.lo) / cell_size_;
+    boxes_[e] = {boxes[e].lo - pad, boxes[e].hi + pad};
+    const glm::dvec3 lo = (boxes_[e].lo - bounds_.lo) / cell_size_,
+                     hi = (boxes_[e].hi - bounds_.lo) / cell_size_;
     glm::ivec3 a, b;
     for (int k = 0; k < 3; ++k) {
       a[k] = std::clamp(int(std::floor(lo[k])), 0, dims_[k] - 1);
@@ -112,7 +117,26 @@ HexFieldLookup::HexFieldLookup(std::span<const HexElementSource* const> sources)
 }
 
 bool HexFieldLookup::sample(glm::dvec3 world, PolynomialSample& out) const {
+  Hint hint;
+  return sample(world, out, hint);
+}
+
+bool HexFieldLookup::sample(glm::dvec3 world, PolynomialSample& out, Hint& hint) const {
   if (!std::isfinite(world.x) || !std::isfinite(world.y) || !std::isfinite(world.z)) return false;
+  const auto inside_box = [&](std::size_t e) {
+    return glm::all(glm::greaterThanEqual(world, boxes_[e].lo)) &&
+           glm::all(glm::lessThanEqual(world, boxes_[e].hi));
+  };
+  const auto reference = [&](std::size_t e) {
+    return elements_[e].source->to_reference(elements_[e].index, world);
+  };
+  // The hinted element first: well inside it (not within 10⁻⁷ of its faces in ξ), the point is
+  // in no other element of a mesh whose elements do not overlap, so the search would find it
+  // too: the same answer, whatever the hint.
+  if (hint.element < elements_.size() && inside_box(hint.element)) {
+    const glm::dvec3 xi = reference(hint.element);
+    if (miss(xi) <= -kInterior) return evaluate(hint.element, xi, out);
+  }
   glm::ivec3 c;
   for (int a = 0; a < 3; ++a) {
     const double u = (world[a] - bounds_.lo[a]) / cell_size_[a];
@@ -121,40 +145,46 @@ bool HexFieldLookup::sample(glm::dvec3 world, PolynomialSample& out) const {
   }
   const std::size_t cell =
       std::size_t(c.x) + dims_.x * (std::size_t(c.y) + std::size_t(dims_.y) * c.z);
-  const Element* best = nullptr;
+  std::size_t best = elements_.size();
   glm::dvec3 best_xi(0.0);
   double best_miss = kReach;
   for (std::uint32_t k = begin_[cell]; k < begin_[cell + 1]; ++k) {
-    const Element& e = elements_[items_[k]];
-    const glm::dvec3 xi = e.source->to_reference(e.index, world);
+    const std::size_t e = items_[k];
+    if (!inside_box(e)) continue;  // its inverse map is not worth computing
+    const glm::dvec3 xi = reference(e);
     const double m = miss(xi);
     if (m <= kInside) {
-      best = &e;
+      best = e;
       best_xi = xi;
       break;
     }
     if (m <= best_miss) {
-      best = &e;
+      best = e;
       best_xi = xi;
       best_miss = m;
     }
   }
-  if (!best) return false;
+  if (best == elements_.size()) return false;
+  hint.element = best;
+  return evaluate(best, best_xi, out);
+}
 
-  const std::size_t n = std::size_t(best->order + 1) * (best->order + 1) * (best->order + 1);
-  const PolynomialSample s = evaluate_bernstein(
-      best->order, std::span<const double>(&bernstein_[best->coefficients], n), best_xi);
+bool HexFieldLookup::evaluate(std::size_t element, glm::dvec3 xi, PolynomialSample& out) const {
+  const Element& e = elements_[element];
+  const std::size_t n = std::size_t(e.order + 1) * (e.order + 1) * (e.order + 1);
+  const PolynomialSample s =
+      evaluate_bernstein(e.order, std::span<const double>(&bernstein_[e.coefficients], n), xi);
   glm::dmat3 jacobian;  // columns ∂x/∂ξ_k
-  if (best->source->is_curved(best->index)) {
-    const curved::Element ce{best->order, best->source->geometry_degree(), nullptr,
-                             best->source->curved_geometry(best->index).data()};
-    jacobian = curved::evaluate(ce, best_xi).jacobian;
+  if (e.source->is_curved(e.index)) {
+    const curved::Element ce{e.order, e.source->geometry_degree(), nullptr,
+                             e.source->curved_geometry(e.index).data()};
+    jacobian = curved::evaluate(ce, xi).jacobian;
   } else {
-    const glm::dvec3 o = best->source->to_world(best->index, glm::dvec3(0.0));
+    const glm::dvec3 o = e.source->to_world(e.index, glm::dvec3(0.0));
     for (int a = 0; a < 3; ++a) {
       glm::dvec3 unit(0.0);
       unit[a] = 1.0;
-      jacobian[a] = best->source->to_world(best->index, unit) - o;
+      jacobian[a] = e.source->to_world(e.index, unit) - o;
     }
   }
   const double det = glm::determinant(jacobian);

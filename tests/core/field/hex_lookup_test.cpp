@@ -7,6 +7,7 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <tbb/global_control.h>
 
 #include "ldimesh/core/metrics/distance.hpp"
 
@@ -35,14 +36,21 @@ TEST(HexFieldLookup, ValuesAndGradientsAreTheFieldsOwn) {
     EXPECT_EQ(lookup.element_count(), m.block.element_count);
     // Points of the elements (the geometry of degree 2 is not the sphere's: its outer faces
     // lie within it between the nodes).
+    // Some on the elements' faces, where two elements hold the point: the hint (the previous
+    // point's element) must not change the answer.
     std::uniform_int_distribution<std::size_t> element(0, m.block.element_count - 1);
+    HexFieldLookup::Hint hint;
     for (int i = 0; i < 2000; ++i) {
-      const glm::dvec3 x =
-          source.to_world(element(rng), glm::dvec3(unit(rng), unit(rng), unit(rng)));
-      PolynomialSample s;
+      glm::dvec3 xi(unit(rng), unit(rng), unit(rng));
+      if (i % 4 == 0) xi[i % 3] = double(i % 8 < 4);
+      const glm::dvec3 x = source.to_world(element(rng), xi);
+      PolynomialSample s, h;
       ASSERT_TRUE(lookup.sample(x, s)) << "r " << glm::length(x);
       EXPECT_NEAR(s.value, glm::dot(x, x), 1e-12);
       EXPECT_NEAR(glm::length(s.gradient - 2.0 * x), 0.0, 1e-9);
+      ASSERT_TRUE(lookup.sample(x, h, hint));
+      EXPECT_EQ(s.value, h.value);
+      EXPECT_EQ(s.gradient, h.gradient);
     }
     // Inside the hole, beyond the outer sphere, far away: no element holds the point.
     PolynomialSample s;
@@ -137,6 +145,13 @@ TEST(HexFieldLookup, DistanceToTheShellsIsosurfaceIsTheSpheres) {
                                  lookup.bounds()};
   const double iso = 0.72 * 0.72;
   const SurfaceDistance d = surface_distance(sphere, polynomial, iso);
+  {
+    // The threads' hints do not change the figures: the same bits on one thread.
+    tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    const SurfaceDistance serial = surface_distance(sphere, polynomial, iso);
+    EXPECT_EQ(serial.forward.mean, d.forward.mean);
+    EXPECT_EQ(serial.forward.max, d.forward.max);
+  }
   const SurfaceDistance e = surface_distance(sphere, analytic, iso);
   EXPECT_EQ(d.not_converged, 0u);
   EXPECT_EQ(d.outside_clip, 0u);

@@ -30,11 +30,21 @@ class HexFieldLookup {
   // meets the boundary converges. False beyond that, or where an element's inverse map does
   // not converge or its Jacobian is singular. Reentrant.
   bool sample(glm::dvec3 world, PolynomialSample& out) const;
+  // The same, trying the element of `hint` first and leaving the element used there: a caller
+  // whose points move little (a projection's steps) skips the search. The answer is the one
+  // without a hint (the hinted element is taken only for points well inside it, which no other
+  // element holds in a mesh whose elements do not overlap). Start from Hint{}.
+  struct Hint {
+    std::size_t element = ~std::size_t(0);
+  };
+  bool sample(glm::dvec3 world, PolynomialSample& out, Hint& hint) const;
 
   Box bounds() const { return bounds_; }
   std::size_t element_count() const { return elements_.size(); }
 
  private:
+  bool evaluate(std::size_t element, glm::dvec3 xi, PolynomialSample& out) const;
+
   struct Element {
     const HexElementSource* source;
     std::size_t index;         // in its source
@@ -42,6 +52,7 @@ class HexFieldLookup {
     int order;
   };
   std::vector<Element> elements_;
+  std::vector<Box> boxes_;         // per element, widened by the extrapolation's reach
   std::vector<double> bernstein_;  // the field's coefficients, element after element
   Box bounds_;
   // The grid: dims_ cells over bounds_, cell c's elements in items_[begin_[c] .. begin_[c + 1]).
