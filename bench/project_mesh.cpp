@@ -12,8 +12,9 @@
 // p ← p − (f(p) − iso) ∇f(p) / |∇f(p)|², at most 50 steps, until |f − iso| / |∇f| is below
 // 1e-12 of the domain diagonal or the step below 1e-14 of it. A vertex whose projection fails
 // (vanishing gradient, no convergence) or would move further than --max-move (default 1 % of the
-// domain diagonal) stays where it was and is counted; with --drop-failed the faces that use it
-// are removed (a reference whose vertices all lie on the surface). One JSON line on stdout.
+// domain diagonal) stays where it was and is counted; with --drop-failed it is removed with the
+// faces that use it (a reference whose vertices all lie on the surface). One JSON line on
+// stdout ("vertices": those written).
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -60,7 +61,7 @@ int main(int argc, char** argv) {
   app.add_option("--out", out, "output PLY (binary)")->required();
   app.add_option("--max-move", max_move, "largest move kept (default: 1 % of the diagonal)");
   app.add_flag("--drop-failed", drop_failed,
-               "remove the faces that use a vertex whose projection failed or went too far");
+               "remove each vertex whose projection failed or went too far, and its faces");
   app.add_option("--threads", threads, "threads (default: all cores)")->check(CLI::Range(1, 4096));
   CLI11_PARSE(app, argc, argv);
 
@@ -86,13 +87,7 @@ int main(int argc, char** argv) {
         list.push_back(sources.back().get());
       }
       lookup = std::make_unique<ldimesh::HexFieldLookup>(list);
-      field = [l = lookup.get()](const glm::dvec3& p, glm::dvec3& gradient) {
-        thread_local ldimesh::HexFieldLookup::Hint hint;  // each thread's last element first
-        ldimesh::PolynomialSample sample;
-        if (!l->sample(p, sample, hint)) return std::numeric_limits<double>::quiet_NaN();
-        gradient = sample.gradient;
-        return sample.value;
-      };
+      field = lookup->field();
       diagonal = lookup->bounds().diagonal();
       name = vtu + ":" + field_name;
 #else
@@ -119,7 +114,7 @@ int main(int argc, char** argv) {
     std::vector<std::uint8_t> kept(mesh.positions.size(), 1);
     tbb::parallel_for(std::size_t(0), mesh.positions.size(), [&](std::size_t i) {
       const glm::dvec3 p0(mesh.positions[i]);
-      glm::dvec3 p = p0, g;
+      glm::dvec3 p = p0, g(0.0);
       bool ok = false;
       for (int it = 0; it < 50; ++it) {
         const double f = field(p, g) - iso;
@@ -174,6 +169,25 @@ int main(int argc, char** argv) {
       };
       keep_faces(mesh.triangles, mesh.triangle_view, 3);
       keep_faces(mesh.quads, mesh.quad_view, 4);
+      // The vertices left where they were go too (readers that take every point see only
+      // points on the surface); the faces' indices follow.
+      std::vector<std::uint32_t> index(mesh.positions.size(), 0);
+      std::size_t next = 0;
+      for (std::size_t i = 0; i < mesh.positions.size(); ++i) {
+        if (!kept[i]) continue;
+        index[i] = std::uint32_t(next);
+        mesh.positions[next] = mesh.positions[i];
+        if (mesh.normals.size() == kept.size()) mesh.normals[next] = mesh.normals[i];
+        if (mesh.scalars.size() == kept.size()) mesh.scalars[next] = mesh.scalars[i];
+        ++next;
+      }
+      mesh.positions.resize(next);
+      if (mesh.normals.size() == kept.size()) mesh.normals.resize(next);
+      if (mesh.scalars.size() == kept.size()) mesh.scalars.resize(next);
+      for (std::uint32_t& v : mesh.triangles)
+        v = index[v];
+      for (std::uint32_t& v : mesh.quads)
+        v = index[v];
     }
     if (const ldimesh::Status st = ldimesh::write_ply(out, mesh); !st)
       throw std::runtime_error(st.message());

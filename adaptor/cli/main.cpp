@@ -124,6 +124,9 @@ struct Input {
   std::vector<std::unique_ptr<ldimesh::FieldSource>> sources;
   ldimesh::Subdomain subdomain;
   double default_isovalue = 0.0;
+  // Of a --vtu input: building the element sources from the cells read (their geometry's
+  // Bernstein form, the Jacobian checks), part of "load".
+  double prepare_seconds = 0.0;
   ldimesh::RawVolume volume;  // owns the values of a --grid input
 #ifdef LDIMESH_WITH_VTU
   ldimesh::VtuElements elements;  // owns the arrays of a --vtu input
@@ -147,8 +150,10 @@ void load_input(const MeshArgs& args, int rank, int ranks, Input& input) {
     if (!status) throw std::runtime_error(status.message());
     input.name = args.vtu;
     // Every rank holds every element (the file's); it casts only its block of the domain.
+    const auto start = std::chrono::steady_clock::now();
     for (const ldimesh::VtuElements::Group& g : input.elements.groups)
       input.sources.push_back(std::make_unique<ldimesh::HexElementSource>(g.block()));
+    input.prepare_seconds = seconds_since(start);
     // The sources' bounds hold the curved cells (their Bernstein hulls), not only the points.
     ldimesh::Box whole = input.sources.front()->bounds();
     for (const auto& source : input.sources)
@@ -423,6 +428,7 @@ int run_mesh(const MeshArgs& args) {
     j["output"] = args.out.empty() ? nlohmann::json(nullptr) : nlohmann::json(args.out);
     j["repeats"] = repeats;
     j["seconds"] = {{"load", load_seconds},
+                    {"prepare", input.prepare_seconds},
                     {"scene", max_scene},
                     {"raycast", t.cast},
                     {"encode", t.encode},
@@ -593,14 +599,7 @@ int run_distance(const DistanceArgs& args) {
     }
     lookup = std::make_unique<ldimesh::HexFieldLookup>(list);
     surface.name = args.vtu + ":" + args.field;
-    surface.field = [l = lookup.get()](const glm::dvec3& p, glm::dvec3& gradient) {
-      // Each thread's last element first: a projection's points move little.
-      thread_local ldimesh::HexFieldLookup::Hint hint;
-      ldimesh::PolynomialSample s;
-      if (!l->sample(p, s, hint)) return std::numeric_limits<double>::quiet_NaN();
-      gradient = s.gradient;
-      return s.value;
-    };
+    surface.field = lookup->field();
     // The cells' boxes, and a little beyond: where the lookup extrapolates.
     const glm::dvec3 pad = 1e-6 * (lookup->bounds().hi - lookup->bounds().lo);
     surface.domain = {lookup->bounds().lo - pad, lookup->bounds().hi + pad};

@@ -44,16 +44,19 @@ same = all(abs(a["forward"][k] - b["forward"][k]) <= 1e-9 for k in ("mean", "rms
 sys.exit(0 if same and b["not_converged"] == 0 and
          a["forward"]["samples"] == b["forward"]["samples"] else 1)
 PY
-if "$ldimesh" distance "$tmp/sphere.ply" --vtu "$tmp/sphere.vtu" --field u >/dev/null 2>"$tmp/err" ||
-  ! grep -q "no point array 'u'" "$tmp/err"; then
-  cat "$tmp/err"
-  fail "ldimesh distance --vtu with a missing field: no clear error"
-fi
-if "$ldimesh" distance "$tmp/sphere.ply" --vtu "$tmp/sphere.vtu" >/dev/null 2>"$tmp/err" ||
-  ! grep -q "needs --field" "$tmp/err"; then
-  cat "$tmp/err"
-  fail "ldimesh distance --vtu without --field: no clear error"
-fi
+expect_distance_error() {  # expect_distance_error PATTERN ARGS...
+  local pattern=$1
+  shift
+  if "$ldimesh" distance "$@" >/dev/null 2>"$tmp/err" || ! grep -q -- "$pattern" "$tmp/err"; then
+    cat "$tmp/err"
+    fail "ldimesh distance $*: no error with '$pattern'"
+  fi
+}
+expect_distance_error "no point array 'u'" "$tmp/sphere.ply" --vtu "$tmp/sphere.vtu" --field u
+expect_distance_error "needs --field" "$tmp/sphere.ply" --vtu "$tmp/sphere.vtu"
+expect_distance_error "not both" "$tmp/sphere.ply" --vtu "$tmp/sphere.vtu" --field r --surface sphere
+expect_distance_error "isovalue of --surface or --vtu" "$tmp/sphere.ply" "$tmp/sphere.ply" --iso 0.5
+expect_distance_error "requires --vtu" "$tmp/sphere.ply" --surface sphere --field r
 
 # The same cells as a .pvtu over two pieces: the same mesh.
 "$ldimesh" mesh --vtu "$tmp/pieces.pvtu" --field r --iso 0.49 --res 128 --out "$tmp/pieces.ply" \

@@ -6,12 +6,11 @@
 #include <cmath>
 #include <limits>
 #include <stdexcept>
+#include <string>
 
 namespace ldimesh {
 namespace {
 
-// Points this close to an element's reference cube (in ξ) are inside it.
-constexpr double kInside = 1e-9;
 // Points at most this far outside every element's cube (in ξ) take the nearest one's polynomial.
 constexpr double kReach = 1e-3;
 // The hinted element is taken without a search for points this far inside it (in ξ).
@@ -75,19 +74,22 @@ HexFieldLookup::HexFieldLookup(std::span<const HexElementSource* const> sources)
   // About one element per cell, the cells as cubic as the bounds allow.
   const glm::dvec3 extent = glm::max(bounds_.hi - bounds_.lo, glm::dvec3(1e-300));
   const double volume = extent.x * extent.y * extent.z;
-  const double side = std::cbrt(volume / double(elements_.size()));
+  const double side = std::max(std::cbrt(volume / double(elements_.size())), 1e-300);
   for (int a = 0; a < 3; ++a) {
-    dims_[a] = std::clamp(int(std::ceil(extent[a] / side)), 1, kMaxCells);
+    dims_[a] = int(std::clamp(std::ceil(extent[a] / side), 1.0, double(kMaxCells)));
     cell_size_[a] = extent[a] / dims_[a];
   }
-  // Each element in every cell its box (widened by the reach of the extrapolation and a little
-  // more for rounding) overlaps.
+  // Each element in every cell its box overlaps, widened by the reach of the extrapolation (a
+  // step of kReach along each ξ moves a point of a map of degree q at most q·kReach of the
+  // box's extent along each axis) and a little more for rounding.
   const std::size_t cells = std::size_t(dims_.x) * dims_.y * dims_.z;
   std::vector<std::uint32_t> count(cells + 1, 0);
   std::vector<std::pair<glm::ivec3, glm::ivec3>> ranges(elements_.size());
   boxes_.resize(elements_.size());
   for (std::size_t e = 0; e < elements_.size(); ++e) {
-    const glm::dvec3 pad = 2.0 * kReach * (boxes[e].hi - boxes[e].lo) + 1e-12 * extent;
+    const HexElementSource& source = *elements_[e].source;
+    const int degree = source.is_curved(elements_[e].index) ? source.geometry_degree() : 1;
+    const glm::dvec3 pad = 3.0 * degree * kReach * (boxes[e].hi - boxes[e].lo) + 1e-12 * extent;
     boxes_[e] = {boxes[e].lo - pad, boxes[e].hi + pad};
     const glm::dvec3 lo = (boxes_[e].lo - bounds_.lo) / cell_size_,
                      hi = (boxes_[e].hi - bounds_.lo) / cell_size_;
@@ -130,9 +132,9 @@ bool HexFieldLookup::sample(glm::dvec3 world, PolynomialSample& out, Hint& hint)
   const auto reference = [&](std::size_t e) {
     return elements_[e].source->to_reference(elements_[e].index, world);
   };
-  // The hinted element first: well inside it (not within 10⁻⁷ of its faces in ξ), the point is
-  // in no other element of a mesh whose elements do not overlap, so the search would find it
-  // too: the same answer, whatever the hint.
+  // The hinted element first. Well inside it (10⁻⁷ from its faces in ξ) the point lies in no
+  // other element of a mesh whose elements do not overlap, and the search below takes such an
+  // element as soon as it meets one: the same answer, whatever the hint.
   if (hint.element < elements_.size() && inside_box(hint.element)) {
     const glm::dvec3 xi = reference(hint.element);
     if (miss(xi) <= -kInterior) return evaluate(hint.element, xi, out);
@@ -145,28 +147,39 @@ bool HexFieldLookup::sample(glm::dvec3 world, PolynomialSample& out, Hint& hint)
   }
   const std::size_t cell =
       std::size_t(c.x) + dims_.x * (std::size_t(c.y) + std::size_t(dims_.y) * c.z);
+  // The first element the point lies well inside, else the one it misses least (on a face two
+  // elements share, the one it is deeper in; the first of equals).
   std::size_t best = elements_.size();
   glm::dvec3 best_xi(0.0);
-  double best_miss = kReach;
+  double best_miss = std::nextafter(kReach, 1.0);
   for (std::uint32_t k = begin_[cell]; k < begin_[cell + 1]; ++k) {
     const std::size_t e = items_[k];
     if (!inside_box(e)) continue;  // its inverse map is not worth computing
     const glm::dvec3 xi = reference(e);
     const double m = miss(xi);
-    if (m <= kInside) {
-      best = e;
-      best_xi = xi;
-      break;
-    }
-    if (m <= best_miss) {
+    if (m < best_miss) {
       best = e;
       best_xi = xi;
       best_miss = m;
+      if (m <= -kInterior) break;
     }
   }
   if (best == elements_.size()) return false;
   hint.element = best;
   return evaluate(best, best_xi, out);
+}
+
+std::function<double(const glm::dvec3&, glm::dvec3&)> HexFieldLookup::field() const {
+  return [this](const glm::dvec3& p, glm::dvec3& gradient) {
+    thread_local Hint hint;  // each thread's last element first: a projection's points move little
+    PolynomialSample s;
+    if (!sample(p, s, hint)) {
+      gradient = glm::dvec3(std::numeric_limits<double>::quiet_NaN());
+      return std::numeric_limits<double>::quiet_NaN();
+    }
+    gradient = s.gradient;
+    return s.value;
+  };
 }
 
 bool HexFieldLookup::evaluate(std::size_t element, glm::dvec3 xi, PolynomialSample& out) const {

@@ -474,8 +474,8 @@ class SurfaceProbe {
     glm::dvec3 best = y;
     double best_d = glm::length(x - y);
     for (int round = 0; round < kFootRounds && best_d > 0.0; ++round) {
-      glm::dvec3 grad;
-      field_(y, grad);
+      glm::dvec3 grad(0.0);
+      if (!std::isfinite(field_(y, grad))) break;
       const double g2 = glm::dot(grad, grad);
       if (!(g2 > 0.0)) break;
       const glm::dvec3 z = x - (glm::dot(x - y, grad) / g2) * grad;
@@ -501,7 +501,7 @@ class SurfaceProbe {
   // than the tolerance; false for a vanishing or non-finite gradient or no convergence.
   bool newton(glm::dvec3& y) const {
     for (int it = 0; it < kNewtonIterations; ++it) {
-      glm::dvec3 grad;
+      glm::dvec3 grad(0.0);
       const double g = field_(y, grad) - iso_;
       if (g == 0.0) return true;
       const double g2 = glm::dot(grad, grad);

@@ -7,6 +7,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <span>
 #include <vector>
 
@@ -22,13 +23,13 @@ class HexFieldLookup {
   // element), which holds the whole element. Throws std::invalid_argument without elements.
   explicit HexFieldLookup(std::span<const HexElementSource* const> sources);
 
-  // The field and its world gradient ∇ₓf = J⁻ᵀ ∇ξf at `world` from the element whose reference
-  // cube holds the point (up to 10⁻⁹ in ξ; the first in source and element order where
-  // several do, as on a face two elements share). Where none does, the element whose cube
-  // the point misses by the least, if by at most 10⁻³ in ξ, extrapolated: a point just
-  // beyond the mesh's boundary still has a value, so a projection onto an isosurface that
-  // meets the boundary converges. False beyond that, or where an element's inverse map does
-  // not converge or its Jacobian is singular. Reentrant.
+  // The field and its world gradient ∇ₓf = J⁻ᵀ ∇ξf at `world`, from the first element (in
+  // source and element order) whose reference cube holds the point at least 10⁻⁷ from its
+  // faces (in ξ), else from the element the point misses least: the one it is deeper in on a
+  // face two elements share, the nearest one — extrapolated — for a point at most 10⁻³
+  // outside every element (so that a projection onto an isosurface that meets the mesh's
+  // boundary converges). False beyond that, or where an element's inverse map does not
+  // converge or its Jacobian is singular. Reentrant.
   bool sample(glm::dvec3 world, PolynomialSample& out) const;
   // The same, trying the element of `hint` first and leaving the element used there: a caller
   // whose points move little (a projection's steps) skips the search. The answer is the one
@@ -38,6 +39,11 @@ class HexFieldLookup {
     std::size_t element = ~std::size_t(0);
   };
   bool sample(glm::dvec3 world, PolynomialSample& out, Hint& hint) const;
+
+  // sample() as a field for ImplicitSurface (core/metrics/distance.hpp): the value, or NaN
+  // (and a NaN gradient) where there is none; each calling thread keeps its own hint. The
+  // lookup must outlive it.
+  std::function<double(const glm::dvec3&, glm::dvec3&)> field() const;
 
   Box bounds() const { return bounds_; }
   std::size_t element_count() const { return elements_.size(); }

@@ -84,7 +84,8 @@ SurfaceDistance surface_distance(const Mesh& mesh, const SurfaceInfo& surface, d
 
 // The surface field = isovalue of any field: `field` returns its value at p and its gradient
 // into `gradient`, or NaN where it is not defined (outside the data: a sample whose projection
-// leaves the data counts as not converged). Called from several threads at once.
+// leaves the data counts as not converged; the gradient is not read then). Called from several
+// threads at once. Throws std::invalid_argument without a field or for an empty domain.
 struct ImplicitSurface {
   std::string name;
   std::function<double(const glm::dvec3& p, glm::dvec3& gradient)> field;
