@@ -464,8 +464,9 @@ class AdaptorImpl final : public Adaptor {
         copy.owned = b.owned;
         if (b.grid)
           copy.source = std::make_shared<GridSource>(copy_grid(*b.grid, snapshot_[k]));
-        else
-          copy.source = std::make_shared<HexElementSource>(copy_hex(*b.hex, snapshot_[k]));
+        else  // the geometry as the block's source prepared it (converted and checked once)
+          copy.source = std::make_shared<HexElementSource>(
+              static_cast<const HexElementSource&>(*b.source), copy_hex(*b.hex, snapshot_[k]));
         bytes += snapshot_[k].bytes();
         snapshot_blocks_.push_back(std::move(copy));
       }

@@ -1727,6 +1727,34 @@ HexElementSource::HexElementSource(const HexBlock& block) : block_(block) {
   }
 }
 
+HexElementSource::HexElementSource(const HexElementSource& prepared, const HexBlock& block)
+    : block_(block),
+      bounds_(prepared.bounds_),
+      geometry_degree_(prepared.geometry_degree_),
+      corners_(prepared.corners_),
+      curved_geometry_(prepared.curved_geometry_),
+      curved_of_(prepared.curved_of_) {
+  const HexBlock& p = prepared.block_;
+  if (block.order != p.order || block.nodes != p.nodes || block.ordering != p.ordering ||
+      block.element_count != p.element_count || block.geometry_order != p.geometry_order)
+    throw std::invalid_argument(
+        "hex source: the block's layout (order, node set, ordering, element count, geometry "
+        "order) differs from the prepared source's");
+  if (block.geometry_order > 0 && !block.geometry)
+    throw std::invalid_argument("hex source: null geometry array");
+  if (block.geometry_order == 0 && !block.corners)
+    throw std::invalid_argument("hex source: null corner array");
+  if (!block.values) throw std::invalid_argument("hex source: null value array");
+  if (block.type != ScalarType::float32 && block.type != ScalarType::float64)
+    throw std::invalid_argument("hex source: unknown scalar type");
+  const std::size_t n = nodes_per_element(block.order);
+  if (block_.element_stride == 0) block_.element_stride = n;
+  if (block_.element_stride < n)
+    throw std::invalid_argument("hex source: element stride " +
+                                std::to_string(block_.element_stride) +
+                                " below (order + 1)^3 = " + std::to_string(n));
+}
+
 // A curved element's Jacobian determinant has one strict sign (either: a mirrored element is
 // fine) at the (q + 2)³ points of a uniform lattice of its reference cube; zero or a change of
 // sign there means a folded (inverted) or degenerate element. A necessary condition, checked

@@ -559,6 +559,57 @@ TEST(CurvedHex, RaysAlongFacesEdgesAndThroughAVertexHitOnce) {
   }
 }
 
+// The adaptor's snapshot: a source over copies of a block's arrays with new values, its
+// geometry taken from the block's prepared source, casts exactly as a source built from the
+// copies from scratch; a copy whose layout differs is refused.
+TEST(CurvedHex, SourceOverACopyReusesThePreparedGeometry) {
+  const CurvedMesh m = shell_mesh(2, 2, 4, 4, NodeSet::equispaced, 0.5, 1.0,
+                                  [](glm::dvec3 x) { return glm::dot(x, x); });
+  const HexElementSource prepared(m.block);
+  // The copy: the same geometry in another array, another field (x + y² − z).
+  std::vector<double> geometry = m.geometry, values(m.values.size());
+  const std::vector<double> xp = node_positions(4, NodeSet::equispaced);
+  std::size_t v = 0;
+  for (std::size_t e = 0; e < m.block.element_count; ++e)
+    for (int k = 0; k <= 4; ++k)
+      for (int j = 0; j <= 4; ++j)
+        for (int i = 0; i <= 4; ++i) {
+          const glm::dvec3 x = prepared.to_world(e, {xp[i], xp[j], xp[k]});
+          values[v++] = x.x + x.y * x.y - x.z;
+        }
+  HexBlock copy = m.block;
+  copy.geometry = geometry.data();
+  copy.values = values.data();
+  const HexElementSource reused(prepared, copy), scratch(copy);
+  EXPECT_EQ(reused.bounds().lo, scratch.bounds().lo);
+  EXPECT_EQ(reused.bounds().hi, scratch.bounds().hi);
+  std::size_t hits = 0;
+  for (const glm::dvec3& dir :
+       {glm::dvec3(1, 0, 0), glm::dvec3(0, 0, -1), glm::dvec3(0.3, 0.5, 0.8)}) {
+    const View view = make_view(scratch.bounds(), dir, 40);
+    const Ldi a = RayCaster(reused, 0.1).cast(view), b = RayCaster(scratch, 0.1).cast(view);
+    EXPECT_EQ(a.offsets, b.offsets);
+    EXPECT_EQ(a.depth, b.depth);
+    EXPECT_EQ(a.normal, b.normal);
+    hits += a.depth.size();
+  }
+  EXPECT_GT(hits, 1000u);
+  // The prepared source's own field is not the copy's: its hits differ.
+  {
+    const View view = make_view(scratch.bounds(), glm::dvec3(1, 0, 0), 40);
+    EXPECT_NE(RayCaster(prepared, 0.1).cast(view).depth, RayCaster(reused, 0.1).cast(view).depth);
+  }
+  HexBlock other = copy;
+  other.order = 3;
+  EXPECT_THROW(HexElementSource(prepared, other), std::invalid_argument);
+  other = copy;
+  other.element_count -= 1;
+  EXPECT_THROW(HexElementSource(prepared, other), std::invalid_argument);
+  other = copy;
+  other.values = nullptr;
+  EXPECT_THROW(HexElementSource(prepared, other), std::invalid_argument);
+}
+
 TEST(CurvedHex, InvalidCurvedBlocksAreRejected) {
   // One element: only its centre node is off the box's faces, and the distortion moves it.
   const CurvedMesh good =

@@ -76,6 +76,14 @@ class HexElementSource final : public FieldSource {
   // corners and geometry must not change while it lives (they are read here), values may:
   // every bind() reads them.
   explicit HexElementSource(const HexBlock& block);
+  // A source over `block`, whose geometry is that of `prepared`'s block (a copy of its arrays:
+  // the adaptor's snapshot of a block at each due step), with its own values: the geometry's
+  // Bernstein form, bounds and checks are taken from `prepared` instead of computed again
+  // (for curved elements most of the constructor's time). `block`'s geometry arrays are not
+  // compared with prepared's, only its layout: throws std::invalid_argument where the order,
+  // node set, ordering, element count or geometry order differ, or for a null value array or
+  // an element stride below (p + 1)³.
+  HexElementSource(const HexElementSource& prepared, const HexBlock& block);
 
   // The axis-aligned box around all elements.
   Box bounds() const override;
