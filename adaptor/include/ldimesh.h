@@ -86,7 +86,10 @@ typedef struct ldimesh_grid_block {
   int ghost_hi[3];
 } ldimesh_grid_block;
 
-/* A rank-local block of hexahedral elements of order p (ldimesh::HexBlock). */
+/* A rank-local block of hexahedral elements of order p (ldimesh::HexBlock). The values are read
+ * at every due step and may change between steps; the corners and geometry nodes are prepared
+ * when the block is added and must not change while it is added (ldimesh_clear_blocks and add
+ * it again to move the mesh). */
 typedef struct ldimesh_hex_block {
   int order; /* 1..8 */
   int nodes; /* LDIMESH_NODES_* */

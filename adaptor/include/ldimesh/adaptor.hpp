@@ -2,7 +2,8 @@
 //
 // Like Ascent (open / publish / execute / close) and Catalyst 2 (initialize / execute /
 // finalize): create the adaptor with a communicator and options, describe the data each rank
-// holds once (pointers into the solver's own arrays, read in place; they may be updated), call
+// holds once (pointers into the solver's own arrays, read in place; the values may be updated
+// between steps, the geometry not: clear_blocks() and add again to move a mesh), call
 // execute(step, time) every step, and finalize (or destroy) at the end.
 //
 // On a due step (options "cadence") every rank ray casts the isosurfaces of its own blocks and
@@ -77,8 +78,11 @@ class Adaptor {
   virtual Status set_domain(const Box& global) = 0;
   // This rank's data: blocks of point data, blocks of high-order elements, or any source (an
   // analytic field). Each call adds one block; `owned` is the part of the domain this block's
-  // hits belong to (for grid blocks: the owned region, GridSource::bounds()). The arrays are
-  // read in place at every due step.
+  // hits belong to (for grid blocks: the owned region, GridSource::bounds()). The values are
+  // read in place at every due step and may change between steps; the geometry (a grid's
+  // coordinates, an element block's corners or geometry nodes) is prepared when the block is
+  // added and must not change while it is added — to move a mesh, clear_blocks() and add it
+  // again.
   virtual Status add_grid_block(const GridBlock& block) = 0;
   virtual Status add_hex_block(const HexBlock& block) = 0;
   virtual Status add_source(std::shared_ptr<const FieldSource> source, const Box& owned) = 0;

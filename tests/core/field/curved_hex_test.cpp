@@ -8,6 +8,7 @@
 #include <string>
 #include <tuple>
 #include <utility>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -559,55 +560,137 @@ TEST(CurvedHex, RaysAlongFacesEdgesAndThroughAVertexHitOnce) {
   }
 }
 
-// The adaptor's snapshot: a source over copies of a block's arrays with new values, its
-// geometry taken from the block's prepared source, casts exactly as a source built from the
-// copies from scratch; a copy whose layout differs is refused.
+// Everything a source derives from its block's geometry, and its values' Bernstein form, equal
+// in two sources.
+void expect_same_source(const HexElementSource& a, const HexElementSource& b,
+                        const std::string& what) {
+  ASSERT_EQ(a.geometry_degree(), b.geometry_degree()) << what;
+  ASSERT_EQ(a.block().element_count, b.block().element_count) << what;
+  EXPECT_EQ(a.block().element_stride, b.block().element_stride) << what;
+  EXPECT_EQ(a.bounds().lo, b.bounds().lo) << what;
+  EXPECT_EQ(a.bounds().hi, b.bounds().hi) << what;
+  const int p = a.block().order;
+  std::vector<double> ca(std::size_t(p + 1) * (p + 1) * (p + 1)), cb(ca.size());
+  for (std::size_t e = 0; e < a.block().element_count; ++e) {
+    ASSERT_EQ(a.is_curved(e), b.is_curved(e)) << what << " element " << e;
+    const auto ga = a.curved_geometry(e), gb = b.curved_geometry(e);
+    EXPECT_TRUE(std::equal(ga.begin(), ga.end(), gb.begin(), gb.end())) << what << " " << e;
+    EXPECT_TRUE(std::equal(a.corners_of(e), a.corners_of(e) + 24, b.corners_of(e))) << what;
+    a.element_bernstein(e, ca);
+    b.element_bernstein(e, cb);
+    EXPECT_EQ(ca, cb) << what << " element " << e;
+  }
+}
+
+// The adaptor's snapshot: a source over copies of a block's arrays with new values (packed,
+// element_stride 0), its geometry taken from the block's prepared source, is the source built
+// from the copies from scratch, and casts the same LDIs — for curved elements, straight ones
+// given by geometry nodes, and corner blocks with a trilinear element and a padded stride; a
+// copy whose layout differs is refused.
 TEST(CurvedHex, SourceOverACopyReusesThePreparedGeometry) {
-  const CurvedMesh m = shell_mesh(2, 2, 4, 4, NodeSet::equispaced, 0.5, 1.0,
-                                  [](glm::dvec3 x) { return glm::dot(x, x); });
-  const HexElementSource prepared(m.block);
-  // The copy: the same geometry in another array, another field (x + y² − z).
-  std::vector<double> geometry = m.geometry, values(m.values.size());
-  const std::vector<double> xp = node_positions(4, NodeSet::equispaced);
-  std::size_t v = 0;
-  for (std::size_t e = 0; e < m.block.element_count; ++e)
-    for (int k = 0; k <= 4; ++k)
-      for (int j = 0; j <= 4; ++j)
-        for (int i = 0; i <= 4; ++i) {
-          const glm::dvec3 x = prepared.to_world(e, {xp[i], xp[j], xp[k]});
-          values[v++] = x.x + x.y * x.y - x.z;
-        }
-  HexBlock copy = m.block;
-  copy.geometry = geometry.data();
-  copy.values = values.data();
-  const HexElementSource reused(prepared, copy), scratch(copy);
-  EXPECT_EQ(reused.bounds().lo, scratch.bounds().lo);
-  EXPECT_EQ(reused.bounds().hi, scratch.bounds().hi);
-  std::size_t hits = 0;
-  for (const glm::dvec3& dir :
-       {glm::dvec3(1, 0, 0), glm::dvec3(0, 0, -1), glm::dvec3(0.3, 0.5, 0.8)}) {
-    const View view = make_view(scratch.bounds(), dir, 40);
-    const Ldi a = RayCaster(reused, 0.1).cast(view), b = RayCaster(scratch, 0.1).cast(view);
-    EXPECT_EQ(a.offsets, b.offsets);
-    EXPECT_EQ(a.depth, b.depth);
-    EXPECT_EQ(a.normal, b.normal);
-    hits += a.depth.size();
-  }
-  EXPECT_GT(hits, 1000u);
-  // The prepared source's own field is not the copy's: its hits differ.
+  const auto field = [](glm::dvec3 x) { return x.x + x.y * x.y - x.z; };
+  // A copy of `m`'s block: its geometry in other arrays, the values of `field` packed.
+  struct Copy {
+    std::vector<double> geometry, values;
+    HexBlock block;
+  };
+  const auto copy_of = [&](const CurvedMesh& m, const HexElementSource& prepared) {
+    Copy c;
+    c.block = m.block;
+    const int p = m.block.order;
+    const std::size_t n = std::size_t(p + 1) * (p + 1) * (p + 1);
+    const std::vector<double> xp = node_positions(p, m.block.nodes);
+    for (std::size_t e = 0; e < m.block.element_count; ++e)
+      for (int k = 0; k <= p; ++k)
+        for (int j = 0; j <= p; ++j)
+          for (int i = 0; i <= p; ++i)
+            c.values.push_back(field(prepared.to_world(e, {xp[i], xp[j], xp[k]})));
+    EXPECT_EQ(c.values.size(), n * m.block.element_count);
+    c.geometry = m.geometry;
+    if (m.block.geometry_order > 0)
+      c.block.geometry = c.geometry.data();
+    else
+      c.block.corners = c.geometry.data();
+    c.block.values = c.values.data();
+    c.block.element_stride = 0;
+    return c;
+  };
+  const auto check = [&](const CurvedMesh& m, const std::string& what) {
+    const HexElementSource prepared(m.block);
+    const Copy c = copy_of(m, prepared);
+    const HexElementSource reused(prepared, c.block), scratch(c.block);
+    expect_same_source(reused, scratch, what);
+    std::size_t hits = 0;
+    for (const glm::dvec3& dir :
+         {glm::dvec3(1, 0, 0), glm::dvec3(0, 0, -1), glm::dvec3(0.3, 0.5, 0.8)}) {
+      const View view = make_view(scratch.bounds(), dir, 40);
+      const Ldi a = RayCaster(reused, 0.1).cast(view), b = RayCaster(scratch, 0.1).cast(view);
+      EXPECT_EQ(a.offsets, b.offsets) << what;
+      EXPECT_EQ(a.depth, b.depth) << what;
+      EXPECT_EQ(a.normal, b.normal) << what;
+      hits += a.depth.size();
+    }
+    EXPECT_GT(hits, 500u) << what;
+  };
+
+  // Curved elements (a shell, geometry order 4).
+  const CurvedMesh shell = shell_mesh(2, 2, 4, 4, NodeSet::equispaced, 0.5, 1.0, field);
+  check(shell, "curved shell");
+  // Straight elements given by geometry nodes (order 2, undistorted box).
+  const CurvedMesh box = curved_mesh(3, 3, 2, NodeSet::gauss_lobatto_legendre, 0.0, field);
+  check(box, "straight elements of geometry order 2");
   {
-    const View view = make_view(scratch.bounds(), glm::dvec3(1, 0, 0), 40);
-    EXPECT_NE(RayCaster(prepared, 0.1).cast(view).depth, RayCaster(reused, 0.1).cast(view).depth);
+    const HexElementSource s(box.block);
+    EXPECT_FALSE(s.is_curved(0));
   }
-  HexBlock other = copy;
-  other.order = 3;
-  EXPECT_THROW(HexElementSource(prepared, other), std::invalid_argument);
-  other = copy;
-  other.element_count -= 1;
-  EXPECT_THROW(HexElementSource(prepared, other), std::invalid_argument);
-  other = copy;
-  other.values = nullptr;
-  EXPECT_THROW(HexElementSource(prepared, other), std::invalid_argument);
+  // A corner block (geometry order 0): two elements, one trilinear (a corner moved), values
+  // at a padded stride.
+  {
+    CurvedMesh corners;
+    const int p = 3;
+    const std::size_t n = (p + 1) * (p + 1) * (p + 1), stride = n + 3;
+    for (int e = 0; e < 2; ++e)
+      for (int c = 0; c < 8; ++c) {
+        glm::dvec3 x(double(e + (c & 1)), double((c >> 1) & 1), double((c >> 2) & 1));
+        if (e == 1 && c == 7) x += glm::dvec3(0.2, 0.1, 0.15);
+        corners.geometry.insert(corners.geometry.end(), {0.5 * x.x, 0.5 * x.y, 0.5 * x.z});
+      }
+    corners.block.order = p;
+    corners.block.nodes = NodeSet::gauss_legendre;
+    corners.block.element_count = 2;
+    corners.block.corners = corners.geometry.data();
+    corners.block.element_stride = stride;
+    corners.values.assign(2 * stride, 0.0);
+    corners.block.values = corners.values.data();
+    const HexElementSource geometry(corners.block);
+    EXPECT_FALSE(geometry.is_curved(0));
+    EXPECT_TRUE(geometry.is_curved(1));
+    const std::vector<double> xp = node_positions(p, corners.block.nodes);
+    for (std::size_t e = 0; e < 2; ++e) {
+      std::size_t v = e * stride;
+      for (int k = 0; k <= p; ++k)
+        for (int j = 0; j <= p; ++j)
+          for (int i = 0; i <= p; ++i)
+            corners.values[v++] = field(geometry.to_world(e, {xp[i], xp[j], xp[k]}));
+    }
+    check(corners, "corner block with a trilinear element, padded stride");
+  }
+
+  // Another layout is refused.
+  const HexElementSource prepared(shell.block);
+  const auto refused = [&](auto change, const char* what) {
+    HexBlock other = shell.block;
+    change(other);
+    EXPECT_THROW(HexElementSource(prepared, other), std::invalid_argument) << what;
+  };
+  refused([](HexBlock& b) { b.order = 3; }, "order");
+  refused([](HexBlock& b) { b.element_count -= 1; }, "element count");
+  refused([](HexBlock& b) { b.geometry_order = 3; }, "geometry order");
+  refused([](HexBlock& b) { b.nodes = NodeSet::gauss_legendre; }, "node set");
+  refused([](HexBlock& b) { b.ordering = NodeOrdering::vtk_lagrange; }, "ordering");
+  refused([](HexBlock& b) { b.values = nullptr; }, "values");
+  refused([](HexBlock& b) { b.geometry = nullptr; }, "geometry");
+  refused([](HexBlock& b) { b.element_stride = 10; }, "stride");
 }
 
 TEST(CurvedHex, InvalidCurvedBlocksAreRejected) {
