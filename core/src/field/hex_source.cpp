@@ -1775,7 +1775,6 @@ void HexElementSource::check_jacobian(std::size_t element, const std::vector<glm
       for (int i = n; i >= 0; --i)
         upper[i] = (i > 0 ? t * upper[i - 1] : 0.0) + (i < n ? (1.0 - t) * upper[i] : 0.0);
     }
-    if (q == 0) lower = upper;
     for (int i = 0; i < m; ++i) {
       basis[a * m + i] = upper[i];
       // d/dt B_{i,q} = q (B_{i−1,q−1} − B_{i,q−1})
