@@ -21,6 +21,7 @@ import sys
 import time
 
 from evaluate_highorder import HighOrder
+from mesh_figures import draw_shaded, load_triangles
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PY = "/usr/bin/python3"
@@ -525,21 +526,7 @@ class Evaluation:
         import matplotlib
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
-        from mpl_toolkits.mplot3d.art3d import Poly3DCollection
         import numpy as np
-        import vtk
-        from vtk.util import numpy_support as ns
-
-        def load(path):
-            r = vtk.vtkPLYReader()
-            r.SetFileName(path)
-            t = vtk.vtkTriangleFilter()
-            t.SetInputConnection(r.GetOutputPort())
-            t.Update()
-            pd = t.GetOutput()
-            pts = ns.vtk_to_numpy(pd.GetPoints().GetData()).astype(float)
-            faces = ns.vtk_to_numpy(pd.GetPolys().GetData()).reshape(-1, 4)[:, 1:]
-            return pts[faces]
 
         files = []
         wanted = QUICK_IMAGES if self.args.quick else FULL_IMAGES
@@ -556,24 +543,7 @@ class Evaluation:
                      (row["mc"]["ply"], f"Marching Cubes, n = {row['mc']['n']}, "
                       f"{fmt_int(row['mc']['triangles'])} triangles", (1.0, 0.72, 0.55))]
             for k, (ply, title, rgb) in enumerate(items):
-                tri = load(ply)
-                ax = fig.add_subplot(1, 2, k + 1, projection="3d")
-                n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-                n /= np.linalg.norm(n, axis=1)[:, None] + 1e-30
-                # A headlight (from the camera: elevation 30°, azimuth −60°), two-sided.
-                el, az = np.radians(30.0), np.radians(-60.0)
-                light = np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
-                s = 0.15 + 0.85 * np.abs(n @ light)
-                col = np.c_[s * rgb[0], s * rgb[1], s * rgb[2], np.ones_like(s)]
-                ax.add_collection3d(Poly3DCollection(tri, facecolors=col, edgecolors="none",
-                                                     linewidths=0))
-                ax.set_xlim(lo[0], hi[0])
-                ax.set_ylim(lo[1], hi[1])
-                ax.set_zlim(lo[2], hi[2])
-                ax.set_box_aspect(hi - lo, zoom=1.3)
-                ax.view_init(elev=30, azim=-60)
-                ax.set_axis_off()
-                ax.set_title(title, fontsize=10)
+                draw_shaded(fig, (1, 2, k + 1), load_triangles(ply), rgb, lo, hi, title, 1.3)
             fig.subplots_adjust(left=0.0, right=1.0, bottom=0.0, top=0.92, wspace=0.0)
             name = f"mesh_{surface}_{res}.png"
             fig.savefig(os.path.join(self.fig_dir, name))
@@ -581,6 +551,17 @@ class Evaluation:
             files.append((surface, res, name))
             log(f"  image {name}")
         return files
+
+    def kept_pictures(self):
+        """The mesh images and cross-sections a previous run left in the figure folder, as
+        images() and sections() list them."""
+        images = [(s_, r, f"mesh_{s_}_{r}.png") for s_, r in
+                  (QUICK_IMAGES if self.args.quick else FULL_IMAGES)
+                  if os.path.exists(os.path.join(self.fig_dir, f"mesh_{s_}_{r}.png"))]
+        sections = [(s_, r, a, o, f"section_{s_}_{r}.png") for s_, r, a, o, _ in
+                    (SECTIONS_QUICK if self.args.quick else SECTIONS)
+                    if os.path.exists(os.path.join(self.fig_dir, f"section_{s_}_{r}.png"))]
+        return images, sections
 
     # ---- where the backward distances come from ----
 
@@ -1137,12 +1118,7 @@ def main():
         with open(os.path.join(ev.fig_dir, "results.json")) as f:
             ev.results = json.load(f)
         ev.run_highorder()  # the section notes its own date and commit
-        images = [(s_, r, f"mesh_{s_}_{r}.png") for s_, r in
-                  (QUICK_IMAGES if args.quick else FULL_IMAGES)
-                  if os.path.exists(os.path.join(ev.fig_dir, f"mesh_{s_}_{r}.png"))]
-        sections = [(s_, r, a, o, f"section_{s_}_{r}.png") for s_, r, a, o, _ in
-                    (SECTIONS_QUICK if args.quick else SECTIONS)
-                    if os.path.exists(os.path.join(ev.fig_dir, f"section_{s_}_{r}.png"))]
+        images, sections = ev.kept_pictures()
         with open(os.path.join(ev.fig_dir, "results.json"), "w") as f:
             f.write(json.dumps(ev.results, indent=1).replace(ROOT + "/", ""))
         ev.write_report(ev.plots(), images, sections, ev.results["seconds"])
@@ -1153,12 +1129,7 @@ def main():
         # bench/evaluation_discussion.md; the mesh images and sections are kept as they are.
         with open(os.path.join(ev.fig_dir, "results.json")) as f:
             ev.results = json.load(f)
-        images = [(s_, r, f"mesh_{s_}_{r}.png") for s_, r in
-                  (QUICK_IMAGES if args.quick else FULL_IMAGES)
-                  if os.path.exists(os.path.join(ev.fig_dir, f"mesh_{s_}_{r}.png"))]
-        sections = [(s_, r, a, o, f"section_{s_}_{r}.png") for s_, r, a, o, _ in
-                    (SECTIONS_QUICK if args.quick else SECTIONS)
-                    if os.path.exists(os.path.join(ev.fig_dir, f"section_{s_}_{r}.png"))]
+        images, sections = ev.kept_pictures()
         ev.write_report(ev.plots(), images, sections, ev.results["seconds"])
         log(f"rewrote {os.path.join(args.docs, 'evaluation.md')} from results.json")
         return

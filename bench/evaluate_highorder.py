@@ -426,11 +426,8 @@ class HighOrder:
         import matplotlib
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
-        from mpl_toolkits.mplot3d.art3d import Poly3DCollection
         import numpy as np
-        from vtkmodules.util.numpy_support import vtk_to_numpy
-        from vtkmodules.vtkFiltersCore import vtkTriangleFilter
-        from vtkmodules.vtkIOPLY import vtkPLYReader
+        from mesh_figures import draw_shaded, load_triangles
         files = {}
         colours = {"contour": "tab:red", "tessellate": "tab:orange"}
         for ds in results["datasets"]:
@@ -471,16 +468,6 @@ class HighOrder:
 
             # The meshes: VTK's contour of the Lagrange cells, ours at its triangle count, and
             # VTK's first tessellation (when small enough to draw).
-            def load(path):
-                r = vtkPLYReader()
-                r.SetFileName(os.path.join(ROOT, path))  # results.json holds relative paths
-                t = vtkTriangleFilter()
-                t.SetInputConnection(r.GetOutputPort())
-                t.Update()
-                pd = t.GetOutput()
-                pts = vtk_to_numpy(pd.GetPoints().GetData()).astype(float)
-                faces = vtk_to_numpy(pd.GetPolys().GetData()).reshape(-1, 4)[:, 1:]
-                return pts[faces]
             contour = next(r for r in vtk_rows if r["method"] == "contour")
             same = next(e["ours"] for e in ds["equal"] if e["vtk"] == "contour 0")
             items = [(contour, f"VTK contour of the Lagrange cells\n"
@@ -496,29 +483,14 @@ class HighOrder:
             crop = ds.get("crop")
             fig = plt.figure(figsize=(5 * len(items), 5.4), dpi=100)
             for k, (m, title, rgb) in enumerate(items):
-                tri = load(m["ply"])
+                # results.json holds relative paths
+                tri = load_triangles(os.path.join(ROOT, m["ply"]))
                 if crop:
                     c = tri.mean(axis=1)
-                    inside = np.all((c >= crop[0]) & (c <= crop[1]), axis=1)
-                    tri = tri[inside]
+                    tri = tri[np.all((c >= crop[0]) & (c <= crop[1]), axis=1)]
                 lo, hi = (np.array(crop[0]), np.array(crop[1])) if crop else \
                     (tri.reshape(-1, 3).min(axis=0), tri.reshape(-1, 3).max(axis=0))
-                ax = fig.add_subplot(1, len(items), k + 1, projection="3d")
-                n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-                n /= np.linalg.norm(n, axis=1)[:, None] + 1e-30
-                el, az = np.radians(30.0), np.radians(-60.0)
-                light = np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
-                s = 0.15 + 0.85 * np.abs(n @ light)
-                col = np.c_[s * rgb[0], s * rgb[1], s * rgb[2], np.ones_like(s)]
-                ax.add_collection3d(Poly3DCollection(tri, facecolors=col, edgecolors="none",
-                                                     linewidths=0))
-                ax.set_xlim(lo[0], hi[0])
-                ax.set_ylim(lo[1], hi[1])
-                ax.set_zlim(lo[2], hi[2])
-                ax.set_box_aspect(hi - lo, zoom=1.2)
-                ax.view_init(elev=30, azim=-60)
-                ax.set_axis_off()
-                ax.set_title(title, fontsize=10)
+                draw_shaded(fig, (1, len(items), k + 1), tri, rgb, lo, hi, title, 1.2)
             fig.subplots_adjust(left=0.0, right=1.0, bottom=0.0, top=0.9, wspace=0.0)
             image = f"highorder_mesh_{ds['key']}.png"
             fig.savefig(os.path.join(fig_dir, image))

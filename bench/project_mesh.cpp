@@ -37,7 +37,6 @@
 #include "ldimesh/core/field/surfaces.hpp"
 #include "ldimesh/core/io/mesh_io.hpp"
 #ifdef LDIMESH_WITH_VTU
-#include "ldimesh/core/field/hex_lookup.hpp"
 #include "ldimesh/core/io/vtu.hpp"
 #endif
 
@@ -70,25 +69,17 @@ int main(int argc, char** argv) {
     std::function<double(const glm::dvec3&, glm::dvec3&)> field;
     double diagonal = 0.0, iso = isovalue;
 #ifdef LDIMESH_WITH_VTU
-    ldimesh::VtuElements elements;
-    std::vector<std::unique_ptr<ldimesh::HexElementSource>> sources;
-    std::unique_ptr<ldimesh::HexFieldLookup> lookup;
+    ldimesh::VtuField data;  // owns what `field` reads
 #endif
     if (!vtu.empty()) {
 #ifdef LDIMESH_WITH_VTU
       if (field_name.empty() || std::isnan(isovalue))
         throw std::runtime_error("--vtu needs --field NAME and --iso V");
       ldimesh::quiet_vtk_logging();
-      if (const ldimesh::Status st = ldimesh::read_vtu(vtu, field_name, elements); !st)
+      if (const ldimesh::Status st = ldimesh::read_vtu_field(vtu, field_name, data); !st)
         throw std::runtime_error(st.message());
-      std::vector<const ldimesh::HexElementSource*> list;
-      for (const ldimesh::VtuElements::Group& g : elements.groups) {
-        sources.push_back(std::make_unique<ldimesh::HexElementSource>(g.block()));
-        list.push_back(sources.back().get());
-      }
-      lookup = std::make_unique<ldimesh::HexFieldLookup>(list);
-      field = lookup->field();
-      diagonal = lookup->bounds().diagonal();
+      field = data.lookup->field();
+      diagonal = data.lookup->bounds().diagonal();
       name = vtu + ":" + field_name;
 #else
       throw std::runtime_error("--vtu: built without VTK (libvtk9-dev)");

@@ -34,7 +34,6 @@
 #include "ldimesh/core/io/mesh_io.hpp"
 #include "ldimesh/core/io/raw_volume.hpp"
 #ifdef LDIMESH_WITH_VTU
-#include "ldimesh/core/field/hex_lookup.hpp"
 #include "ldimesh/core/field/hex_source.hpp"
 #include "ldimesh/core/io/vtu.hpp"
 #endif
@@ -582,28 +581,21 @@ int run_distance(const DistanceArgs& args) {
   ldimesh::ImplicitSurface surface;
   double default_isovalue = 0.0;
 #ifdef LDIMESH_WITH_VTU
-  ldimesh::VtuElements elements;
-  std::vector<std::unique_ptr<ldimesh::HexElementSource>> sources;
-  std::unique_ptr<ldimesh::HexFieldLookup> lookup;
+  ldimesh::VtuField data;  // owns what the surface's field reads
 #endif
   if (!args.vtu.empty()) {
 #ifdef LDIMESH_WITH_VTU
     if (args.field.empty()) throw std::runtime_error("--vtu needs --field NAME");
     ldimesh::quiet_vtk_logging();
-    if (const ldimesh::Status st = ldimesh::read_vtu(args.vtu, args.field, elements); !st)
+    if (const ldimesh::Status st = ldimesh::read_vtu_field(args.vtu, args.field, data); !st)
       throw std::runtime_error(st.message());
-    std::vector<const ldimesh::HexElementSource*> list;
-    for (const ldimesh::VtuElements::Group& g : elements.groups) {
-      sources.push_back(std::make_unique<ldimesh::HexElementSource>(g.block()));
-      list.push_back(sources.back().get());
-    }
-    lookup = std::make_unique<ldimesh::HexFieldLookup>(list);
+    const ldimesh::Box bounds = data.lookup->bounds();
     surface.name = args.vtu + ":" + args.field;
-    surface.field = lookup->field();
+    surface.field = data.lookup->field();
     // The cells' boxes, and a little beyond: where the lookup extrapolates.
-    const glm::dvec3 pad = 1e-6 * (lookup->bounds().hi - lookup->bounds().lo);
-    surface.domain = {lookup->bounds().lo - pad, lookup->bounds().hi + pad};
-    default_isovalue = 0.5 * (elements.min_value + elements.max_value);
+    const glm::dvec3 pad = 1e-6 * (bounds.hi - bounds.lo);
+    surface.domain = {bounds.lo - pad, bounds.hi + pad};
+    default_isovalue = 0.5 * (data.elements.min_value + data.elements.max_value);
 #else
     throw std::runtime_error("--vtu: this ldimesh was built without VTK (libvtk9-dev)");
 #endif

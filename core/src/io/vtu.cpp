@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <limits>
 #include <map>
+#include <stdexcept>
 
 #include <vtkCellData.h>
 #include <vtkCellType.h>
@@ -191,6 +192,22 @@ Status read_vtu(const std::string& path, const std::string& field, VtuElements& 
   }
   for (auto& [order, g] : groups)
     out.groups.push_back(std::move(g));
+  return Status::ok();
+}
+
+Status read_vtu_field(const std::string& path, const std::string& field, VtuField& out) {
+  out = {};
+  if (Status st = read_vtu(path, field, out.elements); !st) return st;
+  try {
+    std::vector<const HexElementSource*> list;
+    for (const VtuElements::Group& g : out.elements.groups) {
+      out.sources.push_back(std::make_unique<HexElementSource>(g.block()));
+      list.push_back(out.sources.back().get());
+    }
+    out.lookup = std::make_unique<HexFieldLookup>(list);
+  } catch (const std::invalid_argument& e) {
+    return Status::invalid_argument(path + ": " + e.what());
+  }
   return Status::ok();
 }
 

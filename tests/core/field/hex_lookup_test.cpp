@@ -21,6 +21,22 @@ using test::CurvedMesh;
 using test::kBox;
 using test::shell_mesh;
 
+// At random points of kBox (which the mesh fills), the lookup's value and gradient are
+// `field`'s and `gradient`'s.
+template <class Field, class Gradient>
+void expect_field_in_box(const HexFieldLookup& lookup, Field field, Gradient gradient) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  for (int i = 0; i < 2000; ++i) {
+    const glm::dvec3 x =
+        kBox.lo + (kBox.hi - kBox.lo) * glm::dvec3(unit(rng), unit(rng), unit(rng));
+    PolynomialSample s;
+    ASSERT_TRUE(lookup.sample(x, s));
+    EXPECT_NEAR(s.value, field(x), 1e-12);
+    EXPECT_NEAR(glm::length(s.gradient - gradient(x)), 0.0, 1e-9);
+  }
+}
+
 // A field each mesh represents exactly (f ∘ x of the elements' degree), so the lookup must
 // return it and its gradient to rounding, wherever the point lies among the elements.
 TEST(HexFieldLookup, ValuesAndGradientsAreTheFieldsOwn) {
@@ -65,14 +81,7 @@ TEST(HexFieldLookup, ValuesAndGradientsAreTheFieldsOwn) {
     const HexElementSource source(m.block);
     const HexElementSource* sources[] = {&source};
     const HexFieldLookup lookup(sources);
-    for (int i = 0; i < 2000; ++i) {
-      const glm::dvec3 x =
-          kBox.lo + (kBox.hi - kBox.lo) * glm::dvec3(unit(rng), unit(rng), unit(rng));
-      PolynomialSample s;
-      ASSERT_TRUE(lookup.sample(x, s));
-      EXPECT_NEAR(s.value, plane(x), 1e-12);
-      EXPECT_NEAR(glm::length(s.gradient - glm::dvec3(1.0, 2.0, -1.0)), 0.0, 1e-9);
-    }
+    expect_field_in_box(lookup, plane, [](glm::dvec3) { return glm::dvec3(1.0, 2.0, -1.0); });
     // Just beyond a face (3·10⁻⁴ of an element in ξ): extrapolated, still the field; further
     // (3 %): outside.
     const glm::dvec3 mid = 0.5 * (kBox.lo + kBox.hi);
@@ -133,14 +142,8 @@ TEST(HexFieldLookup, ValuesAndGradientsAreTheFieldsOwn) {
     EXPECT_FALSE(source.is_curved(0));
     const HexElementSource* sources[] = {&source};
     const HexFieldLookup lookup(sources);
-    for (int i = 0; i < 2000; ++i) {
-      const glm::dvec3 x =
-          kBox.lo + (kBox.hi - kBox.lo) * glm::dvec3(unit(rng), unit(rng), unit(rng));
-      PolynomialSample s;
-      ASSERT_TRUE(lookup.sample(x, s));
-      EXPECT_NEAR(s.value, quadratic(x), 1e-12);
-      EXPECT_NEAR(glm::length(s.gradient - glm::dvec3(2.0 * x.x, x.z, x.y)), 0.0, 1e-9);
-    }
+    expect_field_in_box(lookup, quadratic,
+                        [](glm::dvec3 x) { return glm::dvec3(2.0 * x.x, x.z, x.y); });
   }
 }
 

@@ -6,12 +6,15 @@
 #pragma once
 
 #include <cstddef>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "ldimesh/core/base/geometry.hpp"
 #include "ldimesh/core/base/status.hpp"
 #include "ldimesh/core/field/blocks.hpp"
+#include "ldimesh/core/field/hex_lookup.hpp"
+#include "ldimesh/core/field/hex_source.hpp"
 
 namespace ldimesh {
 
@@ -41,6 +44,18 @@ struct VtuElements {
 // above, an order outside 1–8 or different along the axes or not matching the point count, a
 // missing or multi-component field, non-finite points.
 Status read_vtu(const std::string& path, const std::string& field, VtuElements& out);
+
+// A file's field at world points: its cells, their sources and the lookup over them (for
+// distances to, and projections onto, the cells' exact isosurface).
+struct VtuField {
+  VtuElements elements;
+  std::vector<std::unique_ptr<HexElementSource>> sources;  // one per group
+  std::unique_ptr<HexFieldLookup> lookup;
+};
+
+// read_vtu, then a source per group and the lookup over them. Errors as read_vtu's, and a
+// source's refusal of a cell (one line naming it).
+Status read_vtu_field(const std::string& path, const std::string& field, VtuField& out);
 
 // Turns VTK's own logging to stderr off for the whole process: its XML parser and pipeline
 // report a bad file there besides the error read_vtu returns. For programs that print their
