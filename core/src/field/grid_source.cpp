@@ -1294,6 +1294,9 @@ GridPart grid_part(const GridBlock& whole, std::array<int, 3> blocks, std::array
   }
   b.values =
       static_cast<const char*>(whole.values) + offset * std::int64_t(scalar_size(whole.type));
+  if (whole.colour)
+    b.colour = static_cast<const char*>(whole.colour) +
+               offset * std::int64_t(scalar_size(whole.colour_type));
   return part;
 }
 
@@ -1342,6 +1345,60 @@ double GridSource::value(std::int64_t i, std::int64_t j, std::int64_t k) const {
   const std::int64_t at = i * block_.strides[0] + j * block_.strides[1] + k * block_.strides[2];
   return block_.type == ScalarType::float32 ? double(static_cast<const float*>(block_.values)[at])
                                             : static_cast<const double*>(block_.values)[at];
+}
+
+double GridSource::interpolate(glm::dvec3 p) const {
+  constexpr double kSlack = 1e-6;  // of a cell, for points rounded onto the wrong side of a face
+  std::array<std::int64_t, 3> cell{};
+  glm::dvec3 f(0.0);
+  for (int a = 0; a < 3; ++a) {
+    const std::int64_t n = block_.dims[a];
+    std::int64_t i = 0;
+    if (block_.coords[0]) {
+      const double* c = block_.coords[a];
+      i = std::int64_t(std::upper_bound(c, c + n, p[a]) - c) - 1;
+    } else {
+      const double u = (p[a] - block_.origin[a]) / block_.spacing[a];
+      if (!(u > -1.0 && u < double(n))) return std::numeric_limits<double>::quiet_NaN();
+      i = std::int64_t(std::floor(u));
+    }
+    i = std::clamp<std::int64_t>(i, 0, n - 2);
+    const double x0 = coordinate(a, i), x1 = coordinate(a, i + 1);
+    const double t = (p[a] - x0) / (x1 - x0);
+    if (!(t >= -kSlack && t <= 1.0 + kSlack)) return std::numeric_limits<double>::quiet_NaN();
+    cell[a] = i;
+    f[a] = std::clamp(t, 0.0, 1.0);
+  }
+  const auto [i, j, k] = cell;
+  const auto lerp = [](double u, double v, double t) { return u + t * (v - u); };
+  const double c00 = lerp(value(i, j, k), value(i + 1, j, k), f.x);
+  const double c10 = lerp(value(i, j + 1, k), value(i + 1, j + 1, k), f.x);
+  const double c01 = lerp(value(i, j, k + 1), value(i + 1, j, k + 1), f.x);
+  const double c11 = lerp(value(i, j + 1, k + 1), value(i + 1, j + 1, k + 1), f.x);
+  return lerp(lerp(c00, c10, f.y), lerp(c01, c11, f.y), f.z);
+}
+
+namespace {
+
+// The colour field of a grid block: its interpolant, read in place.
+class GridScalarProbe final : public ScalarProbe {
+ public:
+  explicit GridScalarProbe(const GridBlock& colour) : grid_(colour) {}
+  double at(glm::dvec3 p) const override { return grid_.interpolate(p); }
+
+ private:
+  GridSource grid_;
+};
+
+}  // namespace
+
+std::unique_ptr<ScalarProbe> GridSource::bind_scalar() const {
+  if (!block_.colour) return nullptr;
+  GridBlock colour = block_;
+  colour.values = block_.colour;
+  colour.type = block_.colour_type;
+  colour.colour = nullptr;
+  return std::make_unique<GridScalarProbe>(colour);
 }
 
 Box GridSource::bounds() const {

@@ -123,8 +123,9 @@ bool HexFieldLookup::sample(glm::dvec3 world, PolynomialSample& out) const {
   return sample(world, out, hint);
 }
 
-bool HexFieldLookup::sample(glm::dvec3 world, PolynomialSample& out, Hint& hint) const {
-  if (!std::isfinite(world.x) || !std::isfinite(world.y) || !std::isfinite(world.z)) return false;
+std::size_t HexFieldLookup::locate(glm::dvec3 world, Hint& hint, glm::dvec3& xi_out) const {
+  const std::size_t none = elements_.size();
+  if (!std::isfinite(world.x) || !std::isfinite(world.y) || !std::isfinite(world.z)) return none;
   const auto inside_box = [&](std::size_t e) {
     return glm::all(glm::greaterThanEqual(world, boxes_[e].lo)) &&
            glm::all(glm::lessThanEqual(world, boxes_[e].hi));
@@ -137,19 +138,22 @@ bool HexFieldLookup::sample(glm::dvec3 world, PolynomialSample& out, Hint& hint)
   // element as soon as it meets one: the same answer, whatever the hint.
   if (hint.element < elements_.size() && inside_box(hint.element)) {
     const glm::dvec3 xi = reference(hint.element);
-    if (miss(xi) <= -kInterior) return evaluate(hint.element, xi, out);
+    if (miss(xi) <= -kInterior) {
+      xi_out = xi;
+      return hint.element;
+    }
   }
   glm::ivec3 c;
   for (int a = 0; a < 3; ++a) {
     const double u = (world[a] - bounds_.lo[a]) / cell_size_[a];
-    if (u < -1.0 || u > dims_[a] + 1.0) return false;  // well outside every element's box
+    if (u < -1.0 || u > dims_[a] + 1.0) return none;  // well outside every element's box
     c[a] = std::clamp(int(std::floor(u)), 0, dims_[a] - 1);
   }
   const std::size_t cell =
       std::size_t(c.x) + dims_.x * (std::size_t(c.y) + std::size_t(dims_.y) * c.z);
   // The first element the point lies well inside, else the one it misses least (on a face two
   // elements share, the one it is deeper in; the first of equals).
-  std::size_t best = elements_.size();
+  std::size_t best = none;
   glm::dvec3 best_xi(0.0);
   double best_miss = std::nextafter(kReach, 1.0);
   for (std::uint32_t k = begin_[cell]; k < begin_[cell + 1]; ++k) {
@@ -164,9 +168,27 @@ bool HexFieldLookup::sample(glm::dvec3 world, PolynomialSample& out, Hint& hint)
       if (m <= -kInterior) break;
     }
   }
-  if (best == elements_.size()) return false;
+  if (best == none) return none;
   hint.element = best;
-  return evaluate(best, best_xi, out);
+  xi_out = best_xi;
+  return best;
+}
+
+bool HexFieldLookup::sample(glm::dvec3 world, PolynomialSample& out, Hint& hint) const {
+  glm::dvec3 xi;
+  const std::size_t e = locate(world, hint, xi);
+  return e < elements_.size() && evaluate(e, xi, out);
+}
+
+bool HexFieldLookup::value(glm::dvec3 world, double& out, Hint& hint) const {
+  glm::dvec3 xi;
+  const std::size_t e = locate(world, hint, xi);
+  if (e == elements_.size()) return false;
+  const Element& el = elements_[e];
+  const std::size_t n = std::size_t(el.order + 1) * (el.order + 1) * (el.order + 1);
+  out = evaluate_bernstein(el.order, std::span<const double>(&bernstein_[el.coefficients], n), xi)
+            .value;
+  return std::isfinite(out);
 }
 
 std::function<double(const glm::dvec3&, glm::dvec3&)> HexFieldLookup::field() const {

@@ -2,6 +2,7 @@
 
 #include "bernstein_basis.hpp"
 #include "curved_element.hpp"
+#include "ldimesh/core/field/hex_lookup.hpp"
 
 #include <algorithm>
 #include <array>
@@ -1634,6 +1635,20 @@ PolynomialSample evaluate_bernstein(int order, std::span<const double> bernstein
   return with_order(order, [&](auto p) { return evaluate_tensor<p>(bernstein.data(), reference); });
 }
 
+namespace {
+
+// The value and colour arrays' element types.
+void check_scalar_types(const HexBlock& block) {
+  const auto known = [](ScalarType t) {
+    return t == ScalarType::float32 || t == ScalarType::float64;
+  };
+  if (!known(block.type)) throw std::invalid_argument("hex source: unknown scalar type");
+  if (block.colour && !known(block.colour_type))
+    throw std::invalid_argument("hex source: unknown scalar type of the colour field");
+}
+
+}  // namespace
+
 HexElementSource::HexElementSource(const HexBlock& block) : block_(block) {
   check_order(block.order);
   check_node_set(block.nodes);
@@ -1648,8 +1663,7 @@ HexElementSource::HexElementSource(const HexBlock& block) : block_(block) {
   if (!block.values) throw std::invalid_argument("hex source: null value array");
   if (block.ordering != NodeOrdering::lexicographic && block.ordering != NodeOrdering::vtk_lagrange)
     throw std::invalid_argument("hex source: unknown node ordering");
-  if (block.type != ScalarType::float32 && block.type != ScalarType::float64)
-    throw std::invalid_argument("hex source: unknown scalar type");
+  check_scalar_types(block);
   if (block_.element_stride == 0) block_.element_stride = n;
   if (block_.element_stride < n)
     throw std::invalid_argument("hex source: element stride " +
@@ -1745,14 +1759,47 @@ HexElementSource::HexElementSource(const HexElementSource& prepared, const HexBl
   if (block.geometry_order == 0 && !block.corners)
     throw std::invalid_argument("hex source: null corner array");
   if (!block.values) throw std::invalid_argument("hex source: null value array");
-  if (block.type != ScalarType::float32 && block.type != ScalarType::float64)
-    throw std::invalid_argument("hex source: unknown scalar type");
+  check_scalar_types(block);
   const std::size_t n = nodes_per_element(block.order);
   if (block_.element_stride == 0) block_.element_stride = n;
   if (block_.element_stride < n)
     throw std::invalid_argument("hex source: element stride " +
                                 std::to_string(block_.element_stride) +
                                 " below (order + 1)^3 = " + std::to_string(n));
+}
+
+namespace {
+
+// The colour field of an element block: a source over the colour's nodal values with the block's
+// prepared geometry, and a lookup of the element that holds a point (its values read when
+// bound, as bind() reads the isovalue's field).
+class HexScalarProbe final : public ScalarProbe {
+ public:
+  HexScalarProbe(const HexElementSource& prepared, const HexBlock& colour)
+      : source_(prepared, colour), sources_{&source_}, lookup_(sources_) {}
+  double at(glm::dvec3 p) const override {
+    // Each thread's last element first: a row of pixels' hits lie in few elements. The hint
+    // cannot change the answer (HexFieldLookup::sample).
+    thread_local HexFieldLookup::Hint hint;
+    double v = 0.0;
+    return lookup_.value(p, v, hint) ? v : std::numeric_limits<double>::quiet_NaN();
+  }
+
+ private:
+  HexElementSource source_;
+  std::array<const HexElementSource*, 1> sources_;
+  HexFieldLookup lookup_;
+};
+
+}  // namespace
+
+std::unique_ptr<ScalarProbe> HexElementSource::bind_scalar() const {
+  if (!block_.colour) return nullptr;
+  HexBlock colour = block_;
+  colour.values = block_.colour;
+  colour.type = block_.colour_type;
+  colour.colour = nullptr;
+  return std::make_unique<HexScalarProbe>(*this, colour);
 }
 
 // A curved element's Jacobian determinant has one strict sign (either: a mirrored element is

@@ -5,6 +5,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
@@ -175,16 +176,15 @@ RayCaster::RayCaster(std::span<const FieldSource* const> sources, double isovalu
         axis_bindings_.clear();
         break;
       }
-      has_scalar_ = has_scalar_ || binding->has_scalar();
       axis_bindings_.push_back(std::move(binding));
     }
   }
-  axis_seconds_ = seconds_since(start);
-  if (axis_bindings_.empty()) {
-    ensure_scene();
-    for (const auto& binding : bindings_)
-      has_scalar_ = has_scalar_ || binding->has_scalar();
+  for (const FieldSource* source : sources_) {
+    scalar_probes_.push_back(source->bind_scalar());
+    has_scalar_ = has_scalar_ || scalar_probes_.back() != nullptr;
   }
+  axis_seconds_ = seconds_since(start);
+  if (axis_bindings_.empty()) ensure_scene();
 }
 
 void RayCaster::ensure_scene() const {
@@ -325,10 +325,10 @@ void RayCaster::trace(const View& view, glm::dvec2 image_position, const RaySegm
   rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
   rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
   rtcIntersect1(scene_, &q.context, &rh);
-  hits.resize(finish_ray(segment, view.dir, hits));
+  hits.resize(finish_ray(segment, q.org, view.dir, hits));
 }
 
-std::size_t RayCaster::finish_ray(const RaySegment& segment, glm::dvec3 dir,
+std::size_t RayCaster::finish_ray(const RaySegment& segment, glm::dvec3 org, glm::dvec3 dir,
                                   std::span<RayHit> hits) const {
   const std::size_t n = sort_and_merge(hits, duplicate_tolerance_, dir);
   // Sources report roots on the closed segment; the half-open rule keeps a root on the face
@@ -340,6 +340,16 @@ std::size_t RayCaster::finish_ray(const RaySegment& segment, glm::dvec3 dir,
       continue;
     hits[kept++] = h;
   }
+  // The colour field at each hit, from the first source with a value there (on a face two
+  // sources share, a continuous field has the same value in both).
+  if (has_scalar_)
+    for (std::size_t k = 0; k < kept; ++k) {
+      const glm::dvec3 p = org + hits[k].t * dir;
+      double v = std::numeric_limits<double>::quiet_NaN();
+      for (const auto& probe : scalar_probes_)
+        if (probe && !std::isnan(v = probe->at(p))) break;
+      hits[k].scalar = float(v);
+    }
   return kept;
 }
 
@@ -376,8 +386,9 @@ void RayCaster::cast_axis_rays(const AxisRays& rays, std::span<const RaySegment>
       for (std::uint32_t j = x.first[k]; j < x.first[k + 1]; ++j)
         x.ray_hits.push_back(found[x.order[j]]);
       const std::span<RayHit> hits(x.ray_hits);
-      run.append(hits.first(hits.empty() ? 0 : finish_ray(segments[k], rays.dir, hits)),
-                 has_scalar_);
+      run.append(
+          hits.first(hits.empty() ? 0 : finish_ray(segments[k], rays.rays[k].org, rays.dir, hits)),
+          has_scalar_);
     }
     return;
   }
@@ -387,7 +398,9 @@ void RayCaster::cast_axis_rays(const AxisRays& rays, std::span<const RaySegment>
     for (; h < found.size() && ray_of[h] == k; ++h)
       x.ray_hits.push_back(found[h]);
     const std::span<RayHit> hits(x.ray_hits);
-    run.append(hits.first(hits.empty() ? 0 : finish_ray(segments[k], rays.dir, hits)), has_scalar_);
+    run.append(
+        hits.first(hits.empty() ? 0 : finish_ray(segments[k], rays.rays[k].org, rays.dir, hits)),
+        has_scalar_);
   }
 }
 

@@ -38,6 +38,11 @@ struct GridBlock {
   std::array<const double*, 3> coords{{nullptr, nullptr, nullptr}};
   std::array<int, 3> ghost_lo{{0, 0, 0}};
   std::array<int, 3> ghost_hi{{0, 0, 0}};
+  // Optional: a second point field in the layout of `values` (the same dims and strides, ghosts
+  // included) to colour the isosurface by; hits carry its trilinear interpolant at the hit
+  // (FieldSource::bind_scalar). Null: none. Read in place like `values`.
+  const void* colour = nullptr;
+  ScalarType colour_type = ScalarType::float32;
 };
 
 // Where an element's p + 1 nodes per axis lie.
@@ -80,6 +85,11 @@ struct HexBlock {
   // The order of the nodal values and of the geometry nodes within an element (not of the
   // corners, whose order is the one above).
   NodeOrdering ordering = NodeOrdering::lexicographic;
+  // Optional: a second field's nodal values in the layout of `values` (the same nodes, order
+  // and element_stride) to colour the isosurface by; hits carry its polynomial's value at the
+  // hit (FieldSource::bind_scalar). Null: none. Read in place like `values`.
+  const void* colour = nullptr;
+  ScalarType colour_type = ScalarType::float64;
 };
 
 }  // namespace ldimesh

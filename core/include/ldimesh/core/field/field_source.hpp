@@ -48,8 +48,6 @@ class GeometryBinding {
   virtual ~GeometryBinding() = default;
   virtual RTCGeometry geometry() const = 0;
   virtual std::size_t primitive_count() const = 0;
-  // Whether hits carry a meaningful RayHit::scalar.
-  virtual bool has_scalar() const { return false; }
   // How many non-finite values (NaN, +Inf, −Inf) of the source's data the bind read, each
   // counted once; what a value is depends on the source (see its bind()). The parts of the
   // field that depend on such a value (a grid cell, an element) produce no hits; the rest are
@@ -140,6 +138,18 @@ RTCDevice make_embree_device();
 // (RTCError <code>)" — and clears it; empty when there is none.
 std::string embree_failure(RTCDevice device, const std::string& what);
 
+// A second field of a source, to colour the isosurface by (the solver's other quantity:
+// temperature on a density isosurface), as read when it was bound: its value at world points.
+// The ray caster gives every hit the value at the hit's position (RayHit::scalar), whichever
+// caster found it.
+class ScalarProbe {
+ public:
+  virtual ~ScalarProbe() = default;
+  // The field at `p`, NaN where the source has no value there (p outside its domain, or a
+  // non-finite value nearby). Thread-safe; the same answer for the same point on any thread.
+  virtual double at(glm::dvec3 p) const = 0;
+};
+
 class FieldSource {
  public:
   virtual ~FieldSource() = default;
@@ -155,6 +165,9 @@ class FieldSource {
   // A length below which two hits on one ray count as the same root (hits found twice where
   // primitives touch). Sources with a natural length scale may override.
   virtual double duplicate_tolerance() const { return 1e-9 * bounds().diagonal(); }
+  // The source's field to colour by, read now (as bind reads the isovalue's field); null when
+  // it has none. Thread-safe.
+  virtual std::unique_ptr<ScalarProbe> bind_scalar() const { return nullptr; }
 };
 
 }  // namespace ldimesh

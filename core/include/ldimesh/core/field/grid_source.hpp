@@ -36,12 +36,18 @@ class GridSource final : public FieldSource {
   // The same bricks, culled the same way, for rays parallel to an axis: each ray walks the cells
   // of its column of active bricks, where the interpolant is linear (the same roots as bind()).
   std::unique_ptr<AxisBinding> bind_axis(double isovalue) const override;
+  // The block's colour field (GridBlock::colour), its trilinear interpolant read in place at
+  // each hit; null without one.
+  std::unique_ptr<ScalarProbe> bind_scalar() const override;
 
   // Bricks before culling.
   std::size_t brick_count() const;
   // The value at point (i, j, k) (ghosts included), as a double. The indices must lie within the
   // block's points (0 … dims[a] − 1; not checked).
   double value(std::int64_t i, std::int64_t j, std::int64_t k) const;
+  // The trilinear interpolant of the values at world point `p`, in the cell that holds it (ghost
+  // cells included); NaN where p lies more than 10⁻⁶ of a cell outside the block's points.
+  double interpolate(glm::dvec3 p) const;
   // The coordinate of point index i along axis a (0 ≤ i < dims[a], 0 ≤ a < 3; not checked).
   double coordinate(int axis, std::int64_t i) const;
   // Owned cells along each axis: lower corner indices first_cell[a] … last_cell[a].

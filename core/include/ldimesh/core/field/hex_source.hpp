@@ -99,6 +99,9 @@ class HexElementSource final : public FieldSource {
   // The same active elements for rays parallel to an axis: object order over the pixels each
   // element covers (the same roots as bind()).
   std::unique_ptr<AxisBinding> bind_axis(double isovalue) const override;
+  // The block's colour field (HexBlock::colour): its nodal values read now, each hit's value from
+  // the element that holds it (HexFieldLookup); null without one.
+  std::unique_ptr<ScalarProbe> bind_scalar() const override;
 
   // Threads: see field_source.hpp; to_reference and element_bernstein are const and reentrant.
 

@@ -22,7 +22,7 @@ namespace ldimesh {
 struct RayHit {
   double t = 0.0;       // distance from the ray origin (the view's depth)
   glm::vec3 normal{};   // unit gradient direction at the hit
-  float scalar = 0.0f;  // optional attribute (only meaningful when the source has one)
+  float scalar = 0.0f;  // the colour field there (FieldSource::bind_scalar), when there is one
 };
 
 // A ray o + t·d with d = ±e_axis, and the closed stretch [t0, t1] of it to report roots on.
@@ -95,7 +95,6 @@ class AxisBinding {
   virtual void prepare(int /*axis*/) const {}
   // The same figures as the Embree binding's (GeometryBinding).
   virtual std::size_t primitive_count() const = 0;
-  virtual bool has_scalar() const { return false; }
   // Whether the caster should hand this source an axis view's pixels in blocks of columns (all
   // rows) rather than blocks of rows: a grid whose rows along the view's v axis are its fastest
   // memory axis, where a block of rows is a slab a few cells thin along it.

@@ -143,9 +143,11 @@ class RayCaster {
   // The hits of `rays` (axis-parallel) from the axis casters, one run entry per ray, in order.
   void cast_axis_rays(const AxisRays& rays, std::span<const RaySegment> segments,
                       HitRun& run) const;
-  // Sorts a ray's hits, merges duplicates and moves those its segment owns to the front;
-  // returns how many.
-  std::size_t finish_ray(const RaySegment& segment, glm::dvec3 dir, std::span<RayHit> hits) const;
+  // Sorts a ray's hits (the ray o + t·dir), merges duplicates, moves those its segment owns to
+  // the front and gives them the colour field's value (when the sources have one); returns how
+  // many.
+  std::size_t finish_ray(const RaySegment& segment, glm::dvec3 org, glm::dvec3 dir,
+                         std::span<RayHit> hits) const;
   // Builds the Embree scene on first use (thread-safe).
   void ensure_scene() const;
   // Has the axis casters build what rays along `view` need, before the parallel loops.
@@ -154,7 +156,8 @@ class RayCaster {
   std::vector<const FieldSource*> sources_;
   double isovalue_ = 0.0;
   std::vector<std::unique_ptr<AxisBinding>> axis_bindings_;  // empty: Embree for every ray
-  bool has_scalar_ = false;
+  std::vector<std::unique_ptr<ScalarProbe>> scalar_probes_;  // per source, null: no colour field
+  bool has_scalar_ = false;  // a source has a colour field: every hit carries its value
   double duplicate_tolerance_ = 0.0;
   double axis_seconds_ = 0.0;
 
