@@ -7,6 +7,7 @@
 //   ldimesh distance A.ply B.ply [--samples N] [--json]
 //   ldimesh distance A.ply --surface NAME [--isovalue v] [--samples N] [--json]
 //   ldimesh distance A.ply --vtu FILE.vtu --field NAME [--isovalue v] [--samples N] [--json]
+#include <algorithm>
 #include <cctype>
 #include <cerrno>
 #include <chrono>
@@ -56,6 +57,8 @@ struct MeshArgs {
   std::string grid;   // raw volume file
   std::string vtu;    // VTK XML unstructured grid (.vtu, .pvtu)
   std::string field;  // its point array
+  // The field to colour by: a --vtu file's point array, or a raw volume of --grid's layout.
+  std::string colour_by;
   std::vector<std::int64_t> dims;
   std::string type = "float32";
   std::vector<double> spacing{1.0, 1.0, 1.0};
@@ -127,6 +130,7 @@ struct Input {
   // Bernstein form, the Jacobian checks), part of "load".
   double prepare_seconds = 0.0;
   ldimesh::RawVolume volume;  // owns the values of a --grid input
+  ldimesh::RawVolume colour;  // and of its --colour-by volume
 #ifdef LDIMESH_WITH_VTU
   ldimesh::VtuElements elements;  // owns the arrays of a --vtu input
 #endif
@@ -145,7 +149,8 @@ void load_input(const MeshArgs& args, int rank, int ranks, Input& input) {
   if (!args.vtu.empty()) {
 #ifdef LDIMESH_WITH_VTU
     ldimesh::quiet_vtk_logging();  // the error comes back as one line
-    const ldimesh::Status status = ldimesh::read_vtu(args.vtu, args.field, input.elements);
+    const ldimesh::Status status =
+        ldimesh::read_vtu(args.vtu, args.field, input.elements, args.colour_by);
     if (!status) throw std::runtime_error(status.message());
     input.name = args.vtu;
     // Every rank holds every element (the file's); it casts only its block of the domain.
@@ -165,6 +170,9 @@ void load_input(const MeshArgs& args, int rank, int ranks, Input& input) {
 #endif
   }
   if (!args.surface.empty()) {
+    if (!args.colour_by.empty())
+      throw std::runtime_error(
+          "--colour-by needs --grid or --vtu (a built-in surface has no other field)");
     const ldimesh::SurfaceInfo* surface = ldimesh::find_surface(args.surface);
     if (!surface)
       throw std::runtime_error("unknown surface '" + args.surface + "' (see 'ldimesh surfaces')");
@@ -183,6 +191,16 @@ void load_input(const MeshArgs& args, int rank, int ranks, Input& input) {
                                {args.origin[0], args.origin[1], args.origin[2]},
                                {args.spacing[0], args.spacing[1], args.spacing[2]}, input.volume);
   if (!status) throw std::runtime_error(status.message());
+  if (!args.colour_by.empty()) {
+    // The field to colour by: a second file of the same layout.
+    const ldimesh::Status colour =
+        ldimesh::read_raw_volume(args.colour_by, {args.dims[0], args.dims[1], args.dims[2]}, type,
+                                 {args.origin[0], args.origin[1], args.origin[2]},
+                                 {args.spacing[0], args.spacing[1], args.spacing[2]}, input.colour);
+    if (!colour) throw std::runtime_error("--colour-by: " + colour.message());
+    input.volume.block.colour = input.colour.block.values;
+    input.volume.block.colour_type = input.colour.block.type;
+  }
   input.name = args.grid;
   // Each rank reads the file and takes its block of cells (with the ghost layer it needs),
   // as a solver's rank would hold its own block.
@@ -296,7 +314,14 @@ int run_mesh(const MeshArgs& args) {
   }
   if (!root) return 0;
 
-  const ldimesh::MeshingResult& result = step.meshing;
+  ldimesh::MeshingResult& result = step.meshing;
+  // Vertices where the colour field has no finite value (NaN/Inf in it) take the lowest colour.
+  const std::size_t uncoloured = ldimesh::replace_nonfinite_scalars(result.mesh);
+  if (uncoloured > 0 && !args.json)
+    std::fprintf(stderr,
+                 "ldimesh: warning: %zu vertices without a finite colour value (NaN/Inf in the "
+                 "--colour-by field), given the lowest colour\n",
+                 uncoloured);
   const double r_used = ldimesh::trim_r(options.meshing);
   double write_seconds = 0.0, glb_seconds = 0.0;
   std::vector<std::uint8_t> glb;
@@ -326,6 +351,8 @@ int run_mesh(const MeshArgs& args) {
     // A step as the job's server would publish it, for `ldimesh-serve --dir`.
     ldimesh::StepMetadata meta = ldimesh::describe_step(args.step, args.time, {iso}, views, r_used,
                                                         result.samples, result.quads, glb_info);
+    if (glb_info.has_scalar)
+      meta.scalar = ldimesh::ScalarRange{args.colour_by, glb_info.scalar_min, glb_info.scalar_max};
     meta.seconds = {{"cast", step.seconds.cast},     {"encode", step.seconds.encode},
                     {"reduce", step.seconds.reduce}, {"decode", step.seconds.decode},
                     {"mesh", step.seconds.mesh},     {"glb", glb_seconds}};
@@ -363,6 +390,13 @@ int run_mesh(const MeshArgs& args) {
     j["vertices"] = m.vertex_count();
     j["faces"] = m.face_count();
     j["face_type"] = args.quads ? "quads" : "triangles";
+    if (!m.scalars.empty()) {
+      const auto [lo, hi] = std::minmax_element(m.scalars.begin(), m.scalars.end());
+      j["colour"] = {{"field", args.colour_by},
+                     {"min", *lo},
+                     {"max", *hi},
+                     {"uncoloured_vertices", uncoloured}};
+    }
     j["bytes_to_root"] = step.bytes_to_root;
     j["bytes_moved"] = step.bytes_moved;
     j["refinement"] = {{"levels", options.meshing.refinement.levels},
@@ -745,6 +779,10 @@ int main(int argc, char** argv) {
                    "VTK XML unstructured grid (.vtu, .pvtu) of VTK_LAGRANGE_HEXAHEDRON or "
                    "VTK_HEXAHEDRON cells, meshed exactly (needs --field)");
   mesh->add_option("--field", args.field, "point array of --vtu to mesh");
+  mesh->add_option("--colour-by", args.colour_by,
+                   "colour the isosurface by a second field: a point array of --vtu, or for "
+                   "--grid a raw volume file of the same layout (kept per vertex: GLB TEXCOORD_0, "
+                   "docs/api.md; PLY property 'value')");
   mesh->add_option("--res", args.res, "pixels along the longer side of each view")
       ->check(CLI::Range(1, 16384))
       ->capture_default_str();

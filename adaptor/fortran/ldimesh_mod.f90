@@ -113,6 +113,15 @@ module ldimesh_mod
       type(ldimesh_hex_block), intent(in) :: block
       integer(c_int) :: c_add_hex_block
     end function c_add_hex_block
+    function c_add_field(a, name, values, value_count, type) bind(C, name='ldimesh_add_field')
+      import :: c_int, c_ptr, c_char, c_int64_t
+      type(c_ptr), value :: a
+      character(kind=c_char), intent(in) :: name(*)
+      type(c_ptr), value :: values
+      integer(c_int64_t), value :: value_count
+      integer(c_int), value :: type
+      integer(c_int) :: c_add_field
+    end function c_add_field
     function c_clear_blocks(a) bind(C, name='ldimesh_clear_blocks')
       import :: c_int, c_ptr
       type(c_ptr), value :: a
@@ -178,9 +187,16 @@ module ldimesh_mod
     module procedure add_hex_elements_r8, add_hex_elements_r4
   end interface ldimesh_add_hex_elements
 
+  ! A further named field of the block added last (ldimesh_add_field of ldimesh.h; option
+  ! "colour_by" colours by it), in the block's layout: a 3D array shaped like the grid's, or a 2D
+  ! array of nodal values shaped like the elements' values (one column per element).
+  interface ldimesh_add_field
+    module procedure add_field_grid_r8, add_field_grid_r4, add_field_nodal_r8, add_field_nodal_r4
+  end interface ldimesh_add_field
+
   public :: ldimesh_create, ldimesh_create_from_file, ldimesh_set_domain, &
             ldimesh_add_grid_block, ldimesh_add_uniform_grid, ldimesh_add_hex_block, &
-            ldimesh_add_hex_elements, ldimesh_clear_blocks, &
+            ldimesh_add_hex_elements, ldimesh_add_field, ldimesh_clear_blocks, &
             ldimesh_execute, ldimesh_finalize, ldimesh_destroy, ldimesh_last_error, &
             ldimesh_url, ldimesh_last_report, ldimesh_published_steps
 
@@ -228,7 +244,7 @@ contains
     integer, intent(out) :: ierr
     type(ldimesh_grid_block) :: block
     block%type = LDIMESH_FLOAT64
-    if (.not. contiguous_block(adaptor, field)) then
+    if (.not. contiguous_block(adaptor, field, 'ldimesh_add_uniform_grid')) then
       ierr = LDIMESH_ERROR_ARGUMENT
       return
     end if
@@ -246,7 +262,7 @@ contains
     integer, intent(out) :: ierr
     type(ldimesh_grid_block) :: block
     block%type = LDIMESH_FLOAT32
-    if (.not. contiguous_block(adaptor, field)) then
+    if (.not. contiguous_block(adaptor, field, 'ldimesh_add_uniform_grid')) then
       ierr = LDIMESH_ERROR_ARGUMENT
       return
     end if
@@ -258,14 +274,14 @@ contains
 
   ! A strided section would need strides the module cannot see: the caller passes a whole
   ! array or a range of its last index.
-  logical function contiguous_block(adaptor, field)
+  logical function contiguous_block(adaptor, field, what)
     type(ldimesh_adaptor), intent(in) :: adaptor
     class(*), intent(in) :: field(:, :, :)
+    character(len=*), intent(in) :: what
     integer :: ignored
     contiguous_block = is_contiguous(field)
     if (.not. contiguous_block) ignored = fail(adaptor, &
-      'ldimesh_add_uniform_grid: the array is not contiguous (pass a whole array or a range '// &
-      'of its last index)')
+      what//': the array is not contiguous (pass a whole array or a range of its last index)')
   end function contiguous_block
 
   subroutine describe_uniform(block, dims, count, origin, spacing, ghost_lo, ghost_hi)
@@ -375,6 +391,56 @@ contains
     end if
     ierr = c_add_hex_block(adaptor%handle, block)
   end subroutine add_hex_elements
+
+  subroutine add_field_grid_r8(adaptor, name, field, ierr)
+    type(ldimesh_adaptor), intent(in) :: adaptor
+    character(len=*), intent(in) :: name
+    real(c_double), intent(in), target :: field(:, :, :)
+    integer, intent(out) :: ierr
+    call add_grid_field(adaptor, name, field, c_loc(field(1, 1, 1)), LDIMESH_FLOAT64, ierr)
+  end subroutine add_field_grid_r8
+
+  subroutine add_field_grid_r4(adaptor, name, field, ierr)
+    type(ldimesh_adaptor), intent(in) :: adaptor
+    character(len=*), intent(in) :: name
+    real(c_float), intent(in), target :: field(:, :, :)
+    integer, intent(out) :: ierr
+    call add_grid_field(adaptor, name, field, c_loc(field(1, 1, 1)), LDIMESH_FLOAT32, ierr)
+  end subroutine add_field_grid_r4
+
+  ! The shared part of the grid fields: `first` is the address of field(1, 1, 1).
+  subroutine add_grid_field(adaptor, name, field, first, type, ierr)
+    type(ldimesh_adaptor), intent(in) :: adaptor
+    character(len=*), intent(in) :: name
+    class(*), intent(in) :: field(:, :, :)
+    type(c_ptr), intent(in) :: first
+    integer(c_int), intent(in) :: type
+    integer, intent(out) :: ierr
+    if (.not. contiguous_block(adaptor, field, 'ldimesh_add_field')) then
+      ierr = LDIMESH_ERROR_ARGUMENT
+      return
+    end if
+    ierr = c_add_field(adaptor%handle, trim(name)//c_null_char, first, &
+                       size(field, kind=c_int64_t), type)
+  end subroutine add_grid_field
+
+  subroutine add_field_nodal_r8(adaptor, name, values, ierr)
+    type(ldimesh_adaptor), intent(in) :: adaptor
+    character(len=*), intent(in) :: name
+    real(c_double), intent(in), target, contiguous :: values(:, :)
+    integer, intent(out) :: ierr
+    ierr = c_add_field(adaptor%handle, trim(name)//c_null_char, c_loc(values), &
+                       size(values, kind=c_int64_t), LDIMESH_FLOAT64)
+  end subroutine add_field_nodal_r8
+
+  subroutine add_field_nodal_r4(adaptor, name, values, ierr)
+    type(ldimesh_adaptor), intent(in) :: adaptor
+    character(len=*), intent(in) :: name
+    real(c_float), intent(in), target, contiguous :: values(:, :)
+    integer, intent(out) :: ierr
+    ierr = c_add_field(adaptor%handle, trim(name)//c_null_char, c_loc(values), &
+                       size(values, kind=c_int64_t), LDIMESH_FLOAT32)
+  end subroutine add_field_nodal_r4
 
   ! Keeps `message` as the adaptor's last error; returns LDIMESH_ERROR_ARGUMENT.
   integer function fail(adaptor, message)

@@ -142,6 +142,13 @@ int ldimesh_set_domain(ldimesh_adaptor* a, const double lo[3], const double hi[3
 /* Adds one block of this rank's data; checked here (sizes, dims, strides). */
 int ldimesh_add_grid_block(ldimesh_adaptor* a, const ldimesh_grid_block* block);
 int ldimesh_add_hex_block(ldimesh_adaptor* a, const ldimesh_hex_block* block);
+/* A further named field of the block added last (temperature beside density), read in place like
+ * its values and in their layout (a grid: the same dims and strides; elements: the same nodes and
+ * element_stride), of `type` LDIMESH_FLOAT32 or LDIMESH_FLOAT64; value_count as for the block.
+ * With option "colour_by": "NAME" the isosurfaces are coloured by the field of that name, which
+ * every block must then have. Adding a name again replaces that field. */
+int ldimesh_add_field(ldimesh_adaptor* a, const char* name, const void* values,
+                      int64_t value_count, int type);
 /* Forgets this rank's blocks (to describe them anew). */
 int ldimesh_clear_blocks(ldimesh_adaptor* a);
 

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <map>
 #include <mutex>
 #include <new>
 #include <optional>
@@ -44,6 +45,7 @@ struct Job {
   std::map<std::string, double> seconds;
   std::uint64_t skipped_steps = 0;  // due steps dropped since the previous job was handed over
   std::uint64_t nonfinite_values = 0;
+  std::size_t uncoloured_vertices = 0;  // the colour field not finite there (publish)
 };
 
 std::size_t scalar_bytes(ScalarType type) {
@@ -54,26 +56,29 @@ std::size_t scalar_bytes(ScalarType type) {
 // later copies reuse their pages.
 struct BlockCopy {
   std::vector<unsigned char> values;
+  std::vector<unsigned char> colour;  // the colour field's, when the block has one
   std::array<std::vector<double>, 3> coords;
   std::vector<double> geometry;  // an element block's corners or geometry nodes
   std::size_t bytes() const {
-    return values.size() +
+    return values.size() + colour.size() +
            (coords[0].size() + coords[1].size() + coords[2].size() + geometry.size()) *
                sizeof(double);
   }
 };
 
-// The grid block's points (ghosts included), contiguous with x fastest, and its coordinates.
-GridBlock copy_grid(const GridBlock& block, BlockCopy& copy) {
+// A grid block's array of `type` at `values` (its points, ghosts included) into `out`,
+// contiguous with x fastest.
+void copy_points(const GridBlock& block, const void* values, ScalarType type,
+                 std::vector<unsigned char>& out) {
   const std::int64_t nx = block.dims[0], ny = block.dims[1], nz = block.dims[2];
-  const std::size_t size = scalar_bytes(block.type);
+  const std::size_t size = scalar_bytes(type);
   std::array<std::int64_t, 3> stride = block.strides;
   if (stride == std::array<std::int64_t, 3>{0, 0, 0}) stride = {1, nx, nx * ny};
-  copy.values.resize(std::size_t(nx * ny * nz) * size);
-  const auto* src = static_cast<const unsigned char*>(block.values);
-  unsigned char* dst = copy.values.data();
+  out.resize(std::size_t(nx * ny * nz) * size);
+  const auto* src = static_cast<const unsigned char*>(values);
+  unsigned char* dst = out.data();
   if (stride == std::array<std::int64_t, 3>{1, nx, nx * ny}) {
-    std::memcpy(dst, src, copy.values.size());
+    std::memcpy(dst, src, out.size());
   } else {
     for (std::int64_t k = 0; k < nz; ++k)
       for (std::int64_t j = 0; j < ny; ++j)
@@ -82,8 +87,18 @@ GridBlock copy_grid(const GridBlock& block, BlockCopy& copy) {
                       src + (i * stride[0] + j * stride[1] + k * stride[2]) * std::int64_t(size),
                       size);
   }
+}
+
+// The grid block's points (ghosts included) and colour field, contiguous with x fastest, and its
+// coordinates.
+GridBlock copy_grid(const GridBlock& block, BlockCopy& copy) {
   GridBlock out = block;
-  out.values = dst;
+  copy_points(block, block.values, block.type, copy.values);
+  out.values = copy.values.data();
+  if (block.colour) {
+    copy_points(block, block.colour, block.colour_type, copy.colour);
+    out.colour = copy.colour.data();
+  }
   out.strides = {0, 0, 0};
   for (int a = 0; a < 3; ++a) {
     if (!block.coords[a]) continue;
@@ -99,25 +114,37 @@ std::size_t geometry_doubles(const HexBlock& block) {
   return block.geometry_order > 0 ? 3 * (q + 1) * (q + 1) * (q + 1) : 24;
 }
 
-// The high-order block's geometry and nodal values, element after element without gaps.
-HexBlock copy_hex(const HexBlock& block, BlockCopy& copy) {
+// An element block's nodal array of `type` at `values` into `out`, element after element without
+// gaps.
+void copy_nodal(const HexBlock& block, const void* values, ScalarType type,
+                std::vector<unsigned char>& out) {
   const std::size_t n = std::size_t(block.order + 1) * (block.order + 1) * (block.order + 1);
-  const std::size_t size = scalar_bytes(block.type);
+  const std::size_t size = scalar_bytes(type);
   const std::size_t stride = block.element_stride == 0 ? n : block.element_stride;
-  const double* geometry = block.geometry_order > 0 ? block.geometry : block.corners;
-  copy.geometry.assign(geometry, geometry + geometry_doubles(block) * block.element_count);
-  copy.values.resize(block.element_count * n * size);
-  const auto* src = static_cast<const unsigned char*>(block.values);
+  out.resize(block.element_count * n * size);
+  const auto* src = static_cast<const unsigned char*>(values);
   if (stride == n) {
-    std::memcpy(copy.values.data(), src, copy.values.size());
+    std::memcpy(out.data(), src, out.size());
   } else {
     for (std::size_t e = 0; e < block.element_count; ++e)
-      std::memcpy(copy.values.data() + e * n * size, src + e * stride * size, n * size);
+      std::memcpy(out.data() + e * n * size, src + e * stride * size, n * size);
   }
+}
+
+// The high-order block's geometry, nodal values and colour field, element after element without
+// gaps.
+HexBlock copy_hex(const HexBlock& block, BlockCopy& copy) {
+  const double* geometry = block.geometry_order > 0 ? block.geometry : block.corners;
+  copy.geometry.assign(geometry, geometry + geometry_doubles(block) * block.element_count);
+  copy_nodal(block, block.values, block.type, copy.values);
   HexBlock out = block;
   out.corners = block.geometry_order > 0 ? nullptr : copy.geometry.data();
   out.geometry = block.geometry_order > 0 ? copy.geometry.data() : nullptr;
   out.values = copy.values.data();
+  if (block.colour) {
+    copy_nodal(block, block.colour, block.colour_type, copy.colour);
+    out.colour = copy.colour.data();
+  }
   out.element_stride = 0;
   return out;
 }
@@ -197,8 +224,37 @@ class AdaptorImpl final : public Adaptor {
   }
   Status add_source(std::shared_ptr<const FieldSource> source, const Box& owned) override {
     if (!source) return fail(Status::invalid_argument("add_source: no source"));
-    blocks_.push_back({std::move(source), owned, std::nullopt, std::nullopt});
+    blocks_.push_back({std::move(source), owned, std::nullopt, std::nullopt, {}});
     return Status::ok();
+  }
+  Status add_field(std::string_view name, const void* values, ScalarType type) override {
+    return fail_if(guard("add_field: ", [&] {
+      if (blocks_.empty() || (!blocks_.back().grid && !blocks_.back().hex))
+        return Status::invalid_argument(
+            blocks_.empty() ? "no block added yet (the field belongs to the block added last)"
+                            : "the block added last is a FieldSource (it colours by its own "
+                              "bind_scalar)");
+      if (name.empty()) return Status::invalid_argument("the field's name is empty");
+      if (!values)
+        return Status::invalid_argument("field '" + std::string(name) + "': null values");
+      if (type != ScalarType::float32 && type != ScalarType::float64)
+        return Status::invalid_argument("field '" + std::string(name) + "': unknown scalar type");
+      Block& b = blocks_.back();
+      b.fields[std::string(name)] = {values, type};
+      if (name != options_.colour_by) return Status::ok();
+      // The colour field: a source that reads it (an element block's geometry as prepared).
+      if (b.grid) {
+        b.grid->colour = values;
+        b.grid->colour_type = type;
+        b.source = std::make_shared<GridSource>(*b.grid);
+      } else {
+        b.hex->colour = values;
+        b.hex->colour_type = type;
+        b.source = std::make_shared<HexElementSource>(
+            static_cast<const HexElementSource&>(*b.source), *b.hex);
+      }
+      return Status::ok();
+    }));
   }
   void clear_blocks() override { blocks_.clear(); }
 
@@ -313,6 +369,9 @@ class AdaptorImpl final : public Adaptor {
     // cannot be copied).
     std::optional<GridBlock> grid;
     std::optional<HexBlock> hex;
+    // Its named fields (add_field); the one named by "colour_by" is also the description's
+    // colour.
+    std::map<std::string, std::pair<const void*, ScalarType>> fields;
   };
   // A snapshotted step for this rank's caster thread.
   struct CasterJob {
@@ -355,6 +414,15 @@ class AdaptorImpl final : public Adaptor {
     casters.blocks.resize(options_.isovalues.size());
     const auto bind_start = Clock::now();
     if (local && !domain) local = Status::invalid_argument("set_domain() was not called");
+    if (local && !options_.colour_by.empty())
+      for (std::size_t k = 0; k < blocks.size(); ++k)
+        if ((blocks[k].grid && !blocks[k].grid->colour) ||
+            (blocks[k].hex && !blocks[k].hex->colour)) {
+          local = Status::invalid_argument("colour_by: block " + std::to_string(k) + " of rank " +
+                                           std::to_string(rank_) + " has no field named '" +
+                                           options_.colour_by + "' (add_field)");
+          break;
+        }
     if (local)
       local = guard("binding the blocks: ", [&] {
         if (fault_here("out_of_memory", job.step)) throw std::bad_alloc();
@@ -429,13 +497,17 @@ class AdaptorImpl final : public Adaptor {
     for (const Block& b : blocks_) {
       if (b.grid) {
         const auto& d = b.grid->dims;
-        bytes += std::size_t(d[0] * d[1] * d[2]) * scalar_bytes(b.grid->type);
+        bytes +=
+            std::size_t(d[0] * d[1] * d[2]) *
+            (scalar_bytes(b.grid->type) + (b.grid->colour ? scalar_bytes(b.grid->colour_type) : 0));
         if (b.grid->coords[0]) bytes += std::size_t(d[0] + d[1] + d[2]) * sizeof(double);
       } else if (b.hex) {
         const std::size_t n =
             std::size_t(b.hex->order + 1) * (b.hex->order + 1) * (b.hex->order + 1);
-        bytes += b.hex->element_count *
-                 (n * scalar_bytes(b.hex->type) + geometry_doubles(*b.hex) * sizeof(double));
+        bytes +=
+            b.hex->element_count * (n * (scalar_bytes(b.hex->type) +
+                                         (b.hex->colour ? scalar_bytes(b.hex->colour_type) : 0)) +
+                                    geometry_doubles(*b.hex) * sizeof(double));
       } else {
         return false;
       }
@@ -462,11 +534,14 @@ class AdaptorImpl final : public Adaptor {
         const Block& b = blocks_[k];
         Block copy;
         copy.owned = b.owned;
-        if (b.grid)
-          copy.source = std::make_shared<GridSource>(copy_grid(*b.grid, snapshot_[k]));
-        else  // the geometry as the block's source prepared it (converted and checked once)
+        if (b.grid) {
+          copy.grid = copy_grid(*b.grid, snapshot_[k]);
+          copy.source = std::make_shared<GridSource>(*copy.grid);
+        } else {  // the geometry as the block's source prepared it (converted and checked once)
+          copy.hex = copy_hex(*b.hex, snapshot_[k]);
           copy.source = std::make_shared<HexElementSource>(
-              static_cast<const HexElementSource&>(*b.source), copy_hex(*b.hex, snapshot_[k]));
+              static_cast<const HexElementSource&>(*b.source), *copy.hex);
+        }
         bytes += snapshot_[k].bytes();
         snapshot_blocks_.push_back(std::move(copy));
       }
@@ -534,7 +609,7 @@ class AdaptorImpl final : public Adaptor {
     return fail_if(guard(std::string(what) + ": ", [&] {
       auto source = std::make_shared<Source>(block);
       const Box owned = source->bounds();
-      Block b{std::move(source), owned, std::nullopt, std::nullopt};
+      Block b{std::move(source), owned, std::nullopt, std::nullopt, {}};
       if constexpr (std::is_same_v<Description, GridBlock>)
         b.grid = block;
       else
@@ -634,6 +709,9 @@ class AdaptorImpl final : public Adaptor {
     }
     const double decode_s = job.cast.seconds.decode, mesh_s = job.cast.seconds.mesh;
     const auto t = Clock::now();
+    // Vertices where the colour field has no finite value (NaN/Inf in the solver's array)
+    // take the lowest colour, and the log says how many.
+    job.uncoloured_vertices = replace_nonfinite_scalars(mesh);
     const GlbOptions glb_options = step_glb_options(job.views.front(), options_.compression_level);
     std::vector<std::uint8_t> glb;
     GlbInfo info;
@@ -648,6 +726,8 @@ class AdaptorImpl final : public Adaptor {
     meta.seconds["glb"] = glb_s;
     meta.skipped_steps = job.skipped_steps;
     meta.nonfinite_values = job.nonfinite_values;
+    if (info.has_scalar)
+      meta.scalar = ScalarRange{options_.colour_by, info.scalar_min, info.scalar_max};
     const std::size_t bytes = glb.size();
     Snapshot snapshot = make_snapshot(std::move(meta), std::move(glb));
     if (!options_.output_dir.empty()) write_step(snapshot);
@@ -675,6 +755,10 @@ class AdaptorImpl final : public Adaptor {
     if (job.nonfinite_values > 0)
       notes += "  warning: " + std::to_string(job.nonfinite_values) +
                " NaN/Inf field values, the cells touching them left out";
+    if (job.uncoloured_vertices > 0)
+      notes += "  warning: " + std::to_string(job.uncoloured_vertices) +
+               " vertices without a finite colour value (NaN/Inf in the colour field), shown at "
+               "the lowest colour";
     return notes;
   }
 

@@ -13,6 +13,9 @@ struct ldimesh_adaptor {
   std::unique_ptr<ldimesh::Adaptor> impl;
   std::string error;  // this handle's last error (C API checks and the adaptor's)
   std::string url;
+  // Values the block added last reads (ldimesh_add_field checks a field's array against it);
+  // 0 before the first block.
+  std::int64_t block_values = 0;
 };
 
 namespace {
@@ -209,7 +212,10 @@ int ldimesh_add_grid_block(ldimesh_adaptor* a, const ldimesh_grid_block* b) {
     g.ghost_lo[i] = b->ghost_lo[i];
     g.ghost_hi[i] = b->ghost_hi[i];
   }
-  return guarded(a, "ldimesh_add_grid_block: ", [&] { return a->impl->add_grid_block(g); });
+  const int code =
+      guarded(a, "ldimesh_add_grid_block: ", [&] { return a->impl->add_grid_block(g); });
+  if (code == LDIMESH_OK) a->block_values = needed;
+  return code;
 }
 
 int ldimesh_add_hex_block(ldimesh_adaptor* a, const ldimesh_hex_block* b) {
@@ -275,11 +281,33 @@ int ldimesh_add_hex_block(ldimesh_adaptor* a, const ldimesh_hex_block* b) {
                                                 : ldimesh::NodeOrdering::lexicographic;
   h.values = b->values;
   h.element_stride = std::size_t(stride);
-  return guarded(a, "ldimesh_add_hex_block: ", [&] { return a->impl->add_hex_block(h); });
+  const int code = guarded(a, "ldimesh_add_hex_block: ", [&] { return a->impl->add_hex_block(h); });
+  if (code == LDIMESH_OK) a->block_values = needed;
+  return code;
+}
+
+int ldimesh_add_field(ldimesh_adaptor* a, const char* name, const void* values, int64_t value_count,
+                      int type) {
+  if (!a) return no_handle();
+  const std::string what = "ldimesh_add_field: ";
+  if (!name || !*name) return fail(a, LDIMESH_ERROR_ARGUMENT, what + "name is NULL or empty");
+  ldimesh::ScalarType t;
+  if (!scalar_type(type, t))
+    return fail(a, LDIMESH_ERROR_ARGUMENT,
+                what + "type must be LDIMESH_FLOAT32 or LDIMESH_FLOAT64");
+  if (a->block_values == 0)
+    return fail(a, LDIMESH_ERROR_ARGUMENT,
+                what + "no block added yet (the field belongs to the block added last)");
+  if (value_count < a->block_values)
+    return fail(a, LDIMESH_ERROR_ARGUMENT,
+                what + "field '" + name + "': the array holds " + std::to_string(value_count) +
+                    " values, the block reads " + std::to_string(a->block_values));
+  return guarded(a, "", [&] { return a->impl->add_field(name, values, t); });
 }
 
 int ldimesh_clear_blocks(ldimesh_adaptor* a) {
   if (!a) return no_handle();
+  a->block_values = 0;
   return guarded(a, "ldimesh_clear_blocks: ", [&] {
     a->impl->clear_blocks();
     return Status::ok();

@@ -44,9 +44,9 @@ Status parse_object(const nlohmann::json& j, AdaptorOptions& o) {
   // Counts: up to 2^53, where doubles still hold every integer.
   constexpr double kMaxCount = 9007199254740992.0;
   if (Status s = check_keys(j, "",
-                            {"isovalues", "views", "resolution", "r", "cadence", "busy",
-                             "refinement", "merging", "server", "output_dir", "keep", "memory_mb",
-                             "encoding", "glb", "log", "background", "testing"});
+                            {"isovalues", "colour_by", "views", "resolution", "r", "cadence",
+                             "busy", "refinement", "merging", "server", "output_dir", "keep",
+                             "memory_mb", "encoding", "glb", "log", "background", "testing"});
       !s)
     return s;
   try {
@@ -60,6 +60,11 @@ Status parse_object(const nlohmann::json& j, AdaptorOptions& o) {
         o.isovalues.push_back(x.get<double>());
       }
       if (o.isovalues.size() > 8) return bad("isovalues", "may hold at most 8 values");
+    }
+    if (j.contains("colour_by")) {
+      o.colour_by = j["colour_by"].get<std::string>();
+      if (o.colour_by.empty())
+        return bad("colour_by", "must name a field (add_field), or be left out");
     }
     if (j.contains("views")) {
       o.views = j["views"].get<std::string>();
@@ -108,10 +113,14 @@ Status parse_object(const nlohmann::json& j, AdaptorOptions& o) {
     if (Status s = integer(j, "memory_mb", "", 1, kMaxCount, o.memory_mb); !s) return s;
     if (j.contains("encoding")) {
       const auto& e = j["encoding"];
-      if (Status s = check_keys(e, "encoding.", {"lossless", "depth_bits", "normal_bits"}); !s)
+      if (Status s =
+              check_keys(e, "encoding.", {"lossless", "depth_bits", "normal_bits", "scalar_bits"});
+          !s)
         return s;
       if (e.contains("lossless")) o.encoding.lossless = e["lossless"].get<bool>();
       if (Status s = integer(e, "depth_bits", "encoding.", 1, 24, o.encoding.depth_bits); !s)
+        return s;
+      if (Status s = integer(e, "scalar_bits", "encoding.", 2, 24, o.encoding.scalar_bits); !s)
         return s;
       if (Status s = integer(e, "normal_bits", "encoding.", 2, 16, o.encoding.normal_bits); !s)
         return s;

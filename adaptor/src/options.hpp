@@ -16,6 +16,7 @@ namespace ldimesh {
 
 struct AdaptorOptions {
   std::vector<double> isovalues{0.5};
+  std::string colour_by;  // a field every block has (add_field); "" colours by nothing
   std::string views = "xyz";
   int resolution = 256;
   double r = 0.5;

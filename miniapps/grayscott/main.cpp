@@ -1,5 +1,6 @@
 // ldimesh-grayscott: 3D Gray–Scott reaction–diffusion (Pearson 1993, "Complex patterns in a
-// simple system") on a block-decomposed uniform grid, with the isosurface of V published live.
+// simple system") on a block-decomposed uniform grid, with the isosurface of V published live
+// (coloured by U with option "colour_by": "U", as scripts/demo does).
 //
 //   ∂u/∂t = Du ∇²u − u v² + F (1 − u)        ∂v/∂t = Dv ∇²v + u v² − (F + k) v
 //
@@ -125,29 +126,40 @@ class GrayScottBlock {
   // So the cells with lowest corner in [lo, hi) ∩ [0, N − 2] are this rank's: the ranks tile the
   // (N − 1)³ cells exactly, none twice, none missing. The halo's edges and corners are exchanged
   // too (axis after axis), as the cell [hi − 1, hi]² × … needs them.
+  // V's block: the owned points and the halo points toward other ranks (ghost layers), read in
+  // place from the current buffer.
   ldimesh::GridBlock v_block() const {
     ldimesh::GridBlock b;
-    std::array<std::int64_t, 3> first{};
     const double h = 1.0 / double(global_ - 1);
     for (int a = 0; a < 3; ++a) {
       b.ghost_lo[a] = below_[a] != MPI_PROC_NULL ? 1 : 0;
       b.ghost_hi[a] = above_[a] != MPI_PROC_NULL ? 1 : 0;
       b.dims[a] = n_[a] + b.ghost_lo[a] + b.ghost_hi[a];
-      first[a] = 1 - b.ghost_lo[a];  // local index of the block's first point
       b.origin[a] = double(lo_[a] - b.ghost_lo[a]) * h;
       b.spacing[a] = h;
       b.strides[a] = stride_[a];
     }
-    b.values = v_.data() + first[0] * stride_[0] + first[1] * stride_[1] + first[2] * stride_[2];
+    b.values = v_.data() + first_point();
     b.type = ldimesh::ScalarType::float64;
     return b;
   }
+  // U in the layout of v_block() (for add_field).
+  const double* u_in_block() const { return u_.data() + first_point(); }
 
   const double* v_data() const { return v_.data(); }
 
  private:
   static int rank_of(std::array<int, 3> c, std::array<int, 3> blocks) {
     return c[0] + blocks[0] * (c[1] + blocks[1] * c[2]);
+  }
+
+  // The local index of the block's first point: the halo point below where there is a
+  // neighbour, else the first owned point.
+  std::int64_t first_point() const {
+    std::int64_t at = 0;
+    for (int a = 0; a < 3; ++a)
+      at += (below_[a] != MPI_PROC_NULL ? 0 : 1) * stride_[a];
+    return at;
   }
 
   std::int64_t local_index(std::int64_t i, std::int64_t j, std::int64_t k) const {
@@ -277,12 +289,17 @@ int main(int argc, char** argv) {
     return ldimesh::miniapp::kExitOptions;
   app.check(adaptor->set_domain(domain), "set_domain");
   // V lives in one of two buffers that swap every solver step: the block is described anew
-  // whenever the step ends in the other one (the pointer changed; nothing is copied).
+  // whenever the step ends in the other one (the pointer changed; nothing is copied). U and V
+  // are its named fields (option "colour_by": "U" colours the V isosurface by U).
   const double* described = nullptr;
   auto describe_v = [&] {
     if (block.v_data() == described) return;
     adaptor->clear_blocks();
-    if (app.check(adaptor->add_grid_block(block.v_block()), "add_grid_block"))
+    const ldimesh::GridBlock v = block.v_block();
+    if (app.check(adaptor->add_grid_block(v), "add_grid_block") &&
+        app.check(adaptor->add_field("U", block.u_in_block(), ldimesh::ScalarType::float64),
+                  "add_field") &&
+        app.check(adaptor->add_field("V", v.values, ldimesh::ScalarType::float64), "add_field"))
       described = block.v_data();
   };
 

@@ -2,6 +2,7 @@
 // test and only non-fatal EXPECTs are used, so that no rank is left alone in a collective call.
 #include <mpi.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -194,25 +195,42 @@ TEST(Adaptor, AStepWithoutSurfaceIsPublishedEmpty) {
 // it — through both the synchronous and the background (snapshot) path. A second block reads
 // the same geometry array with another field (y; two fields of one solver on one mesh): its
 // plane y = c is published beside the first, and the shared array is left as it was.
-TEST(Adaptor, CurvedElementBlocksArePublished) {
-  const int q = 2, n = 2;
-  const std::vector<double> x = node_positions(q, NodeSet::gauss_lobatto_legendre);
-  std::vector<double> geometry, values, values_y;
+// This rank's share (every ranks()-th element) of n³ elements of the unit cube with geometry of
+// order q at GLL nodes, bent inside along `axis` (the nodes on the cube's faces stay): curved
+// elements. Their nodes element after element, ξ fastest, and as a geometry array.
+struct BentCube {
   std::size_t count = 0;
+  std::vector<glm::dvec3> nodes;
+  std::vector<double> geometry;
+};
+BentCube bent_cube(int q, int n, int axis) {
+  const std::vector<double> x = node_positions(q, NodeSet::gauss_lobatto_legendre);
+  BentCube cube;
   for (int e = 0; e < n * n * n; ++e) {
     if (e % ranks() != rank_of()) continue;
-    ++count;
+    ++cube.count;
     const glm::dvec3 cell(e % n, (e / n) % n, e / (n * n));
     for (int k = 0; k <= q; ++k)
       for (int j = 0; j <= q; ++j)
         for (int i = 0; i <= q; ++i) {
           glm::dvec3 p = (cell + glm::dvec3(x[i], x[j], x[k])) / double(n);
-          // Bent inside (the nodes on the cube's faces stay): curved elements.
-          p.x += 0.05 * std::sin(3.14159 * p.y) * std::sin(3.14159 * p.z) * std::sin(3.14159 * p.x);
-          geometry.insert(geometry.end(), {p.x, p.y, p.z});
-          values.push_back(p.x);
-          values_y.push_back(p.y);
+          p[axis] +=
+              0.05 * std::sin(3.14159 * p.y) * std::sin(3.14159 * p.z) * std::sin(3.14159 * p.x);
+          cube.nodes.push_back(p);
+          cube.geometry.insert(cube.geometry.end(), {p.x, p.y, p.z});
         }
+  }
+  return cube;
+}
+
+TEST(Adaptor, CurvedElementBlocksArePublished) {
+  const int q = 2;
+  const BentCube cube = bent_cube(q, 2, 0);
+  std::vector<double> geometry = cube.geometry, values, values_y;
+  const std::size_t count = cube.count;
+  for (const glm::dvec3& p : cube.nodes) {
+    values.push_back(p.x);
+    values_y.push_back(p.y);
   }
   const std::vector<double> geometry_before = geometry;
   for (const bool background : {false, true}) {
@@ -493,6 +511,136 @@ TEST(Adaptor, TheSnapshotPathPublishesTheSynchronousMeshWhateverTheSolverDoesNex
       EXPECT_TRUE(expected == got)
           << "step " << step << ": " << expected.size() << " vs " << got.size() << " bytes";
     }
+  }
+}
+
+// ---- Colour by a named field (add_field, option "colour_by").
+
+// The colour field of the slab's points: C = x + 2y − z, linear, so that its trilinear
+// interpolant is C itself and a published vertex's colour can be checked against C at the
+// vertex.
+std::vector<float> slab_colour(const GridSlab& slab) {
+  std::vector<float> c(slab.values.size());
+  const auto& d = slab.block.dims;
+  for (std::int64_t k = 0; k < d[2]; ++k)
+    for (std::int64_t j = 0; j < d[1]; ++j)
+      for (std::int64_t i = 0; i < d[0]; ++i) {
+        const glm::dvec3 x = slab.block.origin + glm::dvec3(i, j, k) * slab.block.spacing;
+        c[std::size_t((k * d[1] + j) * d[0] + i)] = float(x.x + 2.0 * x.y - x.z);
+      }
+  return c;
+}
+
+TEST(Adaptor, GridBlocksAreColouredByANamedFieldOnBothPaths) {
+  for (const bool merging : {false, true}) {
+    std::vector<std::uint8_t> synchronous;
+    for (const bool background : {false, true}) {
+      SCOPED_TRACE(std::string(merging ? "merged" : "views") +
+                   (background ? ", background" : ", synchronous"));
+      GridSlab slab(kSlabPoints, 0.0);
+      std::vector<float> colour = slab_colour(slab);
+      const std::string dir =
+          temp_dir(std::string("colour_") + (merging ? "m" : "v") + (background ? "b" : "s"));
+      std::string options = R"({"colour_by": "C", )" + grid_options(dir, background).substr(1);
+      if (merging) options = R"({"merging": true, )" + options.substr(1);
+      auto a = make_grid_adaptor(options, slab);
+      if (!a) return;
+      EXPECT_TRUE(a->add_field("unused", slab.values.data(), ScalarType::float32));
+      EXPECT_TRUE(a->add_field("C", colour.data(), ScalarType::float32));
+      EXPECT_TRUE(a->execute(1, 0.0)) << a->last_error();
+      if (background && thread_multiple()) {  // the copy: the values and the colour
+        EXPECT_EQ(a->last_report().snapshot_bytes, 2 * slab.values.size() * sizeof(float));
+      }
+      // The solver overwrites both arrays at once: the published step is that of the call.
+      std::fill(colour.begin(), colour.end(), 1e6f);
+      std::fill(slab.values.begin(), slab.values.end(), 100.0f);
+      EXPECT_TRUE(a->finalize()) << a->last_error();
+      if (rank_of() != 0) continue;
+      const Mesh mesh = testing::published_mesh(dir, 1);
+      expect_on_the_slab_sphere(mesh, 0.36);
+      testing::expect_coloured_by(
+          mesh, testing::published_step(dir, 1), "C",
+          [](glm::dvec3 x) { return x.x + 2.0 * x.y - x.z; }, 2.0, 2.0 / 40);
+      if (!background) {
+        synchronous = published_glb(dir, 1);
+      } else {
+        EXPECT_TRUE(published_glb(dir, 1) == synchronous) << "the two paths differ";
+      }
+    }
+  }
+}
+
+TEST(Adaptor, ColourByAFieldABlockLacksFailsTheStepNamingIt) {
+  GridSlab slab(kSlabPoints, 0.0);
+  auto a = make_grid_adaptor(
+      R"({"colour_by": "T", )" + grid_options(temp_dir("colour_missing"), true).substr(1), slab);
+  if (!a) return;
+  EXPECT_TRUE(a->add_field("U", slab.values.data(), ScalarType::float32));  // not T
+  const Status s = a->execute(0, 0.0);
+  if (thread_multiple()) {  // the snapshot path reports it later, from the caster thread
+    const Status f = a->finalize();
+    EXPECT_FALSE(f);
+    EXPECT_NE(f.message().find("no field named 'T'"), std::string::npos) << f.message();
+  } else {
+    EXPECT_FALSE(s);
+    EXPECT_NE(s.message().find("no field named 'T'"), std::string::npos) << s.message();
+    EXPECT_TRUE(a->finalize());
+  }
+  // add_field before any block, with no name or no values: errors, nothing added.
+  std::unique_ptr<Adaptor> b;
+  EXPECT_TRUE(
+      Adaptor::create(MPI_COMM_WORLD, R"({"server": {"enabled": false}, "log": false})", b));
+  if (!b) return;
+  const float x = 0.0f;
+  Status e = b->add_field("T", &x, ScalarType::float32);
+  EXPECT_NE(e.message().find("no block added yet"), std::string::npos) << e.message();
+  EXPECT_TRUE(b->add_grid_block(slab.block));
+  e = b->add_field("", &x, ScalarType::float32);
+  EXPECT_NE(e.message().find("name is empty"), std::string::npos) << e.message();
+  e = b->add_field("T", nullptr, ScalarType::float32);
+  EXPECT_NE(e.message().find("null values"), std::string::npos) << e.message();
+  EXPECT_TRUE(b->finalize());
+}
+
+// Curved elements coloured by z: a field of order p = q on geometry of order q represents z
+// exactly, so a vertex's colour is its own z.
+TEST(Adaptor, CurvedElementBlocksAreColouredByTheirNodalField) {
+  const int q = 2;
+  BentCube cube = bent_cube(q, 2, 2);
+  std::vector<double> values, z;
+  const std::size_t count = cube.count;
+  for (const glm::dvec3& p : cube.nodes) {
+    values.push_back(glm::length(p - glm::dvec3(0.5)));
+    z.push_back(p.z);
+  }
+  for (const bool background : {false, true}) {
+    const std::string dir = temp_dir(background ? "curved_colour_b" : "curved_colour_s");
+    std::unique_ptr<Adaptor> a;
+    EXPECT_TRUE(Adaptor::create(
+        MPI_COMM_WORLD,
+        R"({"server": {"enabled": false}, "resolution": 64, "log": false, "isovalues": [0.35],
+            "colour_by": "z", "background": )" +
+            std::string(background ? "true" : "false") + R"(, "output_dir": ")" + dir + R"("})",
+        a));
+    if (!a) return;
+    EXPECT_TRUE(a->set_domain({glm::dvec3(0.0), glm::dvec3(1.0)}));
+    HexBlock block;
+    block.order = q;
+    block.element_count = count;
+    block.geometry_order = q;
+    block.geometry = cube.geometry.data();
+    block.values = values.data();
+    if (count > 0) {
+      EXPECT_TRUE(a->add_hex_block(block));
+      EXPECT_TRUE(a->add_field("z", z.data(), ScalarType::float64));
+    }
+    EXPECT_TRUE(a->execute(0, 0.0)) << a->last_error();
+    EXPECT_TRUE(a->finalize()) << a->last_error();
+    if (rank_of() != 0) continue;
+    SCOPED_TRACE(background ? "background" : "synchronous");
+    testing::expect_coloured_by(
+        testing::published_mesh(dir, 0), testing::published_step(dir, 0), "z",
+        [](glm::dvec3 p) { return p.z; }, 1.0, 1.0 / 64);
   }
 }
 

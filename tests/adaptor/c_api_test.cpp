@@ -236,6 +236,47 @@ TEST(CApi, AWrongSizeArrayIsRejectedAndTheAdaptorKeepsWorking) {
   ldimesh_destroy(a);
 }
 
+// ldimesh_add_field: the field of the block added last, its array checked like the block's;
+// with "colour_by" the published vertices carry its values.
+TEST(CApi, AFieldColoursTheSurfaceAndItsArrayIsChecked) {
+  const std::string dir = temp_dir("colour");
+  ldimesh_adaptor* a = create(R"({"colour_by": "T", )" + options(dir).substr(1));
+  if (!a) return;
+  Slab slab;
+  std::vector<float> t(slab.values.size());
+  for (long l = 0; l < slab.layers; ++l)
+    for (long j = 0; j < kN; ++j)
+      for (long i = 0; i < kN; ++i)
+        t[std::size_t((l * kN + j) * kN + i)] = float(Slab::coordinate(i) - Slab::coordinate(j));
+  const auto count = std::int64_t(t.size());
+  EXPECT_EQ(ldimesh_add_field(a, "T", t.data(), count, LDIMESH_FLOAT32), LDIMESH_ERROR_ARGUMENT);
+  EXPECT_NE(std::string(ldimesh_last_error(a)).find("no block added yet"), std::string::npos)
+      << ldimesh_last_error(a);
+  add_slab(a, slab);
+  EXPECT_EQ(ldimesh_add_field(a, "T", t.data(), count - 1, LDIMESH_FLOAT32),
+            LDIMESH_ERROR_ARGUMENT);
+  EXPECT_NE(std::string(ldimesh_last_error(a))
+                .find("holds " + std::to_string(count - 1) + " values, the block reads " +
+                      std::to_string(count)),
+            std::string::npos)
+      << ldimesh_last_error(a);
+  EXPECT_EQ(ldimesh_add_field(a, "T", t.data(), count, 7), LDIMESH_ERROR_ARGUMENT);
+  EXPECT_EQ(ldimesh_add_field(a, "", t.data(), count, LDIMESH_FLOAT32), LDIMESH_ERROR_ARGUMENT);
+  EXPECT_EQ(ldimesh_add_field(a, nullptr, t.data(), count, LDIMESH_FLOAT32),
+            LDIMESH_ERROR_ARGUMENT);
+  EXPECT_EQ(ldimesh_add_field(a, "T", t.data(), count, LDIMESH_FLOAT32), LDIMESH_OK)
+      << ldimesh_last_error(a);
+  EXPECT_EQ(ldimesh_execute(a, 1, 0.0), LDIMESH_OK) << ldimesh_last_error(a);
+  EXPECT_EQ(ldimesh_finalize(a), LDIMESH_OK) << ldimesh_last_error(a);
+  if (rank_of() == 0) {
+    const Mesh mesh = published_mesh(dir, 1);
+    expect_on_sphere(mesh);
+    testing::expect_coloured_by(
+        mesh, published_step(dir, 1), "T", [](glm::dvec3 x) { return x.x - x.y; }, 1.0, 2.0 / 48);
+  }
+  ldimesh_destroy(a);
+}
+
 TEST(CApi, NaNsInTheFieldAreCountedAndTheirCellsLeftOut) {
   const std::string dir = temp_dir("nan");
   ldimesh_adaptor* a = create(options(dir));

@@ -25,7 +25,7 @@ using testing::ranks;
 ldimesh_adaptor* create(const std::string& dir) {
   const std::string options =
       R"({"server": {"enabled": false}, "log": false, "resolution": 48, "isovalues": [0.3],
-          "output_dir": ")" +
+          "colour_by": "y", "output_dir": ")" +
       dir + R"("})";
   ldimesh_adaptor* a = nullptr;
   EXPECT_EQ(ldimesh_create(MPI_COMM_WORLD, options.c_str(), &a), LDIMESH_OK)
@@ -37,7 +37,8 @@ ldimesh_adaptor* create(const std::string& dir) {
 
 // The field x on 2³ elements of order 2, curved (interiors bent along x) or straight with float
 // values: the isosurface x = 0.3 is a plane, whatever the geometry, and the published vertices
-// lie on it (within Draco's quantization).
+// lie on it (within Draco's quantization); coloured by the field y (ldimesh_add_field), which
+// the elements represent exactly: each vertex's colour is its y.
 TEST(FortranApi, HexElementsArePublishedOnTheirIsosurface) {
   for (const int curved : {1, 0}) {
     const std::string what = curved ? "curved geometry" : "corners, float values";
@@ -63,6 +64,9 @@ TEST(FortranApi, HexElementsArePublishedOnTheirIsosurface) {
       // The whole plane across the cube, not a piece of it.
       EXPECT_LT(std::max(lo.y, lo.z), 0.05) << what;
       EXPECT_GT(std::min(hi.y, hi.z), 0.95) << what;
+      testing::expect_coloured_by(
+          mesh, testing::published_step(dir, 1), "y", [](glm::dvec3 p) { return p.y; }, 1.0,
+          1.0 / 48);
     }
     ldimesh_destroy(a);
   }

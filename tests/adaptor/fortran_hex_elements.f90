@@ -11,6 +11,9 @@ module fortran_hex_elements
   ! Read by the adaptor at every due step: kept here, with the TARGET attribute.
   real(c_double), allocatable, target, save :: values(:, :), geometry(:, :, :), corners(:, :, :)
   real(c_float), allocatable, target, save :: values4(:, :)
+  ! The field y beside x (ldimesh_add_field), double and float.
+  real(c_double), allocatable, target, save :: y(:, :)
+  real(c_float), allocatable, target, save :: y4(:, :)
 
 contains
 
@@ -28,7 +31,8 @@ contains
 
   ! Adds this rank's elements (element e on rank mod(e, ranks)) of the field x: curved elements
   ! (geometry of order 2, double values) when curved /= 0, else the straight cubes from their 8
-  ! corners (x fastest, then y, then z) with float values. Returns the module's status.
+  ! corners (x fastest, then y, then z) with float values; and the field y as their field "y"
+  ! (of the same type). Returns the module's status.
   integer(c_int) function fortran_add_hex_elements(handle, rank, ranks, curved) &
       bind(C, name='fortran_add_hex_elements')
     type(c_ptr), value :: handle
@@ -41,9 +45,10 @@ contains
     do e = 0, n**3 - 1
       if (mod(e, ranks) == rank) count = count + 1
     end do
-    if (allocated(values)) deallocate (values, values4, geometry, corners)
+    if (allocated(values)) deallocate (values, values4, geometry, corners, y, y4)
     allocate (values((p + 1)**3, count), values4((p + 1)**3, count), &
-              geometry(3, (q + 1)**3, count), corners(3, 8, count))
+              geometry(3, (q + 1)**3, count), corners(3, 8, count), y((p + 1)**3, count), &
+              y4((p + 1)**3, count))
     count = 0
     do e = 0, n**3 - 1
       if (mod(e, ranks) /= rank) cycle
@@ -57,6 +62,8 @@ contains
             geometry(:, m, count) = x
             values(m, count) = x(1)
             values4(m, count) = real(x(1), c_float)
+            y(m, count) = x(2)
+            y4(m, count) = real(x(2), c_float)
           end do
         end do
       end do
@@ -67,8 +74,10 @@ contains
     if (curved /= 0) then
       call ldimesh_add_hex_elements(insitu, p, LDIMESH_NODES_GLL, values, ierr, &
                                     geometry=geometry, geometry_order=q)
+      if (ierr == LDIMESH_OK) call ldimesh_add_field(insitu, 'y', y, ierr)
     else
       call ldimesh_add_hex_elements(insitu, p, LDIMESH_NODES_GLL, values4, ierr, corners=corners)
+      if (ierr == LDIMESH_OK) call ldimesh_add_field(insitu, 'y', y4, ierr)
     end if
     fortran_add_hex_elements = int(ierr, c_int)
   end function fortran_add_hex_elements

@@ -1,4 +1,5 @@
-// What the adaptor tests read back: a published step's metadata from its output_dir files.
+// What the adaptor tests read back: a published step's metadata and mesh from its output_dir
+// files, and checks of what a viewer gets.
 #pragma once
 
 #include <algorithm>
@@ -59,6 +60,32 @@ inline void expect_on_grid_sphere(const Mesh& mesh, double iso, double h, int re
   EXPECT_GE(lo, r - inwards - quantization)
       << "a published vertex is inside the sphere |x| = " << r;
   EXPECT_LE(hi, r + quantization) << "a published vertex is outside the sphere |x| = " << r;
+}
+
+// Every vertex's colour is `colour(vertex)` within what the wire and the GLB allow, computed
+// here from their bit budgets: positions within a tenth of a pixel (`pixel`) per axis, times the
+// field's largest slope `slope` per axis; the value within half a step of 14 bits (the fragments'
+// scalar_bits) and of 12 bits (the GLB's TEXCOORD_0) over the range; and float rounding.
+template <class Colour>
+inline void expect_coloured_by(const Mesh& mesh, const StepMetadata& meta, const std::string& name,
+                               Colour colour, double slope, double pixel) {
+  ASSERT_TRUE(meta.scalar.has_value()) << "the step's metadata names no field";
+  EXPECT_EQ(meta.scalar->name, name);
+  ASSERT_EQ(mesh.scalars.size(), mesh.vertex_count());
+  ASSERT_GT(mesh.vertex_count(), 300u);
+  // The decoded scalars are TEXCOORD_0.u: 0 and 1 at the range's ends.
+  const auto [lo, hi] = std::minmax_element(mesh.scalars.begin(), mesh.scalars.end());
+  EXPECT_NEAR(*lo, 0.0f, 1e-6f);
+  EXPECT_NEAR(*hi, 1.0f, 1e-6f);
+  const double range = meta.scalar->max - meta.scalar->min;
+  const double bound =
+      3.0 * slope * 0.1 * pixel + range / (2.0 * 16382.0) + range / (2.0 * 4095.0) + 1e-5;
+  double worst = 0.0;
+  for (std::size_t v = 0; v < mesh.vertex_count(); ++v) {
+    const double value = meta.scalar->min + double(mesh.scalars[v]) * range;
+    worst = std::max(worst, std::abs(value - colour(glm::dvec3(mesh.positions[v]))));
+  }
+  EXPECT_LT(worst, bound) << "colour of a published vertex vs the field there";
 }
 
 }  // namespace ldimesh::testing

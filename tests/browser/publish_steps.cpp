@@ -1,7 +1,8 @@
 // A job's server for the browser test, without the job: publishes real meshes as the root rank
 // would. Step 1 (the torus) is published at start; each line "next" on standard input publishes
-// the next step (the Barth sextic, then Klein bottle …); "quit" or the end of input stops.
-// Prints "url URL" once the server listens and "published STEP TRIANGLES" after each step.
+// the next step (the Barth sextic, then Klein bottle …), each coloured by its vertices' x; "quit" or
+// the end of input stops. Prints "url URL" once the server listens and "published STEP TRIANGLES"
+// after each step.
 //
 //   ldimesh_test_publisher REPO_ROOT
 #include <cstdio>
@@ -28,7 +29,10 @@ std::size_t publish(ldimesh::SnapshotStore& store, std::uint64_t step, const cha
   std::vector<ldimesh::Ldi> ldis;
   for (const ldimesh::View& v : ldimesh::make_axis_views(s->domain, res))
     ldis.push_back(caster.cast(v));
-  const ldimesh::MeshingResult result = ldimesh::mesh_ldis(ldis, {});
+  ldimesh::MeshingResult result = ldimesh::mesh_ldis(ldis, {});
+  // A field to colour by: each vertex's x (the camera sees both ends of every surface).
+  for (const glm::vec3& p : result.mesh.positions)
+    result.mesh.scalars.push_back(p.x);
   ldimesh::GlbOptions options;
   options.pixel_size = ldis.front().view.spacing;
   std::vector<std::uint8_t> glb;
@@ -40,6 +44,7 @@ std::size_t publish(ldimesh::SnapshotStore& store, std::uint64_t step, const cha
     views.push_back(l.view);
   ldimesh::StepMetadata meta = ldimesh::describe_step(
       step, 0.1 * double(step), {s->isovalue}, views, 0.5, result.samples, result.quads, info);
+  meta.scalar = ldimesh::ScalarRange{"x", info.scalar_min, info.scalar_max};
   meta.seconds = {{"mesh", result.seconds.match + result.seconds.trim + result.seconds.assemble}};
   ldimesh::Snapshot snapshot = ldimesh::make_snapshot(std::move(meta), std::move(glb));
   if (const ldimesh::Status st = store.publish(std::move(snapshot)); !st)

@@ -12,6 +12,10 @@
 //   box of the mesh shown projects inside the view) and re-frames for a surface that outgrows
 //   what it framed, until the person moves it: then it stays put; "reset camera" frames again;
 // - the slider shows an older step, "follow" goes back to the newest;
+// - colouring by the field (each vertex's x): chosen by itself for a step that carries
+//   one, the canvas shows the colour map's colours (viridis' purple, not cool–warm's red, and
+//   the other way round after switching maps), the legend names the field and shows the step's
+//   range; a fixed range above every value paints the whole surface in the map's lowest colour;
 // - no request is answered with an error (favicon included), no three.js interleaved-attribute
 //   warning in the console.
 // Screenshots are kept.
@@ -55,19 +59,46 @@ function instrument() {
     const last = window.testShown[window.testShown.length - 1];
     if (step !== undefined && (!last || last.step !== Number(step))) window.testShown.push({ step: Number(step), t: Date.now() });
   }).observe(document, { subtree: true, attributes: true, attributeFilter: ['data-loaded-step'] });
-  // The canvas's pixels that differ from the background #1d2026 (where the mesh shows), row by
-  // row: { width, height, mesh } with mesh[y * width + x] true there.
-  window.testMeshPixels = () => {
+  // The canvas's RGBA bytes, row by row.
+  window.testCanvasPixels = () => {
     const gl = document.getElementById('view');
     const copy = document.createElement('canvas');
     copy.width = gl.width; copy.height = gl.height;
     const ctx = copy.getContext('2d');
     ctx.drawImage(gl, 0, 0);
-    const d = ctx.getImageData(0, 0, copy.width, copy.height).data;
+    return { width: copy.width, height: copy.height, data: ctx.getImageData(0, 0, copy.width, copy.height).data };
+  };
+  // The canvas's pixels that differ from the background #1d2026 (where the mesh shows), row by
+  // row: { width, height, mesh } with mesh[y * width + x] true there.
+  window.testMeshPixels = () => {
+    const { width, height, data: d } = window.testCanvasPixels();
     const mesh = new Array(d.length / 4);
     for (let i = 0; i < d.length; i += 4)
       mesh[i / 4] = Math.abs(d[i] - 0x1d) + Math.abs(d[i + 1] - 0x20) + Math.abs(d[i + 2] - 0x26) > 24;
-    return { width: copy.width, height: copy.height, mesh };
+    return { width, height, mesh };
+  };
+  // Mesh pixels by hue: viridis' purple end and cool–warm's red end, which the other map does
+  // not produce.
+  window.testColourCounts = () => {
+    const d = window.testCanvasPixels().data;
+    let mesh = 0, purple = 0, red = 0, green = 0;
+    for (let i = 0; i < d.length; i += 4) {
+      const [r, g, b] = [d[i], d[i + 1], d[i + 2]];
+      if (Math.abs(r - 0x1d) + Math.abs(g - 0x20) + Math.abs(b - 0x26) <= 24) continue;
+      mesh++;
+      // By hue (degrees) and saturation, which lighting changes little: viridis' low end
+      // sRGB (68, 1, 84) has hue 288, cool–warm's high end (180, 4, 38) 348, its low end 232;
+      // viridis passes from 288 down through blue and green to yellow (55), never red;
+      // cool–warm's hues stay near 232 and 348–20 (its middle is grey), never green.
+      const max = Math.max(r, g, b), min = Math.min(r, g, b);
+      if (max < 16 || max - min < 0.25 * max) continue;
+      let hue = max === r ? (g - b) / (max - min) : max === g ? 2 + (b - r) / (max - min) : 4 + (r - g) / (max - min);
+      hue = (60 * hue + 360) % 360;
+      if (hue >= 260 && hue <= 320) purple++;
+      if (hue >= 330 || hue <= 15) red++;
+      if (hue >= 70 && hue <= 180) green++;
+    }
+    return { mesh, purple, red, green };
   };
 }
 
@@ -151,6 +182,43 @@ try {
   });
   check(drawn > 0.03, `the canvas is not blank (${(100 * drawn).toFixed(1)} % of its pixels show the mesh)`);
   await page.screenshot({ path: `${artifacts}/viewer_step1.png` });
+
+  // Colour by the field: chosen by itself, the colour map on the canvas, the legend.
+  const field = await page.evaluate(() => window.ldimesh.loaded.scalar);
+  const legend = () => page.evaluate(() => ({
+    hidden: document.getElementById('legend').hidden,
+    name: document.getElementById('legend-name').textContent,
+    min: document.getElementById('legend-min').textContent,
+    max: document.getElementById('legend-max').textContent,
+  }));
+  const colours = async () => { await settle(10000); return page.evaluate(() => window.testColourCounts()); };
+  check(field && field.name === 'x' && field.min < field.max, `step 1 carries a field to colour by: ${JSON.stringify(field)}`);
+  check(await page.evaluate(() => document.getElementById('colour').value) === 'scalar', 'colouring by the field is chosen by itself');
+  let shownLegend = await legend();
+  check(!shownLegend.hidden && shownLegend.name === 'x' && shownLegend.min === Number(field.min).toPrecision(4) &&
+    shownLegend.max === Number(field.max).toPrecision(4), `the legend names the field and its range: ${JSON.stringify(shownLegend)}`);
+  let counts = await colours();
+  check(counts.green > 0.2 * counts.mesh && counts.purple > 0.002 * counts.mesh && counts.red === 0,
+    `viridis on the canvas: ${counts.green} green, ${counts.purple} purple, ${counts.red} red of ${counts.mesh} mesh pixels`);
+  await page.selectOption('#colourmap', 'coolwarm');
+  counts = await colours();
+  check(counts.red > 0.05 * counts.mesh && counts.purple === 0 && counts.green === 0,
+    `cool–warm on the canvas: ${counts.red} red, ${counts.purple} purple, ${counts.green} green of ${counts.mesh} mesh pixels`);
+  await page.screenshot({ path: `${artifacts}/viewer_coolwarm.png` });
+  await page.selectOption('#colourmap', 'viridis');
+  // A fixed range above every value: the whole surface in viridis' lowest colour.
+  const above = [field.max + 1, field.max + 2];
+  await page.click('#range-auto');
+  await page.fill('#range-min', String(above[0]));
+  await page.fill('#range-max', String(above[1]));
+  await page.dispatchEvent('#range-max', 'change');
+  counts = await colours();
+  shownLegend = await legend();
+  check(counts.purple > 0.8 * counts.mesh && shownLegend.min === Number(above[0]).toPrecision(4),
+    `a fixed range above every value: ${counts.purple} of ${counts.mesh} mesh pixels purple, legend from ${shownLegend.min}`);
+  await page.click('#range-auto');
+  shownLegend = await legend();
+  check(shownLegend.min === Number(field.min).toPrecision(4), `back to the step's range: legend from ${shownLegend.min}`);
 
   publisher.stdin.write('next\n');
   const second = published(await nextLine());

@@ -99,6 +99,29 @@ PY
 grid_tris=$(sed -n 's/^ *"triangles": \([0-9]*\),*$/\1/p' "$tmp/grid.json")
 [ "${grid_tris:-0}" -gt 100 ] || fail "grid: implausible triangle count '$grid_tris'"
 expect_error "grid size mismatch" mesh --grid "$tmp/v.raw" --dims 12,12,13
+# --colour-by FILE: a second raw volume of the same layout (c = x - 2z, linear: its interpolant
+# is exact) colours the isosurface: every PLY vertex carries c at its position, the JSON summary
+# its range; a missing colour file is a one-line error.
+python3 - "$tmp/c.raw" <<'PY'
+import array, sys
+n = 12
+a = array.array('f', [float(i - 2 * k) for k in range(n) for j in range(n) for i in range(n)])
+open(sys.argv[1], 'wb').write(a.tobytes())
+PY
+"$ldimesh" mesh --grid "$tmp/v.raw" --dims 12,12,12 --iso 16.5 --res 32 --colour-by "$tmp/c.raw" \
+  --json --out "$tmp/gc.ply" >"$tmp/gc.json" || fail "grid --colour-by run failed"
+python3 - "$tmp/gc.ply" "$tmp/gc.json" <<'PY' || fail "grid --colour-by: colours are not x - 2z"
+import json, struct, sys
+data = open(sys.argv[1], "rb").read()
+header, body = data.split(b"end_header\n", 1)
+n = int(next(l for l in header.decode().splitlines() if l.startswith("element vertex")).split()[2])
+worst = max(abs(v[6] - (v[0] - 2 * v[2])) for v in struct.iter_unpack("<7f", body[:28 * n]))
+c = json.load(open(sys.argv[2]))["colour"]
+# half a step of the fragments' 14 scalar bits over the range, and float rounding
+print(f"grid --colour-by: {n} vertices, largest |value - (x - 2z)| {worst:.1e}, range [{c['min']}, {c['max']}]")
+sys.exit(0 if n > 100 and worst < (c["max"] - c["min"]) / (2 * 16382) + 1e-4 and c["min"] < c["max"] else 1)
+PY
+expect_error "missing colour volume" mesh --grid "$tmp/v.raw" --dims 12,12,12 --colour-by "$tmp/w.missing"
 expect_error "grid without dims" mesh --grid "$tmp/v.raw"
 expect_error "grid and surface" mesh --grid "$tmp/v.raw" --dims 12,12,12 --surface sphere
 expect_error "neither grid nor surface" mesh --res 16

@@ -5,7 +5,7 @@
                                (exact: degree 2 per axis on straight cells), plus linear
                                VTK_HEXAHEDRON cells beyond x = 1 (r > 1 there: no surface), as
                                mixed-order files have them; a second point array "vec" with 3
-                               components.
+                               components, and "h" = x + 2y (exact on every cell: to colour by).
   make_vtu.py tetra OUT.vtu    one VTK_TETRA beside one Lagrange hexahedron
   make_vtu.py degrees OUT.vtu  one order-2 Lagrange hexahedron whose HigherOrderDegrees say 2, 2, 3
   make_vtu.py pieces OUT.pvtu  the sphere's cells as a .pvtu record over two .vtu pieces
@@ -61,6 +61,12 @@ def main():
         for p in range(points.GetNumberOfPoints()):
             vec.InsertNextTuple(points.GetPoint(p))
         grid.GetPointData().AddArray(vec)
+        h = vtkDoubleArray()
+        h.SetName("h")
+        for p in range(points.GetNumberOfPoints()):
+            x = points.GetPoint(p)
+            h.InsertNextValue(x[0] + 2 * x[1])
+        grid.GetPointData().AddArray(h)
     elif kind == "tetra":
         lagrange_cell(grid, points, values, [0, 0, 0], 1, 2, r2)
         ids = [points.InsertNextPoint(x) for x in [(2, 0, 0), (3, 0, 0), (2, 1, 0), (2, 0, 1)]]

@@ -30,6 +30,32 @@ print(f"sphere.vtu at r² = 0.49: {triangles} triangles, mean {d['mean']:.1e}, m
 sys.exit(0 if d["mean"] < 3e-4 and d["max"] < 2e-3 and triangles > 10000 else 1)
 PY
 
+# --colour-by: the isosurface of r coloured by the file's array h = x + 2y, which every cell
+# represents exactly: each vertex of the PLY (float value property) carries x + 2y of its
+# position, within half a step of the fragments' 14 scalar bits over the range and the float
+# depths' rounding; the summary names the field and its range.
+"$ldimesh" mesh --vtu "$tmp/sphere.vtu" --field r --iso 0.49 --colour-by h --res 96 \
+  --out "$tmp/coloured.ply" --json >"$tmp/coloured.json" 2>"$tmp/coloured.err" ||
+  { cat "$tmp/coloured.err"; fail "--vtu --colour-by h"; }
+/usr/bin/python3 - "$tmp/coloured.ply" "$tmp/coloured.json" <<'PY' || fail "the colours are not x + 2y"
+import json, struct, sys
+data = open(sys.argv[1], "rb").read()
+header, body = data.split(b"end_header\n", 1)
+lines = header.decode().splitlines()
+assert "property float value" in lines, "no value property"
+n = int(next(l for l in lines if l.startswith("element vertex")).split()[2])
+worst, lo, hi = 0.0, float("inf"), -float("inf")
+for v in range(n):
+    x, y, z, nx, ny, nz, value = struct.unpack_from("<7f", body, 28 * v)
+    worst = max(worst, abs(value - (x + 2 * y)))
+    lo, hi = min(lo, value), max(hi, value)
+colour = json.load(open(sys.argv[2]))["colour"]
+print(f"{n} vertices coloured by h: largest |value - (x + 2y)| {worst:.1e}, range [{lo:.4f}, {hi:.4f}]; "
+      f"summary {colour}")
+sys.exit(0 if n > 5000 and worst < (hi - lo) / (2 * 16382) + 2e-5 and colour["field"] == "h" and colour["min"] == lo and
+         colour["max"] == hi and colour["uncoloured_vertices"] == 0 and hi - lo > 2.5 else 1)
+PY
+
 # `ldimesh distance --vtu`: the same mesh measured against the file's own isosurface (the cells'
 # polynomials, looked up point by point) — here the sphere itself, so the same figures.
 "$ldimesh" distance "$tmp/sphere.ply" --vtu "$tmp/sphere.vtu" --field r --iso 0.49 --json \
@@ -76,6 +102,9 @@ expect_error() {  # expect_error PATTERN ARGS...
 }
 expect_error "no point array 'u' (point arrays: " --vtu "$tmp/sphere.vtu" --field u
 expect_error "'vec' has 3 components" --vtu "$tmp/sphere.vtu" --field vec
+expect_error "no point array 'nope'" --vtu "$tmp/sphere.vtu" --field r --colour-by nope
+expect_error "'vec' has 3 components" --vtu "$tmp/sphere.vtu" --field r --colour-by vec
+expect_error "--colour-by needs --grid or --vtu" --surface sphere --colour-by h
 expect_error "cell 1 is VTK_TETRA" --vtu "$tmp/tetra.vtu" --field r
 expect_error "cell 0: orders 2, 2, 3 differ" --vtu "$tmp/degrees.vtu" --field r
 expect_error "no such file" --vtu "$tmp/none.vtu" --field r

@@ -21,7 +21,7 @@ namespace ldimesh {
 namespace {
 
 constexpr std::array<std::uint8_t, 4> kMagic{'L', 'D', 'I', 'F'};
-constexpr std::uint8_t kVersion = 1;
+constexpr std::uint8_t kVersion = 2;  // 2: lossy scalars quantized (1: raw floats)
 constexpr std::size_t kHeaderSize = 76;
 constexpr std::size_t kHeaderCrcOffset = 72;
 constexpr std::uint8_t kFlagLossless = 1;
@@ -51,7 +51,11 @@ constexpr bool kVerifyChecksums = true;
 constexpr std::uint64_t kMinPixelBytes = 2, kMaxPixelBytes = 8;
 constexpr std::uint64_t kMinLossySampleBytes = 3, kMaxLossySampleBytes = 10;
 constexpr std::uint64_t kLosslessSampleBytes = 16;
-constexpr std::uint64_t kScalarBytes = 4;
+constexpr std::uint64_t kScalarBytes = 4;  // lossless: a raw float
+// Lossy scalars: the stream's bits (1 byte) and float range (2 × 4 bytes), then a residual per
+// sample, zigzag(±(2²⁴ − 1)) ≤ 4 bytes.
+constexpr std::uint64_t kScalarRangeBytes = 9;
+constexpr std::uint64_t kMinLossyScalarBytes = 1, kMaxLossyScalarBytes = 4;
 
 // CRC-32 of IEEE 802.3 / ISO-HDLC (zlib, PNG): reflected polynomial 0xEDB88320, initial and
 // final XOR 0xFFFFFFFF; table-driven byte at a time (Sarwate 1988, CACM 31(8)). Check value
@@ -184,6 +188,60 @@ struct DepthQuantizer {
     return float(lo + double(q) * ((hi - lo) / double(max_q)));
   }
 };
+
+// The scalar bits the encoder really uses over [lo, hi] (at least 1): as for depths, a step of
+// at least two float spacings, with 2^b − 2 steps (one code is kept for non-finite values).
+int effective_scalar_bits(int bits, double lo, double hi) {
+  const double spacing = float_spacing_at(lo, hi);
+  while (bits > 1 && (hi - lo) / double((std::uint32_t(1) << bits) - 2) < 2.0 * spacing)
+    --bits;
+  return bits;
+}
+
+// Scalars (a colour field) of a lossy fragment: a finite value x is q = round((x − lo)/(hi −
+// lo)·top), top = 2^b − 2, over the fragment's finite values [lo, hi], decoded as lo + q·(hi −
+// lo)/top rounded to float (exactly lo at 0, hi at top); a non-finite one is q = top + 1,
+// decoded as NaN. With b = 1 (top = 0) every finite value is lo.
+struct ScalarQuantizer {
+  double lo = 0.0, hi = 0.0;
+  std::uint32_t top = 0;
+
+  ScalarQuantizer(int bits, double lo_, double hi_)
+      : lo(lo_), hi(hi_), top((std::uint32_t(1) << bits) - 2) {}
+
+  std::uint32_t max_code() const { return top + 1; }
+  std::uint32_t quantize(float x) const {
+    if (!std::isfinite(x)) return top + 1;
+    if (top == 0) return 0;
+    const double t = (double(x) - lo) / (hi - lo) * double(top);
+    return round_nonnegative(std::min(std::max(t, 0.0), double(top)));
+  }
+  float dequantize(std::uint32_t q) const {
+    if (q > top) return std::numeric_limits<float>::quiet_NaN();
+    if (q == top) return float(hi);
+    return float(lo + double(q) * ((hi - lo) / double(top)));
+  }
+};
+
+// The range and bits of a lossy fragment's scalars: [lo, hi] of its finite values (0, 0 without
+// any), collapsed to lo where one bit is left.
+struct ScalarRange {
+  int bits = 1;
+  float lo = 0.0f, hi = 0.0f;
+};
+ScalarRange scalar_range(const std::vector<float>& scalars, int bits) {
+  ScalarRange r;
+  bool any = false;
+  for (float x : scalars) {
+    if (!std::isfinite(x)) continue;
+    r.lo = any ? std::min(r.lo, x) : x;
+    r.hi = any ? std::max(r.hi, x) : x;
+    any = true;
+  }
+  r.bits = effective_scalar_bits(bits, r.lo, r.hi);
+  if (r.bits == 1) r.hi = r.lo;
+  return r;
+}
 
 // −0 counts as positive, so ±0 get one code.
 double sign_not_zero(double v) {
@@ -331,14 +389,22 @@ void put_header(std::vector<std::uint8_t>& out, const Header& h) {
 
 // Bounds on the payload size of a header's counts (the streams' element sizes above).
 std::uint64_t min_payload_size(const Header& h) {
-  const std::uint64_t sample = (h.lossless() ? kLosslessSampleBytes : kMinLossySampleBytes) +
-                               (h.has_scalar() ? kScalarBytes : 0);
-  return h.listed_pixels * kMinPixelBytes + h.samples * sample;
+  const std::uint64_t scalar = !h.has_scalar() ? 0
+                               : h.lossless()  ? kScalarBytes
+                                               : kMinLossyScalarBytes;
+  const std::uint64_t sample =
+      (h.lossless() ? kLosslessSampleBytes : kMinLossySampleBytes) + scalar;
+  const std::uint64_t range = h.has_scalar() && !h.lossless() ? kScalarRangeBytes : 0;
+  return h.listed_pixels * kMinPixelBytes + h.samples * sample + range;
 }
 std::uint64_t max_payload_size(const Header& h) {
-  const std::uint64_t sample = (h.lossless() ? kLosslessSampleBytes : kMaxLossySampleBytes) +
-                               (h.has_scalar() ? kScalarBytes : 0);
-  return h.listed_pixels * kMaxPixelBytes + h.samples * sample;
+  const std::uint64_t scalar = !h.has_scalar() ? 0
+                               : h.lossless()  ? kScalarBytes
+                                               : kMaxLossyScalarBytes;
+  const std::uint64_t sample =
+      (h.lossless() ? kLosslessSampleBytes : kMaxLossySampleBytes) + scalar;
+  const std::uint64_t range = h.has_scalar() && !h.lossless() ? kScalarRangeBytes : 0;
+  return h.listed_pixels * kMaxPixelBytes + h.samples * sample + range;
 }
 
 void check_encoding(const FragmentEncoding& e) {
@@ -348,6 +414,9 @@ void check_encoding(const FragmentEncoding& e) {
   if (e.normal_bits < 2 || e.normal_bits > 16)
     throw std::invalid_argument("encode_fragment: normal_bits must be in 2..16, not " +
                                 std::to_string(e.normal_bits));
+  if (e.scalar_bits < 2 || e.scalar_bits > 24)
+    throw std::invalid_argument("encode_fragment: scalar_bits must be in 2..24, not " +
+                                std::to_string(e.scalar_bits));
   if (e.zstd_level < ZSTD_minCLevel() || e.zstd_level > ZSTD_maxCLevel())
     throw std::invalid_argument("encode_fragment: zstd_level must be in " +
                                 std::to_string(ZSTD_minCLevel()) + ".." +
@@ -501,11 +570,25 @@ Status decode_payload(std::span<const std::uint8_t> payload, const Header& h, Ld
       f.normal[s] = nq.dequantize(q[s], v[s]);
   }
   f.scalar.clear();
-  if (h.has_scalar()) {
+  if (h.has_scalar() && h.lossless()) {
     f.scalar.resize(samples);
     for (float& x : f.scalar)
       x = std::bit_cast<float>(std::uint32_t(in.le(4)));
     if (in.failed) return fail("truncated payload");
+  } else if (h.has_scalar()) {
+    const int bits = int(in.le(1));
+    const float lo = std::bit_cast<float>(std::uint32_t(in.le(4)));
+    const float hi = std::bit_cast<float>(std::uint32_t(in.le(4)));
+    if (in.failed) return fail("truncated payload");
+    if (bits < 1 || bits > 24 || !std::isfinite(lo) || !std::isfinite(hi) || !(lo <= hi) ||
+        (bits == 1 && lo != hi))
+      return fail("invalid scalar range");
+    const ScalarQuantizer sq(bits, lo, hi);
+    std::vector<std::uint32_t> q(samples);
+    if (!get_predicted(in, f.counts, sq.max_code(), q)) return fail("invalid scalar residual");
+    f.scalar.resize(samples);
+    for (std::size_t s = 0; s < samples; ++s)
+      f.scalar[s] = sq.dequantize(q[s]);
   }
   if (in.pos != payload.size()) return fail("payload longer than its streams");
   return validate_fragment(f);
@@ -553,12 +636,22 @@ void check_encodable(const LdiFragment& f, const FragmentEncoding& e) {
 
 }  // namespace
 
-void check_fragment_encodable(const LdiFragment& f, const FragmentEncoding& e) {
+FragmentQuantizer check_fragment_encodable(const LdiFragment& f, const FragmentEncoding& e) {
   check_encodable(f, e);
+  FragmentQuantizer q;
+  q.encoding = e;
+  if (!e.lossless && !f.scalar.empty()) {
+    const ScalarRange r = scalar_range(f.scalar, e.scalar_bits);
+    q.scalar_bits = r.bits;
+    q.scalar_lo = r.lo;
+    q.scalar_hi = r.hi;
+  }
+  return q;
 }
 
-void quantize_samples(LdiFragment& f, const FragmentEncoding& e, std::size_t begin,
+void quantize_samples(LdiFragment& f, const FragmentQuantizer& quantizer, std::size_t begin,
                       std::size_t end) {
+  const FragmentEncoding& e = quantizer.encoding;
   if (e.lossless) return;
   end = std::min(end, f.depth.size());
   // The encoder's quantizers and the decoder's reconstruction; prediction and zstd are
@@ -572,15 +665,18 @@ void quantize_samples(LdiFragment& f, const FragmentEncoding& e, std::size_t beg
     nq.quantize(f.normal[s], u, v);
     f.normal[s] = nq.dequantize(u, v);
   }
+  if (f.scalar.empty()) return;
+  const ScalarQuantizer sq(quantizer.scalar_bits, quantizer.scalar_lo, quantizer.scalar_hi);
+  for (std::size_t s = begin; s < end; ++s)
+    f.scalar[s] = sq.dequantize(sq.quantize(f.scalar[s]));
 }
 
 void quantize_fragment(LdiFragment& f, const FragmentEncoding& e) {
-  check_encodable(f, e);
-  quantize_samples(f, e, 0, f.depth.size());
+  quantize_samples(f, check_fragment_encodable(f, e), 0, f.depth.size());
 }
 
 std::vector<std::uint8_t> encode_fragment(const LdiFragment& f, const FragmentEncoding& e) {
-  check_encodable(f, e);
+  const FragmentQuantizer quantizer = check_fragment_encodable(f, e);
 
   Header h;
   h.flags =
@@ -628,8 +724,19 @@ std::vector<std::uint8_t> encode_fragment(const LdiFragment& f, const FragmentEn
     put_predicted(payload, f.counts, q);
     put_predicted(payload, f.counts, v);
   }
-  for (float x : f.scalar)
-    put_le(payload, std::bit_cast<std::uint32_t>(x), 4);
+  if (e.lossless) {
+    for (float x : f.scalar)
+      put_le(payload, std::bit_cast<std::uint32_t>(x), 4);
+  } else if (!f.scalar.empty()) {
+    put_le(payload, std::uint64_t(quantizer.scalar_bits), 1);
+    put_le(payload, std::bit_cast<std::uint32_t>(quantizer.scalar_lo), 4);
+    put_le(payload, std::bit_cast<std::uint32_t>(quantizer.scalar_hi), 4);
+    const ScalarQuantizer sq(quantizer.scalar_bits, quantizer.scalar_lo, quantizer.scalar_hi);
+    std::vector<std::uint32_t> q(n);
+    for (std::size_t s = 0; s < n; ++s)
+      q[s] = sq.quantize(f.scalar[s]);
+    put_predicted(payload, f.counts, q);
+  }
   h.payload_size = payload.size();
 
   std::vector<std::uint8_t> out;
@@ -676,6 +783,14 @@ double depth_error_bound(const FragmentEncoding& e, double lo, double hi) {
   const double spacing = float_spacing_at(lo, hi);
   if (bits == 0) return (hi - lo) + spacing;
   return (hi - lo) / (2.0 * double((std::uint32_t(1) << bits) - 1)) + spacing;
+}
+
+double scalar_error_bound(const FragmentEncoding& e, double lo, double hi) {
+  if (e.lossless) return 0.0;
+  const int bits = effective_scalar_bits(e.scalar_bits, lo, hi);
+  const double spacing = float_spacing_at(lo, hi);
+  if (bits == 1) return (hi - lo) + spacing;
+  return (hi - lo) / (2.0 * double((std::uint32_t(1) << bits) - 2)) + spacing;
 }
 
 double normal_error_bound(const FragmentEncoding& e) {

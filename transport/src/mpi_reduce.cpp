@@ -165,11 +165,11 @@ Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragm
     tbb::parallel_for(std::size_t(0), fragments.size(), [&](std::size_t v) {
       LdiFragment& f = fragments[v];
       try {
-        check_fragment_encodable(f, encoding);
+        const FragmentQuantizer quantizer = check_fragment_encodable(f, encoding);
         // The samples in parallel too: a rank has few views (three fragments on its threads).
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, f.depth.size(), 8192),
                           [&](const tbb::blocked_range<std::size_t>& r) {
-                            quantize_samples(f, encoding, r.begin(), r.end());
+                            quantize_samples(f, quantizer, r.begin(), r.end());
                           });
       } catch (...) {
         // Never leave the collective: go on with the fragment emptied (its view kept), and

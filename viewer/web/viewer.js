@@ -91,7 +91,6 @@ function showMetadata(meta, triangles) {
   const rows = Object.entries(meta.seconds || {}).map(
     ([stage, s]) => `<tr><th>${stage}</th><td>${Number(s).toFixed(3)}</td></tr>`);
   $('stages').innerHTML = rows.join('');
-  $('colour').querySelector('option[value=scalar]').disabled = !meta.scalar;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -119,31 +118,94 @@ draco.setDecoderPath('/vendor/three/examples/jsm/libs/draco/');
 const loader = new GLTFLoader();
 loader.setDRACOLoader(draco);
 
-// Viridis, sampled (matplotlib's colour map, public domain).
-const viridis = [[0.267, 0.005, 0.329], [0.283, 0.141, 0.458], [0.254, 0.265, 0.530],
-  [0.207, 0.372, 0.553], [0.164, 0.471, 0.558], [0.128, 0.567, 0.551], [0.135, 0.659, 0.518],
-  [0.267, 0.749, 0.441], [0.478, 0.821, 0.318], [0.741, 0.873, 0.150], [0.993, 0.906, 0.144]];
+// Colour maps, sampled at equal steps and interpolated linearly: viridis (perceptually uniform,
+// sequential; van der Walt and Smith's colour map for matplotlib) and cool–warm (diverging, for
+// values on both sides of a midpoint; Moreland 2009, "Diverging Color Maps for Scientific
+// Visualization").
+const colourmaps = {
+  viridis: [[0.267, 0.005, 0.329], [0.283, 0.141, 0.458], [0.254, 0.265, 0.530],
+    [0.207, 0.372, 0.553], [0.164, 0.471, 0.558], [0.128, 0.567, 0.551], [0.135, 0.659, 0.518],
+    [0.267, 0.749, 0.441], [0.478, 0.821, 0.318], [0.741, 0.873, 0.150], [0.993, 0.906, 0.144]],
+  coolwarm: [[0.230, 0.299, 0.754], [0.384, 0.510, 0.918], [0.553, 0.690, 0.996],
+    [0.722, 0.816, 0.976], [0.867, 0.867, 0.867], [0.961, 0.769, 0.678], [0.957, 0.604, 0.482],
+    [0.871, 0.376, 0.302], [0.706, 0.016, 0.150]],
+};
 
-function colourmap(u) {
-  const x = Math.min(Math.max(u, 0), 1) * (viridis.length - 1);
-  const i = Math.min(Math.floor(x), viridis.length - 2), f = x - i;
-  return viridis[i].map((c, k) => c + f * (viridis[i + 1][k] - c));
+// The colour map's sRGB colour at t ∈ [0, 1] (the tables are sRGB, as published).
+function colourmap(name, t) {
+  const table = colourmaps[name] || colourmaps.viridis;
+  const x = Math.min(Math.max(t, 0), 1) * (table.length - 1);
+  const i = Math.min(Math.floor(x), table.length - 2), f = x - i;
+  return table[i].map((c, k) => c + f * (table[i + 1][k] - c));
 }
 
-// Colours by view (the GLB's COLOR_0), by scalar (TEXCOORD_0.u through viridis) or plain. The
-// colour attributes are swapped, never modified, so the GLB's own (which the Draco loader may
-// hand over interleaved: cloning it would de-interleave it, with a warning) is kept as it is.
-function applyColouring(root) {
+// sRGB to linear: three.js takes vertex colours as linear and converts its output to sRGB, so
+// the surface shows the map's own colours (those of the legend) where it is lit fully.
+function linear(c) {
+  return c <= 0.04045 ? c / 12.92 : Math.pow((c + 0.055) / 1.055, 2.4);
+}
+
+// The field's values map to the colour map over this range: the step's own (its metadata's
+// scalar.min and max) or the person's fixed one.
+function colourRange(meta) {
+  if ($('range-auto').checked || !meta || !meta.scalar) {
+    return meta && meta.scalar ? [meta.scalar.min, meta.scalar.max] : [0, 1];
+  }
+  return [Number($('range-min').value), Number($('range-max').value)];
+}
+
+// The controls and the legend for the step shown: colouring by the field is offered when the
+// step carries one, and chosen by itself until the person picks a colouring.
+const colouring = { chosenByPerson: false };
+function updateFieldControls(meta) {
+  const field = meta && meta.scalar;
+  $('colour').querySelector('option[value=scalar]').disabled = !field;
+  if (field && !colouring.chosenByPerson) $('colour').value = 'scalar';
+  if (!field && $('colour').value === 'scalar') $('colour').value = 'view';
+  $('field-controls').disabled = !field;
+  if (field && $('range-auto').checked) {
+    $('range-min').value = String(field.min);
+    $('range-max').value = String(field.max);
+  }
+  const legend = $('legend');
+  legend.hidden = !(field && $('colour').value === 'scalar');
+  if (legend.hidden) return;
+  const [lo, hi] = colourRange(meta);
+  $('legend-name').textContent = field.name || 'field';
+  $('legend-min').textContent = Number(lo).toPrecision(4);
+  $('legend-max').textContent = Number(hi).toPrecision(4);
+  const bar = $('legend-bar'), ctx = bar.getContext('2d');
+  for (let x = 0; x < bar.width; ++x) {
+    const [r, g, b] = colourmap($('colourmap').value, x / (bar.width - 1));
+    ctx.fillStyle = `rgb(${Math.round(255 * r)}, ${Math.round(255 * g)}, ${Math.round(255 * b)})`;
+    ctx.fillRect(x, 0, 1, bar.height);
+  }
+}
+
+// Colours by view (the GLB's COLOR_0), by the field (TEXCOORD_0.u, the value's place in the
+// step's range, through the colour map over colourRange) or plain. The colour attributes are
+// swapped, never modified, so the GLB's own (which the Draco loader may hand over interleaved:
+// cloning it would de-interleave it, with a warning) is kept as it is.
+function applyColouring(root, meta) {
   const mode = $('colour').value;
+  const field = meta && meta.scalar;
+  const [lo, hi] = colourRange(meta);
+  const key = `${$('colourmap').value} ${lo} ${hi}`;
   root.traverse((object) => {
     if (!object.isMesh) return;
     const g = object.geometry;
     if (!g.userData.viewColours && g.attributes.color) g.userData.viewColours = g.attributes.color;
-    if (mode === 'scalar' && g.attributes.uv) {
-      if (!g.userData.scalarColours) {
+    if (mode === 'scalar' && field && g.attributes.uv) {
+      if (g.userData.scalarKey !== key) {
         const uv = g.attributes.uv, colours = new Float32Array(uv.count * 3);
-        for (let i = 0; i < uv.count; ++i) colours.set(colourmap(uv.getX(i)), 3 * i);
+        const span = field.max - field.min, width = hi - lo;
+        for (let i = 0; i < uv.count; ++i) {
+          const value = field.min + uv.getX(i) * span;
+          const rgb = colourmap($('colourmap').value, width > 0 ? (value - lo) / width : 0.5);
+          colours.set(rgb.map(linear), 3 * i);
+        }
         g.userData.scalarColours = new THREE.BufferAttribute(colours, 3);
+        g.userData.scalarKey = key;
       }
       g.setAttribute('color', g.userData.scalarColours);
     } else if (mode !== 'plain' && g.userData.viewColours) {
@@ -220,12 +282,13 @@ async function loadStep(step) {
     state.mesh.traverse((o) => o.isMesh && o.geometry.dispose());
   }
   state.mesh = gltf.scene;
-  applyColouring(state.mesh);
+  state.loaded = meta;
+  updateFieldControls(meta);
+  applyColouring(state.mesh, meta);
   scene.add(state.mesh);
   frameShown(false);
   requestRender();
   const triangles = countTriangles(state.mesh);
-  state.loaded = meta;
   showMetadata(meta, triangles);
   syncSlider();
   document.body.dataset.loadedStep = String(meta.step);
@@ -288,11 +351,23 @@ $('slider').addEventListener('input', () => {
 $('follow').addEventListener('change', () => {
   if ($('follow').checked && state.steps.length) show(state.steps[state.steps.length - 1]);
 });
-$('colour').addEventListener('change', () => {
+// A change of colouring, colour map or range recolours the step shown.
+function recolour() {
+  updateFieldControls(state.loaded);
   if (!state.mesh) return;
-  applyColouring(state.mesh);
+  applyColouring(state.mesh, state.loaded);
   requestRender();
+}
+$('colour').addEventListener('change', () => {
+  colouring.chosenByPerson = true;
+  recolour();
 });
+$('colourmap').addEventListener('change', recolour);
+$('range-auto').addEventListener('change', () => {
+  $('range-min').disabled = $('range-max').disabled = $('range-auto').checked;
+  recolour();
+});
+for (const id of ['range-min', 'range-max']) $(id).addEventListener('change', recolour);
 $('reset').addEventListener('click', () => frameShown(true));
 
 function listen() {

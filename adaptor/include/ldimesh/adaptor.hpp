@@ -86,6 +86,15 @@ class Adaptor {
   virtual Status add_grid_block(const GridBlock& block) = 0;
   virtual Status add_hex_block(const HexBlock& block) = 0;
   virtual Status add_source(std::shared_ptr<const FieldSource> source, const Box& owned) = 0;
+  // A further named field of the block added last (temperature beside density), read in place
+  // like its values and in their layout: a grid block's points with the same dims and strides,
+  // an element block's nodal values with the same nodes, order and element_stride; `type` may
+  // differ from the block's. With option "colour_by": NAME every isosurface is coloured by the
+  // field of that name, which every grid and element block must then have (a step without it
+  // fails, naming the block); a FieldSource colours by its own bind_scalar(). Adding a name
+  // again replaces that field. Errors: no block added yet, a FieldSource block, an empty name,
+  // null values.
+  virtual Status add_field(std::string_view name, const void* values, ScalarType type) = 0;
   // Forgets the blocks (to describe them anew, e.g. after a re-partition).
   virtual void clear_blocks() = 0;
 

@@ -52,4 +52,20 @@ Status check_mesh(const Mesh& m, const MeshChecks& checks) {
   return Status::ok();
 }
 
+std::size_t replace_nonfinite_scalars(Mesh& m) {
+  float lowest = INFINITY;
+  std::size_t bad = 0;
+  for (float s : m.scalars) {
+    if (std::isfinite(s))
+      lowest = std::min(lowest, s);
+    else
+      ++bad;
+  }
+  if (bad == 0) return 0;
+  if (!std::isfinite(lowest)) lowest = 0.0f;
+  for (float& s : m.scalars)
+    if (!std::isfinite(s)) s = lowest;
+  return bad;
+}
+
 }  // namespace ldimesh

@@ -408,8 +408,11 @@ Status parse_ply_body(const PlyHeader& h, std::string_view body, Mesh& m) {
 
     const bool is_vertex = &e == vertex_element;
     const bool is_face = e.name == "face";
-    int xyz[3] = {-1, -1, -1}, nxyz[3] = {-1, -1, -1}, indices = -1, view = -1;
+    int xyz[3] = {-1, -1, -1}, nxyz[3] = {-1, -1, -1}, indices = -1, view = -1, value = -1;
     if (is_vertex) {
+      value = e.find("value");
+      if (value >= 0 && e.properties[value].list) value = -1;
+      if (value >= 0) m.scalars.resize(e.count);
       for (int a = 0; a < 3; ++a) {
         xyz[a] = e.find(std::string(1, char('x' + a)));
         nxyz[a] = e.find(std::string("n") + char('x' + a));
@@ -447,6 +450,11 @@ Status parse_ply_body(const PlyHeader& h, std::string_view body, Mesh& m) {
             for (int a = 0; a < 3; ++a) {
               if (k == xyz[a]) m.positions[item][a] = float(v);
               if (k == nxyz[a]) m.normals[item][a] = float(v);
+            }
+            if (k == value) {
+              if (!std::isfinite(float(v)))
+                return ply_error("vertex " + std::to_string(item) + ": value is not finite");
+              m.scalars[item] = float(v);
             }
           }
           if (k == view) face_view = v;
@@ -517,12 +525,14 @@ Status write_ply(const std::string& path, const Mesh& mesh) {
     header += "element vertex " + std::to_string(mesh.vertex_count()) + "\n";
     header += "property float x\nproperty float y\nproperty float z\n";
     header += "property float nx\nproperty float ny\nproperty float nz\n";
+    if (!mesh.scalars.empty()) header += "property float value\n";
     header += "element face " + std::to_string(mesh.face_count()) + "\n";
     header += "property list uchar uint vertex_indices\nproperty uchar view\nend_header\n";
     w.text(header);
     for (std::size_t i = 0; i < mesh.vertex_count(); ++i) {
       w.pod(mesh.positions[i]);
       w.pod(mesh.normals[i]);
+      if (!mesh.scalars.empty()) w.pod(mesh.scalars[i]);
     }
     for (std::size_t f = 0; f < mesh.quad_count(); ++f) {
       w.pod(std::uint8_t(4));

@@ -91,10 +91,40 @@ HexBlock VtuElements::Group::block() const {
   b.type = ScalarType::float64;
   b.geometry_order = order;
   b.geometry = geometry.data();
+  if (!colour.empty()) {
+    b.colour = colour.data();
+    b.colour_type = ScalarType::float64;
+  }
   return b;
 }
 
-Status read_vtu(const std::string& path, const std::string& field, VtuElements& out) {
+namespace {
+
+// The one-component point array `name` of `grid`; an error naming the file's point arrays where
+// there is none of that name.
+Status scalar_point_array(vtkUnstructuredGrid* grid, const std::string& path,
+                          const std::string& name, vtkDataArray*& out) {
+  out = grid->GetPointData()->GetArray(name.c_str());
+  if (!out) {
+    std::string names;
+    for (int a = 0; a < grid->GetPointData()->GetNumberOfArrays(); ++a) {
+      const char* n = grid->GetPointData()->GetArrayName(a);
+      names += std::string(names.empty() ? "" : ", ") + (n ? n : "(unnamed)");
+    }
+    return Status::invalid_argument("'" + path + "': no point array '" + name +
+                                    "' (point arrays: " + (names.empty() ? "none" : names) + ")");
+  }
+  if (out->GetNumberOfComponents() != 1)
+    return Status::invalid_argument("'" + path + "': point array '" + name + "' has " +
+                                    std::to_string(out->GetNumberOfComponents()) +
+                                    " components; give a scalar one");
+  return Status::ok();
+}
+
+}  // namespace
+
+Status read_vtu(const std::string& path, const std::string& field, VtuElements& out,
+                const std::string& colour_field) {
   out = {};
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec))
@@ -117,20 +147,11 @@ Status read_vtu(const std::string& path, const std::string& field, VtuElements& 
   if (!grid || grid->GetNumberOfCells() == 0)
     return Status::corrupt_input("'" + path + "': no cells (not a VTK XML unstructured grid?)");
 
-  vtkDataArray* values = grid->GetPointData()->GetArray(field.c_str());
-  if (!values) {
-    std::string names;
-    for (int a = 0; a < grid->GetPointData()->GetNumberOfArrays(); ++a) {
-      const char* name = grid->GetPointData()->GetArrayName(a);
-      names += std::string(names.empty() ? "" : ", ") + (name ? name : "(unnamed)");
-    }
-    return Status::invalid_argument("'" + path + "': no point array '" + field +
-                                    "' (point arrays: " + (names.empty() ? "none" : names) + ")");
-  }
-  if (values->GetNumberOfComponents() != 1)
-    return Status::invalid_argument("'" + path + "': point array '" + field + "' has " +
-                                    std::to_string(values->GetNumberOfComponents()) +
-                                    " components; give a scalar one");
+  vtkDataArray* values = nullptr;
+  if (Status st = scalar_point_array(grid, path, field, values); !st) return st;
+  vtkDataArray* colour = nullptr;
+  if (!colour_field.empty())
+    if (Status st = scalar_point_array(grid, path, colour_field, colour); !st) return st;
   vtkDataArray* degrees = grid->GetCellData()->GetArray("HigherOrderDegrees");
   if (degrees && degrees->GetNumberOfComponents() != 3) degrees = nullptr;
 
@@ -185,6 +206,7 @@ Status read_vtu(const std::string& path, const std::string& field, VtuElements& 
       out.bounds.hi = glm::max(out.bounds.hi, glm::dvec3(x[0], x[1], x[2]));
       const double v = values->GetTuple1(ids->GetId(k));
       g.values.push_back(v);
+      if (colour) g.colour.push_back(colour->GetTuple1(ids->GetId(k)));
       if (std::isfinite(v))
         out.min_value = std::min(out.min_value, v), out.max_value = std::max(out.max_value, v);
     }

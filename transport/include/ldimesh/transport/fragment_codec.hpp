@@ -5,7 +5,7 @@
 //
 //   offset size  field
 //        0    4  magic "LDIF"
-//        4    1  format version (1)
+//        4    1  format version (2)
 //        5    1  flags: bit 0 lossless, bit 1 has_scalar
 //        6    1  depth_bits (0..24 lossy, 0 lossless)
 //        7    1  normal_bits (2..16 lossy, 0 lossless)
@@ -43,6 +43,10 @@ struct FragmentEncoding {
   int depth_bits = 20;
   // Normals octahedral-encoded with this many bits per coordinate (2..16).
   int normal_bits = 12;
+  // Scalars (a colour field) quantized to this many bits over the fragment's range of finite
+  // scalars (2..24; fewer where a step would fall below two float spacings; the bits used are
+  // in the scalar stream). A non-finite scalar stays non-finite (NaN).
+  int scalar_bits = 14;
   // zstd level, ZSTD_minCLevel()..ZSTD_maxCLevel(); not stored, the decoder does not need it.
   int zstd_level = 3;
 };
@@ -51,7 +55,8 @@ struct FragmentEncoding {
 // interval within ±1e30, at most 65536 samples per pixel and at most 2³¹ samples; throws
 // std::invalid_argument otherwise or for out-of-range encoding settings (std::runtime_error
 // should zstd itself fail, std::bad_alloc without memory). Lossy encoding clamps
-// depths outside [depth_lo, depth_hi] to the interval. Scalars are always stored bit-exactly.
+// depths outside [depth_lo, depth_hi] to the interval and quantizes scalars (scalar_bits);
+// lossless encoding stores them bit-exactly.
 // Deterministic, and idempotent: encoding the decoded fragment again with the same `encoding`
 // gives the same bytes (so a rank may decode, merge and re-encode without drift).
 std::vector<std::uint8_t> encode_fragment(const LdiFragment& fragment,
@@ -64,11 +69,18 @@ std::vector<std::uint8_t> encode_fragment(const LdiFragment& fragment,
 void quantize_fragment(LdiFragment& fragment, const FragmentEncoding& encoding = {});
 
 // quantize_fragment in two steps, so that a caller can quantize a large fragment's samples in
-// parallel: check_fragment_encodable throws as quantize_fragment does (and changes nothing);
+// parallel: check_fragment_encodable throws as quantize_fragment does (and changes nothing)
+// and returns what the samples' quantization needs of the whole fragment (its scalars' range);
 // quantize_samples then quantizes samples [begin, end) alone (each sample on its own, so any
-// split gives the same values). quantize_samples assumes the check passed.
-void check_fragment_encodable(const LdiFragment& fragment, const FragmentEncoding& encoding);
-void quantize_samples(LdiFragment& fragment, const FragmentEncoding& encoding, std::size_t begin,
+// split gives the same values).
+struct FragmentQuantizer {
+  FragmentEncoding encoding;
+  int scalar_bits = 1;  // lossy scalars: the bits used over [scalar_lo, scalar_hi]
+  float scalar_lo = 0.0f, scalar_hi = 0.0f;
+};
+FragmentQuantizer check_fragment_encodable(const LdiFragment& fragment,
+                                           const FragmentEncoding& encoding);
+void quantize_samples(LdiFragment& fragment, const FragmentQuantizer& quantizer, std::size_t begin,
                       std::size_t end);
 
 // Decodes `bytes` into `out`. Validates the header, every size and count, the checksum and the
@@ -92,6 +104,10 @@ Status check_fragment(std::span<const std::uint8_t> bytes, LdiFragment& shape);
 // (hi − lo below two float spacings); 0 for lossless encoding. lo ≤ hi, both finite (a
 // fragment's depth interval); other arguments give no meaningful bound.
 double depth_error_bound(const FragmentEncoding& encoding, double lo, double hi);
+// The largest error of a decoded finite scalar of a fragment whose finite scalars span [lo, hi]:
+// (hi − lo) / (2·(2^b − 2)) + u, with b the scalar bits the encoder uses and u the float spacing
+// at max(|lo|, |hi|); (hi − lo) + u when b = 1; 0 for lossless encoding.
+double scalar_error_bound(const FragmentEncoding& encoding, double lo, double hi);
 // The largest angle (radians) between a unit normal and its decoded value:
 // 3·√2 / (2^n − 2) + 2⁻²², with n the normal bits; 0 for lossless encoding. The axes are
 // encoded exactly.

@@ -43,6 +43,11 @@ struct MeshChecks {
 // prefix their name), else ok. O(vertices + faces); no allocation.
 Status check_mesh(const Mesh& m, const MeshChecks& checks = {});
 
+// Replaces the scalars that are not finite (a colour field with NaN/Inf values at a vertex) by
+// the smallest finite one (0 when there is none), so that the mesh can be encoded; returns how
+// many were replaced.
+std::size_t replace_nonfinite_scalars(Mesh& m);
+
 // Appends the two triangles of quad v[0..3] to `triangles`: split along the shorter diagonal
 // (ties take v0–v2), which cuts the obtuse corners of a skewed quad. The one rule of the mesher's
 // triangle output, the GLB encoder and the distance sampler, so all see the same triangles.

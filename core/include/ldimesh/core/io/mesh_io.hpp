@@ -14,7 +14,8 @@
 
 namespace ldimesh {
 
-// Binary little-endian PLY: vertex x y z nx ny nz (float), face vertex_indices (uchar count,
+// Binary little-endian PLY: vertex x y z nx ny nz (float) and, when the mesh has scalars (a field
+// to colour by), value (float), face vertex_indices (uchar count,
 // uint indices) and view (uchar, 0 where the mesh has no views); one `comment view k dir x y z`
 // line per view. Quads first, then triangles. Same mesh, same bytes.
 Status write_ply(const std::string& path, const Mesh& mesh);
@@ -28,13 +29,13 @@ Status write_mesh(const std::string& path, const Mesh& mesh);
 
 // Reads a PLY file: ASCII, binary little- or big-endian; any property types. Needs a `vertex`
 // element with x, y, z (nx, ny, nz optional: without them each vertex gets the area-weighted
-// normal of its faces) and takes faces from the list property `vertex_indices` (or
-// `vertex_index`) of a `face` element: 3 indices a triangle, 4 a quad, more a fan of triangles.
-// A face property `view` and `comment view k dir x y z` lines are read as write_ply writes them
-// (views 0 without). Other elements and properties are skipped. Everything is checked against
-// the header and the file's size (a truncated or hostile file, an index out of range, a
-// non-finite coordinate or a face of fewer than 3 vertices is an error, never a crash); on error
-// `mesh` is left empty.
+// normal of its faces; a float `value`, when there, becomes the scalars) and takes faces from the
+// list property `vertex_indices` (or `vertex_index`) of a `face` element: 3 indices a triangle, 4 a
+// quad, more a fan of triangles. A face property `view` and `comment view k dir x y z` lines are
+// read as write_ply writes them (views 0 without). Other elements and properties are skipped.
+// Everything is checked against the header and the file's size (a truncated or hostile file, an
+// index out of range, a non-finite coordinate or a face of fewer than 3 vertices is an error, never
+// a crash); on error `mesh` is left empty.
 Status read_ply(const std::string& path, Mesh& mesh);
 
 // The same from the bytes of a PLY file in memory.

@@ -28,6 +28,7 @@ struct VtuElements {
     std::size_t cells = 0;
     std::vector<double> geometry;  // (order + 1)³ points × (x, y, z) per cell
     std::vector<double> values;    // (order + 1)³ field values per cell
+    std::vector<double> colour;    // the same of the field to colour by, when one was read
     // The block over this group's arrays (valid while the group lives and is not resized).
     HexBlock block() const;
   };
@@ -42,8 +43,10 @@ struct VtuElements {
 // along the three axes), else from its point count ((p + 1)³). Errors (one line, naming the
 // file, and the cell or the field): a file VTK cannot read, a cell type other than the two
 // above, an order outside 1–8 or different along the axes or not matching the point count, a
-// missing or multi-component field, non-finite points.
-Status read_vtu(const std::string& path, const std::string& field, VtuElements& out);
+// missing or multi-component field, non-finite points. With `colour_field`, that point array too,
+// as each group's colour (HexBlock::colour: the isosurface coloured by it); the same errors.
+Status read_vtu(const std::string& path, const std::string& field, VtuElements& out,
+                const std::string& colour_field = "");
 
 // A file's field at world points: its cells, their sources and the lookup over them (for
 // distances to, and projections onto, the cells' exact isosurface).
