@@ -142,6 +142,13 @@ struct Input {
   }
 };
 
+// The name of the field the mesh is coloured by: --colour-by's point array, or for --grid the
+// colour file's name without folder and extension.
+std::string colour_name(const MeshArgs& args) {
+  if (args.grid.empty()) return args.colour_by;
+  return std::filesystem::path(args.colour_by).stem().string();
+}
+
 void load_input(const MeshArgs& args, int rank, int ranks, Input& input) {
   if (int(!args.surface.empty()) + int(!args.grid.empty()) + int(!args.vtu.empty()) != 1)
     throw std::runtime_error(
@@ -352,7 +359,8 @@ int run_mesh(const MeshArgs& args) {
     ldimesh::StepMetadata meta = ldimesh::describe_step(args.step, args.time, {iso}, views, r_used,
                                                         result.samples, result.quads, glb_info);
     if (glb_info.has_scalar)
-      meta.scalar = ldimesh::ScalarRange{args.colour_by, glb_info.scalar_min, glb_info.scalar_max};
+      meta.scalar =
+          ldimesh::ScalarRange{colour_name(args), glb_info.scalar_min, glb_info.scalar_max};
     meta.seconds = {{"cast", step.seconds.cast},     {"encode", step.seconds.encode},
                     {"reduce", step.seconds.reduce}, {"decode", step.seconds.decode},
                     {"mesh", step.seconds.mesh},     {"glb", glb_seconds}};
@@ -392,7 +400,7 @@ int run_mesh(const MeshArgs& args) {
     j["face_type"] = args.quads ? "quads" : "triangles";
     if (!m.scalars.empty()) {
       const auto [lo, hi] = std::minmax_element(m.scalars.begin(), m.scalars.end());
-      j["colour"] = {{"field", args.colour_by},
+      j["colour"] = {{"field", colour_name(args)},
                      {"min", *lo},
                      {"max", *hi},
                      {"uncoloured_vertices", uncoloured}};

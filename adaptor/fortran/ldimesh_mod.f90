@@ -427,20 +427,44 @@ contains
   subroutine add_field_nodal_r8(adaptor, name, values, ierr)
     type(ldimesh_adaptor), intent(in) :: adaptor
     character(len=*), intent(in) :: name
-    real(c_double), intent(in), target, contiguous :: values(:, :)
+    real(c_double), intent(in), target :: values(:, :)
     integer, intent(out) :: ierr
-    ierr = c_add_field(adaptor%handle, trim(name)//c_null_char, c_loc(values), &
-                       size(values, kind=c_int64_t), LDIMESH_FLOAT64)
+    if (size(values) == 0) then
+      ierr = fail(adaptor, 'ldimesh_add_field: the array is empty')
+    else
+      call add_nodal_field(adaptor, name, values, c_loc(values(1, 1)), LDIMESH_FLOAT64, ierr)
+    end if
   end subroutine add_field_nodal_r8
 
   subroutine add_field_nodal_r4(adaptor, name, values, ierr)
     type(ldimesh_adaptor), intent(in) :: adaptor
     character(len=*), intent(in) :: name
-    real(c_float), intent(in), target, contiguous :: values(:, :)
+    real(c_float), intent(in), target :: values(:, :)
     integer, intent(out) :: ierr
-    ierr = c_add_field(adaptor%handle, trim(name)//c_null_char, c_loc(values), &
-                       size(values, kind=c_int64_t), LDIMESH_FLOAT32)
+    if (size(values) == 0) then
+      ierr = fail(adaptor, 'ldimesh_add_field: the array is empty')
+    else
+      call add_nodal_field(adaptor, name, values, c_loc(values(1, 1)), LDIMESH_FLOAT32, ierr)
+    end if
   end subroutine add_field_nodal_r4
+
+  ! The shared part of the nodal fields: `first` is the address of values(1, 1). No copy-in: a
+  ! strided section is refused, as the adaptor keeps the address.
+  subroutine add_nodal_field(adaptor, name, values, first, type, ierr)
+    type(ldimesh_adaptor), intent(in) :: adaptor
+    character(len=*), intent(in) :: name
+    class(*), intent(in) :: values(:, :)
+    type(c_ptr), intent(in) :: first
+    integer(c_int), intent(in) :: type
+    integer, intent(out) :: ierr
+    if (.not. is_contiguous(values)) then
+      ierr = fail(adaptor, 'ldimesh_add_field: the array is not contiguous (pass a whole array '// &
+                  'or a range of its last index)')
+      return
+    end if
+    ierr = c_add_field(adaptor%handle, trim(name)//c_null_char, first, &
+                       size(values, kind=c_int64_t), type)
+  end subroutine add_nodal_field
 
   ! Keeps `message` as the adaptor's last error; returns LDIMESH_ERROR_ARGUMENT.
   integer function fail(adaptor, message)

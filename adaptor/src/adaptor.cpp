@@ -223,12 +223,16 @@ class AdaptorImpl final : public Adaptor {
     return add_block<HexElementSource>(block, "add_hex_block");
   }
   Status add_source(std::shared_ptr<const FieldSource> source, const Box& owned) override {
+    last_add_failed_ = !source;
     if (!source) return fail(Status::invalid_argument("add_source: no source"));
     blocks_.push_back({std::move(source), owned, std::nullopt, std::nullopt, {}});
     return Status::ok();
   }
   Status add_field(std::string_view name, const void* values, ScalarType type) override {
     return fail_if(guard("add_field: ", [&] {
+      if (last_add_failed_)
+        return Status::invalid_argument(
+            "the block added last was refused (the field would belong to the one before)");
       if (blocks_.empty() || (!blocks_.back().grid && !blocks_.back().hex))
         return Status::invalid_argument(
             blocks_.empty() ? "no block added yet (the field belongs to the block added last)"
@@ -256,7 +260,10 @@ class AdaptorImpl final : public Adaptor {
       return Status::ok();
     }));
   }
-  void clear_blocks() override { blocks_.clear(); }
+  void clear_blocks() override {
+    blocks_.clear();
+    last_add_failed_ = false;
+  }
 
   Status execute(std::uint64_t step, double time) override {
     const auto start = Clock::now();
@@ -414,15 +421,6 @@ class AdaptorImpl final : public Adaptor {
     casters.blocks.resize(options_.isovalues.size());
     const auto bind_start = Clock::now();
     if (local && !domain) local = Status::invalid_argument("set_domain() was not called");
-    if (local && !options_.colour_by.empty())
-      for (std::size_t k = 0; k < blocks.size(); ++k)
-        if ((blocks[k].grid && !blocks[k].grid->colour) ||
-            (blocks[k].hex && !blocks[k].hex->colour)) {
-          local = Status::invalid_argument("colour_by: block " + std::to_string(k) + " of rank " +
-                                           std::to_string(rank_) + " has no field named '" +
-                                           options_.colour_by + "' (add_field)");
-          break;
-        }
     if (local)
       local = guard("binding the blocks: ", [&] {
         if (fault_here("out_of_memory", job.step)) throw std::bad_alloc();
@@ -432,9 +430,19 @@ class AdaptorImpl final : public Adaptor {
         for (const View& v : casters.views)
           casters.tolerance = std::max(casters.tolerance,
                                        merge_tolerance(options_.encoding, v, domain->diagonal()));
+        // Hits carry a colour only with "colour_by", and then every block's.
+        RayCasterOptions caster_options;
+        caster_options.scalars = !options_.colour_by.empty();
         for (std::size_t i = 0; i < options_.isovalues.size(); ++i)
-          for (const Block& b : blocks) {
-            casters.owned.push_back(std::make_unique<RayCaster>(*b.source, options_.isovalues[i]));
+          for (std::size_t k = 0; k < blocks.size(); ++k) {
+            const Block& b = blocks[k];
+            casters.owned.push_back(
+                std::make_unique<RayCaster>(*b.source, options_.isovalues[i], caster_options));
+            if (caster_options.scalars && !casters.owned.back()->carries_scalars())
+              return Status::invalid_argument(
+                  "colour_by: block " + std::to_string(k) + " of rank " + std::to_string(rank_) +
+                  (b.grid || b.hex ? " has no field named '" + options_.colour_by + "' (add_field)"
+                                   : " is a FieldSource without a colour field (bind_scalar)"));
             casters.blocks[i].push_back({casters.owned.back().get(), {b.owned, *domain}});
           }
         return Status::ok();
@@ -604,8 +612,11 @@ class AdaptorImpl final : public Adaptor {
   }
 
   // A block whose hits belong to its own bounds (the owned region of a grid block).
+  // The block's own colour array is not read: its fields come by name (add_field).
   template <class Source, class Description>
-  Status add_block(const Description& block, const char* what) {
+  Status add_block(Description block, const char* what) {
+    block.colour = nullptr;
+    last_add_failed_ = true;
     return fail_if(guard(std::string(what) + ": ", [&] {
       auto source = std::make_shared<Source>(block);
       const Box owned = source->bounds();
@@ -615,6 +626,7 @@ class AdaptorImpl final : public Adaptor {
       else
         b.hex = block;
       blocks_.push_back(std::move(b));
+      last_add_failed_ = false;
       return Status::ok();
     }));
   }
@@ -783,6 +795,7 @@ class AdaptorImpl final : public Adaptor {
   Box domain_;
   bool has_domain_ = false;
   std::vector<Block> blocks_;
+  bool last_add_failed_ = false;  // the last add_*_block call failed: add_field refuses
   StepReport report_;
   bool finalized_ = false;
   Clock::time_point last_run_;

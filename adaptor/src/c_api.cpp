@@ -164,6 +164,7 @@ int ldimesh_set_domain(ldimesh_adaptor* a, const double lo[3], const double hi[3
 
 int ldimesh_add_grid_block(ldimesh_adaptor* a, const ldimesh_grid_block* b) {
   if (!a) return no_handle();
+  a->block_values = 0;  // until a block is added: a field would belong to none
   const std::string what = "ldimesh_add_grid_block: ";
   if (!b) return fail(a, LDIMESH_ERROR_ARGUMENT, what + "block is NULL");
   ldimesh::GridBlock g;
@@ -220,6 +221,7 @@ int ldimesh_add_grid_block(ldimesh_adaptor* a, const ldimesh_grid_block* b) {
 
 int ldimesh_add_hex_block(ldimesh_adaptor* a, const ldimesh_hex_block* b) {
   if (!a) return no_handle();
+  a->block_values = 0;  // until a block is added: a field would belong to none
   const std::string what = "ldimesh_add_hex_block: ";
   if (!b) return fail(a, LDIMESH_ERROR_ARGUMENT, what + "block is NULL");
   ldimesh::HexBlock h;
@@ -297,7 +299,9 @@ int ldimesh_add_field(ldimesh_adaptor* a, const char* name, const void* values, 
                 what + "type must be LDIMESH_FLOAT32 or LDIMESH_FLOAT64");
   if (a->block_values == 0)
     return fail(a, LDIMESH_ERROR_ARGUMENT,
-                what + "no block added yet (the field belongs to the block added last)");
+                what +
+                    "no block added yet, or the last one was refused (the field belongs to "
+                    "the block added last)");
   if (value_count < a->block_values)
     return fail(a, LDIMESH_ERROR_ARGUMENT,
                 what + "field '" + name + "': the array holds " + std::to_string(value_count) +

@@ -62,6 +62,7 @@ Status parse_object(const nlohmann::json& j, AdaptorOptions& o) {
       if (o.isovalues.size() > 8) return bad("isovalues", "may hold at most 8 values");
     }
     if (j.contains("colour_by")) {
+      if (!j["colour_by"].is_string()) return bad("colour_by", "must be a field's name (a string)");
       o.colour_by = j["colour_by"].get<std::string>();
       if (o.colour_by.empty())
         return bad("colour_by", "must name a field (add_field), or be left out");

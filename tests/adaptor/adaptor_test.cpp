@@ -69,11 +69,17 @@ TEST(Adaptor, InvalidOptionsAreReportedOnEveryRankWithTheKey) {
   EXPECT_FALSE(s);
   s = Adaptor::create(MPI_COMM_WORLD, R"({"refinement": true})", a);
   EXPECT_NE(s.message().find("refinement"), std::string::npos) << s.message();
+  for (const char* doc : {R"({"colour_by": ""})", R"({"colour_by": 3})"}) {
+    s = Adaptor::create(MPI_COMM_WORLD, doc, a);
+    EXPECT_EQ(s.code(), StatusCode::invalid_options) << doc;
+    EXPECT_NE(s.message().find("colour_by"), std::string::npos) << s.message();
+  }
   // Integers out of their type's range or not integral: named errors, not undefined behaviour
   // in the conversion (UBSan reported it in the options fuzz target for 1e20).
   for (const char* doc :
        {R"({"resolution": 1e20})", R"({"resolution": 512.5})", R"({"keep": 1.5e19})",
-        R"({"server": {"port": -1e30}})", R"({"encoding": {"depth_bits": "16"}})"}) {
+        R"({"server": {"port": -1e30}})", R"({"encoding": {"depth_bits": "16"}})",
+        R"({"encoding": {"scalar_bits": 1}})", R"({"encoding": {"scalar_bits": 25}})"}) {
     s = Adaptor::create(MPI_COMM_WORLD, doc, a);
     EXPECT_EQ(s.code(), StatusCode::invalid_options) << doc;
     EXPECT_NE(s.message().find("must be an integer in"), std::string::npos) << s.message();
@@ -586,6 +592,16 @@ TEST(Adaptor, ColourByAFieldABlockLacksFailsTheStepNamingIt) {
     EXPECT_NE(s.message().find("no field named 'T'"), std::string::npos) << s.message();
     EXPECT_TRUE(a->finalize());
   }
+  // A FieldSource without a colour field of its own: the step fails, naming it.
+  auto c = make(R"({"server": {"enabled": false}, "log": false, "resolution": 32, "colour_by": "T",
+                   "background": false})");
+  if (c) {
+    const Status step = c->execute(0, 0.0);
+    EXPECT_FALSE(step);
+    EXPECT_NE(step.message().find("is a FieldSource without a colour field"), std::string::npos)
+        << step.message();
+    EXPECT_TRUE(c->finalize());
+  }
   // add_field before any block, with no name or no values: errors, nothing added.
   std::unique_ptr<Adaptor> b;
   EXPECT_TRUE(
@@ -599,6 +615,12 @@ TEST(Adaptor, ColourByAFieldABlockLacksFailsTheStepNamingIt) {
   EXPECT_NE(e.message().find("name is empty"), std::string::npos) << e.message();
   e = b->add_field("T", nullptr, ScalarType::float32);
   EXPECT_NE(e.message().find("null values"), std::string::npos) << e.message();
+  // After a refused block the field would belong to the block before: refused.
+  GridBlock broken = slab.block;
+  broken.values = nullptr;
+  EXPECT_FALSE(b->add_grid_block(broken));
+  e = b->add_field("T", slab.values.data(), ScalarType::float32);
+  EXPECT_NE(e.message().find("the block added last was refused"), std::string::npos) << e.message();
   EXPECT_TRUE(b->finalize());
 }
 

@@ -117,9 +117,9 @@ header, body = data.split(b"end_header\n", 1)
 n = int(next(l for l in header.decode().splitlines() if l.startswith("element vertex")).split()[2])
 worst = max(abs(v[6] - (v[0] - 2 * v[2])) for v in struct.iter_unpack("<7f", body[:28 * n]))
 c = json.load(open(sys.argv[2]))["colour"]
-# half a step of the fragments' 14 scalar bits over the range, and float rounding
+# half a step of the fragments' 12 scalar bits over the range, and float rounding
 print(f"grid --colour-by: {n} vertices, largest |value - (x - 2z)| {worst:.1e}, range [{c['min']}, {c['max']}]")
-sys.exit(0 if n > 100 and worst < (c["max"] - c["min"]) / (2 * 16382) + 1e-4 and c["min"] < c["max"] else 1)
+sys.exit(0 if n > 100 and worst < (c["max"] - c["min"]) / (2 * 4094) + 1e-4 and c["min"] < c["max"] else 1)
 PY
 expect_error "missing colour volume" mesh --grid "$tmp/v.raw" --dims 12,12,12 --colour-by "$tmp/w.missing"
 expect_error "grid without dims" mesh --grid "$tmp/v.raw"

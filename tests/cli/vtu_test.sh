@@ -32,7 +32,7 @@ PY
 
 # --colour-by: the isosurface of r coloured by the file's array h = x + 2y, which every cell
 # represents exactly: each vertex of the PLY (float value property) carries x + 2y of its
-# position, within half a step of the fragments' 14 scalar bits over the range and the float
+# position, within half a step of the fragments' 12 scalar bits over the range and the float
 # depths' rounding; the summary names the field and its range.
 "$ldimesh" mesh --vtu "$tmp/sphere.vtu" --field r --iso 0.49 --colour-by h --res 96 \
   --out "$tmp/coloured.ply" --json >"$tmp/coloured.json" 2>"$tmp/coloured.err" ||
@@ -52,7 +52,7 @@ for v in range(n):
 colour = json.load(open(sys.argv[2]))["colour"]
 print(f"{n} vertices coloured by h: largest |value - (x + 2y)| {worst:.1e}, range [{lo:.4f}, {hi:.4f}]; "
       f"summary {colour}")
-sys.exit(0 if n > 5000 and worst < (hi - lo) / (2 * 16382) + 2e-5 and colour["field"] == "h" and colour["min"] == lo and
+sys.exit(0 if n > 5000 and worst < (hi - lo) / (2 * 4094) + 2e-5 and colour["field"] == "h" and colour["min"] == lo and
          colour["max"] == hi and colour["uncoloured_vertices"] == 0 and hi - lo > 2.5 else 1)
 PY
 

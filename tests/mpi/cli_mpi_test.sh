@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The command line over MPI: 2, 3 and 4 ranks write the same mesh (byte for byte) as one process,
-# for an analytic surface and for a raw volume split into grid blocks, refined (§4) or not.
+# for an analytic surface and for a raw volume split into grid blocks, coloured by a second
+# volume or not, refined (§4) or not.
 set -u
 ldimesh=$1
 mpiexec=$2
@@ -32,6 +33,23 @@ PY
 "$mpiexec" -n 3 --oversubscribe "$ldimesh" mesh --grid "$tmp/v.raw" --dims 40,40,40 --iso 0.7 --res 96 \
   --out "$tmp/g3.ply" >/dev/null || fail "grid, 3 ranks"
 cmp -s "$tmp/g1.ply" "$tmp/g3.ply" || fail "grid: 3 ranks wrote a different mesh"
+# Coloured by a second volume (--colour-by): the ranks agree on each view's scalar range before
+# quantizing, so 1, 3 and 4 ranks (4: an intermediate rank re-encodes a merge) write the same
+# mesh and the same colours (the PLY's value property), byte for byte.
+python3 - "$tmp/c.raw" <<'PY'
+import array, math, sys
+n = 40
+a = array.array('f', [math.sin(0.3 * i) + 0.05 * j * k for k in range(n) for j in range(n) for i in range(n)])
+open(sys.argv[1], 'wb').write(a.tobytes())
+PY
+"$ldimesh" mesh --grid "$tmp/v.raw" --dims 40,40,40 --iso 0.7 --res 96 --colour-by "$tmp/c.raw" \
+  --out "$tmp/c1.ply" >/dev/null || fail "coloured grid, one process"
+grep -aq "property float value" "$tmp/c1.ply" || fail "coloured grid: no value property"
+for n in 3 4; do
+  "$mpiexec" -n "$n" --oversubscribe "$ldimesh" mesh --grid "$tmp/v.raw" --dims 40,40,40 --iso 0.7 \
+    --res 96 --colour-by "$tmp/c.raw" --out "$tmp/c$n.ply" >/dev/null || fail "coloured grid, $n ranks"
+  cmp -s "$tmp/c1.ply" "$tmp/c$n.ply" || fail "coloured grid: $n ranks wrote a different mesh"
+done
 # --repeat over ranks: every run's binds and collectives on all ranks, the same mesh, one
 # "repeats" entry per run.
 "$mpiexec" -n 3 --oversubscribe "$ldimesh" mesh --grid "$tmp/v.raw" --dims 40,40,40 --iso 0.7 --res 96 \

@@ -223,20 +223,22 @@ struct ScalarQuantizer {
   }
 };
 
-// The range and bits of a lossy fragment's scalars: [lo, hi] of its finite values (0, 0 without
-// any), collapsed to lo where one bit is left.
+// The range and bits of a lossy fragment's scalars: its scalar range (the one the ranks agreed
+// on) widened to hold its finite scalars, 0 and 0 without either; −0 as +0 (a decoded q = 0 is
+// float(lo + 0), +0, which must give the same range again); collapsed to lo where one bit is
+// left.
 struct ScalarRange {
   int bits = 1;
   float lo = 0.0f, hi = 0.0f;
 };
-ScalarRange scalar_range(const std::vector<float>& scalars, int bits) {
+ScalarRange scalar_range(const LdiFragment& f, int bits) {
+  float lo = f.scalar_lo, hi = f.scalar_hi;
+  for (float x : f.scalar)
+    if (std::isfinite(x)) widen_scalar_range(lo, hi, x, x);
   ScalarRange r;
-  bool any = false;
-  for (float x : scalars) {
-    if (!std::isfinite(x)) continue;
-    r.lo = any ? std::min(r.lo, x) : x;
-    r.hi = any ? std::max(r.hi, x) : x;
-    any = true;
+  if (!std::isnan(lo)) {
+    r.lo = lo + 0.0f;
+    r.hi = hi + 0.0f;
   }
   r.bits = effective_scalar_bits(bits, r.lo, r.hi);
   if (r.bits == 1) r.hi = r.lo;
@@ -581,7 +583,8 @@ Status decode_payload(std::span<const std::uint8_t> payload, const Header& h, Ld
     const float hi = std::bit_cast<float>(std::uint32_t(in.le(4)));
     if (in.failed) return fail("truncated payload");
     if (bits < 1 || bits > 24 || !std::isfinite(lo) || !std::isfinite(hi) || !(lo <= hi) ||
-        (bits == 1 && lo != hi))
+        (bits == 1 && lo != hi) || std::signbit(lo) != (lo < 0.0f) ||
+        std::signbit(hi) != (hi < 0.0f))
       return fail("invalid scalar range");
     const ScalarQuantizer sq(bits, lo, hi);
     std::vector<std::uint32_t> q(samples);
@@ -589,6 +592,8 @@ Status decode_payload(std::span<const std::uint8_t> payload, const Header& h, Ld
     f.scalar.resize(samples);
     for (std::size_t s = 0; s < samples; ++s)
       f.scalar[s] = sq.dequantize(q[s]);
+    f.scalar_lo = lo;
+    f.scalar_hi = hi;
   }
   if (in.pos != payload.size()) return fail("payload longer than its streams");
   return validate_fragment(f);
@@ -641,7 +646,7 @@ FragmentQuantizer check_fragment_encodable(const LdiFragment& f, const FragmentE
   FragmentQuantizer q;
   q.encoding = e;
   if (!e.lossless && !f.scalar.empty()) {
-    const ScalarRange r = scalar_range(f.scalar, e.scalar_bits);
+    const ScalarRange r = scalar_range(f, e.scalar_bits);
     q.scalar_bits = r.bits;
     q.scalar_lo = r.lo;
     q.scalar_hi = r.hi;
@@ -672,7 +677,12 @@ void quantize_samples(LdiFragment& f, const FragmentQuantizer& quantizer, std::s
 }
 
 void quantize_fragment(LdiFragment& f, const FragmentEncoding& e) {
-  quantize_samples(f, check_fragment_encodable(f, e), 0, f.depth.size());
+  const FragmentQuantizer quantizer = check_fragment_encodable(f, e);
+  quantize_samples(f, quantizer, 0, f.depth.size());
+  if (!e.lossless && !f.scalar.empty()) {
+    f.scalar_lo = quantizer.scalar_lo;
+    f.scalar_hi = quantizer.scalar_hi;
+  }
 }
 
 std::vector<std::uint8_t> encode_fragment(const LdiFragment& f, const FragmentEncoding& e) {

@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <climits>
+#include <cmath>
 #include <cstring>
 #include <stdexcept>
 #include <string>
@@ -116,6 +117,31 @@ Status check_message(std::span<const std::uint8_t> in, const std::vector<LdiFrag
 
 namespace {
 
+// Collective: sets every fragment's scalar range to the union over the ranks of their ranges
+// and finite scalars (left unset where no rank has one). Ranks that disagree about the number
+// of fragments leave them as they are (the reduction's envelope check then fails the step).
+void agree_on_scalar_ranges(MPI_Comm comm, std::vector<LdiFragment>& fragments) {
+  long long counts[2] = {(long long)fragments.size(), -(long long)fragments.size()};
+  MPI_Allreduce(MPI_IN_PLACE, counts, 2, MPI_LONG_LONG, MPI_MAX, comm);
+  if (counts[0] != -counts[1]) return;
+  // lo and −hi per fragment, reduced by MIN; +∞ where unset.
+  std::vector<double> ends(2 * fragments.size(), INFINITY);
+  for (std::size_t v = 0; v < fragments.size(); ++v) {
+    float lo = fragments[v].scalar_lo, hi = fragments[v].scalar_hi;
+    for (float x : fragments[v].scalar)
+      if (std::isfinite(x)) widen_scalar_range(lo, hi, x, x);
+    if (std::isnan(lo)) continue;
+    ends[2 * v] = lo;
+    ends[2 * v + 1] = -double(hi);
+  }
+  MPI_Allreduce(MPI_IN_PLACE, ends.data(), int(ends.size()), MPI_DOUBLE, MPI_MIN, comm);
+  for (std::size_t v = 0; v < fragments.size(); ++v) {
+    if (!std::isfinite(ends[2 * v])) continue;
+    fragments[v].scalar_lo = float(ends[2 * v]);
+    fragments[v].scalar_hi = float(-ends[2 * v + 1]);
+  }
+}
+
 // One round of the tree on the receiving side: decodes a child's message and merges it into
 // `fragments`. A message that does not decode leaves `fragments` as they were and sets `status`.
 void merge_message(std::span<const std::uint8_t> message, std::vector<LdiFragment>& fragments,
@@ -157,6 +183,11 @@ Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragm
   Status status = Status::ok();
   bool upstream_error = false;
 
+  // The ranks agree on each view's scalar range (the union of their finite scalars): the lossy
+  // codec quantizes a fragment's scalars over it, so that every rank, and every intermediate
+  // rank that re-encodes a merge, puts a value on the same grid.
+  agree_on_scalar_ranges(comm, fragments);
+
   // Quantize this rank's own samples first, as they would arrive from any other rank, so that
   // the result does not depend on which rank a sample came from (nor on the number of ranks).
   {
@@ -171,6 +202,10 @@ Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragm
                           [&](const tbb::blocked_range<std::size_t>& r) {
                             quantize_samples(f, quantizer, r.begin(), r.end());
                           });
+        if (!encoding.lossless && !f.scalar.empty()) {
+          f.scalar_lo = quantizer.scalar_lo;
+          f.scalar_hi = quantizer.scalar_hi;
+        }
       } catch (...) {
         // Never leave the collective: go on with the fragment emptied (its view kept), and
         // report the failure up the tree.

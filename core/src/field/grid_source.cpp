@@ -1305,6 +1305,9 @@ GridSource::GridSource(const GridBlock& block, int brick_cells)
   if (brick_cells < 1)
     throw std::invalid_argument("grid block: brick size must be at least one cell");
   if (!block_.values) throw std::invalid_argument("grid block: values pointer is null");
+  for (const ScalarType t : {block_.type, block_.colour ? block_.colour_type : block_.type})
+    if (t != ScalarType::float32 && t != ScalarType::float64)
+      throw std::invalid_argument("grid block: unknown scalar type");
   if (block_.strides == std::array<std::int64_t, 3>{0, 0, 0})
     block_.strides = {1, block_.dims[0], block_.dims[0] * block_.dims[1]};
   const bool rectilinear = block_.coords[0] && block_.coords[1] && block_.coords[2];
@@ -1347,8 +1350,7 @@ double GridSource::value(std::int64_t i, std::int64_t j, std::int64_t k) const {
                                             : static_cast<const double*>(block_.values)[at];
 }
 
-double GridSource::interpolate(glm::dvec3 p) const {
-  constexpr double kSlack = 1e-6;  // of a cell, for points rounded onto the wrong side of a face
+double GridSource::interpolate(glm::dvec3 p, double slack) const {
   std::array<std::int64_t, 3> cell{};
   glm::dvec3 f(0.0);
   for (int a = 0; a < 3; ++a) {
@@ -1365,7 +1367,7 @@ double GridSource::interpolate(glm::dvec3 p) const {
     i = std::clamp<std::int64_t>(i, 0, n - 2);
     const double x0 = coordinate(a, i), x1 = coordinate(a, i + 1);
     const double t = (p[a] - x0) / (x1 - x0);
-    if (!(t >= -kSlack && t <= 1.0 + kSlack)) return std::numeric_limits<double>::quiet_NaN();
+    if (!(t >= -slack && t <= 1.0 + slack)) return std::numeric_limits<double>::quiet_NaN();
     cell[a] = i;
     f[a] = std::clamp(t, 0.0, 1.0);
   }
@@ -1375,7 +1377,8 @@ double GridSource::interpolate(glm::dvec3 p) const {
   const double c10 = lerp(value(i, j + 1, k), value(i + 1, j + 1, k), f.x);
   const double c01 = lerp(value(i, j, k + 1), value(i + 1, j, k + 1), f.x);
   const double c11 = lerp(value(i, j + 1, k + 1), value(i + 1, j + 1, k + 1), f.x);
-  return lerp(lerp(c00, c10, f.y), lerp(c01, c11, f.y), f.z);
+  const double v = lerp(lerp(c00, c10, f.y), lerp(c01, c11, f.y), f.z);
+  return std::isfinite(v) ? v : std::numeric_limits<double>::quiet_NaN();
 }
 
 namespace {
@@ -1384,7 +1387,9 @@ namespace {
 class GridScalarProbe final : public ScalarProbe {
  public:
   explicit GridScalarProbe(const GridBlock& colour) : grid_(colour) {}
-  double at(glm::dvec3 p) const override { return grid_.interpolate(p); }
+  double at(glm::dvec3 p) const override { return grid_.interpolate(p, 0.0); }
+  // Points rounded onto the wrong side of the block's faces.
+  double near(glm::dvec3 p) const override { return grid_.interpolate(p, 1e-6); }
 
  private:
   GridSource grid_;

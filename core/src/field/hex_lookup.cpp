@@ -123,7 +123,8 @@ bool HexFieldLookup::sample(glm::dvec3 world, PolynomialSample& out) const {
   return sample(world, out, hint);
 }
 
-std::size_t HexFieldLookup::locate(glm::dvec3 world, Hint& hint, glm::dvec3& xi_out) const {
+std::size_t HexFieldLookup::locate(glm::dvec3 world, Hint& hint, glm::dvec3& xi_out,
+                                   double reach) const {
   const std::size_t none = elements_.size();
   if (!std::isfinite(world.x) || !std::isfinite(world.y) || !std::isfinite(world.z)) return none;
   const auto inside_box = [&](std::size_t e) {
@@ -155,7 +156,7 @@ std::size_t HexFieldLookup::locate(glm::dvec3 world, Hint& hint, glm::dvec3& xi_
   // elements share, the one it is deeper in; the first of equals).
   std::size_t best = none;
   glm::dvec3 best_xi(0.0);
-  double best_miss = std::nextafter(kReach, 1.0);
+  double best_miss = std::nextafter(reach, 1.0);
   for (std::uint32_t k = begin_[cell]; k < begin_[cell + 1]; ++k) {
     const std::size_t e = items_[k];
     if (!inside_box(e)) continue;  // its inverse map is not worth computing
@@ -176,13 +177,14 @@ std::size_t HexFieldLookup::locate(glm::dvec3 world, Hint& hint, glm::dvec3& xi_
 
 bool HexFieldLookup::sample(glm::dvec3 world, PolynomialSample& out, Hint& hint) const {
   glm::dvec3 xi;
-  const std::size_t e = locate(world, hint, xi);
+  const std::size_t e = locate(world, hint, xi, kReach);
   return e < elements_.size() && evaluate(e, xi, out);
 }
 
-bool HexFieldLookup::value(glm::dvec3 world, double& out, Hint& hint) const {
+bool HexFieldLookup::value(glm::dvec3 world, double& out, Hint& hint, bool extrapolate) const {
   glm::dvec3 xi;
-  const std::size_t e = locate(world, hint, xi);
+  // Without extrapolation: points in an element, up to the inverse map's rounding.
+  const std::size_t e = locate(world, hint, xi, extrapolate ? kReach : 1e-9);
   if (e == elements_.size()) return false;
   const Element& el = elements_[e];
   const std::size_t n = std::size_t(el.order + 1) * (el.order + 1) * (el.order + 1);

@@ -1777,15 +1777,20 @@ class HexScalarProbe final : public ScalarProbe {
  public:
   HexScalarProbe(const HexElementSource& prepared, const HexBlock& colour)
       : source_(prepared, colour), sources_{&source_}, lookup_(sources_) {}
-  double at(glm::dvec3 p) const override {
+  HexScalarProbe(const HexScalarProbe&) = delete;  // the lookup points at source_
+  HexScalarProbe& operator=(const HexScalarProbe&) = delete;
+  double at(glm::dvec3 p) const override { return value(p, false); }
+  double near(glm::dvec3 p) const override { return value(p, true); }
+
+ private:
+  double value(glm::dvec3 p, bool extrapolate) const {
     // Each thread's last element first: a row of pixels' hits lie in few elements. The hint
     // cannot change the answer (HexFieldLookup::sample).
     thread_local HexFieldLookup::Hint hint;
     double v = 0.0;
-    return lookup_.value(p, v, hint) ? v : std::numeric_limits<double>::quiet_NaN();
+    return lookup_.value(p, v, hint, extrapolate) ? v : std::numeric_limits<double>::quiet_NaN();
   }
 
- private:
   HexElementSource source_;
   std::array<const HexElementSource*, 1> sources_;
   HexFieldLookup lookup_;

@@ -9,6 +9,11 @@
 
 namespace ldimesh {
 
+void widen_scalar_range(float& lo, float& hi, float a, float b) {
+  if (!std::isnan(a)) lo = std::isnan(lo) ? a : std::min(lo, a);
+  if (!std::isnan(b)) hi = std::isnan(hi) ? b : std::max(hi, b);
+}
+
 LdiFragment make_empty_fragment(const View& view, std::uint32_t view_index) {
   LdiFragment f;
   f.view = view_index;
@@ -41,6 +46,10 @@ Status validate_fragment(const LdiFragment& f) {
     return Status::corrupt_input("fragment: scalars and depths differ in number");
   if (!(f.depth_lo <= f.depth_hi) || !std::isfinite(f.depth_lo) || !std::isfinite(f.depth_hi))
     return Status::corrupt_input("fragment: invalid depth interval");
+  if ((std::isnan(f.scalar_lo) != std::isnan(f.scalar_hi)) ||
+      (!std::isnan(f.scalar_lo) && (!std::isfinite(f.scalar_lo) || !std::isfinite(f.scalar_hi) ||
+                                    !(f.scalar_lo <= f.scalar_hi))))
+    return Status::corrupt_input("fragment: invalid scalar range");
   std::uint64_t total = 0;
   for (std::size_t k = 0; k < f.pixels.size(); ++k) {
     if (f.pixels[k] >= f.pixel_count)
@@ -73,6 +82,7 @@ LdiFragment merge_fragments(std::span<const LdiFragment> fragments, double toler
   const bool with_scalar = std::any_of(fragments.begin(), fragments.end(),
                                        [](const LdiFragment& f) { return !f.scalar.empty(); });
   for (const LdiFragment& f : fragments) {
+    widen_scalar_range(out.scalar_lo, out.scalar_hi, f.scalar_lo, f.scalar_hi);
     if (f.view != first.view || f.pixel_count != first.pixel_count ||
         f.depth_lo != first.depth_lo || f.depth_hi != first.depth_hi)
       throw std::invalid_argument("merge_fragments: fragments of different views");

@@ -179,10 +179,11 @@ RayCaster::RayCaster(std::span<const FieldSource* const> sources, double isovalu
       axis_bindings_.push_back(std::move(binding));
     }
   }
-  for (const FieldSource* source : sources_) {
-    scalar_probes_.push_back(source->bind_scalar());
-    has_scalar_ = has_scalar_ || scalar_probes_.back() != nullptr;
-  }
+  if (options.scalars)
+    for (const FieldSource* source : sources_) {
+      scalar_probes_.push_back(source->bind_scalar());
+      has_scalar_ = has_scalar_ || scalar_probes_.back() != nullptr;
+    }
   axis_seconds_ = seconds_since(start);
   if (axis_bindings_.empty()) ensure_scene();
 }
@@ -244,6 +245,11 @@ void RayCaster::prepare(const View& view) const {
 bool RayCaster::uses_axis_casters(const View& view) const {
   return !axis_bindings_.empty() && exact_axis(view.dir) >= 0 && exact_axis(view.u) >= 0 &&
          exact_axis(view.v) >= 0;
+}
+
+bool RayCaster::carries_scalars() const {
+  return has_scalar_ && std::all_of(scalar_probes_.begin(), scalar_probes_.end(),
+                                    [](const auto& probe) { return probe != nullptr; });
 }
 
 std::size_t RayCaster::primitive_count() const {
@@ -340,14 +346,18 @@ std::size_t RayCaster::finish_ray(const RaySegment& segment, glm::dvec3 org, glm
       continue;
     hits[kept++] = h;
   }
-  // The colour field at each hit, from the first source with a value there (on a face two
-  // sources share, a continuous field has the same value in both).
+  // The colour field at each hit: from the first source that holds the point (on a face two
+  // sources share, a continuous field has the same value in both), else from the first that
+  // is near it.
   if (has_scalar_)
     for (std::size_t k = 0; k < kept; ++k) {
       const glm::dvec3 p = org + hits[k].t * dir;
       double v = std::numeric_limits<double>::quiet_NaN();
       for (const auto& probe : scalar_probes_)
-        if (probe && !std::isnan(v = probe->at(p))) break;
+        if (probe && std::isfinite(v = probe->at(p))) break;
+      if (!std::isfinite(v))
+        for (const auto& probe : scalar_probes_)
+          if (probe && std::isfinite(v = probe->near(p))) break;
       hits[k].scalar = float(v);
     }
   return kept;

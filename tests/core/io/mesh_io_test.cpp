@@ -127,6 +127,35 @@ TEST_F(MeshIo, PlyRoundTripsThroughReadPly) {
   EXPECT_EQ(slurp(path("again.ply")), slurp(path("m.ply")));
 }
 
+// A mesh with scalars (a field to colour by) writes a float `value` per vertex and reads back the
+// same; a `value` given as a list is not one (skipped), a non-finite one is an error.
+TEST_F(MeshIo, ScalarsRoundTripAsThePlyValueProperty) {
+  Mesh m = two_faces();
+  m.scalars = {0.0f, -1.5f, 2.25f, 1e-20f, 3.0f};
+  ASSERT_TRUE(write_ply(path("s.ply"), m));
+  EXPECT_NE(slurp(path("s.ply")).find("property float nz\nproperty float value\n"),
+            std::string::npos);
+  Mesh r;
+  ASSERT_TRUE(read_ply(path("s.ply"), r));
+  EXPECT_EQ(r.scalars, m.scalars);
+  ASSERT_TRUE(write_ply(path("s2.ply"), r));
+  EXPECT_EQ(slurp(path("s2.ply")), slurp(path("s.ply")));
+  const std::string head =
+      "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+      "property float z\n";
+  const std::string faces = "element face 1\nproperty list uchar int vertex_indices\nend_header\n";
+  Mesh listed;
+  ASSERT_TRUE(parse_ply(head + "property list uchar float value\n" + faces +
+                            "0 0 0 1 7\n1 0 0 1 7\n0 1 0 1 7\n3 0 1 2\n",
+                        listed));
+  EXPECT_TRUE(listed.scalars.empty());
+  Mesh bad;
+  const Status s = parse_ply(
+      head + "property float value\n" + faces + "0 0 0 1\n1 0 0 nan\n0 1 0 2\n3 0 1 2\n", bad);
+  EXPECT_FALSE(s);
+  EXPECT_NE(s.message().find("vertex 1: value is not finite"), std::string::npos) << s.message();
+}
+
 TEST(PlyReader, AsciiWithoutNormalsAndWithPolygons) {
   // A unit square as one pentagon-free quad, a triangle, and a pentagon (a fan of 3 triangles);
   // CRLF line ends, extra properties and an extra element are skipped.

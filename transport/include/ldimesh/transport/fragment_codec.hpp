@@ -46,7 +46,7 @@ struct FragmentEncoding {
   // Scalars (a colour field) quantized to this many bits over the fragment's range of finite
   // scalars (2..24; fewer where a step would fall below two float spacings; the bits used are
   // in the scalar stream). A non-finite scalar stays non-finite (NaN).
-  int scalar_bits = 14;
+  int scalar_bits = 12;
   // zstd level, ZSTD_minCLevel()..ZSTD_maxCLevel(); not stored, the decoder does not need it.
   int zstd_level = 3;
 };
@@ -55,8 +55,9 @@ struct FragmentEncoding {
 // interval within ±1e30, at most 65536 samples per pixel and at most 2³¹ samples; throws
 // std::invalid_argument otherwise or for out-of-range encoding settings (std::runtime_error
 // should zstd itself fail, std::bad_alloc without memory). Lossy encoding clamps
-// depths outside [depth_lo, depth_hi] to the interval and quantizes scalars (scalar_bits);
-// lossless encoding stores them bit-exactly.
+// depths outside [depth_lo, depth_hi] to the interval and quantizes scalars (scalar_bits)
+// over the fragment's scalar range widened to its finite scalars (the decoded fragment has
+// that range); lossless encoding stores them bit-exactly.
 // Deterministic, and idempotent: encoding the decoded fragment again with the same `encoding`
 // gives the same bytes (so a rank may decode, merge and re-encode without drift).
 std::vector<std::uint8_t> encode_fragment(const LdiFragment& fragment,

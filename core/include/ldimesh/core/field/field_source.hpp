@@ -145,9 +145,12 @@ std::string embree_failure(RTCDevice device, const std::string& what);
 class ScalarProbe {
  public:
   virtual ~ScalarProbe() = default;
-  // The field at `p`, NaN where the source has no value there (p outside its domain, or a
-  // non-finite value nearby). Thread-safe; the same answer for the same point on any thread.
+  // The field at `p` where the source's domain holds it (closed); NaN elsewhere, and where the
+  // value there is not finite. Thread-safe; the same answer for the same point on any thread.
   virtual double at(glm::dvec3 p) const = 0;
+  // The same, also for points a little outside the domain (rounding, an element's curved face),
+  // from the nearest part of it: what a hit that no source holds exactly takes.
+  virtual double near(glm::dvec3 p) const = 0;
 };
 
 class FieldSource {

@@ -46,8 +46,9 @@ class GridSource final : public FieldSource {
   // block's points (0 … dims[a] − 1; not checked).
   double value(std::int64_t i, std::int64_t j, std::int64_t k) const;
   // The trilinear interpolant of the values at world point `p`, in the cell that holds it (ghost
-  // cells included); NaN where p lies more than 10⁻⁶ of a cell outside the block's points.
-  double interpolate(glm::dvec3 p) const;
+  // cells included); NaN where p lies more than `slack` (a fraction of a cell) outside the
+  // block's points, or where the interpolant there is not finite.
+  double interpolate(glm::dvec3 p, double slack = 0.0) const;
   // The coordinate of point index i along axis a (0 ≤ i < dims[a], 0 ≤ a < 3; not checked).
   double coordinate(int axis, std::int64_t i) const;
   // Owned cells along each axis: lower corner indices first_cell[a] … last_cell[a].

@@ -40,8 +40,9 @@ class HexFieldLookup {
   };
   bool sample(glm::dvec3 world, PolynomialSample& out, Hint& hint) const;
   // The field's value alone, from the element sample() takes (false where it has none, or the
-  // value is not finite): the colour of a hit (ScalarProbe), which needs no gradient.
-  bool value(glm::dvec3 world, double& out, Hint& hint) const;
+  // value is not finite): the colour of a hit (ScalarProbe), which needs no gradient. Without
+  // `extrapolate`, only from an element that holds the point (within 10⁻⁹ in ξ).
+  bool value(glm::dvec3 world, double& out, Hint& hint, bool extrapolate = true) const;
 
   // sample() as a field for ImplicitSurface (core/metrics/distance.hpp): the value, or NaN
   // (and a NaN gradient) where there is none; each calling thread keeps its own hint. The
@@ -53,9 +54,9 @@ class HexFieldLookup {
 
  private:
   bool evaluate(std::size_t element, glm::dvec3 xi, PolynomialSample& out) const;
-  // The element sample() takes for `world` and the point's reference coordinates in it
-  // (`hint` updated); element_count() where there is none.
-  std::size_t locate(glm::dvec3 world, Hint& hint, glm::dvec3& xi) const;
+  // The element sample() takes for `world` (missed by at most `reach` in ξ) and the point's
+  // reference coordinates in it (`hint` updated); element_count() where there is none.
+  std::size_t locate(glm::dvec3 world, Hint& hint, glm::dvec3& xi, double reach) const;
 
   struct Element {
     const HexElementSource* source;

@@ -2,6 +2,7 @@
 // sample), and how fragments of one view become a full LDI again.
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <span>
 #include <vector>
@@ -27,9 +28,18 @@ struct LdiFragment {
   std::vector<float> depth;
   std::vector<glm::vec3> normal;
   std::vector<float> scalar;  // empty, or one value per sample
+  // The range the lossy wire format quantizes the scalars over (transport/fragment_codec.hpp),
+  // widened to hold every finite scalar; NaN: the scalars' own range. The ranks of a step agree
+  // on one per view (the reduction sets it), so that a sample's value does not depend on the
+  // rank that cast it, nor on the number of ranks.
+  float scalar_lo = NAN;
+  float scalar_hi = NAN;
 
   std::size_t sample_count() const { return depth.size(); }
 };
+
+// The union of the scalar ranges [lo, hi] and [a, b], NaN ends unset (the other's, or NaN).
+void widen_scalar_range(float& lo, float& hi, float a, float b);
 
 // An empty fragment of `view` (what a rank with nothing to cast sends).
 LdiFragment make_empty_fragment(const View& view, std::uint32_t view_index);
@@ -38,8 +48,8 @@ LdiFragment make_empty_fragment(const View& view, std::uint32_t view_index);
 LdiFragment fragment_from_ldi(const Ldi& ldi, std::uint32_t view_index);
 
 // Checks every invariant above (sizes agree, counts ≥ 1 and sum to the samples, pixel ids
-// strictly increasing and in range, depths finite and sorted per pixel); a Status naming the
-// first violation.
+// strictly increasing and in range, depths finite and sorted per pixel, a scalar range either
+// unset (both NaN) or finite with lo ≤ hi); a Status naming the first violation.
 Status validate_fragment(const LdiFragment& fragment);
 
 // Fragments of one view merged: per pixel the samples of all fragments are concatenated,
@@ -47,7 +57,8 @@ Status validate_fragment(const LdiFragment& fragment);
 // the first of them (one root found by two ranks on their shared face). The result does not
 // depend on the order of the fragments. All fragments must be of the same view (same view
 // index, pixel_count and depth interval) and carry a scalar alike; throws
-// std::invalid_argument otherwise. An empty list gives an empty fragment.
+// std::invalid_argument otherwise. The scalar range is the union of the fragments' (NaN where
+// none has one). An empty list gives an empty fragment.
 LdiFragment merge_fragments(std::span<const LdiFragment> fragments, double tolerance);
 
 // The full LDI of `view` with the fragment's samples; throws std::invalid_argument if the

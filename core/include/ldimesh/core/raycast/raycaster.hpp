@@ -53,6 +53,9 @@ enum class CastPath {
 
 struct RayCasterOptions {
   CastPath path = CastPath::automatic;
+  // Whether hits carry the sources' colour fields (FieldSource::bind_scalar) where they have
+  // one.
+  bool scalars = true;
 };
 
 // The roots of one isovalue of a set of field sources along rays. Two casters behind one
@@ -97,6 +100,8 @@ class RayCaster {
                          const Subdomain* sub = nullptr,
                          std::span<const glm::dvec2> depth_ranges = {}) const;
 
+  // Whether every source has a colour field that the hits carry (RayCasterOptions::scalars).
+  bool carries_scalars() const;
   // Primitives in the scene (those whose value range may contain the isovalue), all sources.
   std::size_t primitive_count() const;
   // Non-finite values (NaN, ±Inf) the sources read when the scene was built: the sum of their
