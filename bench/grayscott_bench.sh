@@ -10,7 +10,8 @@
 # published step's JSON "seconds"); then the three runs side by side. Prints Markdown for
 # docs/benchmarks.md.
 # Usage: bench/grayscott_bench.sh [SIZE=192] [SUBSTEPS=60] [STEPS=20] [RESOLUTION=256]
-# (binaries from build/bin, or from $LDIMESH_BIN)
+# (binaries from build/bin, or from $LDIMESH_BIN; COLOUR_BY=U colours the V isosurface by U,
+# option "colour_by")
 set -euo pipefail
 cd "$(dirname "$0")/.."
 size=${1:-192}
@@ -26,6 +27,7 @@ for mode in none sync background; do
   extra='"background": true'
   [ "$mode" = sync ] && extra='"background": false'
   [ "$mode" = none ] && extra='"cadence": {"every_steps": 1000000000}'
+  [ -n "${COLOUR_BY:-}" ] && extra="$extra, \"colour_by\": \"$COLOUR_BY\""
   printf '{"server": {"enabled": false}, "output_dir": "%s/%s/steps", "resolution": %d, "keep": 4, %s}\n' \
     "$tmp" "$mode" "$resolution" "$extra" >"$tmp/$mode/options.json"
   # --bind-to none: the ray caster runs threads on every rank.
@@ -47,15 +49,17 @@ def read_reports(mode):
 tmp = os.path.join(root, "background")
 reports = read_reports("background")
 stages = ["cast", "encode", "reduce", "decode", "mesh", "glb"]
+colour = os.environ.get("COLOUR_BY")
 print(f"2 ranks, {size}³ points, {substeps} substeps per step, {steps} steps, {res}² views, "
-      f"every step due, busy = skip; background path\n")
+      f"every step due, busy = skip; background path"
+      + (f"; coloured by {colour}" if colour else "") + "\n")
 executed = [s for s, r in sorted(reports.items()) if r["executed"] == "1"]
 every = max(1, -(-len(executed) // 20))  # at most about 20 rows; the median covers them all
 if every > 1:
     print(f"Every {every}th executed step:\n")
-print("| step | compute s | blocked s | blocked / compute | triangles | "
+print("| step | compute s | blocked s | blocked / compute | triangles | bytes / triangle | "
       + " | ".join(f"{s} s" for s in stages) + " |")
-print("|---" * (5 + len(stages)) + "|")
+print("|---" * (6 + len(stages)) + "|")
 rows = []
 for i, s in enumerate(executed):
     r = reports[s]
@@ -66,7 +70,8 @@ for i, s in enumerate(executed):
     if i % every and i != len(executed) - 1:
         continue
     cells = [str(s), f"{compute:.3f}", f"{blocked:.3f}", f"{100 * blocked / compute:.1f} %",
-             str(meta["triangles"]) if meta else "(replaced)"]
+             str(meta["triangles"]) if meta else "(replaced)",
+             f"{meta['bytes'] / max(meta['triangles'], 1):.2f}" if meta else ""]
     cells += [f"{meta['seconds'].get(st, 0):.3f}" if meta else "" for st in stages]
     print("| " + " | ".join(cells) + " |")
 skipped = sum(1 for r in reports.values() if r["skipped_busy"] == "1")

@@ -11,7 +11,9 @@
 // - the camera keeps the surface in view (no mesh pixels on the canvas's edges, the bounding
 //   box of the mesh shown projects inside the view) and re-frames for a surface that outgrows
 //   what it framed, until the person moves it: then it stays put; "reset camera" frames again;
-// - the slider shows an older step, "follow" goes back to the newest;
+// - the slider shows an older step, "follow" goes back to the newest; the panel says how many
+//   kept steps are newer than the one shown; "play" shows the newer ones in turn and stops; the
+//   screenshot button downloads a PNG;
 // - colouring by the field (each vertex's x): chosen by itself for a step that carries
 //   one, the canvas shows the colour map's colours (viridis' purple, not cool–warm's red, and
 //   the other way round after switching maps), the legend names the field and shows the step's
@@ -22,7 +24,7 @@
 //
 //   node tests/browser/viewer_test.mjs PUBLISHER REPO_ROOT ARTIFACT_DIR
 import { spawn } from 'node:child_process';
-import { mkdirSync } from 'node:fs';
+import { mkdirSync, readFileSync } from 'node:fs';
 import { createInterface } from 'node:readline';
 import { chromium } from 'playwright-core';
 
@@ -335,6 +337,33 @@ try {
   await waitForStep(fourth.step, 15000).catch(() => {});
   status = await page.evaluate(() => document.body.dataset.status);
   check(await loadedStep() === Number(fourth.step) && status === `step ${fourth.step} (following)`, `"follow" goes back to step ${fourth.step}: "${status}"`);
+
+  // How far behind the picture is: none while following the newest step.
+  let lagText = await page.evaluate(() => [document.body.dataset.behind, document.getElementById('lag').textContent]);
+  check(lagText[0] === '0' && lagText[1].startsWith('showing the newest step'), `following: "${lagText[1]}"`);
+  // Play: from an older kept step, each kept step after it in turn up to the newest, then it stops.
+  const kept = await page.evaluate(() => window.ldimesh.steps.slice());
+  const from = kept[kept.length - 4];
+  await page.evaluate((step) => {
+    const slider = document.getElementById('slider');
+    slider.value = String(window.ldimesh.steps.indexOf(step));
+    slider.dispatchEvent(new Event('input'));
+  }, from);
+  await waitForStep(from, 15000).catch(() => {});
+  lagText = await page.evaluate(() => [document.body.dataset.behind, document.getElementById('lag').textContent]);
+  check(lagText[0] === '3' && lagText[1].startsWith('behind by 3 steps'), `step ${from} shown: "${lagText[1]}"`);
+  const playStart = Date.now();
+  await page.click('#play');
+  await page.waitForFunction((s) => document.body.dataset.loadedStep === String(s) &&
+    document.body.dataset.playing === 'false', kept[kept.length - 1], { timeout: 30000 }).catch(() => {});
+  const played = (await page.evaluate(() => window.testShown)).filter((s) => s.t >= playStart).map((s) => s.step);
+  check(JSON.stringify(played) === JSON.stringify(kept.slice(-3)),
+    `play shows the kept steps after ${from} in turn, then stops: ${played.join(', ')} (kept: ${kept.slice(-3).join(', ')})`);
+  // Screenshot: a PNG of the canvas, downloaded.
+  const [download] = await Promise.all([page.waitForEvent('download', { timeout: 15000 }), page.click('#screenshot')]);
+  const png = readFileSync(await download.path());
+  check(png.length > 10000 && png.subarray(1, 4).toString() === 'PNG' && download.suggestedFilename() === `ldimesh_step_${kept[kept.length - 1]}.png`,
+    `the screenshot button saves ${download.suggestedFilename()} (${png.length} bytes of PNG)`);
 
   const interleaved = consoleMessages.filter((m) => m.includes('InterleavedBufferAttribute'));
   check(interleaved.length === 0, `no InterleavedBufferAttribute warning in the console (${interleaved.length})`);

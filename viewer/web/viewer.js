@@ -292,6 +292,7 @@ async function loadStep(step) {
   showMetadata(meta, triangles);
   syncSlider();
   document.body.dataset.loadedStep = String(meta.step);
+  showLag();
   document.body.dataset.triangles = String(triangles);
   setStatus($('follow').checked ? `step ${meta.step} (following)` : `step ${meta.step}`);
 }
@@ -342,13 +343,83 @@ function addStep(meta) {
   if (!state.steps.includes(meta.step)) state.steps.push(meta.step);
   state.steps.sort((a, b) => a - b);
   syncSlider();
+  showLag();
 }
+
+// How far the picture is behind the job: kept steps newer than the one shown, and the time
+// since the job last published (document.body.dataset.behind: the first, for tests).
+const lag = { lastPublished: null };
+function showLag() {
+  if (!state.loaded || !state.steps.length) return;
+  const behind = state.steps.filter((s) => s > state.loaded.step).length;
+  const newest = state.steps[state.steps.length - 1];
+  const ago = lag.lastPublished === null ? '' :
+    `; last step ${Math.round((Date.now() - lag.lastPublished) / 1000)} s ago`;
+  $('lag').textContent = (behind ? `behind by ${behind} step${behind > 1 ? 's' : ''} (newest ${newest})`
+    : 'showing the newest step') + ago;
+  document.body.dataset.behind = String(behind);
+}
+setInterval(showLag, 1000);
+
+// Play: the kept steps one after another, from the one shown to the newest, each as soon as the
+// one before is shown and half a second has passed; then it stops.
+const player = { playing: false, timer: null };
+function setPlaying(on) {
+  player.playing = on;
+  $('play').textContent = on ? 'pause' : 'play';
+  document.body.dataset.playing = String(on);
+  clearInterval(player.timer);
+  if (!on) return;
+  $('follow').checked = false;
+  player.timer = setInterval(() => {
+    if (state.loading !== null || state.next !== null || !state.loaded) return;
+    const at = state.steps.indexOf(state.loaded.step);
+    if (at < 0 || at + 1 >= state.steps.length) return setPlaying(false);
+    show(state.steps[at + 1]);
+  }, 500);
+}
+$('play').addEventListener('click', () => {
+  if (!player.playing && state.loaded && state.steps.indexOf(state.loaded.step) === state.steps.length - 1)
+    show(state.steps[0]);  // at the newest: from the oldest kept
+  setPlaying(!player.playing);
+});
+
+// The picture as a PNG, with the legend drawn in where it shows.
+$('screenshot').addEventListener('click', () => {
+  renderer.render(scene, camera);
+  const out = document.createElement('canvas');
+  out.width = canvas.width;
+  out.height = canvas.height;
+  const ctx = out.getContext('2d');
+  ctx.drawImage(canvas, 0, 0);
+  if (!$('legend').hidden) {
+    const bar = $('legend-bar'), x = out.width - bar.width - 20, y = out.height - 50;
+    ctx.fillStyle = 'rgba(20, 22, 27, 0.85)';
+    ctx.fillRect(x - 10, y - 26, bar.width + 20, 70);
+    ctx.fillStyle = '#e8e8e8';
+    ctx.font = '13px system-ui, sans-serif';
+    ctx.fillText($('legend-name').textContent, x, y - 8);
+    ctx.drawImage(bar, x, y);
+    ctx.fillText($('legend-min').textContent, x, y + bar.height + 16);
+    const max = $('legend-max').textContent;
+    ctx.fillText(max, x + bar.width - ctx.measureText(max).width, y + bar.height + 16);
+  }
+  out.toBlob((blob) => {
+    const link = document.createElement('a');
+    link.href = URL.createObjectURL(blob);
+    link.download = `ldimesh_step_${state.loaded ? state.loaded.step : 0}.png`;
+    link.click();
+    setTimeout(() => URL.revokeObjectURL(link.href), 10000);
+  }, 'image/png');
+});
 
 $('slider').addEventListener('input', () => {
   $('follow').checked = false;
+  setPlaying(false);
   show(state.steps[Number($('slider').value)]);
 });
 $('follow').addEventListener('change', () => {
+  if ($('follow').checked) setPlaying(false);
   if ($('follow').checked && state.steps.length) show(state.steps[state.steps.length - 1]);
 });
 // A change of colouring, colour map or range recolours the step shown.
@@ -376,6 +447,7 @@ function listen() {
   const events = new EventSource(`/api/v1/events?token=${encodeURIComponent(token)}`);
   events.addEventListener('step', (event) => {
     const meta = JSON.parse(event.data);
+    lag.lastPublished = Date.now();
     addStep(meta);
     if ($('follow').checked && meta.step > newestWanted()) show(meta.step);
   });
