@@ -2,14 +2,18 @@
 // every built-in analytic surface at each --res: three axis views, r = 0.5, triangles. Reports
 // triangles, GLB bytes (and per triangle), PLY bytes (and per triangle), the position bits
 // chosen (automatic: step ≤ a tenth of the LDI pixel) with glb_position_error_bound in pixels,
-// and the single-thread encode and decode times (median of --repeat). Prints a Markdown table.
+// and the encode times on one thread and on --threads (meshes above 200 000 triangles are
+// encoded in parts, concurrently), the decode time (one thread), each the median of --repeat,
+// the two encodes alternating. Prints a Markdown table.
 //
 //   build/bin/ldimesh_bench_glb [--res 256 512] [--repeat 5] [--level 7] [--normal-bits 10]
+//                               [--threads N]
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <tbb/global_control.h>
@@ -34,6 +38,7 @@ int main(int argc, char** argv) {
   CLI::App app{"ldimesh mesh delivery benchmark: Draco GLB against binary PLY"};
   std::vector<int> resolutions = {256, 512};
   int repeat = 5;
+  int threads = int(std::max(1u, std::thread::hardware_concurrency()));
   ldimesh::GlbOptions options;
   app.add_option("--res", resolutions, "pixels per view side (several allowed)")
       ->check(CLI::Range(8, 8192));
@@ -43,23 +48,27 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0, 10));
   app.add_option("--normal-bits", options.normal_bits, "normal quantization bits")
       ->check(CLI::Range(2, 30));
+  app.add_option("--threads", threads, "threads of the second encode timing")
+      ->check(CLI::Range(1, 1024));
   CLI11_PARSE(app, argc, argv);
 
   std::printf(
       "Three axis views per surface, r = 0.5, triangles; GLB: Draco level %d, automatic "
       "position bits (step ≤ 0.1 pixel), %d normal bits, colours; PLY: binary, "
-      "ldimesh::write_ply (float position + normal, uint indices, view byte); encode and "
-      "decode on one thread, median of %d\n\n",
-      options.compression_level, options.normal_bits, repeat);
+      "ldimesh::write_ply (float position + normal, uint indices, view byte); encode on one "
+      "thread and on %d, decode on one, median of %d\n\n",
+      options.compression_level, options.normal_bits, threads, repeat);
   std::printf(
       "| surface | res | triangles | vertices | GLB bytes | GLB B/tri | PLY bytes | PLY B/tri | "
-      "PLY / GLB | position bits | error bound (pixels) | encode s | decode s |\n");
-  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+      "PLY / GLB | position bits | error bound (pixels) | encode s | encode s, %d threads | "
+      "decode s |\n",
+      threads);
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   const std::filesystem::path ply = std::filesystem::temp_directory_path() /
                                     ("ldimesh_bench_glb_" + std::to_string(getpid()) + ".ply");
   for (const int res : resolutions) {
     std::size_t total_triangles = 0, total_glb = 0, total_ply = 0;
-    double total_encode = 0.0, total_decode = 0.0;
+    double total_encode = 0.0, total_encode_threads = 0.0, total_decode = 0.0;
     for (const ldimesh::SurfaceInfo& s : ldimesh::builtin_surfaces()) {
       ldimesh::Mesh mesh;
       double pixel = 0.0;
@@ -76,19 +85,34 @@ int main(int argc, char** argv) {
       ldimesh::GlbOptions o = options;
       o.pixel_size = pixel;
 
-      // Encoding and decoding on one thread (Draco is single-threaded anyway).
-      const tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
-      std::vector<double> enc, dec;
-      std::vector<std::uint8_t> glb;
+      std::vector<double> enc, enc_threads, dec;
+      std::vector<std::uint8_t> glb, glb_threads;
       ldimesh::GlbInfo info;
       ldimesh::Mesh back;
       for (int r = 0; r < repeat; ++r) {
+        {
+          ldimesh::GlbOptions with_threads = o;
+          with_threads.threads = threads;
+          const auto start = std::chrono::steady_clock::now();
+          if (ldimesh::Status st = ldimesh::encode_glb(mesh, with_threads, glb_threads); !st) {
+            std::fprintf(stderr, "%s\n", st.message().c_str());
+            return 1;
+          }
+          enc_threads.push_back(seconds_since(start));
+        }
+        // One thread (the parts one after another), and the decode.
+        ldimesh::GlbOptions one_thread = o;
+        one_thread.threads = 1;
         auto start = std::chrono::steady_clock::now();
-        if (ldimesh::Status st = ldimesh::encode_glb(mesh, o, glb, &info); !st) {
+        if (ldimesh::Status st = ldimesh::encode_glb(mesh, one_thread, glb, &info); !st) {
           std::fprintf(stderr, "%s\n", st.message().c_str());
           return 1;
         }
         enc.push_back(seconds_since(start));
+        if (glb != glb_threads) {
+          std::fprintf(stderr, "%s: the GLB depends on the threads\n", s.name.c_str());
+          return 1;
+        }
         start = std::chrono::steady_clock::now();
         if (ldimesh::Status st = ldimesh::decode_glb(glb, back); !st) {
           std::fprintf(stderr, "%s\n", st.message().c_str());
@@ -108,21 +132,24 @@ int main(int argc, char** argv) {
       const std::size_t ply_bytes = std::filesystem::file_size(ply);
       const double t = double(mesh.triangle_count());
       std::printf(
-          "| %s | %d² | %zu | %zu | %zu | %.2f | %zu | %.2f | %.1f | %d | %.3f | %.4f | %.4f |\n",
+          "| %s | %d² | %zu | %zu | %zu | %.2f | %zu | %.2f | %.1f | %d | %.3f | %.4f | %.4f | "
+          "%.4f |\n",
           s.name.c_str(), res, mesh.triangle_count(), mesh.vertex_count(), glb.size(),
           double(glb.size()) / t, ply_bytes, double(ply_bytes) / t,
           double(ply_bytes) / double(glb.size()), info.position_bits,
-          info.position_error_bound / pixel, median(enc), median(dec));
+          info.position_error_bound / pixel, median(enc), median(enc_threads), median(dec));
       total_triangles += mesh.triangle_count();
       total_glb += glb.size();
       total_ply += ply_bytes;
       total_encode += median(enc);
+      total_encode_threads += median(enc_threads);
       total_decode += median(dec);
     }
-    std::printf("| **all** | %d² | %zu | | %zu | %.2f | %zu | %.2f | %.1f | | | %.4f | %.4f |\n",
-                res, total_triangles, total_glb, double(total_glb) / double(total_triangles),
-                total_ply, double(total_ply) / double(total_triangles),
-                double(total_ply) / double(total_glb), total_encode, total_decode);
+    std::printf(
+        "| **all** | %d² | %zu | | %zu | %.2f | %zu | %.2f | %.1f | | | %.4f | %.4f | %.4f |\n",
+        res, total_triangles, total_glb, double(total_glb) / double(total_triangles), total_ply,
+        double(total_ply) / double(total_triangles), double(total_ply) / double(total_glb),
+        total_encode, total_encode_threads, total_decode);
   }
   std::filesystem::remove(ply);
   return 0;

@@ -214,6 +214,94 @@ TEST(Glb, RoundTripKeepsTrianglesViewsAndPositionsWithinTheBound) {
     ASSERT_NEAR(glm::length(n), 1.0f, 1e-5f);
 }
 
+// A mesh above 200 000 triangles is encoded in parts (slabs), concurrently, as primitives of one
+// mesh: the same bytes on one thread and on two; every original triangle comes back once, with
+// its view; every decoded vertex within the position bound of its original (a vertex two parts
+// share comes back once per part), scalars within their bound.
+TEST(Glb, ALargeMeshIsEncodedInPartsTheSameOnAnyNumberOfThreads) {
+  const Mesh mesh = with_scalar(surface_mesh("torus", 256, FaceType::triangles));
+  ASSERT_GT(mesh.triangle_count(), 200000u);
+  ASSERT_LT(mesh.triangle_count(), 400000u);  // two parts
+  GlbInfo info;
+  GlbOptions options;
+  options.threads = 1;
+  const Bytes one_thread = encode(mesh, options, &info);
+  options.threads = 2;
+  const Bytes two_threads = encode(mesh, options);
+  EXPECT_TRUE(one_thread == two_threads) << "the GLB depends on the number of threads";
+  const Json json = json_chunk(one_thread);
+  ASSERT_EQ(json["meshes"].size(), 1u);
+  ASSERT_EQ(json["meshes"][0]["primitives"].size(), 2u);
+  EXPECT_EQ(json["nodes"].size(), 1u);
+  EXPECT_TRUE(json["meshes"][0]["extras"]["ldimesh"].contains("scalar_range"));
+  Mesh back;
+  GlbInfo back_info;
+  const Status s = decode_glb(one_thread, back, &back_info);
+  ASSERT_TRUE(s) << s.message();
+  EXPECT_EQ(back.triangle_count(), mesh.triangle_count());
+  EXPECT_EQ(info.triangles, mesh.triangle_count());
+  EXPECT_EQ(back.vertex_count(), info.vertices);
+  EXPECT_GT(back.vertex_count(), mesh.vertex_count());              // the shared ones twice
+  EXPECT_LT(back.vertex_count(), mesh.vertex_count() * 102 / 100);  // only those
+  // Every original vertex within the bound of each decoded one (the meshes' views overlap: two
+  // originals may lie that close), and each decoded triangle is the original triangle of one
+  // choice among them.
+  const double bound = info.position_error_bound, range = info.scalar_max - info.scalar_min;
+  std::vector<std::vector<std::uint32_t>> near(back.vertex_count());
+  {
+    std::map<std::array<std::int64_t, 3>, std::vector<std::uint32_t>> grid;
+    const auto cell = [bound](glm::vec3 p) {
+      const glm::i64vec3 c(glm::floor(glm::dvec3(p) / bound));
+      return std::array<std::int64_t, 3>{c.x, c.y, c.z};
+    };
+    for (std::uint32_t j = 0; j < mesh.vertex_count(); ++j)
+      grid[cell(mesh.positions[j])].push_back(j);
+    for (std::size_t i = 0; i < back.vertex_count(); ++i) {
+      const std::array<std::int64_t, 3> c = cell(back.positions[i]);
+      for (int d = 0; d < 27; ++d) {
+        const auto it = grid.find({c[0] + d % 3 - 1, c[1] + d / 3 % 3 - 1, c[2] + d / 9 - 1});
+        if (it == grid.end()) continue;
+        for (std::uint32_t j : it->second)
+          if (glm::length(glm::dvec3(back.positions[i]) - glm::dvec3(mesh.positions[j])) <= bound)
+            near[i].push_back(j);
+      }
+      ASSERT_FALSE(near[i].empty())
+          << "decoded vertex " << i << " is farther than the bound from all";
+    }
+  }
+  std::map<std::array<std::uint32_t, 3>, std::uint8_t> faces;
+  for (std::size_t f = 0; f < mesh.triangle_count(); ++f) {
+    const std::uint32_t* t = &mesh.triangles[3 * f];
+    faces[canonical(t[0], t[1], t[2])] = mesh.triangle_view[f];
+  }
+  std::vector<int> used(mesh.vertex_count(), 0);
+  double worst_scalar = 0.0;
+  for (std::size_t f = 0; f < back.triangle_count(); ++f) {
+    const std::uint32_t* t = &back.triangles[3 * f];
+    bool found = false;
+    for (std::uint32_t a : near[t[0]])
+      for (std::uint32_t b : near[t[1]])
+        for (std::uint32_t c : near[t[2]]) {
+          const auto it = found ? faces.end() : faces.find(canonical(a, b, c));
+          if (it == faces.end()) continue;
+          found = true;
+          EXPECT_EQ(back.triangle_view[f], it->second) << "triangle " << f << " changed view";
+          faces.erase(it);
+          const std::uint32_t original[3] = {a, b, c};
+          for (int k = 0; k < 3; ++k) {
+            ++used[original[k]];
+            const double value = info.scalar_min + back.scalars[t[k]] * range;
+            const double err = std::abs(value - mesh.scalars[original[k]]);
+            if (!(err <= worst_scalar)) worst_scalar = err;
+          }
+        }
+    ASSERT_TRUE(found) << "decoded triangle " << f << " is not an original triangle";
+  }
+  EXPECT_TRUE(faces.empty()) << faces.size() << " original triangles not decoded";
+  EXPECT_TRUE(std::all_of(used.begin(), used.end(), [](int u) { return u >= 1; }));
+  EXPECT_LE(worst_scalar, glb_scalar_error_bound({}) * range);
+}
+
 // Every compression level gives the same mesh; level 0 (sequential) keeps the vertex order,
 // Edgebreaker (levels ≥ 1) reorders vertices, so the other tests match by position.
 TEST(Glb, EveryCompressionLevelRoundTripsAndLevelZeroKeepsTheVertexOrder) {

@@ -9,6 +9,7 @@
 #include "ldimesh/transport/glb.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <bit>
 #include <cmath>
 #include <cstring>
@@ -16,6 +17,8 @@
 #include <memory>
 #include <new>
 #include <string>
+#include <system_error>
+#include <thread>
 #include <unordered_map>
 
 #include <draco/compression/decode.h>
@@ -24,6 +27,7 @@
 #include <draco/core/encoder_buffer.h>
 #include <draco/io/gltf_encoder.h>
 #include <draco/mesh/mesh.h>
+#include <tbb/parallel_for.h>
 #include <nlohmann/json.hpp>
 
 namespace ldimesh {
@@ -173,6 +177,7 @@ Status check_options(const GlbOptions& o) {
     return Status::invalid_argument("glb: normal_bits must be 2..30");
   if (o.scalar_bits < 1 || o.scalar_bits > 30)
     return Status::invalid_argument("glb: scalar_bits must be 1..30");
+  if (o.threads < 0) return Status::invalid_argument("glb: threads must be ≥ 0");
   if (o.compression_level < 0 || o.compression_level > 10)
     return Status::invalid_argument("glb: compression_level must be 0..10");
   if (o.scalar_range) {
@@ -294,15 +299,123 @@ Status build_draco_mesh(const Mesh& m, const std::vector<std::uint32_t>& tris,
   return Status::ok();
 }
 
-// Counts (vertices, triangles) of the single primitive encode_glb wrote, from its accessors.
+// Counts (vertices, triangles) of the primitives encode_glb wrote, from their accessors.
 void primitive_counts(const Json& json, GlbInfo& info) {
   const Json& accessors = json.at("accessors");
-  const Json& primitive = json.at("meshes").at(0).at("primitives").at(0);
-  info.vertices = accessors.at(primitive.at("attributes").at("POSITION").get<std::size_t>())
-                      .at("count")
-                      .get<std::size_t>();
-  info.triangles =
-      accessors.at(primitive.at("indices").get<std::size_t>()).at("count").get<std::size_t>() / 3;
+  info.vertices = info.triangles = 0;
+  for (const Json& primitive : json.at("meshes").at(0).at("primitives")) {
+    info.vertices += accessors.at(primitive.at("attributes").at("POSITION").get<std::size_t>())
+                         .at("count")
+                         .get<std::size_t>();
+    info.triangles +=
+        accessors.at(primitive.at("indices").get<std::size_t>()).at("count").get<std::size_t>() / 3;
+  }
+}
+
+// Triangles per part above which a mesh is encoded in parts, concurrently (a part per spatial
+// slab): Draco's encoder runs on one thread, and a root that encodes a million triangles on one
+// core falls behind its job. The count depends on the mesh only, never on the threads, so the
+// GLB is the same on any machine.
+constexpr std::size_t kPartTriangles = 200000;
+constexpr std::size_t kMaxParts = 8;
+
+// Each triangle's part: slabs along the longest axis of the box, about equal in triangles (by
+// the triangles' centroids, in 4096 bins).
+std::vector<std::uint8_t> split_into_parts(const Mesh& m, const std::vector<std::uint32_t>& tris,
+                                           std::size_t parts) {
+  const std::size_t t = tris.size() / 3;
+  const BoundingBox box = bounding_box(m.positions);
+  const glm::dvec3 extent = box.hi - box.lo;
+  const int axis = extent.x >= extent.y && extent.x >= extent.z ? 0 : extent.y >= extent.z ? 1 : 2;
+  constexpr std::size_t kBins = 4096;
+  const double scale = extent[axis] > 0.0 ? double(kBins) / extent[axis] : 0.0;
+  std::vector<std::uint16_t> bin(t);
+  std::vector<std::size_t> count(kBins, 0);
+  for (std::size_t f = 0; f < t; ++f) {
+    const double c = (double(m.positions[tris[3 * f]][axis]) + m.positions[tris[3 * f + 1]][axis] +
+                      m.positions[tris[3 * f + 2]][axis]) /
+                     3.0;
+    bin[f] = std::uint16_t(std::clamp((c - box.lo[axis]) * scale, 0.0, double(kBins - 1)));
+    ++count[bin[f]];
+  }
+  // Bin b goes to the part its first triangle's rank falls in.
+  std::vector<std::uint8_t> part_of_bin(kBins);
+  std::size_t before = 0;
+  for (std::size_t b = 0; b < kBins; ++b) {
+    part_of_bin[b] = std::uint8_t(std::min(parts - 1, before * parts / t));
+    before += count[b];
+  }
+  std::vector<std::uint8_t> part(t);
+  for (std::size_t f = 0; f < t; ++f)
+    part[f] = part_of_bin[bin[f]];
+  return part;
+}
+
+// The triangles of part `k` as a mesh of their own (the vertices they use, renumbered in order
+// of first use), with their views.
+void extract_part(const Mesh& m, const std::vector<std::uint32_t>& tris,
+                  const std::vector<std::uint8_t>& tri_view, const std::vector<std::uint8_t>& part,
+                  std::uint8_t k, Mesh& sub, std::vector<std::uint32_t>& sub_tris,
+                  std::vector<std::uint8_t>& sub_view) {
+  constexpr std::uint32_t kUnused = ~std::uint32_t(0);
+  std::vector<std::uint32_t> index(m.vertex_count(), kUnused);
+  sub.view_dirs = m.view_dirs;
+  for (std::size_t f = 0; f < part.size(); ++f) {
+    if (part[f] != k) continue;
+    for (int c = 0; c < 3; ++c) {
+      const std::uint32_t v = tris[3 * f + c];
+      if (index[v] == kUnused) {
+        index[v] = std::uint32_t(sub.positions.size());
+        sub.positions.push_back(m.positions[v]);
+        sub.normals.push_back(m.normals[v]);
+        if (!m.scalars.empty()) sub.scalars.push_back(m.scalars[v]);
+      }
+      sub_tris.push_back(index[v]);
+    }
+    sub_view.push_back(tri_view[f]);
+  }
+}
+
+// Appends GLB `part` (as GltfEncoder writes one: one mesh of one Draco primitive) to `base`'s
+// JSON and BIN as a further primitive of its first mesh: accessors, bufferViews (offset into the
+// joined BIN, 4-byte aligned) and the primitive's indices renumbered.
+void append_part(Json& base, std::vector<std::uint8_t>& bin, const Json& part,
+                 std::span<const std::uint8_t> part_bin) {
+  const std::size_t accessors = base["accessors"].size(), views = base["bufferViews"].size();
+  bin.resize((bin.size() + 3) & ~std::size_t(3), 0);
+  const std::size_t offset = bin.size();
+  bin.insert(bin.end(), part_bin.begin(), part_bin.end());
+  for (const Json& a : part.at("accessors"))
+    base["accessors"].push_back(a);
+  for (Json v : part.at("bufferViews")) {
+    v["byteOffset"] = v.value("byteOffset", std::size_t(0)) + offset;
+    base["bufferViews"].push_back(std::move(v));
+  }
+  for (Json p : part.at("meshes").at(0).at("primitives")) {
+    for (auto& [name, id] : p["attributes"].items())
+      id = id.get<std::size_t>() + accessors;
+    p["indices"] = p["indices"].get<std::size_t>() + accessors;
+    Json& draco = p["extensions"][kDraco];
+    draco["bufferView"] = draco["bufferView"].get<std::size_t>() + views;
+    base["meshes"][0]["primitives"].push_back(std::move(p));
+  }
+  base["buffers"][0]["byteLength"] = bin.size();
+}
+
+// One Draco primitive's GLB from GltfEncoder, parsed into `json` and `bin` (copied).
+Status encode_primitive(draco::Mesh& dm, Json& json, std::vector<std::uint8_t>& bin) {
+  draco::GltfEncoder encoder;
+  draco::EncoderBuffer buffer;
+  if (const draco::Status s = encoder.EncodeToBuffer(dm, &buffer); !s.ok())
+    return Status::internal("glb: Draco's glTF encoder failed: " + s.error_msg_string());
+  GlbChunks chunks;
+  const std::span<const std::uint8_t> encoded(reinterpret_cast<const std::uint8_t*>(buffer.data()),
+                                              buffer.size());
+  if (Status s = parse_glb(encoded, chunks); !s)
+    return Status::internal("glb: Draco's glTF encoder wrote an unreadable GLB: " + s.message());
+  json = std::move(chunks.json);
+  bin.assign(chunks.bin.begin(), chunks.bin.end());
+  return Status::ok();
 }
 
 Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
@@ -337,24 +450,67 @@ Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
     result.scalar_max = scalar_hi;
   }
 
-  draco::Mesh dm;
-  if (Status s = build_draco_mesh(mesh, tris, tri_view, options, result.position_bits, scalar_lo,
-                                  scalar_hi, dm);
-      !s)
-    return s;
-  draco::GltfEncoder encoder;
-  draco::EncoderBuffer buffer;
-  if (const draco::Status s = encoder.EncodeToBuffer(dm, &buffer); !s.ok())
-    return Status::internal("glb: Draco's glTF encoder failed: " + s.error_msg_string());
+  // Large meshes in parts, encoded concurrently and joined as primitives of one mesh. Each part
+  // takes the whole mesh's position bits over its own (smaller) box: its step is at most the
+  // whole mesh's, so every vertex keeps the stated bound (a vertex two parts share is written
+  // by both, each copy within the bound).
+  const std::size_t triangles = tri_view.size();
+  const std::size_t parts = std::min(kMaxParts, (triangles + kPartTriangles - 1) / kPartTriangles);
+  Json json;
+  std::vector<std::uint8_t> bin;
+  if (parts <= 1) {
+    draco::Mesh dm;
+    LDIMESH_RETURN_IF_ERROR(build_draco_mesh(mesh, tris, tri_view, options, result.position_bits,
+                                             scalar_lo, scalar_hi, dm));
+    LDIMESH_RETURN_IF_ERROR(encode_primitive(dm, json, bin));
+  } else {
+    const std::vector<std::uint8_t> part = split_into_parts(mesh, tris, parts);
+    std::vector<Json> jsons(parts);
+    std::vector<std::vector<std::uint8_t>> bins(parts);
+    std::vector<Status> status(parts, Status::ok());
+    // Threads of its own (this library needs no TBB): each takes the next part.
+    std::atomic<std::size_t> next{0};
+    const auto encode_parts = [&] {
+      for (std::size_t k = next++; k < parts; k = next++)
+        status[k] = guard("", [&] {
+          Mesh sub;
+          std::vector<std::uint32_t> sub_tris;
+          std::vector<std::uint8_t> sub_view;
+          extract_part(mesh, tris, tri_view, part, std::uint8_t(k), sub, sub_tris, sub_view);
+          if (sub_view.empty()) return Status::ok();  // an empty slab (all in one bin elsewhere)
+          draco::Mesh dm;
+          LDIMESH_RETURN_IF_ERROR(build_draco_mesh(sub, sub_tris, sub_view, options,
+                                                   result.position_bits, scalar_lo, scalar_hi, dm));
+          return encode_primitive(dm, jsons[k], bins[k]);
+        });
+    };
+    const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
+    const std::size_t threads =
+        std::min(parts, std::size_t(options.threads > 0 ? options.threads : int(cores)));
+    std::vector<std::thread> pool;
+    try {
+      for (std::size_t t = 1; t < threads; ++t)
+        pool.emplace_back(encode_parts);
+    } catch (const std::system_error&) {  // no thread to be had: this one does the rest
+    }
+    encode_parts();
+    for (std::thread& t : pool)
+      t.join();
+    for (const Status& s : status)
+      LDIMESH_RETURN_IF_ERROR(s);
+    for (std::size_t k = 0; k < parts; ++k) {
+      if (jsons[k].is_null()) continue;
+      if (json.is_null()) {
+        json = std::move(jsons[k]);
+        bin = std::move(bins[k]);
+      } else {
+        append_part(json, bin, jsons[k], bins[k]);
+      }
+    }
+  }
 
   // Add what a client needs beyond glTF's attributes, in the place glTF reserves for
   // application data ("extras"), and name the writer (Draco writes "draco_decoder").
-  GlbChunks chunks;
-  const std::span<const std::uint8_t> encoded(reinterpret_cast<const std::uint8_t*>(buffer.data()),
-                                              buffer.size());
-  if (Status s = parse_glb(encoded, chunks); !s)
-    return Status::internal("glb: Draco's glTF encoder wrote an unreadable GLB: " + s.message());
-  Json& json = chunks.json;
   json["asset"]["generator"] = "ldimesh (Draco glTF encoder)";
   Json extras;
   extras["view_dirs"] = Json::array();
@@ -364,9 +520,9 @@ Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
   json["meshes"][0]["extras"]["ldimesh"] = std::move(extras);
   primitive_counts(json, result);
   const std::string text = json.dump();
-  if (text.size() + chunks.bin.size() > std::numeric_limits<std::uint32_t>::max() - 64)
+  if (text.size() + bin.size() > std::numeric_limits<std::uint32_t>::max() - 64)
     return Status::invalid_argument("glb: the GLB would exceed 4 GiB (glTF's 32-bit length)");
-  out = assemble_glb(text, chunks.bin);
+  out = assemble_glb(text, bin);
   if (info) *info = result;
   return Status::ok();
 }

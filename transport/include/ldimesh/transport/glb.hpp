@@ -48,6 +48,10 @@ struct GlbOptions {
   // run so that colours mean the same at every step; unset = the mesh's own min and max (a
   // constant scalar then gives u = 0 everywhere).
   std::optional<std::array<float, 2>> scalar_range;
+  // Threads that encode a mesh of more than 200 000 triangles, which goes in parts (slabs along
+  // its longest axis, about 200 000 triangles each, at most 8) as primitives of one mesh; 0: one
+  // per core. The GLB is the same for any number.
+  int threads = 0;
 };
 
 // What a GLB holds, as encode_glb wrote it or decode_glb read it.
