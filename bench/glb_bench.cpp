@@ -16,7 +16,6 @@
 #include <thread>
 #include <vector>
 
-#include <tbb/global_control.h>
 #include <unistd.h>
 #include <CLI/CLI.hpp>
 

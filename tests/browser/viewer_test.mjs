@@ -357,7 +357,9 @@ try {
   await page.waitForFunction((s) => document.body.dataset.loadedStep === String(s) &&
     document.body.dataset.playing === 'false', kept[kept.length - 1], { timeout: 30000 }).catch(() => {});
   const played = (await page.evaluate(() => window.testShown)).filter((s) => s.t >= playStart).map((s) => s.step);
-  check(JSON.stringify(played) === JSON.stringify(kept.slice(-3)),
+  const stopped = await page.evaluate(() => document.body.dataset.playing === 'false' &&
+    document.getElementById('play').textContent === 'play');
+  check(JSON.stringify(played) === JSON.stringify(kept.slice(-3)) && stopped,
     `play shows the kept steps after ${from} in turn, then stops: ${played.join(', ')} (kept: ${kept.slice(-3).join(', ')})`);
   // Screenshot: a PNG of the canvas, downloaded.
   const [download] = await Promise.all([page.waitForEvent('download', { timeout: 15000 }), page.click('#screenshot')]);

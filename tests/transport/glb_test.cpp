@@ -217,7 +217,8 @@ TEST(Glb, RoundTripKeepsTrianglesViewsAndPositionsWithinTheBound) {
 // A mesh above 200 000 triangles is encoded in parts (slabs), concurrently, as primitives of one
 // mesh: the same bytes on one thread and on two; every original triangle comes back once, with
 // its view; every decoded vertex within the position bound of its original (a vertex two parts
-// share comes back once per part), scalars within their bound.
+// share comes back once per part, both copies at the same point: no seam), scalars within their
+// bound.
 TEST(Glb, ALargeMeshIsEncodedInPartsTheSameOnAnyNumberOfThreads) {
   const Mesh mesh = with_scalar(surface_mesh("torus", 256, FaceType::triangles));
   ASSERT_GT(mesh.triangle_count(), 200000u);
@@ -275,6 +276,8 @@ TEST(Glb, ALargeMeshIsEncodedInPartsTheSameOnAnyNumberOfThreads) {
     faces[canonical(t[0], t[1], t[2])] = mesh.triangle_view[f];
   }
   std::vector<int> used(mesh.vertex_count(), 0);
+  std::unordered_map<std::uint32_t, glm::vec3> decoded_at;
+  std::size_t split_copies = 0;
   double worst_scalar = 0.0;
   for (std::size_t f = 0; f < back.triangle_count(); ++f) {
     const std::uint32_t* t = &back.triangles[3 * f];
@@ -289,6 +292,9 @@ TEST(Glb, ALargeMeshIsEncodedInPartsTheSameOnAnyNumberOfThreads) {
           faces.erase(it);
           const std::uint32_t original[3] = {a, b, c};
           for (int k = 0; k < 3; ++k) {
+            // Every copy of a vertex (one per part that uses it) decodes to the same point.
+            const auto [first, added] = decoded_at.try_emplace(original[k], back.positions[t[k]]);
+            if (!added && first->second != back.positions[t[k]]) ++split_copies;
             ++used[original[k]];
             const double value = info.scalar_min + back.scalars[t[k]] * range;
             const double err = std::abs(value - mesh.scalars[original[k]]);
@@ -298,6 +304,7 @@ TEST(Glb, ALargeMeshIsEncodedInPartsTheSameOnAnyNumberOfThreads) {
     ASSERT_TRUE(found) << "decoded triangle " << f << " is not an original triangle";
   }
   EXPECT_TRUE(faces.empty()) << faces.size() << " original triangles not decoded";
+  EXPECT_EQ(split_copies, 0u) << "copies of a vertex on a slab border decode apart";
   EXPECT_TRUE(std::all_of(used.begin(), used.end(), [](int u) { return u >= 1; }));
   EXPECT_LE(worst_scalar, glb_scalar_error_bound({}) * range);
 }

@@ -21,13 +21,14 @@
 #include <thread>
 #include <unordered_map>
 
+#include <sched.h>
+
 #include <draco/compression/decode.h>
 #include <draco/compression/draco_compression_options.h>
 #include <draco/core/decoder_buffer.h>
 #include <draco/core/encoder_buffer.h>
 #include <draco/io/gltf_encoder.h>
 #include <draco/mesh/mesh.h>
-#include <tbb/parallel_for.h>
 #include <nlohmann/json.hpp>
 
 namespace ldimesh {
@@ -319,6 +320,13 @@ void primitive_counts(const Json& json, GlbInfo& info) {
 constexpr std::size_t kPartTriangles = 200000;
 constexpr std::size_t kMaxParts = 8;
 
+// The cores this process may run on (its affinity mask, which a job's launcher sets), at least 1.
+int usable_cores() {
+  cpu_set_t set;
+  if (sched_getaffinity(0, sizeof set, &set) == 0) return std::max(1, CPU_COUNT(&set));
+  return int(std::max(1u, std::thread::hardware_concurrency()));
+}
+
 // Each triangle's part: slabs along the longest axis of the box, about equal in triangles (by
 // the triangles' centroids, in 4096 bins).
 std::vector<std::uint8_t> split_into_parts(const Mesh& m, const std::vector<std::uint32_t>& tris,
@@ -465,6 +473,7 @@ Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
     LDIMESH_RETURN_IF_ERROR(encode_primitive(dm, json, bin));
   } else {
     const std::vector<std::uint8_t> part = split_into_parts(mesh, tris, parts);
+    const BoundingBox box = bounding_box(mesh.positions);
     std::vector<Json> jsons(parts);
     std::vector<std::vector<std::uint8_t>> bins(parts);
     std::vector<Status> status(parts, Status::ok());
@@ -472,30 +481,39 @@ Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
     std::atomic<std::size_t> next{0};
     const auto encode_parts = [&] {
       for (std::size_t k = next++; k < parts; k = next++)
-        status[k] = guard("", [&] {
+        status[k] = guard("glb: part " + std::to_string(k) + ": ", [&] {
           Mesh sub;
           std::vector<std::uint32_t> sub_tris;
           std::vector<std::uint8_t> sub_view;
           extract_part(mesh, tris, tri_view, part, std::uint8_t(k), sub, sub_tris, sub_view);
           if (sub_view.empty()) return Status::ok();  // an empty slab (all in one bin elsewhere)
+          // Two points no face uses, at the whole mesh's box corners and scalar range: every
+          // part quantizes the same box (and range) on the same grid, so a vertex two parts
+          // share decodes to the same point in both (Draco's Edgebreaker keeps no unused point
+          // in its output).
+          sub.positions.insert(sub.positions.end(), {glm::vec3(box.lo), glm::vec3(box.hi)});
+          sub.normals.insert(sub.normals.end(), 2, glm::vec3(0.0f, 0.0f, 1.0f));
+          if (!sub.scalars.empty()) sub.scalars.insert(sub.scalars.end(), {scalar_lo, scalar_hi});
           draco::Mesh dm;
           LDIMESH_RETURN_IF_ERROR(build_draco_mesh(sub, sub_tris, sub_view, options,
                                                    result.position_bits, scalar_lo, scalar_hi, dm));
           return encode_primitive(dm, jsons[k], bins[k]);
         });
     };
-    const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
     const std::size_t threads =
-        std::min(parts, std::size_t(options.threads > 0 ? options.threads : int(cores)));
-    std::vector<std::thread> pool;
-    try {
-      for (std::size_t t = 1; t < threads; ++t)
-        pool.emplace_back(encode_parts);
-    } catch (const std::system_error&) {  // no thread to be had: this one does the rest
+        std::min(parts, std::size_t(options.threads > 0 ? options.threads : usable_cores()));
+    {
+      // Joined however this block is left; a thread that cannot be started (no memory, no
+      // thread) leaves its parts to the others.
+      std::vector<std::jthread> pool;
+      pool.reserve(threads);
+      try {
+        for (std::size_t t = 1; t < threads; ++t)
+          pool.emplace_back(encode_parts);
+      } catch (...) {
+      }
+      encode_parts();
     }
-    encode_parts();
-    for (std::thread& t : pool)
-      t.join();
     for (const Status& s : status)
       LDIMESH_RETURN_IF_ERROR(s);
     for (std::size_t k = 0; k < parts; ++k) {

@@ -312,7 +312,10 @@ function show(step) {
   }
   state.next = null;
   state.loading = step;
-  loadStep(step).catch((e) => setStatus(e.message, true)).finally(() => {
+  loadStep(step).catch((e) => {
+    setStatus(e.message, true);
+    setPlaying(false);  // a step that cannot be shown (evicted since listed): play stops there
+  }).finally(() => {
     state.loading = null;
     const next = state.next;
     state.next = null;
@@ -335,7 +338,7 @@ function syncSlider() {
   slider.disabled = state.steps.length < 2;
   // The slider follows the step shown while following; otherwise it is the person's.
   const at = state.loaded ? state.steps.indexOf(state.loaded.step) : -1;
-  if (at >= 0 && $('follow').checked) slider.value = String(at);
+  if (at >= 0 && ($('follow').checked || player.playing)) slider.value = String(at);
   $('slider-step').textContent = state.loaded ? `#${state.loaded.step}` : '';
 }
 
@@ -378,10 +381,20 @@ function setPlaying(on) {
     show(state.steps[at + 1]);
   }, 500);
 }
-$('play').addEventListener('click', () => {
-  if (!player.playing && state.loaded && state.steps.indexOf(state.loaded.step) === state.steps.length - 1)
-    show(state.steps[0]);  // at the newest: from the oldest kept
-  setPlaying(!player.playing);
+$('play').addEventListener('click', async () => {
+  if (player.playing) return setPlaying(false);
+  if (state.loaded && state.steps.indexOf(state.loaded.step) === state.steps.length - 1) {
+    // At the newest: from the oldest step the server still keeps (older ones were evicted).
+    try {
+      const list = await json('/api/v1/steps');
+      state.steps = (list.steps || []).map((m) => m.step).sort((a, b) => a - b);
+      syncSlider();
+    } catch (e) {
+      return setStatus(e.message, true);
+    }
+    if (state.steps.length) show(state.steps[0]);
+  }
+  setPlaying(true);
 });
 
 // The picture as a PNG, with the legend drawn in where it shows.
@@ -447,7 +460,8 @@ function listen() {
   const events = new EventSource(`/api/v1/events?token=${encodeURIComponent(token)}`);
   events.addEventListener('step', (event) => {
     const meta = JSON.parse(event.data);
-    lag.lastPublished = Date.now();
+    // (a reconnect announces the newest step again: not a new one)
+    if (!state.steps.includes(meta.step)) lag.lastPublished = Date.now();
     addStep(meta);
     if ($('follow').checked && meta.step > newestWanted()) show(meta.step);
   });

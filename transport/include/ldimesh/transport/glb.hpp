@@ -42,7 +42,9 @@ struct GlbOptions {
   // TEXCOORD_0 (normalized scalar) quantization bits, 1..30.
   int scalar_bits = 12;
   // Draco compression level 0..10 (GltfEncoder maps it to speed 10 − level; 0 = sequential
-  // encoding that keeps the vertex order, ≥ 1 = Edgebreaker, which reorders vertices).
+  // encoding that keeps the vertex order — of a mesh of up to 200 000 triangles; a larger one,
+  // in parts (`threads`), also keeps two unused points per part at its box's corners — ≥ 1 =
+  // Edgebreaker, which reorders vertices and drops unused ones).
   int compression_level = 7;
   // The scalar values mapped to u = 0 and u = 1 (min < max, both finite), e.g. fixed over a
   // run so that colours mean the same at every step; unset = the mesh's own min and max (a
