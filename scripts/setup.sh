@@ -33,7 +33,7 @@ fi
 install_node_modules() {
   cd "$(dirname "$0")/.."
   if [ ! -f node_modules/.package-lock.json ] || [ package-lock.json -nt node_modules/.package-lock.json ]; then
-    echo "setup: npm ci (three, playwright-core)"
+    echo "setup: npm ci (three, playwright-core, gltf-validator)"
     npm ci --no-audit --no-fund --loglevel=error
   fi
 }

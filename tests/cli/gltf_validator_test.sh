@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# Every kind of GLB ldimesh writes passes Khronos' glTF validator (npm gltf-validator) with no
+# error and no warning: a small mesh (one Draco primitive), a mesh of more than 200 000
+# triangles (encoded in slabs: several primitives of one mesh), and a mesh coloured by a second
+# field (TEXCOORD_0), small and large.
+#   gltf_validator_test.sh LDIMESH SOURCE_DIR
+set -u
+ldimesh=$1
+src=$2
+. "$(dirname "$0")/../lib.sh"
+test_setup
+"$ldimesh" mesh --surface torus --res 64 --out "$tmp/small.glb" >/dev/null || fail "small mesh"
+"$ldimesh" mesh --surface torus --res 256 --out "$tmp/large.glb" >/dev/null || fail "large mesh"
+python3 - "$tmp" <<'PY'
+import array, math, sys
+n = 96
+v, c = array.array('f'), array.array('f')
+for k in range(n):
+    for j in range(n):
+        for i in range(n):
+            x, y, z = (2.0 * i / (n - 1) - 1, 2.0 * j / (n - 1) - 1, 2.0 * k / (n - 1) - 1)
+            v.append(x * x + y * y + z * z + 0.3 * math.sin(6 * x) * math.sin(5 * y))
+            c.append(x - 0.5 * z)
+open(sys.argv[1] + "/v.raw", "wb").write(v.tobytes())
+open(sys.argv[1] + "/c.raw", "wb").write(c.tobytes())
+PY
+for res in 64 512; do
+  "$ldimesh" mesh --grid "$tmp/v.raw" --dims 96,96,96 --iso 0.5 --res "$res" --colour-by "$tmp/c.raw" \
+    --out "$tmp/coloured$res.glb" >/dev/null || fail "coloured mesh at $res"
+done
+cd "$src" || fail "no source folder"
+node tests/cli/validate_glb.mjs --primitives 2 "$tmp/large.glb" "$tmp/small.glb" "$tmp/coloured64.glb" ||
+  fail "a GLB is not valid glTF"
+node tests/cli/validate_glb.mjs --primitives 2 "$tmp/coloured512.glb" ||
+  fail "the large coloured GLB is not valid glTF"
+finish
