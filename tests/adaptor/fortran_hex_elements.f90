@@ -14,6 +14,8 @@ module fortran_hex_elements
   ! The field y beside x (ldimesh_add_field), double and float.
   real(c_double), allocatable, target, save :: y(:, :)
   real(c_float), allocatable, target, save :: y4(:, :)
+  ! A grid block of the field x with its field y (fortran_add_grid_field).
+  real(c_float), allocatable, target, save :: gx(:, :, :), gy(:, :, :)
 
 contains
 
@@ -81,6 +83,33 @@ contains
     end if
     fortran_add_hex_elements = int(ierr, c_int)
   end function fortran_add_hex_elements
+
+  ! Rank 0 adds a 9³ uniform grid over [0, 1]³ of the field x (float) with the field y as its
+  ! field "y" (ldimesh_add_field of a 3D array); the other ranks add nothing. Returns the status.
+  integer(c_int) function fortran_add_grid_field(handle, rank) bind(C, name='fortran_add_grid_field')
+    type(c_ptr), value :: handle
+    integer(c_int), value :: rank
+    type(ldimesh_adaptor) :: insitu
+    integer :: i, j, k, ierr
+    insitu%handle = handle
+    fortran_add_grid_field = LDIMESH_OK
+    if (rank /= 0) return
+    if (allocated(gx)) deallocate (gx, gy)
+    allocate (gx(9, 9, 9), gy(9, 9, 9))
+    do k = 1, 9
+      do j = 1, 9
+        do i = 1, 9
+          gx(i, j, k) = real(i - 1, c_float)/8.0_c_float
+          gy(i, j, k) = real(j - 1, c_float)/8.0_c_float
+        end do
+      end do
+    end do
+    call ldimesh_add_uniform_grid(insitu, gx, [0.0_c_double, 0.0_c_double, 0.0_c_double], &
+                                  [0.125_c_double, 0.125_c_double, 0.125_c_double], [0, 0, 0], &
+                                  [0, 0, 0], ierr)
+    if (ierr == LDIMESH_OK) call ldimesh_add_field(insitu, 'y', gy, ierr)
+    fortran_add_grid_field = int(ierr, c_int)
+  end function fortran_add_grid_field
 
   ! Wrong shapes and degenerate geometry, each refused with LDIMESH_ERROR_ARGUMENT and a message
   ! saying why. Returns how many calls did not do so (0: all refused as they should be).
