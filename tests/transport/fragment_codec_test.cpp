@@ -400,7 +400,9 @@ TEST(FragmentCodec, ScalarEdgeCasesRoundTripAndReencodeAlike) {
       expect_idempotent(f, e);
       // The range the decoded fragment carries holds its finite values, +0 for a −0 end.
       for (float x : g.scalar) {
-        if (std::isfinite(x)) EXPECT_TRUE(x >= g.scalar_lo && x <= g.scalar_hi) << x;
+        if (std::isfinite(x)) {
+          EXPECT_TRUE(x >= g.scalar_lo && x <= g.scalar_hi) << x;
+        }
       }
       EXPECT_FALSE(std::signbit(g.scalar_lo) && g.scalar_lo == 0.0f);
     }
