@@ -147,8 +147,8 @@ int ldimesh_add_hex_block(ldimesh_adaptor* a, const ldimesh_hex_block* block);
  * element_stride), of `type` LDIMESH_FLOAT32 or LDIMESH_FLOAT64; value_count as for the block.
  * With option "colour_by": "NAME" the isosurfaces are coloured by the field of that name, which
  * every block must then have. Adding a name again replaces that field. */
-int ldimesh_add_field(ldimesh_adaptor* a, const char* name, const void* values,
-                      int64_t value_count, int type);
+int ldimesh_add_field(ldimesh_adaptor* a, const char* name, const void* values, int64_t value_count,
+                      int type);
 /* Forgets this rank's blocks (to describe them anew). */
 int ldimesh_clear_blocks(ldimesh_adaptor* a);
 

@@ -45,7 +45,6 @@ struct Job {
   std::map<std::string, double> seconds;
   std::uint64_t skipped_steps = 0;  // due steps dropped since the previous job was handed over
   std::uint64_t nonfinite_values = 0;
-  std::size_t uncoloured_vertices = 0;  // the colour field not finite there (publish)
 };
 
 std::size_t scalar_bytes(ScalarType type) {
@@ -225,7 +224,7 @@ class AdaptorImpl final : public Adaptor {
   Status add_source(std::shared_ptr<const FieldSource> source, const Box& owned) override {
     last_add_failed_ = !source;
     if (!source) return fail(Status::invalid_argument("add_source: no source"));
-    blocks_.push_back({std::move(source), owned, std::nullopt, std::nullopt, {}});
+    blocks_.push_back({std::move(source), owned, std::nullopt, std::nullopt});
     return Status::ok();
   }
   Status add_field(std::string_view name, const void* values, ScalarType type) override {
@@ -243,9 +242,9 @@ class AdaptorImpl final : public Adaptor {
         return Status::invalid_argument("field '" + std::string(name) + "': null values");
       if (type != ScalarType::float32 && type != ScalarType::float64)
         return Status::invalid_argument("field '" + std::string(name) + "': unknown scalar type");
-      Block& b = blocks_.back();
-      b.fields[std::string(name)] = {values, type};
+      // Only the field "colour_by" names is read; the others are accepted and left alone.
       if (name != options_.colour_by) return Status::ok();
+      Block& b = blocks_.back();
       // The colour field: a source that reads it (an element block's geometry as prepared).
       if (b.grid) {
         b.grid->colour = values;
@@ -376,9 +375,6 @@ class AdaptorImpl final : public Adaptor {
     // cannot be copied).
     std::optional<GridBlock> grid;
     std::optional<HexBlock> hex;
-    // Its named fields (add_field); the one named by "colour_by" is also the description's
-    // colour.
-    std::map<std::string, std::pair<const void*, ScalarType>> fields;
   };
   // A snapshotted step for this rank's caster thread.
   struct CasterJob {
@@ -620,7 +616,7 @@ class AdaptorImpl final : public Adaptor {
     return fail_if(guard(std::string(what) + ": ", [&] {
       auto source = std::make_shared<Source>(block);
       const Box owned = source->bounds();
-      Block b{std::move(source), owned, std::nullopt, std::nullopt, {}};
+      Block b{std::move(source), owned, std::nullopt, std::nullopt};
       if constexpr (std::is_same_v<Description, GridBlock>)
         b.grid = block;
       else
@@ -723,7 +719,7 @@ class AdaptorImpl final : public Adaptor {
     const auto t = Clock::now();
     // Vertices where the colour field has no finite value (NaN/Inf in the solver's array)
     // take the lowest colour, and the log says how many.
-    job.uncoloured_vertices = replace_nonfinite_scalars(mesh);
+    const std::size_t uncoloured = replace_nonfinite_scalars(mesh);
     const GlbOptions glb_options = step_glb_options(job.views.front(), options_.compression_level);
     std::vector<std::uint8_t> glb;
     GlbInfo info;
@@ -753,22 +749,24 @@ class AdaptorImpl final : public Adaptor {
           "ldimesh: step %llu  t=%g  %zu triangles  %zu bytes  cast %.3f reduce %.3f mesh %.3f glb "
           "%.3f s%s\n",
           (unsigned long long)job.step, job.time, std::size_t(info.triangles), bytes,
-          job.seconds["cast"], job.seconds["reduce"], mesh_s, glb_s, step_notes(job).c_str());
+          job.seconds["cast"], job.seconds["reduce"], mesh_s, glb_s,
+          step_notes(job, uncoloured).c_str());
       std::fflush(stdout);
     }
     return Status::ok();
   }
 
-  // The log line's warnings: steps dropped before this one, non-finite field values.
-  static std::string step_notes(const Job& job) {
+  // The log line's warnings: steps dropped before this one, non-finite field values, vertices
+  // without a finite colour.
+  static std::string step_notes(const Job& job, std::size_t uncoloured) {
     std::string notes;
     if (job.skipped_steps > 0)
       notes += "  (" + std::to_string(job.skipped_steps) + " earlier steps skipped: root busy)";
     if (job.nonfinite_values > 0)
       notes += "  warning: " + std::to_string(job.nonfinite_values) +
                " NaN/Inf field values, the cells touching them left out";
-    if (job.uncoloured_vertices > 0)
-      notes += "  warning: " + std::to_string(job.uncoloured_vertices) +
+    if (uncoloured > 0)
+      notes += "  warning: " + std::to_string(uncoloured) +
                " vertices without a finite colour value (NaN/Inf in the colour field), shown at "
                "the lowest colour";
     return notes;

@@ -1,8 +1,8 @@
 // A job's server for the browser test, without the job: publishes real meshes as the root rank
 // would. Step 1 (the torus) is published at start; each line "next" on standard input publishes
-// the next step (the Barth sextic, then Klein bottle …), each coloured by its vertices' x; "quit" or
-// the end of input stops. Prints "url URL" once the server listens and "published STEP TRIANGLES"
-// after each step.
+// the next step (the Barth sextic, then Klein bottle …), each coloured by its vertices' x; "quit"
+// or the end of input stops. Prints "url URL" once the server listens and "published STEP
+// TRIANGLES" after each step.
 //
 //   ldimesh_test_publisher REPO_ROOT
 #include <cstdio>

@@ -1,5 +1,7 @@
 #include "ldimesh/core/field/grid_source.hpp"
 
+#include "colour_block.hpp"
+
 #include <algorithm>
 #include <atomic>
 #include <bit>
@@ -1399,11 +1401,7 @@ class GridScalarProbe final : public ScalarProbe {
 
 std::unique_ptr<ScalarProbe> GridSource::bind_scalar() const {
   if (!block_.colour) return nullptr;
-  GridBlock colour = block_;
-  colour.values = block_.colour;
-  colour.type = block_.colour_type;
-  colour.colour = nullptr;
-  return std::make_unique<GridScalarProbe>(colour);
+  return std::make_unique<GridScalarProbe>(colour_as_values(block_));
 }
 
 Box GridSource::bounds() const {

@@ -1,6 +1,7 @@
 #include "ldimesh/core/field/hex_source.hpp"
 
 #include "bernstein_basis.hpp"
+#include "colour_block.hpp"
 #include "curved_element.hpp"
 #include "ldimesh/core/field/hex_lookup.hpp"
 
@@ -1800,11 +1801,7 @@ class HexScalarProbe final : public ScalarProbe {
 
 std::unique_ptr<ScalarProbe> HexElementSource::bind_scalar() const {
   if (!block_.colour) return nullptr;
-  HexBlock colour = block_;
-  colour.values = block_.colour;
-  colour.type = block_.colour_type;
-  colour.colour = nullptr;
-  return std::make_unique<HexScalarProbe>(*this, colour);
+  return std::make_unique<HexScalarProbe>(*this, colour_as_values(block_));
 }
 
 // A curved element's Jacobian determinant has one strict sign (either: a mirrored element is
