@@ -39,8 +39,8 @@ struct Job {
   double time = 0.0;
   std::vector<View> views;
   CastStep cast;  // the collective half's fragments (isovalue-major) and the others' pending merge
-  // Meshed already, one per isovalue (merging that projects: on the thread that made the step's
-  // MPI calls, while every rank served samples); otherwise the worker meshes.
+  // Meshed already, one per isovalue (refinement, or merging that projects: on the thread that made
+  // the step's MPI calls, while every rank served samples); otherwise the worker meshes.
   std::optional<std::vector<MeshingResult>> meshed;
   std::map<std::string, double> seconds;
   std::uint64_t skipped_steps = 0;  // due steps dropped since the previous job was handed over
@@ -396,6 +396,7 @@ class AdaptorImpl final : public Adaptor {
   MeshingOptions meshing_options() const {
     MeshingOptions meshing;
     meshing.r = options_.r;
+    meshing.refinement.levels = options_.refinement_levels;
     meshing.merging.enabled = options_.merging;
     return meshing;
   }
@@ -464,9 +465,10 @@ class AdaptorImpl final : public Adaptor {
     return Status::ok();
   }
 
-  // The root half where meshing needs every rank's samples (merging that projects), collective
-  // over `comm`: the root meshes (mesh_step) while the other ranks serve from `casters`; the
-  // root's worker then only encodes and publishes. On the thread that made the step's MPI calls.
+  // The root half where meshing needs every rank's samples (refinement, merging that projects),
+  // collective over `comm`: the root meshes (mesh_step) while the other ranks serve from `casters`;
+  // the root's worker then only encodes and publishes. On the thread that made the step's MPI
+  // calls.
   Status mesh_with_samples(MPI_Comm comm, const StepCasters& casters, Job& job) const {
     CastStep none;
     std::vector<MeshingResult> results;

@@ -95,10 +95,15 @@ Status parse_object(const nlohmann::json& j, AdaptorOptions& o) {
       if (b != "skip" && b != "coalesce") return bad("busy", "must be \"skip\" or \"coalesce\"");
       o.coalesce = b == "coalesce";
     }
-    if (j.contains("refinement") && j["refinement"].get<bool>())
-      return bad("refinement",
-                 "is not available in situ yet (every rank would have to answer the root's ray "
-                 "requests during the step); refine offline with 'ldimesh mesh --refine'");
+    if (j.contains("refinement")) {
+      // true: two levels (a quarter of the pixel spacing where the surface curves); a number:
+      // that many levels; false or 0: off.
+      const nlohmann::json& v = j["refinement"];
+      if (v.is_boolean())
+        o.refinement_levels = v.get<bool>() ? 2 : 0;
+      else if (Status s = integer(j, "refinement", "", 0, 6, o.refinement_levels); !s)
+        return bad("refinement", "must be true, false or a number of levels in 0..6");
+    }
     if (j.contains("merging")) o.merging = j["merging"].get<bool>();
     if (j.contains("server")) {
       const auto& s = j["server"];

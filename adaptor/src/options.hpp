@@ -20,7 +20,8 @@ struct AdaptorOptions {
   std::string views = "xyz";
   int resolution = 256;
   double r = 0.5;
-  bool merging = false;  // §5: one merged mesh per isovalue (trimmed with r = 1)
+  int refinement_levels = 0;  // §4: levels of refinement (0 off), with samples from every rank
+  bool merging = false;       // §5: one merged mesh per isovalue (trimmed with r = 1)
   std::uint64_t every_steps = 1;
   double every_seconds = 0.0;
   bool coalesce = false;

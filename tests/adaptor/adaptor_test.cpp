@@ -67,8 +67,14 @@ TEST(Adaptor, InvalidOptionsAreReportedOnEveryRankWithTheKey) {
   EXPECT_NE(s.message().find("cadence.every_steps"), std::string::npos) << s.message();
   s = Adaptor::create(MPI_COMM_WORLD, "{not json", a);
   EXPECT_FALSE(s);
-  s = Adaptor::create(MPI_COMM_WORLD, R"({"refinement": true})", a);
-  EXPECT_NE(s.message().find("refinement"), std::string::npos) << s.message();
+  for (const char* doc : {R"({"refinement": 7})", R"({"refinement": -1})", R"({"refinement": 1.5})",
+                          R"({"refinement": "2"})"}) {
+    s = Adaptor::create(MPI_COMM_WORLD, doc, a);
+    EXPECT_EQ(s.code(), StatusCode::invalid_options) << doc;
+    EXPECT_NE(s.message().find("'refinement' must be true, false or a number of levels in 0..6"),
+              std::string::npos)
+        << s.message();
+  }
   for (const char* doc : {R"({"colour_by": ""})", R"({"colour_by": 3})"}) {
     s = Adaptor::create(MPI_COMM_WORLD, doc, a);
     EXPECT_EQ(s.code(), StatusCode::invalid_options) << doc;
@@ -310,13 +316,15 @@ TEST(Adaptor, MergingPublishesOneClosedMesh) {
 }
 
 // Collective: runs the CLI's pipeline (mesh_distributed, then encode_glb as `ldimesh mesh --out
-// x.glb` calls it) on `caster` over `sub`, three 40² views of sub.global, merged or not, and
-// checks on the root that the adaptor published those bytes as step `step` in `dir`.
-void expect_cli_mesh_published(const RayCaster& caster, const Subdomain& sub, bool merging,
-                               const std::string& dir, std::uint64_t step) {
+// x.glb` calls it) on `caster` over `sub`, three 40² views of sub.global, with `meshing` (merged,
+// refined or neither), and checks on the root that the adaptor published those bytes as step
+// `step` in `dir`.
+void expect_cli_mesh_published(const RayCaster& caster, const Subdomain& sub,
+                               const MeshingOptions& meshing, const std::string& dir,
+                               std::uint64_t step) {
   const std::vector<View> views = make_axis_views(sub.global, 40);
   DistributedOptions options;
-  options.meshing.merging.enabled = merging;
+  options.meshing = meshing;
   DistributedResult cli;
   const Status s = mesh_distributed(MPI_COMM_WORLD, caster, sub, views, options, cli);
   EXPECT_TRUE(s) << s.message();
@@ -324,6 +332,9 @@ void expect_cli_mesh_published(const RayCaster& caster, const Subdomain& sub, bo
   std::vector<std::uint8_t> expected;
   EXPECT_TRUE(encode_glb(cli.meshing.mesh, step_glb_options(views.front()), expected));
   EXPECT_GT(cli.meshing.mesh.face_count(), 500u);
+  if (meshing.refinement.levels > 0) {  // refinement did something: the test means it
+    EXPECT_GT(cli.meshing.refinement.subdivided_cells, 0u);
+  }
   Snapshot published;
   const Status r = read_step_files(dir, step, published);
   EXPECT_TRUE(r) << r.message();
@@ -332,21 +343,37 @@ void expect_cli_mesh_published(const RayCaster& caster, const Subdomain& sub, bo
       << "published " << published.glb->size() << " bytes, the CLI's pipeline " << expected.size();
 }
 
+// The meshing variants the adaptor is checked against the CLI's pipeline with, and the options
+// document's keys that ask for them.
+struct MeshingVariant {
+  const char* name;
+  const char* keys;  // inserted at the start of the options object
+  MeshingOptions meshing;
+};
+std::vector<MeshingVariant> meshing_variants() {
+  MeshingOptions merged, refined;
+  merged.merging.enabled = true;
+  refined.refinement.levels = 2;
+  return {{"views", "", {}},
+          {"merged", R"("merging": true, )", merged},
+          {"refined", R"("refinement": true, )", refined}};
+}
+
 // One pipeline, one result: the adaptor publishes the GLB that the CLI's pipeline
 // (mesh_distributed, then encode_glb as `ldimesh mesh --out x.glb` calls it) gives for the same
-// blocks and options, byte for byte — plain, and merged (§5, its new vertices projected with
+// blocks and options, byte for byte — plain, merged (§5, its new vertices projected with
 // samples that every rank casts from its blocks: in the step on the synchronous path, on the
-// caster threads on the background one).
+// caster threads on the background one) and refined (§4, two levels, with samples the same way).
 TEST(Adaptor, PublishesTheMeshOfTheCommandLinePipeline) {
   const SurfaceInfo* info = find_surface("torus");
-  for (const bool merging : {false, true}) {
-    SCOPED_TRACE(merging ? "merged" : "views");
-    const std::string dir = temp_dir(merging ? "same_as_cli_merged" : "same_as_cli");
-    auto a =
-        make(R"({"server": {"enabled": false}, "resolution": 40, "log": false, "isovalues": [)" +
-                 std::to_string(info->isovalue) + R"(], "merging": )" +
-                 (merging ? "true" : "false") + R"(, "output_dir": ")" + dir + R"("})",
-             "torus");
+  for (const MeshingVariant& variant : meshing_variants()) {
+    SCOPED_TRACE(variant.name);
+    const std::string dir = temp_dir(std::string("same_as_cli_") + variant.name);
+    auto a = make(std::string("{") + variant.keys +
+                      R"("server": {"enabled": false}, "resolution": 40, "log": false,
+                      "isovalues": [)" +
+                      std::to_string(info->isovalue) + R"(], "output_dir": ")" + dir + R"("})",
+                  "torus");
     if (!a) return;
     EXPECT_TRUE(a->execute(3, 0.0)) << a->last_error();
     EXPECT_TRUE(a->finalize()) << a->last_error();
@@ -354,7 +381,7 @@ TEST(Adaptor, PublishesTheMeshOfTheCommandLinePipeline) {
     const auto source = make_surface_source("torus");
     const RayCaster caster(*source, info->isovalue);
     const Subdomain sub{decompose_box(info->domain, ranks())[rank_of()], info->domain};
-    expect_cli_mesh_published(caster, sub, merging, dir, 3);
+    expect_cli_mesh_published(caster, sub, variant.meshing, dir, 3);
   }
 }
 
@@ -429,21 +456,20 @@ TEST(Adaptor, GridBlocksPublishTheMeshOfTheCommandLinePipelineOnBothPaths) {
   const GridSource source(slab.block);
   const RayCaster caster(source, 0.36);
   const Subdomain sub{source.bounds(), domain};
-  for (const bool merging : {false, true})
+  for (const MeshingVariant& variant : meshing_variants())
     for (const bool background : {false, true}) {
-      SCOPED_TRACE(std::string(merging ? "merged" : "views") +
-                   (background ? ", background" : ", synchronous"));
+      SCOPED_TRACE(std::string(variant.name) + (background ? ", background" : ", synchronous"));
       const std::string dir =
-          temp_dir(std::string("grid_as_cli_") + (merging ? "m" : "v") + (background ? "b" : "s"));
-      std::string options = grid_options(dir, background);
-      if (merging) options = R"({"merging": true, )" + options.substr(1);
+          temp_dir(std::string("grid_as_cli_") + variant.name + (background ? "_b" : "_s"));
+      const std::string options =
+          std::string("{") + variant.keys + grid_options(dir, background).substr(1);
       auto a = make_grid_adaptor(options, slab);
       if (!a) return;
       EXPECT_TRUE(a->execute(1, 0.0)) << a->last_error();
       EXPECT_EQ(a->last_report().background, background && thread_multiple());
       EXPECT_TRUE(a->finalize()) << a->last_error();
 
-      expect_cli_mesh_published(caster, sub, merging, dir, 1);
+      expect_cli_mesh_published(caster, sub, variant.meshing, dir, 1);
       if (rank_of() == 0) expect_on_the_slab_sphere(testing::published_mesh(dir, 1), 0.36);
     }
 }
