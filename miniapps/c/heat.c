@@ -8,9 +8,11 @@
  * default isovalue) shows three spheres that swell, merge and shrink until the heat has
  * spread and no surface is left.
  *
- * Slab decomposition along z: rank r owns the point layers [z0, z1) and stores them with one
- * halo layer on each side (MPI_Sendrecv after every solver step). The block handed over is the
- * owned layers plus the halo layer below (ghost_lo = 1) and above (ghost_hi = 1) where a
+ * Slab decomposition along z: rank r owns the point layers [z0, z1) and stores them with two
+ * halo layers on each side (MPI_Sendrecv after every solver step): the Laplacian reads one, the
+ * adaptor's normals the second (central differences at the rank's edge, as one process computes
+ * them: the same mesh on any number of ranks; docs/adaptor.md). The block handed over is the
+ * owned layers plus the halo layers below (ghost_lo = 2) and above (ghost_hi = 2) where a
  * neighbour is; at the domain boundary no ghost.
  *
  * Usage: mpiexec -n R ldimesh-heat-c [--size N] [--steps S] [--substeps K] [--options FILE]
@@ -99,6 +101,16 @@ static double initial(long n, long i, long j, long k) {
   return u;
 }
 
+/* Fills the two halo layers on each side of `u` (`layers` layers of `plane` values) from the
+ * neighbours' two owned layers next to them (MPI_PROC_NULL: none; tags `tag` and `tag` + 1). */
+static void exchange_halo(double* u, long layers, long plane, int below, int above, int tag) {
+  const int count = (int)(2 * plane);
+  MPI_Sendrecv(u + (layers - 4) * plane, count, MPI_DOUBLE, above, tag, u, count, MPI_DOUBLE, below,
+               tag, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+  MPI_Sendrecv(u + 2 * plane, count, MPI_DOUBLE, below, tag + 1, u + (layers - 2) * plane, count,
+               MPI_DOUBLE, above, tag + 1, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+}
+
 int main(int argc, char** argv) {
   int provided = 0, rank = 0, size = 1;
   MPI_Init_thread(&argc, &argv, MPI_THREAD_FUNNELED, &provided);
@@ -117,7 +129,7 @@ int main(int argc, char** argv) {
     return 1;
   }
   const long z0 = rank * n / size, z1 = (rank + 1) * n / size;
-  const long layers = z1 - z0 + 2; /* owned + one halo layer each side */
+  const long layers = z1 - z0 + 4; /* owned + two halo layers each side */
   const long plane = n * n;
   double* u = calloc((size_t)(layers * plane), sizeof(double));
   double* v = calloc((size_t)(layers * plane), sizeof(double));
@@ -125,9 +137,9 @@ int main(int argc, char** argv) {
     fprintf(stderr, "%s: rank %d: out of memory\n", kName, rank);
     MPI_Abort(MPI_COMM_WORLD, 1); /* the solver's own decision, not the adaptor's */
   }
-  /* Local layer l holds global layer z0 - 1 + l. */
+  /* Local layer l holds global layer z0 - 2 + l. */
   for (long l = 0; l < layers; ++l) {
-    const long k = z0 - 1 + l;
+    const long k = z0 - 2 + l;
     if (k < 0 || k >= n) continue;
     for (long j = 0; j < n; ++j)
       for (long i = 0; i < n; ++i)
@@ -137,7 +149,7 @@ int main(int argc, char** argv) {
   for (long l = 0; l < layers; ++l)
     for (long j = 0; j < n; ++j)
       for (long i = 0; i < n; ++i) {
-        const long k = z0 - 1 + l;
+        const long k = z0 - 2 + l;
         if (i == 0 || j == 0 || i == n - 1 || j == n - 1 || k <= 0 || k >= n - 1)
           u[l * plane + j * n + i] = 0.0;
       }
@@ -165,20 +177,17 @@ int main(int argc, char** argv) {
   if (ldimesh_set_domain(insitu, lo, hi) != LDIMESH_OK && rank == 0)
     fprintf(stderr, "%s: set_domain: %s\n", kName, ldimesh_last_error(insitu));
 
-  /* The block: from the halo layer below (a neighbour there) or the first owned layer, to the
-   * halo layer above (a neighbour there) or the last owned layer. */
-  const long first = below != MPI_PROC_NULL ? 0 : 1;
-  const long last = above != MPI_PROC_NULL ? layers - 1 : layers - 2;
+  /* The block: from the halo layers below (a neighbour there) or the first owned layer, to the
+   * halo layers above (a neighbour there) or the last owned layer. */
+  const long first = below != MPI_PROC_NULL ? 0 : 2;
+  const long last = above != MPI_PROC_NULL ? layers - 1 : layers - 3;
   const double h = 1.0 / (double)(n - 1);
   const double dt = 0.15;
   for (long step = 1; step <= args.steps; ++step) {
     for (long s = 0; s < args.substeps; ++s) {
-      MPI_Sendrecv(u + (layers - 2) * plane, (int)plane, MPI_DOUBLE, above, 0, u, (int)plane,
-                   MPI_DOUBLE, below, 0, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
-      MPI_Sendrecv(u + plane, (int)plane, MPI_DOUBLE, below, 1, u + (layers - 1) * plane,
-                   (int)plane, MPI_DOUBLE, above, 1, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
-      for (long l = 1; l < layers - 1; ++l) {
-        const long k = z0 - 1 + l;
+      exchange_halo(u, layers, plane, below, above, 0);
+      for (long l = 2; l < layers - 2; ++l) {
+        const long k = z0 - 2 + l;
         if (k <= 0 || k >= n - 1) continue;
         for (long j = 1; j < n - 1; ++j)
           for (long i = 1; i < n - 1; ++i) {
@@ -193,10 +202,7 @@ int main(int argc, char** argv) {
       v = t;
     }
     /* The halo layers of the new field for the block's ghost layers. */
-    MPI_Sendrecv(u + (layers - 2) * plane, (int)plane, MPI_DOUBLE, above, 2, u, (int)plane,
-                 MPI_DOUBLE, below, 2, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
-    MPI_Sendrecv(u + plane, (int)plane, MPI_DOUBLE, below, 3, u + (layers - 1) * plane, (int)plane,
-                 MPI_DOUBLE, above, 3, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+    exchange_halo(u, layers, plane, below, above, 2);
 
     /* u now points at the other buffer: describe the block anew (a pointer, no copy). */
     ldimesh_grid_block block;
@@ -207,11 +213,11 @@ int main(int argc, char** argv) {
     block.values = u + first * plane;
     block.value_count = (layers - first) * plane;
     block.type = LDIMESH_FLOAT64;
-    block.origin[2] = (double)(z0 - 1 + first) * h;
+    block.origin[2] = (double)(z0 - 2 + first) * h;
     for (int a = 0; a < 3; ++a)
       block.spacing[a] = h;
-    block.ghost_lo[2] = below != MPI_PROC_NULL;
-    block.ghost_hi[2] = above != MPI_PROC_NULL;
+    block.ghost_lo[2] = below != MPI_PROC_NULL ? 2 : 0;
+    block.ghost_hi[2] = above != MPI_PROC_NULL ? 2 : 0;
     ldimesh_clear_blocks(insitu);
     if (ldimesh_add_grid_block(insitu, &block) != LDIMESH_OK)
       fprintf(stderr, "%s: rank %d: add_grid_block: %s\n", kName, rank, ldimesh_last_error(insitu));

@@ -34,10 +34,11 @@ program heat
     stop
   end if
 
-  ! Rank r owns the point layers z0 .. z1 - 1 and stores z0 - 1 .. z1 (one halo layer each side).
+  ! Rank r owns the point layers z0 .. z1 - 1 and stores z0 - 2 .. z1 + 1 (two halo layers each
+  ! side: the Laplacian reads one, the adaptor's normals the second, as in heat.c).
   z0 = int(int(rank, 8)*n/nranks)
   z1 = int(int(rank + 1, 8)*n/nranks)
-  allocate (u(0:n - 1, 0:n - 1, z0 - 1:z1), v(0:n - 1, 0:n - 1, z0 - 1:z1))
+  allocate (u(0:n - 1, 0:n - 1, z0 - 2:z1 + 1), v(0:n - 1, 0:n - 1, z0 - 2:z1 + 1))
   call initialise(u)
   v = u
   below = merge(rank - 1, MPI_PROC_NULL, rank > 0)
@@ -68,12 +69,12 @@ program heat
   if (ierr /= LDIMESH_OK .and. rank == 0) write (0, '(a)') name//': set_domain: '// &
     ldimesh_last_error(insitu)
 
-  ! The block: from the halo layer below (a neighbour there) or the first owned layer, to the
-  ! halo layer above (a neighbour there) or the last owned layer.
-  kfirst = merge(z0 - 1, z0, below /= MPI_PROC_NULL)
-  klast = merge(z1, z1 - 1, above /= MPI_PROC_NULL)
-  ghost_lo = [0, 0, merge(1, 0, below /= MPI_PROC_NULL)]
-  ghost_hi = [0, 0, merge(1, 0, above /= MPI_PROC_NULL)]
+  ! The block: from the halo layers below (a neighbour there) or the first owned layer, to the
+  ! halo layers above (a neighbour there) or the last owned layer.
+  kfirst = merge(z0 - 2, z0, below /= MPI_PROC_NULL)
+  klast = merge(z1 + 1, z1 - 1, above /= MPI_PROC_NULL)
+  ghost_lo = [0, 0, merge(2, 0, below /= MPI_PROC_NULL)]
+  ghost_hi = [0, 0, merge(2, 0, above /= MPI_PROC_NULL)]
   origin = [0.0_c_double, 0.0_c_double, real(kfirst, c_double)*h]
   spacing = h
 
@@ -175,7 +176,7 @@ contains
 
   ! Three Gaussian blobs, u = 0 on the boundary.
   subroutine initialise(a)
-    real(c_double), intent(out) :: a(0:, 0:, z0 - 1:)
+    real(c_double), intent(out) :: a(0:, 0:, z0 - 2:)
     real(c_double), parameter :: centres(3, 3) = reshape([0.35_c_double, 0.4_c_double, &
       0.45_c_double, 0.65_c_double, 0.45_c_double, 0.55_c_double, 0.5_c_double, 0.68_c_double, &
       0.5_c_double], [3, 3])
@@ -183,7 +184,7 @@ contains
     integer :: i, j, k, b
     step_h = 1.0_c_double/real(n - 1, c_double)
     a = 0.0_c_double
-    do k = max(z0 - 1, 1), min(z1, n - 2)
+    do k = max(z0 - 2, 1), min(z1 + 1, n - 2)
       do j = 1, n - 2
         do i = 1, n - 2
           x = real(i, c_double)*step_h
@@ -204,8 +205,8 @@ contains
 
   ! One explicit Euler step from a into b (halo layers of a exchanged first).
   subroutine advance(a, b)
-    real(c_double), intent(inout) :: a(0:, 0:, z0 - 1:)
-    real(c_double), intent(inout) :: b(0:, 0:, z0 - 1:)
+    real(c_double), intent(inout) :: a(0:, 0:, z0 - 2:)
+    real(c_double), intent(inout) :: b(0:, 0:, z0 - 2:)
     real(c_double) :: lap
     integer :: i, j, k
     call exchange(a, 0)
@@ -220,17 +221,17 @@ contains
     end do
   end subroutine advance
 
-  ! Fills the halo layers z0 - 1 and z1 from the neighbours.
+  ! Fills the halo layers z0 - 2, z0 - 1 and z1, z1 + 1 from the neighbours.
   subroutine exchange(a, tag)
-    real(c_double), intent(inout) :: a(0:, 0:, z0 - 1:)
+    real(c_double), intent(inout) :: a(0:, 0:, z0 - 2:)
     integer, intent(in) :: tag
     integer :: count, e
-    count = n*n
-    call MPI_Sendrecv(a(:, :, z1 - 1), count, MPI_DOUBLE_PRECISION, above, tag, &
-                      a(:, :, z0 - 1), count, MPI_DOUBLE_PRECISION, below, tag, &
+    count = 2*n*n
+    call MPI_Sendrecv(a(:, :, z1 - 2:z1 - 1), count, MPI_DOUBLE_PRECISION, above, tag, &
+                      a(:, :, z0 - 2:z0 - 1), count, MPI_DOUBLE_PRECISION, below, tag, &
                       MPI_COMM_WORLD, MPI_STATUS_IGNORE, e)
-    call MPI_Sendrecv(a(:, :, z0), count, MPI_DOUBLE_PRECISION, below, tag + 1, &
-                      a(:, :, z1), count, MPI_DOUBLE_PRECISION, above, tag + 1, &
+    call MPI_Sendrecv(a(:, :, z0:z0 + 1), count, MPI_DOUBLE_PRECISION, below, tag + 1, &
+                      a(:, :, z1:z1 + 1), count, MPI_DOUBLE_PRECISION, above, tag + 1, &
                       MPI_COMM_WORLD, MPI_STATUS_IGNORE, e)
   end subroutine exchange
 

@@ -10,8 +10,11 @@
 // [0, 1]³ for the views: N points per axis at spacing 1/(N − 1).
 //
 // Each rank owns the points [lo, hi) of its block (block_grid over the ranks) and stores them
-// with one halo point on each side, x fastest: the layout a finite-volume or finite-difference
-// code hands over. The adaptor reads V in place, halo included (see v_block).
+// with two halo points on each side, x fastest: the layout a finite-volume or finite-difference
+// code hands over. The Laplacian needs one; the second lets the adaptor compute the normals at
+// the rank's edge by central differences as one process would (docs/method.md, "Normals"), so
+// that the published mesh is the same for any number of ranks. The adaptor reads V in place,
+// halo included (see v_block).
 //
 //   mpiexec -n 2 build/bin/ldimesh-grayscott --size 64 --steps 200
 #include <algorithm>
@@ -53,7 +56,10 @@ double hash_noise(std::uint64_t index, std::uint64_t salt) {
   return double(x >> 11) * 0x1.0p-52 - 1.0;
 }
 
-// One rank's block: owned points [lo, hi) per axis, stored with one halo point on each side.
+// Halo points on each side of a rank's block.
+constexpr std::int64_t kHalo = 2;
+
+// One rank's block: owned points [lo, hi) per axis, stored with kHalo halo points on each side.
 class GrayScottBlock {
  public:
   GrayScottBlock(std::int64_t global, std::array<int, 3> blocks, int rank, const Parameters& p)
@@ -70,8 +76,8 @@ class GrayScottBlock {
       below_[a] = coord[a] > 0 ? rank_of(below, blocks) : MPI_PROC_NULL;
       above_[a] = coord[a] + 1 < blocks[a] ? rank_of(above, blocks) : MPI_PROC_NULL;
     }
-    stride_ = {1, n_[0] + 2, (n_[0] + 2) * (n_[1] + 2)};
-    const std::size_t count = std::size_t(stride_[2] * (n_[2] + 2));
+    stride_ = {1, n_[0] + 2 * kHalo, (n_[0] + 2 * kHalo) * (n_[1] + 2 * kHalo)};
+    const std::size_t count = std::size_t(stride_[2] * (n_[2] + 2 * kHalo));
     for (auto* f : {&u_, &v_, &u_next_, &v_next_})
       f->assign(count, 0.0);
     for (int a = 0; a < 3; ++a)
@@ -91,14 +97,14 @@ class GrayScottBlock {
   void advance() {
     const std::int64_t sy = stride_[1], sz = stride_[2];
     const double F = p_.F, k = p_.k, Du = p_.Du, Dv = p_.Dv, dt = p_.dt;
-    for (std::int64_t kk = 1; kk <= n_[2]; ++kk)
-      for (std::int64_t j = 1; j <= n_[1]; ++j) {
+    for (std::int64_t kk = kHalo; kk < n_[2] + kHalo; ++kk)
+      for (std::int64_t j = kHalo; j < n_[1] + kHalo; ++j) {
         const std::int64_t row = j * sy + kk * sz;
         const double* u = u_.data() + row;
         const double* v = v_.data() + row;
         double* un = u_next_.data() + row;
         double* vn = v_next_.data() + row;
-        for (std::int64_t i = 1; i <= n_[0]; ++i) {
+        for (std::int64_t i = kHalo; i < n_[0] + kHalo; ++i) {
           const double lap_u =
               u[i - 1] + u[i + 1] + u[i - sy] + u[i + sy] + u[i - sz] + u[i + sz] - 6.0 * u[i];
           const double lap_v =
@@ -115,12 +121,13 @@ class GrayScottBlock {
   }
 
   // V as a grid block of the solver's own array, nothing copied. Along each axis:
-  //  - a neighbour below: the block starts at the halo point lo − 1 as ghost_lo = 1. That point
-  //    is owned by the neighbour, and so is the cell [lo − 1, lo] (its lowest corner is the
-  //    neighbour's): this block produces no hit there, the neighbour does (it reads lo as its
-  //    ghost_hi). The ghost only makes the block's reach explicit.
-  //  - a neighbour above: the block ends at the halo point hi as ghost_hi = 1, so that the cell
-  //    [hi − 1, hi], whose lowest corner hi − 1 is owned here, is produced here and only here.
+  //  - a neighbour below: the block starts at the halo point lo − 2 as ghost_lo = 2. Those
+  //    points are owned by the neighbour, and so are the cells below lo (their lowest corners
+  //    are the neighbour's): this block produces no hit there, the neighbour does. The ghosts
+  //    give the normals' central differences at lo their point below.
+  //  - a neighbour above: the block ends at the halo point hi + 1 as ghost_hi = 2, so that the
+  //    cell [hi − 1, hi], whose lowest corner hi − 1 is owned here, is produced here and only
+  //    here, and the normals at hi have their point above.
   //  - the domain boundary: no ghost; the halo there holds mirrored values, not grid points.
   //    At the top the last owned point N − 1 has no cell above it.
   // So the cells with lowest corner in [lo, hi) ∩ [0, N − 2] are this rank's: the ranks tile the
@@ -132,8 +139,8 @@ class GrayScottBlock {
     ldimesh::GridBlock b;
     const double h = 1.0 / double(global_ - 1);
     for (int a = 0; a < 3; ++a) {
-      b.ghost_lo[a] = below_[a] != MPI_PROC_NULL ? 1 : 0;
-      b.ghost_hi[a] = above_[a] != MPI_PROC_NULL ? 1 : 0;
+      b.ghost_lo[a] = below_[a] != MPI_PROC_NULL ? int(kHalo) : 0;
+      b.ghost_hi[a] = above_[a] != MPI_PROC_NULL ? int(kHalo) : 0;
       b.dims[a] = n_[a] + b.ghost_lo[a] + b.ghost_hi[a];
       b.origin[a] = double(lo_[a] - b.ghost_lo[a]) * h;
       b.spacing[a] = h;
@@ -153,12 +160,12 @@ class GrayScottBlock {
     return c[0] + blocks[0] * (c[1] + blocks[1] * c[2]);
   }
 
-  // The local index of the block's first point: the halo point below where there is a
+  // The local index of the block's first point: the first halo point below where there is a
   // neighbour, else the first owned point.
   std::int64_t first_point() const {
     std::int64_t at = 0;
     for (int a = 0; a < 3; ++a)
-      at += (below_[a] != MPI_PROC_NULL ? 0 : 1) * stride_[a];
+      at += (below_[a] != MPI_PROC_NULL ? 0 : kHalo) * stride_[a];
     return at;
   }
 
@@ -178,7 +185,7 @@ class GrayScottBlock {
           const bool inside =
               g[0] >= c0 && g[0] < c1 && g[1] >= c0 && g[1] < c1 && g[2] >= c0 && g[2] < c1;
           const std::uint64_t id = std::uint64_t(g[0] + global_ * (g[1] + global_ * g[2]));
-          const std::int64_t at = local_index(i + 1, j + 1, k + 1);
+          const std::int64_t at = local_index(i + kHalo, j + kHalo, k + kHalo);
           u_[at] = (inside ? 0.5 : 1.0) * (1.0 + p_.noise * hash_noise(id, 1));
           v_[at] = inside ? 0.25 * (1.0 + p_.noise * hash_noise(id, 2)) : 0.0;
         }
@@ -186,13 +193,13 @@ class GrayScottBlock {
     exchange_halo(v_);
   }
 
-  // One plane orthogonal to `axis` across the whole local array (halos included), as an MPI
-  // datatype to be used at the address of the plane's first value.
+  // kHalo planes orthogonal to `axis` across the whole local array (halos included), as an MPI
+  // datatype to be used at the address of the first plane's first value.
   void make_plane_type(int axis) {
     // MPI's subarray order is C order: z slowest.
-    const int sizes[3] = {int(n_[2] + 2), int(n_[1] + 2), int(n_[0] + 2)};
+    const int sizes[3] = {int(n_[2] + 2 * kHalo), int(n_[1] + 2 * kHalo), int(n_[0] + 2 * kHalo)};
     int sub[3] = {sizes[0], sizes[1], sizes[2]};
-    sub[2 - axis] = 1;
+    sub[2 - axis] = int(kHalo);
     const int starts[3] = {0, 0, 0};
     MPI_Datatype t;
     MPI_Type_create_subarray(3, sizes, sub, starts, MPI_ORDER_C, MPI_DOUBLE, &t);
@@ -207,25 +214,29 @@ class GrayScottBlock {
   // Copies plane `from` to plane `to` along `axis` (the whole local extent of the other axes).
   void copy_plane(std::vector<double>& f, int axis, std::int64_t from, std::int64_t to) {
     const int b = (axis + 1) % 3, c = (axis + 2) % 3;
-    for (std::int64_t y = 0; y < n_[c] + 2; ++y)
-      for (std::int64_t x = 0; x < n_[b] + 2; ++x) {
+    for (std::int64_t y = 0; y < n_[c] + 2 * kHalo; ++y)
+      for (std::int64_t x = 0; x < n_[b] + 2 * kHalo; ++x) {
         const std::int64_t off = x * stride_[b] + y * stride_[c];
         f[to * stride_[axis] + off] = f[from * stride_[axis] + off];
       }
   }
 
   // Fills the halo: per axis (x, then y, then z, each over the full extent of the others, so
-  // edges and corners arrive too) the neighbours' planes by MPI_Sendrecv, or the mirrored
-  // interior plane at the domain boundary (zero flux).
+  // edges and corners arrive too) the neighbours' kHalo planes by MPI_Sendrecv, or at the domain
+  // boundary the mirrored interior plane (zero flux; the outer halo planes there, read by
+  // neither the Laplacian nor the adaptor, repeat it).
   void exchange_halo(std::vector<double>& f) {
+    const std::int64_t h = kHalo;
     for (int a = 0; a < 3; ++a) {
       const std::int64_t n = n_[a];
-      MPI_Sendrecv(plane(f, a, 1), 1, plane_[a], below_[a], 0, plane(f, a, n + 1), 1, plane_[a],
+      MPI_Sendrecv(plane(f, a, h), 1, plane_[a], below_[a], 0, plane(f, a, n + h), 1, plane_[a],
                    above_[a], 0, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
       MPI_Sendrecv(plane(f, a, n), 1, plane_[a], above_[a], 1, plane(f, a, 0), 1, plane_[a],
                    below_[a], 1, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
-      if (below_[a] == MPI_PROC_NULL) copy_plane(f, a, 2, 0);
-      if (above_[a] == MPI_PROC_NULL) copy_plane(f, a, n - 1, n + 1);
+      for (std::int64_t k = 0; k < h; ++k) {
+        if (below_[a] == MPI_PROC_NULL) copy_plane(f, a, h + 1, h - 1 - k);
+        if (above_[a] == MPI_PROC_NULL) copy_plane(f, a, n + h - 2, n + h + k);
+      }
     }
   }
 
@@ -265,7 +276,8 @@ int main(int argc, char** argv) {
   const ldimesh::Box domain{{0.0, 0.0, 0.0}, {1.0, 1.0, 1.0}};
   const std::array<int, 3> blocks = ldimesh::block_grid(domain, app.size());
   for (int a = 0; a < 3; ++a) {
-    // Every block needs two points per axis: one cell at the top boundary.
+    // Every block needs two points per axis (kHalo): one cell at the top boundary, and the
+    // halo planes a neighbour receives are owned ones.
     if (size < 2 * blocks[a]) {
       app.check(ldimesh::Status::invalid_argument("--size " + std::to_string(size) +
                                                   " is too small for " + std::to_string(blocks[a]) +

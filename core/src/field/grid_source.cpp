@@ -75,6 +75,7 @@ struct GridView {
   glm::dvec3 origin, spacing;
   std::array<const double*, 3> coords;  // all null: uniform
   bool rectilinear;
+  std::array<std::int64_t, 3> dims;  // points per axis, ghosts included
 
   double coord(int a, std::int64_t i) const {
     return rectilinear ? coords[a][i] : origin[a] + double(i) * spacing[a];
@@ -154,6 +155,42 @@ inline glm::dvec3 trilinear_gradient(const double c[8], glm::dvec3 p, glm::dvec3
       blend(c[4] - c[0], c[5] - c[1], c[6] - c[2], c[7] - c[3], p.x, q.x, p.y, q.y) * inv_size.z};
 }
 
+// The shading gradient at local point p of cell c: the trilinear blend of the gradients at the
+// cell's 8 corner points, each by central differences ((v[i+1] − v[i−1]) / (x[i+1] − x[i−1])
+// along each axis; one-sided where the block has no point beyond, ghost points included, or
+// where the value beyond is NaN or ±Inf). Unlike the interpolant's own gradient
+// (trilinear_gradient), whose jumps at cell faces show as bands in shading, it is continuous
+// across cells; the hits' positions stay those of the interpolant. Where it is still not finite,
+// the interpolant's gradient `exact` instead. Every caster computes hits' normals here, so that
+// they agree bit for bit.
+template <class T>
+glm::dvec3 smooth_gradient(const GridView<T>& g, const std::array<std::int64_t, 3>& c, glm::dvec3 p,
+                           glm::dvec3 exact) {
+  glm::dvec3 sum(0.0);
+  for (int n = 0; n < 8; ++n) {
+    const std::int64_t q[3] = {c[0] + (n & 1), c[1] + ((n >> 1) & 1), c[2] + ((n >> 2) & 1)};
+    const T* at = g.values + q[0] * g.strides[0] + q[1] * g.strides[1] + q[2] * g.strides[2];
+    glm::dvec3 grad;
+    for (int k = 0; k < 3; ++k) {
+      std::int64_t lo = q[k], hi = q[k];
+      double v_lo = double(at[0]), v_hi = v_lo;
+      if (q[k] > 0) {
+        const double v = double(at[-g.strides[k]]);
+        if (std::isfinite(v)) v_lo = v, lo = q[k] - 1;
+      }
+      if (q[k] + 1 < g.dims[k]) {
+        const double v = double(at[g.strides[k]]);
+        if (std::isfinite(v)) v_hi = v, hi = q[k] + 1;
+      }
+      grad[k] = (v_hi - v_lo) / (g.coord(k, hi) - g.coord(k, lo));
+    }
+    const double w = ((n & 1) ? p.x : 1.0 - p.x) * (((n >> 1) & 1) ? p.y : 1.0 - p.y) *
+                     (((n >> 2) & 1) ? p.z : 1.0 - p.z);
+    sum += w * grad;
+  }
+  return std::isfinite(sum.x) && std::isfinite(sum.y) && std::isfinite(sum.z) ? sum : exact;
+}
+
 // The value on a cell face crossed by an axis ray: the bilinear interpolation of the face's
 // four points (f[0..3], b the lower bit) with weights w (trilinear_value's products with the
 // weight along the ray exactly 1), summed in that order. Both axis paths evaluate faces here, so
@@ -165,15 +202,18 @@ inline double face_value(const double w[4], const double f[4]) {
 // The hit of an axis ray (along a, direction `dir`) in a cell whose face values fa (entry) and
 // fb (exit) differ in sign, entered at ta and left at tb: the root of the linear function between
 // the faces (as trilinear_segment_roots computes it for a segment along one axis) and the
-// gradient there (as solve_cell). `local` holds the ray's local coordinates across it,
-// `inv_size` one over the cell's edges; corner[n] = value − iso at corner n (x + 2y + 4z).
-inline RayHit axis_root(const double corner[8], int a, int step, glm::dvec3 local,
-                        glm::dvec3 inv_size, double fa, double fb, double ta, double tb,
-                        glm::dvec3 dir) {
+// normal there (as solve_cell). `cell` is the cell's lowest point, `local` holds the ray's local
+// coordinates across it, `inv_size` one over the cell's edges; corner[n] = value − iso at corner
+// n (x + 2y + 4z).
+template <class T>
+RayHit axis_root(const GridView<T>& g, const std::array<std::int64_t, 3>& cell,
+                 const double corner[8], int a, int step, glm::dvec3 local, glm::dvec3 inv_size,
+                 double fa, double fb, double ta, double tb, glm::dvec3 dir) {
   const double s = fa / (fa - fb);
   local[a] = step > 0 ? s : 1.0 - s;
-  return {segment_point(ta, tb, s), unit_normal(trilinear_gradient(corner, local, inv_size), dir),
-          0.0f};
+  const glm::dvec3 grad =
+      smooth_gradient(g, cell, local, trilinear_gradient(corner, local, inv_size));
+  return {segment_point(ta, tb, s), unit_normal(grad, dir), 0.0f};
 }
 
 // The roots of one cell c on the ray segment [ta, tb], appended to `hits`: the cell's cubic
@@ -215,7 +255,8 @@ void solve_cell(const GridView<T>& g, double iso, glm::dvec3 org, glm::dvec3 dir
   for (int r = 0; r < n; ++r) {
     const glm::dvec3 p = a + roots[r] * (b - a);
     const double t = segment_point(ta, tb, roots[r]);
-    hits.push_back({t, unit_normal(trilinear_gradient(corner, p, inv_size), dir), 0.0f});
+    const glm::dvec3 grad = smooth_gradient(g, c, p, trilinear_gradient(corner, p, inv_size));
+    hits.push_back({t, unit_normal(grad, dir), 0.0f});
   }
 }
 
@@ -851,8 +892,8 @@ class GridAxisBinding final : public AxisBinding {
         glm::dvec3 local;
         local[B] = h.pb;
         local[C] = h.pc;
-        out.push_back(
-            {h.k, axis_root(corner, A, step, local, inv_size, h.fa, h.fb, t_in, t_out, l.dir)});
+        out.push_back({h.k, axis_root(g_, cell, corner, A, step, local, inv_size, h.fa, h.fb, t_in,
+                                      t_out, l.dir)});
       }
       n_candidates = 0;
     };
@@ -1005,7 +1046,9 @@ class GridAxisBinding final : public AxisBinding {
       local[b] = p[b];
       local[c] = p[c];
       inv_cell[a] = 1.0 / (g_.coord(a, i + 1) - g_.coord(a, i));
-      hits.push_back(axis_root(corner, a, step, local, inv_cell, fa, fb, ta, tb, dir));
+      std::array<std::int64_t, 3> at = cell;
+      at[a] = i;
+      hits.push_back(axis_root(g_, at, corner, a, step, local, inv_cell, fa, fb, ta, tb, dir));
     };
     // The cells whose face values differ in sign, solved (emit_root) in ray order when the
     // buffer fills, before solve_cell adds a hit and at the end.
@@ -1281,15 +1324,20 @@ GridPart grid_part(const GridBlock& whole, std::array<int, 3> blocks, std::array
     if (c1 <= c0) throw std::invalid_argument("grid block: more parts than cells along an axis");
     const bool last_part = index[a] + 1 == blocks[a];
     // Points c0 … c1, where c1 belongs to the next part (a ghost here); the last part keeps
-    // whatever `whole` has above.
-    b.dims[a] = last_part ? whole.dims[a] - c0 : c1 - c0 + 1;
-    b.ghost_lo[a] = 0;
-    b.ghost_hi[a] = last_part ? whole.ghost_hi[a] : 1;
-    offset += c0 * b.strides[a];
+    // whatever `whole` has above. And one more point on each side where `whole` has it (ghosts),
+    // for the central differences of the normals at the owned cells' corners: the parts' hits
+    // then carry the normals the whole block gives.
+    const std::int64_t below = c0 > 0 ? 1 : 0;
+    const std::int64_t above = !last_part && c1 + 1 < whole.dims[a] ? 1 : 0;
+    const std::int64_t p0 = c0 - below;
+    b.dims[a] = (last_part ? whole.dims[a] - c0 : c1 - c0 + 1 + above) + below;
+    b.ghost_lo[a] = int(below);
+    b.ghost_hi[a] = last_part ? whole.ghost_hi[a] : int(1 + above);
+    offset += p0 * b.strides[a];
     if (whole.coords[0]) {
-      b.coords[a] = whole.coords[a] + c0;
+      b.coords[a] = whole.coords[a] + p0;
     } else {
-      b.origin[a] = whole.origin[a] + double(c0) * whole.spacing[a];
+      b.origin[a] = whole.origin[a] + double(p0) * whole.spacing[a];
     }
     part.owned.lo[a] = source.coordinate(a, c0);
     part.owned.hi[a] = source.coordinate(a, c1);
@@ -1421,7 +1469,8 @@ std::unique_ptr<AxisBinding> GridSource::bind_axis(double isovalue) const {
   auto bind_typed = [&](const auto* values) -> std::unique_ptr<AxisBinding> {
     using T = std::remove_cv_t<std::remove_pointer_t<decltype(values)>>;
     const GridView<T> g{values,         block_.strides, block_.origin,
-                        block_.spacing, block_.coords,  block_.coords[0] != nullptr};
+                        block_.spacing, block_.coords,  block_.coords[0] != nullptr,
+                        block_.dims};
     return std::make_unique<GridAxisBinding<T>>(g, isovalue, first_cell_, last_cell_, bricks_,
                                                 brick_cells_);
   };
@@ -1434,7 +1483,8 @@ std::unique_ptr<GeometryBinding> GridSource::bind(RTCDevice device, double isova
   auto bind_typed = [&](const auto* values) {
     using T = std::remove_cv_t<std::remove_pointer_t<decltype(values)>>;
     const GridView<T> g{values,         block_.strides, block_.origin,
-                        block_.spacing, block_.coords,  block_.coords[0] != nullptr};
+                        block_.spacing, block_.coords,  block_.coords[0] != nullptr,
+                        block_.dims};
     return bind_grid(device, g, isovalue, first_cell_, last_cell_, bricks_, brick_cells_);
   };
   if (block_.type == ScalarType::float32)

@@ -63,9 +63,10 @@ class GridSource final : public FieldSource {
 
 // Part `index` of `whole` split into blocks[0] × blocks[1] × blocks[2] blocks of cells (as
 // evenly as possible): a block of the same arrays (nothing copied) with its owned points plus
-// the ghost layer of point values above it that its last cells need, and the box its cells
-// cover, computed from `whole`'s coordinates so that neighbouring parts share faces exactly
-// (use it as the part's Subdomain box). The parts' owned cells tile `whole`'s. Throws
+// the ghost layer of point values above it that its last cells need, one more point layer on
+// each side where `whole` has one (the normals' central differences read them), and the box
+// its cells cover, computed from `whole`'s coordinates so that neighbouring parts share faces
+// exactly (use it as the part's Subdomain box). The parts' owned cells tile `whole`'s. Throws
 // std::invalid_argument if a part would have no cell.
 struct GridPart {
   GridBlock block;
