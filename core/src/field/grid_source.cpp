@@ -163,13 +163,41 @@ inline glm::dvec3 trilinear_gradient(const double c[8], glm::dvec3 p, glm::dvec3
 // across cells; the hits' positions stay those of the interpolant. Where it is still not finite,
 // the interpolant's gradient `exact` instead. Every caster computes hits' normals here, so that
 // they agree bit for bit.
+//
+// On a uniform grid, away from the block's edges, the blend along axis k is the difference of
+// the transverse bilinear interpolants on the four point layers c[k] − 1 … c[k] + 2:
+// ((1 − p)(L₂ − L₀) + p(L₃ − L₁)) / 2h — 48 reads and no division per hit, instead of a division
+// per corner and axis (the general form cost the axis casts a quarter of their time).
 template <class T>
 glm::dvec3 smooth_gradient(const GridView<T>& g, const std::array<std::int64_t, 3>& c, glm::dvec3 p,
                            glm::dvec3 exact) {
+  const T* cell = g.values + c[0] * g.strides[0] + c[1] * g.strides[1] + c[2] * g.strides[2];
+  const auto finite = [](glm::dvec3 v) {
+    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+  };
+  if (!g.rectilinear && c[0] >= 1 && c[1] >= 1 && c[2] >= 1 && c[0] + 2 < g.dims[0] &&
+      c[1] + 2 < g.dims[1] && c[2] + 2 < g.dims[2]) {
+    glm::dvec3 grad;
+    for (int k = 0; k < 3; ++k) {
+      const int u = k == 0 ? 1 : 0, w = k == 2 ? 1 : 2;  // the transverse axes, u < w
+      const std::int64_t sk = g.strides[k], su = g.strides[u], sw = g.strides[w];
+      const double pu = p[u], pw = p[w];
+      const auto layer = [&](std::int64_t i) {
+        const T* q = cell + i * sk;
+        const double a = double(q[0]) + pu * (double(q[su]) - double(q[0]));
+        const double b = double(q[sw]) + pu * (double(q[su + sw]) - double(q[sw]));
+        return a + pw * (b - a);
+      };
+      const double l0 = layer(-1), l1 = layer(0), l2 = layer(1), l3 = layer(2);
+      grad[k] = ((1.0 - p[k]) * (l2 - l0) + p[k] * (l3 - l1)) * (0.5 / g.spacing[k]);
+    }
+    if (finite(grad)) return grad;
+  }
   glm::dvec3 sum(0.0);
   for (int n = 0; n < 8; ++n) {
     const std::int64_t q[3] = {c[0] + (n & 1), c[1] + ((n >> 1) & 1), c[2] + ((n >> 2) & 1)};
-    const T* at = g.values + q[0] * g.strides[0] + q[1] * g.strides[1] + q[2] * g.strides[2];
+    const T* at = cell + (n & 1) * g.strides[0] + ((n >> 1) & 1) * g.strides[1] +
+                  ((n >> 2) & 1) * g.strides[2];
     glm::dvec3 grad;
     for (int k = 0; k < 3; ++k) {
       std::int64_t lo = q[k], hi = q[k];
@@ -182,13 +210,17 @@ glm::dvec3 smooth_gradient(const GridView<T>& g, const std::array<std::int64_t, 
         const double v = double(at[g.strides[k]]);
         if (std::isfinite(v)) v_hi = v, hi = q[k] + 1;
       }
-      grad[k] = (v_hi - v_lo) / (g.coord(k, hi) - g.coord(k, lo));
+      // A uniform grid's spacing, not differences of coordinates: the same bits in any part of
+      // the grid (grid_part moves the origin).
+      const double dx =
+          g.rectilinear ? g.coord(k, hi) - g.coord(k, lo) : double(hi - lo) * g.spacing[k];
+      grad[k] = (v_hi - v_lo) / dx;
     }
     const double w = ((n & 1) ? p.x : 1.0 - p.x) * (((n >> 1) & 1) ? p.y : 1.0 - p.y) *
                      (((n >> 2) & 1) ? p.z : 1.0 - p.z);
     sum += w * grad;
   }
-  return std::isfinite(sum.x) && std::isfinite(sum.y) && std::isfinite(sum.z) ? sum : exact;
+  return finite(sum) ? sum : exact;
 }
 
 // The value on a cell face crossed by an axis ray: the bilinear interpolation of the face's
