@@ -45,6 +45,7 @@ struct Job {
   std::map<std::string, double> seconds;
   std::uint64_t skipped_steps = 0;  // due steps dropped since the previous job was handed over
   std::uint64_t nonfinite_values = 0;
+  bool merge = false;  // §5 merging (the same on every rank: the ranks serve its samples)
 };
 
 std::size_t scalar_bytes(ScalarType type) {
@@ -200,8 +201,12 @@ class AdaptorImpl final : public Adaptor {
         std::fprintf(stderr,
                      "ldimesh: MPI runs without MPI_THREAD_MULTIPLE (MPI_Init_thread gave level "
                      "%d): in situ steps run synchronously, the solver waits for the ray cast and "
-                     "the reduction\n",
-                     level);
+                     "the reduction%s\n",
+                     level,
+                     options_.merging == AdaptorOptions::Merging::automatic
+                         ? "; the views are published trimmed, not merged (\"merging\": \"auto\"; "
+                           "true merges anyway, the solver then waits for the merge too)"
+                         : "");
       return;
     }
     MPI_Comm_dup(comm_, &background_comm_);
@@ -273,7 +278,8 @@ class AdaptorImpl final : public Adaptor {
     // synchronously everywhere. One collective for both.
     std::size_t snapshot_bytes = 0;
     const bool can_snapshot = background_ && snapshot_possible(snapshot_bytes);
-    int flags[2] = {0, background_ && !can_snapshot ? 1 : 0};  // decision, a rank cannot
+    // The root's decision, whether a rank cannot snapshot, whether "auto" merging has stopped.
+    int flags[3] = {0, background_ && !can_snapshot ? 1 : 0, 0};
     if (rank_ == 0) {
       const bool due =
           step % options_.every_steps == 0 && (options_.every_seconds <= 0.0 || !ran_before_ ||
@@ -285,9 +291,14 @@ class AdaptorImpl final : public Adaptor {
         // new one is skipped, or with "coalesce" it waits for them (hand_to_background), so
         // that the newest due step is always published.
         flags[0] = (casting_ || busy) && !options_.coalesce ? 2 : 1;  // 0 not due, 1 run, 2 busy
+        // The solver's time between due steps, run or skipped.
+        const double interval = due_before_ ? seconds_since(last_due_) : 0.0;
+        last_due_ = Clock::now();
+        due_before_ = true;
+        if (flags[0] == 1) flags[2] = auto_merge_stopped(step, interval) ? 1 : 0;
       }
     }
-    MPI_Allreduce(MPI_IN_PLACE, flags, 2, MPI_INT, MPI_MAX, comm_);
+    MPI_Allreduce(MPI_IN_PLACE, flags, 3, MPI_INT, MPI_MAX, comm_);
     const int decision = flags[0];
     if (decision != 1) {
       report_.skipped_busy = decision == 2;
@@ -309,16 +320,24 @@ class AdaptorImpl final : public Adaptor {
       job.skipped_steps = skipped_since_handoff_;
       skipped_since_handoff_ = 0;
     }
+    // "auto" merges the background steps while the root keeps up; "true" every step.
+    job.merge = options_.merging == AdaptorOptions::Merging::on ||
+                (options_.merging == AdaptorOptions::Merging::automatic && background_ &&
+                 flags[1] == 0 && flags[2] == 0);
     if (background_ && flags[1] == 0) return hand_to_background(std::move(job), start);
     if (background_ && rank_ == 0 && options_.log)
-      std::printf("ldimesh: step %llu runs synchronously: %s\n", (unsigned long long)step,
-                  "a rank's blocks cannot be copied (a FieldSource) or exceed memory_mb");
+      std::printf("ldimesh: step %llu runs synchronously: %s%s\n", (unsigned long long)step,
+                  "a rank's blocks cannot be copied (a FieldSource) or exceed memory_mb",
+                  options_.merging == AdaptorOptions::Merging::automatic
+                      ? "; its views are published trimmed, not merged (\"merging\": \"auto\")"
+                      : "");
 
     // The synchronous path: the solver waits for the cast and the reduction (and for the
     // meshing, where it needs every rank's samples).
     StepCasters casters;
     Status s = collective_step(comm_, blocks_, domain(), Status::ok(), job, casters);
-    if (s && meshing_samples(meshing_options())) s = mesh_with_samples(comm_, casters, job);
+    if (s && meshing_samples(meshing_options(job.merge)))
+      s = mesh_with_samples(comm_, casters, job);
     if (rank_ == 0) report_.nonfinite_values = job.cast.nonfinite_values;
     finish_report(start);
     if (!s) return fail(s.prefixed("step " + std::to_string(step) + " skipped: "));
@@ -393,11 +412,12 @@ class AdaptorImpl final : public Adaptor {
     double tolerance = 0.0;
   };
 
-  MeshingOptions meshing_options() const {
+  // The meshing of a step, merged (§5) or not.
+  MeshingOptions meshing_options(bool merge) const {
     MeshingOptions meshing;
     meshing.r = options_.r;
     meshing.refinement.levels = options_.refinement_levels;
-    meshing.merging.enabled = options_.merging;
+    meshing.merging.enabled = merge;
     return meshing;
   }
 
@@ -473,9 +493,30 @@ class AdaptorImpl final : public Adaptor {
     CastStep none;
     std::vector<MeshingResult> results;
     const Status s = mesh_step(comm, casters.blocks, casters.views, casters.tolerance,
-                               meshing_options(), rank_ == 0 ? job.cast : none, results);
+                               meshing_options(job.merge), rank_ == 0 ? job.cast : none, results);
     if (s && rank_ == 0) job.meshed = std::move(results);
     return s;
+  }
+
+  // Root, solver's thread, `mutex_` held, for a due step that runs, `interval` seconds after the
+  // previous due step (0: none): whether "merging": "auto" has stopped merging. It stops for
+  // good when the last merged step's meshing took longer than that (the root would skip
+  // steps), and says so once.
+  bool auto_merge_stopped(std::uint64_t step, double interval) {
+    if (options_.merging != AdaptorOptions::Merging::automatic || !background_) return false;
+    if (!auto_merge_stopped_ && interval > 0.0 && last_merge_seconds_ > 0.0) {
+      if (last_merge_seconds_ > interval) {
+        auto_merge_stopped_ = true;
+        if (options_.log)
+          std::printf(
+              "ldimesh: from step %llu on the views are published trimmed, not merged "
+              "(\"merging\": \"auto\"): merging took %.2f s, %.2f s pass between due steps; "
+              "\"merging\": true merges every step (steps are then skipped while the root "
+              "merges)\n",
+              (unsigned long long)step, last_merge_seconds_, interval);
+      }
+    }
+    return auto_merge_stopped_;
   }
 
   // Root: gives `job` to the worker; true when it replaced a step still waiting ("coalesce").
@@ -592,8 +633,13 @@ class AdaptorImpl final : public Adaptor {
         double max_blocked = 0.0;
         MPI_Reduce(&cj.blocked_seconds, &max_blocked, 1, MPI_DOUBLE, MPI_MAX, 0, background_comm_);
         // The snapshot stays until the next step: the ranks serve the root's samples from it.
-        if (s && meshing_samples(meshing_options()))
+        if (s && meshing_samples(meshing_options(cj.job.merge))) {
           s = mesh_with_samples(background_comm_, casters, cj.job);
+          if (s && rank_ == 0 && cj.job.merge) {
+            std::lock_guard lock(mutex_);
+            last_merge_seconds_ = cj.job.cast.seconds.mesh;
+          }
+        }
         LDIMESH_RETURN_IF_ERROR(s);
         if (rank_ == 0) {
           cj.job.seconds["blocked"] = max_blocked;
@@ -700,7 +746,7 @@ class AdaptorImpl final : public Adaptor {
   Status publish(Job& job) {
     if (options_.slow_root_seconds > 0.0)
       std::this_thread::sleep_for(std::chrono::duration<double>(options_.slow_root_seconds));
-    const MeshingOptions meshing = meshing_options();
+    const MeshingOptions meshing = meshing_options(job.merge);
     // The root half (mesh_step) unless it ran where the samples are: no MPI call here.
     std::vector<MeshingResult> results;
     if (job.meshed) {
@@ -801,6 +847,10 @@ class AdaptorImpl final : public Adaptor {
   Clock::time_point last_run_;
   bool ran_before_ = false;
   std::uint64_t skipped_since_handoff_ = 0;  // root, solver thread only
+  bool auto_merge_stopped_ = false;          // root, solver thread only
+  Clock::time_point last_due_;               // root, solver thread only
+  bool due_before_ = false;                  // root, solver thread only
+  double last_merge_seconds_ = 0.0;          // root: the last merged step's meshing (mutex_)
 
   // Root only.
   std::unique_ptr<SnapshotStore> store_;

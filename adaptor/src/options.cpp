@@ -104,7 +104,15 @@ Status parse_object(const nlohmann::json& j, AdaptorOptions& o) {
       else if (Status s = integer(j, "refinement", "", 0, 6, o.refinement_levels); !s)
         return bad("refinement", "must be true, false or a number of levels in 0..6");
     }
-    if (j.contains("merging")) o.merging = j["merging"].get<bool>();
+    if (j.contains("merging")) {
+      const nlohmann::json& v = j["merging"];
+      if (v.is_boolean())
+        o.merging = v.get<bool>() ? AdaptorOptions::Merging::on : AdaptorOptions::Merging::off;
+      else if (v.is_string() && v.get<std::string>() == "auto")
+        o.merging = AdaptorOptions::Merging::automatic;
+      else
+        return bad("merging", "must be true, false or \"auto\"");
+    }
     if (j.contains("server")) {
       const auto& s = j["server"];
       if (Status st = check_keys(s, "server.", {"enabled", "bind", "port", "token"}); !st)

@@ -21,7 +21,11 @@ struct AdaptorOptions {
   int resolution = 256;
   double r = 0.5;
   int refinement_levels = 0;  // §4: levels of refinement (0 off), with samples from every rank
-  bool merging = false;       // §5: one merged mesh per isovalue (trimmed with r = 1)
+  // §5: one merged mesh per isovalue (trimmed with r = 1). Automatic: on the steps that run in
+  // the background (the caster threads serve the merge's samples, not the solver), else the
+  // trimmed views.
+  enum class Merging { off, on, automatic };
+  Merging merging = Merging::automatic;
   std::uint64_t every_steps = 1;
   double every_seconds = 0.0;
   bool coalesce = false;

@@ -67,6 +67,12 @@ TEST(Adaptor, InvalidOptionsAreReportedOnEveryRankWithTheKey) {
   EXPECT_NE(s.message().find("cadence.every_steps"), std::string::npos) << s.message();
   s = Adaptor::create(MPI_COMM_WORLD, "{not json", a);
   EXPECT_FALSE(s);
+  for (const char* doc : {R"({"merging": "yes"})", R"({"merging": 1})"}) {
+    s = Adaptor::create(MPI_COMM_WORLD, doc, a);
+    EXPECT_EQ(s.code(), StatusCode::invalid_options) << doc;
+    EXPECT_NE(s.message().find("'merging' must be true, false or \"auto\""), std::string::npos)
+        << s.message();
+  }
   for (const char* doc : {R"({"refinement": 7})", R"({"refinement": -1})", R"({"refinement": 1.5})",
                           R"({"refinement": "2"})"}) {
     s = Adaptor::create(MPI_COMM_WORLD, doc, a);
@@ -354,9 +360,9 @@ std::vector<MeshingVariant> meshing_variants() {
   MeshingOptions merged, refined;
   merged.merging.enabled = true;
   refined.refinement.levels = 2;
-  return {{"views", "", {}},
+  return {{"views", R"("merging": false, )", {}},
           {"merged", R"("merging": true, )", merged},
-          {"refined", R"("refinement": true, )", refined}};
+          {"refined", R"("refinement": true, "merging": false, )", refined}};
 }
 
 // One pipeline, one result: the adaptor publishes the GLB that the CLI's pipeline
@@ -474,6 +480,35 @@ TEST(Adaptor, GridBlocksPublishTheMeshOfTheCommandLinePipelineOnBothPaths) {
     }
 }
 
+// "merging" by default ("auto"): the steps that run in the background are merged (the caster
+// threads serve the merge's samples), the synchronous ones publish the trimmed views (the
+// solver would wait for the merge).
+TEST(Adaptor, ByDefaultBackgroundStepsAreMergedAndSynchronousOnesNot) {
+  GridSlab slab(kSlabPoints, 0.0);
+  const Box domain{glm::dvec3(-1.0), glm::dvec3(1.0)};
+  const GridSource source(slab.block);
+  const RayCaster caster(source, 0.36);
+  const Subdomain sub{source.bounds(), domain};
+  for (const bool background : {false, true}) {
+    SCOPED_TRACE(background ? "background" : "synchronous");
+    const std::string dir = temp_dir(std::string("auto_merge_") + (background ? "b" : "s"));
+    auto a = make_grid_adaptor(grid_options(dir, background), slab);
+    if (!a) return;
+    EXPECT_TRUE(a->execute(1, 0.0)) << a->last_error();
+    const bool merged = background && thread_multiple();
+    EXPECT_EQ(a->last_report().background, merged);
+    EXPECT_TRUE(a->finalize()) << a->last_error();
+    MeshingOptions meshing;
+    meshing.merging.enabled = merged;
+    expect_cli_mesh_published(caster, sub, meshing, dir, 1);
+    if (rank_of() == 0) {  // merged: one closed surface, V − E + F = 2 with E = 3F/2
+      const StepMetadata meta = testing::published_step(dir, 1);
+      EXPECT_EQ(meta.triangles == 2 * (meta.vertices - 2), merged)
+          << meta.triangles << " triangles, " << meta.vertices << " vertices";
+    }
+  }
+}
+
 TEST(Adaptor, GridBlocksRunInTheBackgroundWhereMpiAllowsIt) {
   GridSlab slab(kSlabPoints, 0.0);
   auto a = make_grid_adaptor(grid_options(temp_dir("background"), true), slab);
@@ -496,16 +531,20 @@ TEST(Adaptor, GridBlocksRunInTheBackgroundWhereMpiAllowsIt) {
 }
 
 // Both paths publish the same bytes; and the solver may overwrite its arrays as soon as
-// execute() returns: the published mesh is that of the values at the call.
+// execute() returns: the published mesh is that of the values at the call. Merged, so that the
+// snapshot also answers the merge's samples after the solver has moved on.
 TEST(Adaptor, TheSnapshotPathPublishesTheSynchronousMeshWhateverTheSolverDoesNext) {
   const std::string sync_dir = temp_dir("sync"), snap_dir = temp_dir("snapshot");
+  const auto merged_options = [](const std::string& dir, bool background) {
+    return R"({"merging": true, )" + grid_options(dir, background).substr(1);
+  };
   constexpr int kSteps = 3;
   const auto shift = [](int step) { return -0.02 * step; };  // the sphere grows step by step
   {
     std::vector<GridSlab> slabs;
     for (int step = 0; step < kSteps; ++step)
       slabs.emplace_back(kSlabPoints, shift(step));
-    auto a = make_grid_adaptor(grid_options(sync_dir, false), slabs[0]);
+    auto a = make_grid_adaptor(merged_options(sync_dir, false), slabs[0]);
     if (!a) return;
     for (int step = 0; step < kSteps; ++step) {
       a->clear_blocks();
@@ -522,7 +561,7 @@ TEST(Adaptor, TheSnapshotPathPublishesTheSynchronousMeshWhateverTheSolverDoesNex
   // One array, overwritten with the next step's values right after each execute(), and with
   // values that hold no surface at all after the last one.
   GridSlab slab(kSlabPoints, shift(0));
-  auto b = make_grid_adaptor(grid_options(snap_dir, true), slab);
+  auto b = make_grid_adaptor(merged_options(snap_dir, true), slab);
   if (!b) return;
   for (int step = 0; step < kSteps; ++step) {
     EXPECT_TRUE(b->execute(step, 0.0));
@@ -574,7 +613,8 @@ TEST(Adaptor, GridBlocksAreColouredByANamedFieldOnBothPaths) {
       const std::string dir =
           temp_dir(std::string("colour_") + (merging ? "m" : "v") + (background ? "b" : "s"));
       std::string options = R"({"colour_by": "C", )" + grid_options(dir, background).substr(1);
-      if (merging) options = R"({"merging": true, )" + options.substr(1);
+      options =
+          std::string(R"({"merging": )") + (merging ? "true" : "false") + ", " + options.substr(1);
       auto a = make_grid_adaptor(options, slab);
       if (!a) return;
       EXPECT_TRUE(a->add_field("unused", slab.values.data(), ScalarType::float32));
