@@ -368,9 +368,13 @@ std::vector<std::vector<std::uint8_t>> gather(MPI_Comm comm,
   return parts;
 }
 
-// Per ray, the hits of all answers by depth, those within `tolerance` of the previous one
-// dropped (a hit on a shared face, seen by two ranks or two blocks).
-RayHitList merge_hit_lists(const std::vector<RayHitList>& answers, std::size_t rays,
+// Per ray, the hits of all answers by depth; each run of hits within `tolerance` of its first
+// (a hit on a shared face, seen by two ranks or two blocks) becomes the one whose normal faces
+// the viewer most (smallest normal · dir; then the smaller normal, component by component) —
+// the rule by which one caster merges its own duplicates (RayCaster), so that a ray lying in a
+// face plane between ranks, which both answer, keeps the hit that one process keeps.
+RayHitList merge_hit_lists(const std::vector<RayHitList>& answers,
+                           std::span<const SamplePoint> points, std::span<const View> views,
                            double tolerance) {
   const bool with_scalar = std::any_of(answers.begin(), answers.end(),
                                        [](const RayHitList& a) { return !a.scalar.empty(); });
@@ -379,26 +383,40 @@ RayHitList merge_hit_lists(const std::vector<RayHitList>& answers, std::size_t r
     glm::vec3 normal;
     float scalar;
   };
+  const auto normal_less = [](const glm::vec3& a, const glm::vec3& b) {
+    return std::tie(a.x, a.y, a.z) < std::tie(b.x, b.y, b.z);
+  };
   RayHitList merged;
-  merged.offsets.reserve(rays + 1);
+  merged.offsets.reserve(points.size() + 1);
   merged.offsets.push_back(0);
   std::vector<Hit> hits;
-  for (std::size_t k = 0; k < rays; ++k) {
+  for (std::size_t k = 0; k < points.size(); ++k) {
     hits.clear();
     for (const RayHitList& a : answers)
       for (std::uint32_t s = a.offsets[k]; s < a.offsets[k + 1]; ++s)
         hits.push_back({a.depth[s], a.normal[s], a.scalar.empty() ? 0.0f : a.scalar[s]});
-    std::sort(hits.begin(), hits.end(), [](const Hit& a, const Hit& b) {
-      return std::tie(a.depth, a.normal.x, a.normal.y, a.normal.z) <
-             std::tie(b.depth, b.normal.x, b.normal.y, b.normal.z);
+    std::sort(hits.begin(), hits.end(), [&](const Hit& a, const Hit& b) {
+      return a.depth != b.depth ? a.depth < b.depth : normal_less(a.normal, b.normal);
     });
+    const glm::vec3 dir(views[points[k].view].dir);
     std::uint32_t kept = 0;
-    for (const Hit& h : hits) {
-      if (kept > 0 && double(h.depth) - double(merged.depth.back()) <= tolerance) continue;
-      merged.depth.push_back(h.depth);
-      merged.normal.push_back(h.normal);
-      if (with_scalar) merged.scalar.push_back(h.scalar);
+    for (std::size_t i = 0; i < hits.size();) {
+      std::size_t end = i + 1, best = i;
+      while (end < hits.size() && double(hits[end].depth) - double(hits[i].depth) <= tolerance)
+        ++end;
+      float best_dot = glm::dot(hits[i].normal, dir);
+      for (std::size_t m = i + 1; m < end; ++m) {
+        const float dot = glm::dot(hits[m].normal, dir);
+        if (dot < best_dot || (dot == best_dot && normal_less(hits[m].normal, hits[best].normal))) {
+          best = m;
+          best_dot = dot;
+        }
+      }
+      merged.depth.push_back(hits[best].depth);
+      merged.normal.push_back(hits[best].normal);
+      if (with_scalar) merged.scalar.push_back(hits[best].scalar);
       ++kept;
+      i = end;
     }
     merged.offsets.push_back(merged.offsets.back() + kept);
   }
@@ -409,18 +427,18 @@ RayHitList merge_hit_lists(const std::vector<RayHitList>& answers, std::size_t r
 
 RayHitList MpiSampleSource::cast_here(std::span<const SamplePoint> points) const {
   if (blocks_.size() == 1)
-    return cast_sample_points(*blocks_.front().caster, views_, points, &blocks_.front().sub);
+    return cast_sample_points(*blocks_.front().caster, views_, points, &blocks_.front().sub, true);
   for (const SamplePoint& p : points)  // as cast_sample_points checks it
     if (p.view >= views_.size()) throw std::out_of_range("sample request for an unknown view");
   std::vector<RayHitList> answers;
   for (const CastBlock& b : blocks_)
-    answers.push_back(cast_sample_points(*b.caster, views_, points, &b.sub));
+    answers.push_back(cast_sample_points(*b.caster, views_, points, &b.sub, true));
   if (answers.empty()) {
     RayHitList none;
     none.offsets.assign(points.size() + 1, 0);
     return none;
   }
-  return merge_hit_lists(answers, points.size(), tolerance_);
+  return merge_hit_lists(answers, points, views_, tolerance_);
 }
 
 std::vector<std::uint8_t> MpiSampleSource::answer(std::span<const SamplePoint> points) const {
@@ -451,7 +469,7 @@ RayHitList MpiSampleSource::sample(std::span<const SamplePoint> points) {
   } else {
     answers = ask_all(points);
   }
-  return merge_hit_lists(answers, points.size(), tolerance_);
+  return merge_hit_lists(answers, points, views_, tolerance_);
 }
 
 std::vector<RayHitList> MpiSampleSource::ask_all(std::span<const SamplePoint> points) {

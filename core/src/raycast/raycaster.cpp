@@ -276,7 +276,8 @@ std::uint64_t RayCaster::nonfinite_values() const {
   return n;
 }
 
-bool subdomain_segment(const Subdomain& sub, glm::dvec3 o, glm::dvec3 d, RaySegment& segment) {
+bool subdomain_segment(const Subdomain& sub, glm::dvec3 o, glm::dvec3 d, RaySegment& segment,
+                       bool closed_planes) {
   // Where the ray leaves the global box: the end of the last segment is closed there.
   double g0 = -INFINITY, g1 = INFINITY;
   if (!clip_ray_to_box(o, d, sub.global.lo, sub.global.hi, g0, g1)) return false;
@@ -285,7 +286,8 @@ bool subdomain_segment(const Subdomain& sub, glm::dvec3 o, glm::dvec3 d, RaySegm
     const bool closed_hi = sub.box.hi[a] >= sub.global.hi[a];
     if (d[a] == 0.0) {
       // A ray in a face plane: the spatial rule decides.
-      if (o[a] < sub.box.lo[a] || o[a] > sub.box.hi[a] || (o[a] == sub.box.hi[a] && !closed_hi))
+      if (o[a] < sub.box.lo[a] || o[a] > sub.box.hi[a] ||
+          (o[a] == sub.box.hi[a] && !closed_hi && !closed_planes))
         return false;
       continue;
     }
@@ -563,8 +565,8 @@ LdiFragment RayCaster::cast_fragment(const View& view, std::uint32_t view_index,
 }
 
 RayHitList RayCaster::cast_points(const View& view, std::span<const glm::dvec2> image_positions,
-                                  const Subdomain* sub,
-                                  std::span<const glm::dvec2> depth_ranges) const {
+                                  const Subdomain* sub, std::span<const glm::dvec2> depth_ranges,
+                                  bool closed_planes) const {
   const std::size_t n = image_positions.size();
   if (!depth_ranges.empty() && depth_ranges.size() != n)
     throw std::invalid_argument("cast_points: one depth range per ray, or none");
@@ -572,8 +574,8 @@ RayHitList RayCaster::cast_points(const View& view, std::span<const glm::dvec2> 
   const auto segment_of = [&](std::size_t k, RaySegment& segment) {
     const glm::dvec2 position = image_positions[k];
     segment = {0.0, view.depth_extent, true};
-    bool crosses =
-        !sub || subdomain_segment(*sub, view.point(position.x, position.y, 0.0), view.dir, segment);
+    bool crosses = !sub || subdomain_segment(*sub, view.point(position.x, position.y, 0.0),
+                                             view.dir, segment, closed_planes);
     if (crosses && !depth_ranges.empty()) {
       // The range is closed at both ends. Where it ends before the segment, the end is
       // closed; otherwise the segment's own rule (half-open at a shared face) stays.

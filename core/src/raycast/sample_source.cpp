@@ -5,7 +5,8 @@
 namespace ldimesh {
 
 RayHitList cast_sample_points(const RayCaster& caster, std::span<const View> views,
-                              std::span<const SamplePoint> points, const Subdomain* sub) {
+                              std::span<const SamplePoint> points, const Subdomain* sub,
+                              bool closed_planes) {
   // Rays of each view in request order, cast together.
   std::vector<std::vector<glm::dvec2>> positions(views.size()), ranges(views.size());
   std::vector<std::uint32_t> slot(points.size());  // index of point k among its view's rays
@@ -18,7 +19,8 @@ RayHitList cast_sample_points(const RayCaster& caster, std::span<const View> vie
   }
   std::vector<RayHitList> hits(views.size());
   for (std::size_t v = 0; v < views.size(); ++v)
-    if (!positions[v].empty()) hits[v] = caster.cast_points(views[v], positions[v], sub, ranges[v]);
+    if (!positions[v].empty())
+      hits[v] = caster.cast_points(views[v], positions[v], sub, ranges[v], closed_planes);
 
   RayHitList out;
   out.offsets.reserve(points.size() + 1);

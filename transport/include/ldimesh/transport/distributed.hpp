@@ -137,9 +137,11 @@ Status mesh_distributed(MPI_Comm comm, const RayCaster& caster, const Subdomain&
 // calls serve(), which answers the root's requests until the root calls finish(). One
 // sample() call is one round trip, whatever the number of views: the root broadcasts a header
 // (ray count) and all rays (view index and image position each); every rank casts the parts it
-// owns of the rays (cast_sample_points with its subdomain); the answers are gathered to the
-// root and merged per ray (concatenated, sorted by depth, hits closer than `tolerance` merged),
-// so the root gets what one process would.
+// owns of the rays (cast_sample_points with its subdomain; a ray lying in a face plane two
+// ranks share is cast by both); the answers are gathered to the root and merged per ray
+// (concatenated, sorted by depth, each run of hits within `tolerance` of its first merged into
+// the one whose normal faces the viewer most, as a RayCaster merges the duplicates of its own
+// primitives), so the root gets what one process would.
 //
 // Requests are checked on the root before anything is sent: an unknown view throws
 // std::out_of_range, more than 715,827,882 rays std::invalid_argument, and the other ranks

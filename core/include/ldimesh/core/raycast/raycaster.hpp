@@ -36,14 +36,17 @@ struct Subdomain {
 // The part [t0, t1) of a ray o + t·d of `view` that `sub` owns (t1 included when the ray leaves
 // the global box there). Along the ray the rule is half-open in t: a hit exactly on a face two
 // subdomains share belongs to the one the ray enters there. A ray lying in a face plane belongs
-// to the subdomain on the upper side (the spatial rule above). Returns false if the ray does
-// not cross `sub`.
+// to the subdomain on the upper side (the spatial rule above), or with `closed_planes` to those
+// on both sides (extra samples: where primitives on either side both report a root on the
+// face, the root keeps the one that one process would, see MpiSampleSource). Returns false if
+// the ray does not cross `sub`.
 struct RaySegment {
   double t0 = 0.0;
   double t1 = 0.0;
   bool closed_end = true;
 };
-bool subdomain_segment(const Subdomain& sub, glm::dvec3 o, glm::dvec3 d, RaySegment& segment);
+bool subdomain_segment(const Subdomain& sub, glm::dvec3 o, glm::dvec3 d, RaySegment& segment,
+                       bool closed_planes = false);
 
 // Which caster the RayCaster uses for rays parallel to an axis.
 enum class CastPath {
@@ -94,11 +97,12 @@ class RayCaster {
   // View::point), optionally only those `sub` owns and, where `depth_ranges` is not empty, only
   // those with depth in [depth_ranges[k].x, depth_ranges[k].y] for ray k (one range per ray).
   // Used for extra samples between pixel centres (§4) and to put merging's new vertices onto the
-  // surface (§5). Throws std::invalid_argument when
+  // surface (§5); `closed_planes` as for subdomain_segment. Throws std::invalid_argument when
   // `depth_ranges` is neither empty nor one per ray.
   RayHitList cast_points(const View& view, std::span<const glm::dvec2> image_positions,
                          const Subdomain* sub = nullptr,
-                         std::span<const glm::dvec2> depth_ranges = {}) const;
+                         std::span<const glm::dvec2> depth_ranges = {},
+                         bool closed_planes = false) const;
 
   // Whether every source has a colour field that the hits carry (RayCasterOptions::scalars).
   bool carries_scalars() const;

@@ -37,11 +37,12 @@ class SampleSource {
   virtual RayHitList sample(std::span<const SamplePoint> points) = 0;
 };
 
-// The hits of `points` from `caster` (only the parts `sub` owns, when given): the rays grouped
-// by view, cast with RayCaster::cast_points and returned in the order of `points`. Throws
-// std::out_of_range for a view index outside `views`.
+// The hits of `points` from `caster` (only the parts `sub` owns, when given; `closed_planes` as
+// for subdomain_segment): the rays grouped by view, cast with RayCaster::cast_points and
+// returned in the order of `points`. Throws std::out_of_range for a view index outside `views`.
 RayHitList cast_sample_points(const RayCaster& caster, std::span<const View> views,
-                              std::span<const SamplePoint> points, const Subdomain* sub = nullptr);
+                              std::span<const SamplePoint> points, const Subdomain* sub = nullptr,
+                              bool closed_planes = false);
 
 // Samples from a ray caster in this process.
 class LocalSampleSource final : public SampleSource {
