@@ -197,6 +197,12 @@ class AdaptorImpl final : public Adaptor {
     int ok = options_.background && level >= MPI_THREAD_MULTIPLE ? 1 : 0;
     MPI_Allreduce(MPI_IN_PLACE, &ok, 1, MPI_INT, MPI_MIN, comm_);
     if (!ok) {
+      if (!options_.background && rank_ == 0 && options_.log &&
+          options_.merging == AdaptorOptions::Merging::automatic)
+        std::fprintf(stderr,
+                     "ldimesh: \"background\": false: in situ steps run synchronously; the views "
+                     "are published trimmed, not merged (\"merging\": \"auto\"; true merges "
+                     "anyway, the solver then waits for the merge too)\n");
       if (options_.background && rank_ == 0 && options_.log)
         std::fprintf(stderr,
                      "ldimesh: MPI runs without MPI_THREAD_MULTIPLE (MPI_Init_thread gave level "
@@ -500,20 +506,24 @@ class AdaptorImpl final : public Adaptor {
 
   // Root, solver's thread, `mutex_` held, for a due step that runs, `interval` seconds after the
   // previous due step (0: none): whether "merging": "auto" has stopped merging. It stops for
-  // good when the last merged step's meshing took longer than that (the root would skip
-  // steps), and says so once.
+  // good when a merged step is still being worked on (with "busy": "coalesce" the solver would
+  // wait for it), or when the last merged step kept the caster thread busy longer than that
+  // interval (the root would skip steps), and says so once.
   bool auto_merge_stopped(std::uint64_t step, double interval) {
     if (options_.merging != AdaptorOptions::Merging::automatic || !background_) return false;
-    if (!auto_merge_stopped_ && interval > 0.0 && last_merge_seconds_ > 0.0) {
-      if (last_merge_seconds_ > interval) {
+    if (!auto_merge_stopped_ && (merging_now_ || (interval > 0.0 && last_merge_seconds_ > 0.0))) {
+      if (merging_now_ || last_merge_seconds_ > interval) {
         auto_merge_stopped_ = true;
         if (options_.log)
           std::printf(
               "ldimesh: from step %llu on the views are published trimmed, not merged "
-              "(\"merging\": \"auto\"): merging took %.2f s, %.2f s pass between due steps; "
-              "\"merging\": true merges every step (steps are then skipped while the root "
-              "merges)\n",
-              (unsigned long long)step, last_merge_seconds_, interval);
+              "(\"merging\": \"auto\"): %s; \"merging\": true merges every step (steps are "
+              "then skipped while the root merges)\n",
+              (unsigned long long)step,
+              merging_now_ ? "the previous step is still being merged"
+                           : ("a merged step took " + std::to_string(last_merge_seconds_) + " s, " +
+                              std::to_string(interval) + " s pass between due steps")
+                                 .c_str());
       }
     }
     return auto_merge_stopped_;
@@ -605,7 +615,10 @@ class AdaptorImpl final : public Adaptor {
     {
       std::lock_guard lock(mutex_);
       caster_job_ = std::move(cj);
-      if (rank_ == 0) casting_ = true;  // busy from now on for the root's next decision
+      if (rank_ == 0) {  // busy from now on for the root's next decision
+        casting_ = true;
+        merging_now_ = caster_job_->job.merge;
+      }
       caster_wake_.notify_all();
     }
     finish_report(start);
@@ -626,6 +639,7 @@ class AdaptorImpl final : public Adaptor {
         casting_ = true;
       }
       const std::uint64_t step = cj.job.step;
+      const Clock::time_point busy_since = Clock::now();
       const Status failed = guard("", [&] {
         StepCasters casters;
         Status s = collective_step(background_comm_, snapshot_blocks_, cj.domain, cj.status, cj.job,
@@ -635,9 +649,10 @@ class AdaptorImpl final : public Adaptor {
         // The snapshot stays until the next step: the ranks serve the root's samples from it.
         if (s && meshing_samples(meshing_options(cj.job.merge))) {
           s = mesh_with_samples(background_comm_, casters, cj.job);
+          // What a merged step kept this thread busy: cast, reduction, decoding and meshing.
           if (s && rank_ == 0 && cj.job.merge) {
             std::lock_guard lock(mutex_);
-            last_merge_seconds_ = cj.job.cast.seconds.mesh;
+            last_merge_seconds_ = seconds_since(busy_since);
           }
         }
         LDIMESH_RETURN_IF_ERROR(s);
@@ -649,6 +664,7 @@ class AdaptorImpl final : public Adaptor {
       });
       std::lock_guard lock(mutex_);
       casting_ = false;
+      merging_now_ = false;
       if (!failed)
         background_failure(failed, "step " + std::to_string(step) + " skipped: ", rank_ == 0);
       caster_idle_.notify_all();
@@ -758,9 +774,11 @@ class AdaptorImpl final : public Adaptor {
     }
     Mesh mesh;
     std::size_t samples = 0, quads = 0;
+    std::vector<std::uint32_t> surfaces;  // where each isovalue's vertices start
     for (const MeshingResult& r : results) {
       samples += r.samples;
       quads += r.quads;
+      surfaces.push_back(std::uint32_t(mesh.positions.size()));
       append(mesh, r.mesh);
     }
     const double decode_s = job.cast.seconds.decode, mesh_s = job.cast.seconds.mesh;
@@ -768,7 +786,9 @@ class AdaptorImpl final : public Adaptor {
     // Vertices where the colour field has no finite value (NaN/Inf in the solver's array)
     // take the lowest colour, and the log says how many.
     const std::size_t uncoloured = replace_nonfinite_scalars(mesh);
-    const GlbOptions glb_options = step_glb_options(job.views.front(), options_.compression_level);
+    GlbOptions glb_options = step_glb_options(job.views.front(), options_.compression_level);
+    // Several isovalues: a mesh each, which the viewer shows or hides.
+    if (surfaces.size() > 1) glb_options.surfaces = std::move(surfaces);
     std::vector<std::uint8_t> glb;
     GlbInfo info;
     LDIMESH_RETURN_IF_ERROR(encode_glb(mesh, glb_options, glb, &info));
@@ -850,7 +870,8 @@ class AdaptorImpl final : public Adaptor {
   bool auto_merge_stopped_ = false;          // root, solver thread only
   Clock::time_point last_due_;               // root, solver thread only
   bool due_before_ = false;                  // root, solver thread only
-  double last_merge_seconds_ = 0.0;          // root: the last merged step's meshing (mutex_)
+  double last_merge_seconds_ = 0.0;  // root: the caster thread's time on the last merged step
+  bool merging_now_ = false;         // root: the caster thread works on a merged step (mutex_)
 
   // Root only.
   std::unique_ptr<SnapshotStore> store_;

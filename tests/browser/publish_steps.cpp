@@ -1,8 +1,9 @@
 // A job's server for the browser test, without the job: publishes real meshes as the root rank
 // would. Step 1 (the torus) is published at start; each line "next" on standard input publishes
-// the next step (the Barth sextic, then Klein bottle …), each coloured by its vertices' x; "quit"
-// or the end of input stops. Prints "url URL" once the server listens and "published STEP
-// TRIANGLES" after each step.
+// the next step (the Barth sextic, then Klein bottle …), each coloured by its vertices' x;
+// "nested" publishes the next step as two isovalues of the sphere's field (two concentric
+// spheres, a surface each in the GLB); "quit" or the end of input stops. Prints "url URL" once the
+// server listens and "published STEP TRIANGLES" after each step.
 //
 //   ldimesh_test_publisher REPO_ROOT
 #include <cstdio>
@@ -20,20 +21,41 @@
 
 namespace {
 
-// Meshes `surface` at `res` and publishes it as step `step`; returns the GLB's triangle count.
-std::size_t publish(ldimesh::SnapshotStore& store, std::uint64_t step, const char* surface,
-                    int res) {
+// Meshes `surface` at `res` at each of `isovalues` (default: the surface's own) and publishes
+// them as step `step`, a surface of the GLB each; returns the GLB's triangle count.
+std::size_t publish(ldimesh::SnapshotStore& store, std::uint64_t step, const char* surface, int res,
+                    std::vector<double> isovalues = {}) {
   const ldimesh::SurfaceInfo* s = ldimesh::find_surface(surface);
   const auto source = ldimesh::make_surface_source(surface);
-  const ldimesh::RayCaster caster(*source, s->isovalue);
+  if (isovalues.empty()) isovalues = {s->isovalue};
+  ldimesh::MeshingResult result;
   std::vector<ldimesh::Ldi> ldis;
-  for (const ldimesh::View& v : ldimesh::make_axis_views(s->domain, res))
-    ldis.push_back(caster.cast(v));
-  ldimesh::MeshingResult result = ldimesh::mesh_ldis(ldis, {});
+  ldimesh::GlbOptions options;
+  for (const double isovalue : isovalues) {
+    const ldimesh::RayCaster caster(*source, isovalue);
+    ldis.clear();
+    for (const ldimesh::View& v : ldimesh::make_axis_views(s->domain, res))
+      ldis.push_back(caster.cast(v));
+    const ldimesh::MeshingResult one = ldimesh::mesh_ldis(ldis, {});
+    // Appended: the faces' vertex indices move past the vertices before them.
+    const std::uint32_t base = std::uint32_t(result.mesh.positions.size());
+    options.surfaces.push_back(base);
+    ldimesh::Mesh& m = result.mesh;
+    m.view_dirs = one.mesh.view_dirs;
+    m.positions.insert(m.positions.end(), one.mesh.positions.begin(), one.mesh.positions.end());
+    m.normals.insert(m.normals.end(), one.mesh.normals.begin(), one.mesh.normals.end());
+    for (const std::uint32_t v : one.mesh.triangles)
+      m.triangles.push_back(base + v);
+    m.triangle_view.insert(m.triangle_view.end(), one.mesh.triangle_view.begin(),
+                           one.mesh.triangle_view.end());
+    result.samples += one.samples;
+    result.quads += one.quads;
+    result.seconds = one.seconds;
+  }
   // A field to colour by: each vertex's x (the camera sees both ends of every surface).
   for (const glm::vec3& p : result.mesh.positions)
     result.mesh.scalars.push_back(p.x);
-  ldimesh::GlbOptions options;
+  if (isovalues.size() == 1) options.surfaces.clear();
   options.pixel_size = ldis.front().view.spacing;
   std::vector<std::uint8_t> glb;
   ldimesh::GlbInfo info;
@@ -42,8 +64,8 @@ std::size_t publish(ldimesh::SnapshotStore& store, std::uint64_t step, const cha
   std::vector<ldimesh::View> views;
   for (const ldimesh::Ldi& l : ldis)
     views.push_back(l.view);
-  ldimesh::StepMetadata meta = ldimesh::describe_step(
-      step, 0.1 * double(step), {s->isovalue}, views, 0.5, result.samples, result.quads, info);
+  ldimesh::StepMetadata meta = ldimesh::describe_step(step, 0.1 * double(step), isovalues, views,
+                                                      0.5, result.samples, result.quads, info);
   meta.scalar = ldimesh::ScalarRange{"x", info.scalar_min, info.scalar_max};
   meta.seconds = {{"mesh", result.seconds.match + result.seconds.trim + result.seconds.assemble}};
   ldimesh::Snapshot snapshot = ldimesh::make_snapshot(std::move(meta), std::move(glb));
@@ -75,9 +97,11 @@ int main(int argc, char** argv) {
                 publish(store, step, surfaces[0], 96));
     std::fflush(stdout);
     for (std::string line; std::getline(std::cin, line) && line != "quit";) {
-      if (line != "next") continue;
+      if (line != "next" && line != "nested") continue;
       ++step;
-      const std::size_t triangles = publish(store, step, surfaces[(step - 1) % 4], 96);
+      const std::size_t triangles = line == "nested"
+                                        ? publish(store, step, "sphere", 96, {1.0, 0.36})
+                                        : publish(store, step, surfaces[(step - 1) % 4], 96);
       std::printf("published %llu %zu\n", (unsigned long long)step, triangles);
       std::fflush(stdout);
     }

@@ -367,6 +367,43 @@ try {
   check(png.length > 10000 && png.subarray(1, 4).toString() === 'PNG' && download.suggestedFilename() === `ldimesh_step_${kept[kept.length - 1]}.png`,
     `the screenshot button saves ${download.suggestedFilename()} (${png.length} bytes of PNG)`);
 
+  // Several isovalues: a surface each (two concentric spheres, r = 1 and 0.6), each shown or
+  // hidden by its checkbox; the choice holds for the next step.
+  if (!(await page.isChecked('#follow'))) await page.click('#follow');
+  const meshPixels = async () => {
+    await page.waitForTimeout(400);  // a frame or more
+    return page.evaluate(() => window.testMeshPixels().mesh.filter(Boolean).length);
+  };
+  publisher.stdin.write('nested\n');
+  const nested = published(await nextLine());
+  await waitForStep(nested.step, 30000).catch(() => {});
+  const shownSurfaces = await page.evaluate(() => ({
+    nodes: document.body.dataset.surfaces,
+    boxes: [...document.querySelectorAll('#surfaces input')].map((i) => i.parentElement.textContent.trim()),
+    triangles: Number(document.body.dataset.triangles),
+  }));
+  check(await loadedStep() === Number(nested.step) && shownSurfaces.nodes === '2' &&
+    shownSurfaces.boxes.join(', ') === 'isovalue 1, isovalue 0.36' && shownSurfaces.triangles === nested.triangles,
+    `two isovalues: ${shownSurfaces.nodes} surfaces, checkboxes "${shownSurfaces.boxes.join('", "')}", ${shownSurfaces.triangles} triangles (${nested.triangles} published)`);
+  const both = await meshPixels();
+  await page.click('#surface-0');  // the outer sphere hidden: the inner one shows, smaller
+  const inner = await meshPixels();
+  await page.click('#surface-1');  // both hidden
+  const none = await meshPixels();
+  await page.click('#surface-0');  // the outer one again
+  const outer = await meshPixels();
+  check(both > 2000 && inner > 0.15 * both && inner < 0.6 * both && none === 0 && Math.abs(outer - both) <= 0.02 * both,
+    `the checkboxes show and hide each surface: both ${both} mesh pixels, the inner alone ${inner}, none ${none}, the outer alone ${outer}`);
+  await page.click('#surface-0');  // both hidden again: the next step keeps them hidden
+  publisher.stdin.write('nested\n');
+  const nestedAgain = published(await nextLine());
+  await waitForStep(nestedAgain.step, 30000).catch(() => {});
+  const stillHidden = [await loadedStep(), await meshPixels(), await page.isChecked('#surface-0'), await page.isChecked('#surface-1')];
+  check(stillHidden[0] === Number(nestedAgain.step) && stillHidden[1] === 0 && !stillHidden[2] && !stillHidden[3],
+    `the next step (${stillHidden[0]}) keeps both surfaces hidden: ${stillHidden[1]} mesh pixels`);
+  await page.click('#surface-0');
+  await page.click('#surface-1');
+
   const interleaved = consoleMessages.filter((m) => m.includes('InterleavedBufferAttribute'));
   check(interleaved.length === 0, `no InterleavedBufferAttribute warning in the console (${interleaved.length})`);
   // (the browser's own request for /favicon.ico shows only as a console error)

@@ -339,6 +339,67 @@ TEST(Glb, SameMeshSameBytes) {
   EXPECT_EQ(encode(barth_triangles()), encode(barth_triangles()));
 }
 
+// Several surfaces (a step's isovalues): a glTF mesh on a node each, the node's extras naming
+// the surface, so that a viewer can show or hide each; decode_glb reads them all as one mesh.
+TEST(Glb, SeveralSurfacesAreAMeshOnANodeEach) {
+  const Mesh& a = barth_triangles();
+  const Mesh b = surface_mesh("torus", 40, FaceType::triangles);
+  Mesh both = a;
+  const std::uint32_t base = std::uint32_t(a.vertex_count());
+  both.positions.insert(both.positions.end(), b.positions.begin(), b.positions.end());
+  both.normals.insert(both.normals.end(), b.normals.begin(), b.normals.end());
+  for (const std::uint32_t v : b.triangles)
+    both.triangles.push_back(base + v);
+  both.triangle_view.insert(both.triangle_view.end(), b.triangle_view.begin(),
+                            b.triangle_view.end());
+  GlbOptions options;
+  options.surfaces = {0, base};
+  GlbInfo info;
+  const Bytes glb = encode(both, options, &info);
+  EXPECT_EQ(info.triangles, both.triangle_count());
+  const Json j = json_chunk(glb);
+  ASSERT_EQ(j["meshes"].size(), 2u);
+  ASSERT_EQ(j["nodes"].size(), 2u);
+  EXPECT_EQ(j["scenes"][j.value("scene", 0)]["nodes"], Json::array({0, 1}));
+  for (std::size_t k = 0; k < 2; ++k) {
+    EXPECT_EQ(j["nodes"][k]["mesh"], k);
+    EXPECT_EQ(j["nodes"][k]["extras"]["ldimesh"]["surface"], k);
+  }
+  // Each surface's mesh holds that surface's triangles.
+  GlbInfo alone;
+  encode(b, {}, &alone);
+  const Json& accessors = j["accessors"];
+  const auto triangles_of = [&](std::size_t mesh) {
+    std::size_t n = 0;
+    for (const Json& p : j["meshes"][mesh]["primitives"])
+      n += accessors[p["indices"].get<std::size_t>()]["count"].get<std::size_t>() / 3;
+    return n;
+  };
+  EXPECT_EQ(triangles_of(1), alone.triangles);
+  EXPECT_EQ(triangles_of(0) + triangles_of(1), info.triangles);
+  Mesh back;
+  ASSERT_TRUE(decode_glb(glb, back));
+  EXPECT_EQ(back.triangle_count(), both.triangle_count());
+  EXPECT_EQ(back.view_dirs.size(), a.view_dirs.size());
+
+  // One surface: the bytes of none. An empty surface has no node.
+  options.surfaces = {0};
+  EXPECT_EQ(encode(a, options), encode(a));
+  options.surfaces = {0, 0};
+  const Json one = json_chunk(encode(a, options));
+  ASSERT_EQ(one["nodes"].size(), 1u);
+  EXPECT_EQ(one["nodes"][0]["extras"]["ldimesh"]["surface"], 1);
+  // Offsets that do not start at 0, decrease or pass the vertices, and a face whose vertices lie
+  // in two surfaces, are errors.
+  for (const std::vector<std::uint32_t>& bad :
+       {std::vector<std::uint32_t>{1, 5}, {0, 9, 5}, {0, base + 1}, {0, base / 2}}) {
+    options.surfaces = bad;
+    Bytes out;
+    const Status s = encode_glb(a, options, out);
+    EXPECT_EQ(s.code(), StatusCode::invalid_argument) << bad[1];
+  }
+}
+
 TEST(Glb, QuadMeshesBecomeTriangles) {
   const Mesh& quads = barth_quads();
   ASSERT_GT(quads.quad_count(), 500u);

@@ -304,13 +304,15 @@ Status build_draco_mesh(const Mesh& m, const std::vector<std::uint32_t>& tris,
 void primitive_counts(const Json& json, GlbInfo& info) {
   const Json& accessors = json.at("accessors");
   info.vertices = info.triangles = 0;
-  for (const Json& primitive : json.at("meshes").at(0).at("primitives")) {
-    info.vertices += accessors.at(primitive.at("attributes").at("POSITION").get<std::size_t>())
-                         .at("count")
-                         .get<std::size_t>();
-    info.triangles +=
-        accessors.at(primitive.at("indices").get<std::size_t>()).at("count").get<std::size_t>() / 3;
-  }
+  for (const Json& mesh : json.at("meshes"))
+    for (const Json& primitive : mesh.at("primitives")) {
+      info.vertices += accessors.at(primitive.at("attributes").at("POSITION").get<std::size_t>())
+                           .at("count")
+                           .get<std::size_t>();
+      info.triangles +=
+          accessors.at(primitive.at("indices").get<std::size_t>()).at("count").get<std::size_t>() /
+          3;
+    }
 }
 
 // Triangles per part above which a mesh is encoded in parts, concurrently (a part per spatial
@@ -384,11 +386,11 @@ void extract_part(const Mesh& m, const std::vector<std::uint32_t>& tris,
   }
 }
 
-// Appends GLB `part` (as GltfEncoder writes one: one mesh of one Draco primitive) to `base`'s
-// JSON and BIN as a further primitive of its first mesh: accessors, bufferViews (offset into the
-// joined BIN, 4-byte aligned) and the primitive's indices renumbered.
-void append_part(Json& base, std::vector<std::uint8_t>& bin, const Json& part,
-                 std::span<const std::uint8_t> part_bin) {
+// Moves the accessors and bufferViews of GLB `part` (as GltfEncoder writes one: one mesh) into
+// `base`'s JSON, its BIN into `bin` (4-byte aligned), and returns its mesh's primitives with
+// their accessor and bufferView indices renumbered.
+Json take_primitives(Json& base, std::vector<std::uint8_t>& bin, const Json& part,
+                     std::span<const std::uint8_t> part_bin) {
   const std::size_t accessors = base["accessors"].size(), views = base["bufferViews"].size();
   bin.resize((bin.size() + 3) & ~std::size_t(3), 0);
   const std::size_t offset = bin.size();
@@ -399,15 +401,46 @@ void append_part(Json& base, std::vector<std::uint8_t>& bin, const Json& part,
     v["byteOffset"] = v.value("byteOffset", std::size_t(0)) + offset;
     base["bufferViews"].push_back(std::move(v));
   }
+  Json primitives = Json::array();
   for (Json p : part.at("meshes").at(0).at("primitives")) {
     for (auto& [name, id] : p["attributes"].items())
       id = id.get<std::size_t>() + accessors;
     p["indices"] = p["indices"].get<std::size_t>() + accessors;
     Json& draco = p["extensions"][kDraco];
     draco["bufferView"] = draco["bufferView"].get<std::size_t>() + views;
-    base["meshes"][0]["primitives"].push_back(std::move(p));
+    primitives.push_back(std::move(p));
   }
   base["buffers"][0]["byteLength"] = bin.size();
+  return primitives;
+}
+
+// Appends GLB `part` to `base` as further primitives of its first mesh.
+void append_part(Json& base, std::vector<std::uint8_t>& bin, const Json& part,
+                 std::span<const std::uint8_t> part_bin) {
+  for (Json& p : take_primitives(base, bin, part, part_bin))
+    base["meshes"][0]["primitives"].push_back(std::move(p));
+}
+
+// The extras that name a node's surface (GlbOptions::surfaces).
+Json surface_extras(std::size_t surface) {
+  Json extras;
+  extras["ldimesh"]["surface"] = surface;
+  return extras;
+}
+
+// Appends GLB `part` to `base` as a mesh of its own, on a node of the scene whose extras name
+// surface `surface`.
+void append_surface(Json& base, std::vector<std::uint8_t>& bin, const Json& part,
+                    std::span<const std::uint8_t> part_bin, std::size_t surface) {
+  Json mesh = part.at("meshes").at(0);
+  mesh["primitives"] = take_primitives(base, bin, part, part_bin);
+  const std::size_t mesh_index = base["meshes"].size(), node_index = base["nodes"].size();
+  base["meshes"].push_back(std::move(mesh));
+  Json node;
+  node["mesh"] = mesh_index;
+  node["extras"] = surface_extras(surface);
+  base["nodes"].push_back(std::move(node));
+  base["scenes"][base.value("scene", std::size_t(0))]["nodes"].push_back(node_index);
 }
 
 // One Draco primitive's GLB from GltfEncoder, parsed into `json` and `bin` (copied).
@@ -426,10 +459,116 @@ Status encode_primitive(draco::Mesh& dm, Json& json, std::vector<std::uint8_t>& 
   return Status::ok();
 }
 
+// One surface's triangles (`tris`, views `tri_view`) as the JSON and BIN of a GLB of one mesh
+// (GltfEncoder's), with `position_bits` and the scalars mapped from [scalar_lo, scalar_hi].
+Status encode_surface(const Mesh& mesh, const std::vector<std::uint32_t>& tris,
+                      const std::vector<std::uint8_t>& tri_view, const GlbOptions& options,
+                      int position_bits, float scalar_lo, float scalar_hi, Json& json,
+                      std::vector<std::uint8_t>& bin) {
+  // Large meshes in parts, encoded concurrently and joined as primitives of one mesh. Each part
+  // takes the whole mesh's position bits over its own (smaller) box: its step is at most the
+  // whole mesh's, so every vertex keeps the stated bound (a vertex two parts share is written
+  // by both, each copy within the bound).
+  const std::size_t triangles = tri_view.size();
+  const std::size_t parts = std::min(kMaxParts, (triangles + kPartTriangles - 1) / kPartTriangles);
+  if (parts <= 1) {
+    draco::Mesh dm;
+    LDIMESH_RETURN_IF_ERROR(
+        build_draco_mesh(mesh, tris, tri_view, options, position_bits, scalar_lo, scalar_hi, dm));
+    LDIMESH_RETURN_IF_ERROR(encode_primitive(dm, json, bin));
+  } else {
+    const std::vector<std::uint8_t> part = split_into_parts(mesh, tris, parts);
+    const BoundingBox box = bounding_box(mesh.positions);
+    std::vector<Json> jsons(parts);
+    std::vector<std::vector<std::uint8_t>> bins(parts);
+    std::vector<Status> status(parts, Status::ok());
+    // Threads of its own (this library needs no TBB): each takes the next part.
+    std::atomic<std::size_t> next{0};
+    const auto encode_parts = [&] {
+      for (std::size_t k = next++; k < parts; k = next++)
+        status[k] = guard("glb: part " + std::to_string(k) + ": ", [&] {
+          Mesh sub;
+          std::vector<std::uint32_t> sub_tris;
+          std::vector<std::uint8_t> sub_view;
+          extract_part(mesh, tris, tri_view, part, std::uint8_t(k), sub, sub_tris, sub_view);
+          if (sub_view.empty()) return Status::ok();  // an empty slab (all in one bin elsewhere)
+          // Two points no face uses, at the whole mesh's box corners and scalar range: every
+          // part quantizes the same box (and range) on the same grid, so a vertex two parts
+          // share decodes to the same point in both (Draco's Edgebreaker keeps no unused point
+          // in its output).
+          sub.positions.insert(sub.positions.end(), {glm::vec3(box.lo), glm::vec3(box.hi)});
+          sub.normals.insert(sub.normals.end(), 2, glm::vec3(0.0f, 0.0f, 1.0f));
+          if (!sub.scalars.empty()) sub.scalars.insert(sub.scalars.end(), {scalar_lo, scalar_hi});
+          draco::Mesh dm;
+          LDIMESH_RETURN_IF_ERROR(build_draco_mesh(sub, sub_tris, sub_view, options, position_bits,
+                                                   scalar_lo, scalar_hi, dm));
+          return encode_primitive(dm, jsons[k], bins[k]);
+        });
+    };
+    const std::size_t threads =
+        std::min(parts, std::size_t(options.threads > 0 ? options.threads : usable_cores()));
+    {
+      // Joined however this block is left; a thread that cannot be started (no memory, no
+      // thread) leaves its parts to the others.
+      std::vector<std::jthread> pool;
+      pool.reserve(threads);
+      try {
+        for (std::size_t t = 1; t < threads; ++t)
+          pool.emplace_back(encode_parts);
+      } catch (...) {
+      }
+      encode_parts();
+    }
+    for (const Status& s : status)
+      LDIMESH_RETURN_IF_ERROR(s);
+    for (std::size_t k = 0; k < parts; ++k) {
+      if (jsons[k].is_null()) continue;
+      if (json.is_null()) {
+        json = std::move(jsons[k]);
+        bin = std::move(bins[k]);
+      } else {
+        append_part(json, bin, jsons[k], bins[k]);
+      }
+    }
+  }
+
+  return Status::ok();
+}
+
+// The faces of the surface whose vertices are [first, last) as a mesh of its own: those
+// vertices in their order, the faces renumbered, their views. A face whose first vertex lies
+// in the range and another outside it is an error.
+Status extract_surface(const Mesh& m, const std::vector<std::uint32_t>& tris,
+                       const std::vector<std::uint8_t>& tri_view, std::uint32_t first,
+                       std::uint32_t last, Mesh& sub, std::vector<std::uint32_t>& sub_tris,
+                       std::vector<std::uint8_t>& sub_view) {
+  sub.view_dirs = m.view_dirs;
+  sub.positions.assign(m.positions.begin() + first, m.positions.begin() + last);
+  sub.normals.assign(m.normals.begin() + first, m.normals.begin() + last);
+  if (!m.scalars.empty()) sub.scalars.assign(m.scalars.begin() + first, m.scalars.begin() + last);
+  for (std::size_t f = 0; f < tri_view.size(); ++f) {
+    const std::uint32_t* t = &tris[3 * f];
+    if (t[0] < first || t[0] >= last) continue;
+    for (int c = 0; c < 3; ++c) {
+      if (t[c] < first || t[c] >= last)
+        return Status::invalid_argument("glb: a face uses vertices of two surfaces");
+      sub_tris.push_back(t[c] - first);
+    }
+    sub_view.push_back(tri_view[f]);
+  }
+  return Status::ok();
+}
+
 Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
                             std::vector<std::uint8_t>& out, GlbInfo* info) {
   if (Status s = check_options(options); !s) return s;
   if (Status s = check_encodable(mesh); !s) return s;
+  for (std::size_t k = 0; k < options.surfaces.size(); ++k)
+    if ((k == 0 && options.surfaces[0] != 0) ||
+        (k > 0 && options.surfaces[k] < options.surfaces[k - 1]) ||
+        options.surfaces[k] > mesh.vertex_count())
+      return Status::invalid_argument(
+          "glb: surfaces must start at vertex 0 and increase within the vertices");
   GlbInfo result;
   result.position_bits = glb_position_bits(mesh, options);
   result.position_error_bound = glb_position_error_bound(mesh, options);
@@ -458,71 +597,32 @@ Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
     result.scalar_max = scalar_hi;
   }
 
-  // Large meshes in parts, encoded concurrently and joined as primitives of one mesh. Each part
-  // takes the whole mesh's position bits over its own (smaller) box: its step is at most the
-  // whole mesh's, so every vertex keeps the stated bound (a vertex two parts share is written
-  // by both, each copy within the bound).
-  const std::size_t triangles = tri_view.size();
-  const std::size_t parts = std::min(kMaxParts, (triangles + kPartTriangles - 1) / kPartTriangles);
   Json json;
   std::vector<std::uint8_t> bin;
-  if (parts <= 1) {
-    draco::Mesh dm;
-    LDIMESH_RETURN_IF_ERROR(build_draco_mesh(mesh, tris, tri_view, options, result.position_bits,
-                                             scalar_lo, scalar_hi, dm));
-    LDIMESH_RETURN_IF_ERROR(encode_primitive(dm, json, bin));
+  if (options.surfaces.size() <= 1) {
+    LDIMESH_RETURN_IF_ERROR(encode_surface(mesh, tris, tri_view, options, result.position_bits,
+                                           scalar_lo, scalar_hi, json, bin));
   } else {
-    const std::vector<std::uint8_t> part = split_into_parts(mesh, tris, parts);
-    const BoundingBox box = bounding_box(mesh.positions);
-    std::vector<Json> jsons(parts);
-    std::vector<std::vector<std::uint8_t>> bins(parts);
-    std::vector<Status> status(parts, Status::ok());
-    // Threads of its own (this library needs no TBB): each takes the next part.
-    std::atomic<std::size_t> next{0};
-    const auto encode_parts = [&] {
-      for (std::size_t k = next++; k < parts; k = next++)
-        status[k] = guard("glb: part " + std::to_string(k) + ": ", [&] {
-          Mesh sub;
-          std::vector<std::uint32_t> sub_tris;
-          std::vector<std::uint8_t> sub_view;
-          extract_part(mesh, tris, tri_view, part, std::uint8_t(k), sub, sub_tris, sub_view);
-          if (sub_view.empty()) return Status::ok();  // an empty slab (all in one bin elsewhere)
-          // Two points no face uses, at the whole mesh's box corners and scalar range: every
-          // part quantizes the same box (and range) on the same grid, so a vertex two parts
-          // share decodes to the same point in both (Draco's Edgebreaker keeps no unused point
-          // in its output).
-          sub.positions.insert(sub.positions.end(), {glm::vec3(box.lo), glm::vec3(box.hi)});
-          sub.normals.insert(sub.normals.end(), 2, glm::vec3(0.0f, 0.0f, 1.0f));
-          if (!sub.scalars.empty()) sub.scalars.insert(sub.scalars.end(), {scalar_lo, scalar_hi});
-          draco::Mesh dm;
-          LDIMESH_RETURN_IF_ERROR(build_draco_mesh(sub, sub_tris, sub_view, options,
-                                                   result.position_bits, scalar_lo, scalar_hi, dm));
-          return encode_primitive(dm, jsons[k], bins[k]);
-        });
-    };
-    const std::size_t threads =
-        std::min(parts, std::size_t(options.threads > 0 ? options.threads : usable_cores()));
-    {
-      // Joined however this block is left; a thread that cannot be started (no memory, no
-      // thread) leaves its parts to the others.
-      std::vector<std::jthread> pool;
-      pool.reserve(threads);
-      try {
-        for (std::size_t t = 1; t < threads; ++t)
-          pool.emplace_back(encode_parts);
-      } catch (...) {
-      }
-      encode_parts();
-    }
-    for (const Status& s : status)
-      LDIMESH_RETURN_IF_ERROR(s);
-    for (std::size_t k = 0; k < parts; ++k) {
-      if (jsons[k].is_null()) continue;
+    // Each surface a mesh on a node of its own (its vertices as they are, in their order).
+    std::vector<std::uint32_t> starts(options.surfaces.begin(), options.surfaces.end());
+    starts.push_back(std::uint32_t(mesh.vertex_count()));
+    for (std::size_t k = 0; k + 1 < starts.size(); ++k) {
+      Mesh sub;
+      std::vector<std::uint32_t> sub_tris;
+      std::vector<std::uint8_t> sub_view;
+      LDIMESH_RETURN_IF_ERROR(
+          extract_surface(mesh, tris, tri_view, starts[k], starts[k + 1], sub, sub_tris, sub_view));
+      if (sub_view.empty()) continue;
+      Json part;
+      std::vector<std::uint8_t> part_bin;
+      LDIMESH_RETURN_IF_ERROR(encode_surface(sub, sub_tris, sub_view, options, result.position_bits,
+                                             scalar_lo, scalar_hi, part, part_bin));
       if (json.is_null()) {
-        json = std::move(jsons[k]);
-        bin = std::move(bins[k]);
+        json = std::move(part);
+        bin = std::move(part_bin);
+        json["nodes"][0]["extras"] = surface_extras(k);
       } else {
-        append_part(json, bin, jsons[k], bins[k]);
+        append_surface(json, bin, part, part_bin, k);
       }
     }
   }

@@ -218,6 +218,55 @@ function applyColouring(root, meta) {
   });
 }
 
+// A step with several isovalues has a surface each: a GLB node with extras
+// {"ldimesh": {"surface": s}} (three.js: userData), surface s for the step's isovalues[s]. A
+// checkbox each shows or hides it; what the person chose holds from step to step.
+// document.body.dataset.surfaces: the number of surfaces of the step shown.
+const hiddenSurfaces = new Set();
+
+function surfaceNodes(root) {
+  const nodes = [];
+  root.traverse((object) => {
+    const ours = object.userData && object.userData.ldimesh;
+    if (ours && Number.isInteger(ours.surface)) nodes.push([ours.surface, object]);
+  });
+  return nodes;
+}
+
+function applySurfaces(root) {
+  for (const [surface, node] of surfaceNodes(root)) node.visible = !hiddenSurfaces.has(surface);
+  requestRender();
+}
+
+function updateSurfaceControls(meta) {
+  const box = $('surfaces');
+  const isovalues = (meta && meta.isovalues) || [];
+  if (isovalues.length < 2) {
+    box.hidden = true;
+    return;
+  }
+  const key = isovalues.join(' ');
+  if (box.dataset.key !== key) {
+    box.replaceChildren();
+    isovalues.forEach((value, surface) => {
+      const input = document.createElement('input');
+      input.type = 'checkbox';
+      input.id = `surface-${surface}`;
+      input.checked = !hiddenSurfaces.has(surface);
+      input.addEventListener('change', () => {
+        if (input.checked) hiddenSurfaces.delete(surface);
+        else hiddenSurfaces.add(surface);
+        if (state.mesh) applySurfaces(state.mesh);
+      });
+      const label = document.createElement('label');
+      label.append(input, ` isovalue ${value}`);
+      box.append(label);
+    });
+    box.dataset.key = key;
+  }
+  box.hidden = false;
+}
+
 function countTriangles(root) {
   let n = 0;
   root.traverse((object) => {
@@ -285,6 +334,9 @@ async function loadStep(step) {
   state.loaded = meta;
   updateFieldControls(meta);
   applyColouring(state.mesh, meta);
+  updateSurfaceControls(meta);
+  applySurfaces(state.mesh);
+  document.body.dataset.surfaces = String(surfaceNodes(state.mesh).length);
   scene.add(state.mesh);
   frameShown(false);
   requestRender();

@@ -306,6 +306,10 @@ TEST(GridSource, FloatStridedAndRectilinearInputsReadTheSameField) {
     for (std::size_t s = 0; s < la.sample_count(); ++s) {
       EXPECT_NEAR(la.depth[s], lb.depth[s], 1e-6);
       EXPECT_NEAR(la.depth[s], lc.depth[s], 1e-6);
+      // The normals too: the uniform grid's shortcut for the blended central differences
+      // (smooth_gradient) and the rectilinear grid's general form agree up to rounding.
+      EXPECT_LT(glm::length(la.normal[s] - lb.normal[s]), 1e-5f) << "sample " << s;
+      EXPECT_LT(glm::length(la.normal[s] - lc.normal[s]), 1e-5f) << "sample " << s;
     }
   }
 }

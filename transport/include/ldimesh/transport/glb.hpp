@@ -54,6 +54,12 @@ struct GlbOptions {
   // its longest axis, about 200 000 triangles each, at most 8) as primitives of one mesh; 0: one
   // per core. The GLB is the same for any number.
   int threads = 0;
+  // Several surfaces (a step's isovalues), each a glTF mesh of its own that a viewer can show
+  // or hide: surfaces[s] is the first vertex of surface s (surfaces[0] = 0, non-decreasing; a
+  // face belongs to the surface of its first vertex and must use only its vertices). Each mesh
+  // sits on a node of the scene whose extras are {"ldimesh": {"surface": s}} (three.js:
+  // node.userData.ldimesh.surface); an empty surface has none. Empty or one entry: one mesh.
+  std::vector<std::uint32_t> surfaces;
 };
 
 // What a GLB holds, as encode_glb wrote it or decode_glb read it.

@@ -23,9 +23,9 @@ namespace ldimesh {
 // the first ghost point, and blocks whose owned points tile a grid produce every cell exactly
 // once: no duplicate and no missing surface where blocks meet. Blocks that instead share
 // their interface points (no ghosts) tile it as well. The hits' normals (central differences
-// at the cells' corners) read one point beyond: a block with a second ghost layer above
-// (ghost_hi = 2 where a neighbour is) gets the normals one whole block would; with one, they
-// are one-sided on that face.
+// at the cells' corners) read one point beyond them: a block with a ghost layer below and a
+// second one above where a neighbour is (ghost_lo ≥ 1, ghost_hi ≥ 2) gets the normals one whole
+// block would; with fewer, they are one-sided on those faces.
 struct GridBlock {
   std::array<std::int64_t, 3> dims{{0, 0, 0}};  // points per axis, ghost layers included
   const void* values = nullptr;
