@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <thread>
@@ -507,6 +508,36 @@ TEST(Adaptor, ByDefaultBackgroundStepsAreMergedAndSynchronousOnesNot) {
           << meta.triangles << " triangles, " << meta.vertices << " vertices";
     }
   }
+}
+
+// Several isovalues: the published GLB holds a mesh per isovalue, each on a node whose extras
+// name its index (the viewer's checkboxes show or hide them), and both spheres of the slab's
+// field |x|² are there.
+TEST(Adaptor, EachIsovalueIsASurfaceOfItsOwnInTheGlb) {
+  GridSlab slab(kSlabPoints, 0.0);
+  const std::string dir = temp_dir("two_isovalues");
+  auto a = make_grid_adaptor(R"({"server": {"enabled": false}, "resolution": 40, "log": false,
+                                  "isovalues": [0.36, 0.64], "merging": false, "output_dir": ")" +
+                                 dir + R"("})",
+                             slab);
+  if (!a) return;
+  EXPECT_TRUE(a->execute(1, 0.0)) << a->last_error();
+  EXPECT_TRUE(a->finalize()) << a->last_error();
+  if (rank_of() != 0) return;
+  const std::vector<std::uint8_t> glb = published_glb(dir, 1);
+  ASSERT_GT(glb.size(), 20u);
+  std::uint32_t length = 0;
+  std::memcpy(&length, glb.data() + 12, 4);
+  ASSERT_LE(20 + std::size_t(length), glb.size());
+  const std::string json(glb.begin() + 20, glb.begin() + 20 + length);
+  EXPECT_NE(json.find(R"("extras":{"ldimesh":{"surface":0}})"), std::string::npos) << json;
+  EXPECT_NE(json.find(R"("extras":{"ldimesh":{"surface":1}})"), std::string::npos) << json;
+  const Mesh mesh = testing::published_mesh(dir, 1);
+  std::size_t inner = 0, outer = 0;
+  for (const glm::vec3& p : mesh.positions)
+    (glm::length(p) < 0.7f ? inner : outer)++;
+  EXPECT_GT(inner, 500u);
+  EXPECT_GT(outer, 500u);
 }
 
 TEST(Adaptor, GridBlocksRunInTheBackgroundWhereMpiAllowsIt) {

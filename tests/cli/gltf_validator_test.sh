@@ -1,12 +1,14 @@
 #!/usr/bin/env bash
 # Every kind of GLB ldimesh writes passes Khronos' glTF validator (npm gltf-validator) with no
 # error and no warning: a small mesh (one Draco primitive), a mesh of more than 200 000
-# triangles (encoded in slabs: several primitives of one mesh), and a mesh coloured by a second
-# field (TEXCOORD_0), small and large.
-#   gltf_validator_test.sh LDIMESH SOURCE_DIR
+# triangles (encoded in slabs: several primitives of one mesh), a mesh coloured by a second
+# field (TEXCOORD_0), small and large, and an in situ step of two isovalues (a mesh and node
+# each, the node's extras naming the surface).
+#   gltf_validator_test.sh LDIMESH SOURCE_DIR LDIMESH_ANALYTIC
 set -u
 ldimesh=$1
 src=$2
+analytic=$3
 . "$(dirname "$0")/../lib.sh"
 test_setup
 "$ldimesh" mesh --surface torus --res 64 --out "$tmp/small.glb" >/dev/null || fail "small mesh"
@@ -28,8 +30,24 @@ for res in 64 512; do
   "$ldimesh" mesh --grid "$tmp/v.raw" --dims 96,96,96 --iso 0.5 --res "$res" --colour-by "$tmp/c.raw" \
     --out "$tmp/coloured$res.glb" >/dev/null || fail "coloured mesh at $res"
 done
+# A step of two isovalues of the sphere's field, as the adaptor publishes it (the analytic
+# mini-app, one process).
+printf '{"isovalues": [1, 0.36], "server": {"enabled": false}, "output_dir": "%s", "resolution": 64, "log": false}\n' \
+  "$tmp/steps" >"$tmp/two.json"
+OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 \
+  "$analytic" --surface sphere --steps 1 --options "$tmp/two.json" \
+  >/dev/null || fail "two isovalues in situ"
+python3 - "$tmp/steps/step_000001.glb" <<'PY' || fail "the two isovalues are not a node each"
+import json, struct, sys
+data = open(sys.argv[1], "rb").read()
+length = struct.unpack_from("<I", data, 12)[0]
+doc = json.loads(data[20:20 + length])
+surfaces = sorted(n["extras"]["ldimesh"]["surface"] for n in doc["nodes"])
+assert surfaces == [0, 1] and len(doc["meshes"]) == 2, (surfaces, len(doc["meshes"]))
+PY
 cd "$src" || fail "no source folder"
-node tests/cli/validate_glb.mjs --primitives 2 "$tmp/large.glb" "$tmp/small.glb" "$tmp/coloured64.glb" ||
+node tests/cli/validate_glb.mjs --primitives 2 "$tmp/large.glb" "$tmp/small.glb" "$tmp/coloured64.glb" \
+  "$tmp/steps/step_000001.glb" ||
   fail "a GLB is not valid glTF"
 node tests/cli/validate_glb.mjs --primitives 2 "$tmp/coloured512.glb" ||
   fail "the large coloured GLB is not valid glTF"
