@@ -22,6 +22,11 @@ from day to day. ldimesh's later steps reuse their buffers anyway. --default-all
 sides without the setting (the peer then looks slower than it is).
 
     /usr/bin/python3 bench/flying_edges.py [--build build] [--repeats 5] [--threads 2] [--steps 4]
+                                           [--baseline OTHER_BUILD]
+
+--baseline OTHER_BUILD also runs that build's `ldimesh mesh` (e.g. of an earlier commit) on the
+coherent grid cases, interleaved with this one's, and prints its rows beside them: a change's
+cost measured in one run, against the same Flying Edges.
 
 Prints a Markdown table (docs/benchmarks.md, "Ray casting beside Flying Edges") and, with
 --json FILE, writes the figures there.
@@ -112,6 +117,8 @@ def main():
                     help="steps per ldimesh process (the first is the cold start)")
     ap.add_argument("--threads", type=int, default=os.cpu_count())
     ap.add_argument("--json", help="write the figures to this file")
+    ap.add_argument("--baseline", help="another build folder to time beside --build (coherent "
+                    "grid cases)")
     ap.add_argument("--default-allocator", action="store_true",
                     help="leave glibc's allocator as it is (see the module's comment)")
     args = ap.parse_args()
@@ -125,7 +132,7 @@ def main():
         grid_path, fine_path = os.path.join(tmp, "ml256.raw"), os.path.join(tmp, "ml65.raw")
         grid_info, fine_info = sample(args.build, 256, grid_path), sample(args.build, 65, fine_path)
         grid_img, fine_img = image(grid_info, grid_path), image(fine_info, fine_path)
-        fe, fe65, runs, elements = [], [], {}, []
+        fe, fe65, runs, elements, baseline = [], [], {}, [], {}
         triangles = {}
         flying_edges(grid_img, 0.5), flying_edges(fine_img, 0.5)  # warm-up, untimed
         for rep in range(args.repeats):
@@ -138,6 +145,10 @@ def main():
                     r = ldimesh_grid(args.build, grid_info, grid_path, res, caster, args.threads,
                                      args.steps)
                     runs.setdefault((res, caster), []).append(r)
+                    if args.baseline and caster == "auto":
+                        baseline.setdefault(res, []).append(ldimesh_grid(
+                            args.baseline, grid_info, grid_path, res, caster, args.threads,
+                            args.steps))
             t, _ = flying_edges(fine_img, 0.5)
             fe65.append(t)
             elements.append(element_casts(args.build, 512, args.threads))
@@ -167,6 +178,17 @@ def main():
             rows.append({"source": "grid", "resolution": res, "caster": name, "cast": cast,
                          "cast_first_step": cold,
                          "solver": solver, "flying_edges": fe_s, "samples": rs[0]["samples"]})
+    for res, bs in baseline.items():
+        cast, solver = med(r["cast"] for r in bs), med(r["solver"] for r in bs)
+        ours = med(r["cast"] for r in runs[(res, "auto")])
+        print(f"| 256³ grid, 3 × {res}², coherent, baseline {args.baseline}: ray cast (bind + "
+              f"cast), later steps (this build: {ours / cast:.2f}× it) | {cast:.4f} | {fe_s:.4f} "
+              f"| {cast / fe_s:.2f} |")
+        print(f"| 256³ grid, 3 × {res}², coherent, baseline {args.baseline}: solver's share, "
+              f"later steps | {solver:.4f} | {fe_s:.4f} | {solver / fe_s:.2f} |")
+        rows.append({"source": "grid", "resolution": res, "caster": "coherent",
+                     "build": args.baseline, "cast": cast, "solver": solver,
+                     "flying_edges": fe_s})
     for caster in ("coherent", "Embree"):
         s = med(e[("elements", caster, args.threads)]["seconds"] for e in elements)
         hits = elements[0][("elements", caster, args.threads)]["hits"]

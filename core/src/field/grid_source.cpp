@@ -160,68 +160,111 @@ inline glm::dvec3 trilinear_gradient(const double c[8], glm::dvec3 p, glm::dvec3
 // along each axis; one-sided where the block has no point beyond, ghost points included, or
 // where the value beyond is NaN or ±Inf). Unlike the interpolant's own gradient
 // (trilinear_gradient), whose jumps at cell faces show as bands in shading, it is continuous
-// across cells; the hits' positions stay those of the interpolant. Where it is still not finite,
-// the interpolant's gradient `exact` instead. Every caster computes hits' normals here, so that
-// they agree bit for bit.
+// across cells; the hits' positions stay those of the interpolant. Every caster computes hits'
+// normals through a CellNormals, so that they agree bit for bit.
 //
-// On a uniform grid, away from the block's edges, the blend along axis k is the difference of
-// the transverse bilinear interpolants on the four point layers c[k] − 1 … c[k] + 2:
-// ((1 − p)(L₂ − L₀) + p(L₃ − L₁)) / 2h — 48 reads and no division per hit, instead of a division
-// per corner and axis (the general form cost the axis casts a quarter of their time).
+// On a uniform grid, away from the block's edges (the fast form), the blend along axis k is the
+// difference of the transverse bilinear interpolants on the four point layers c[k] − 1 …
+// c[k] + 2: ((1 − p)(L₂ − L₀) + p(L₃ − L₁)) / 2h, i.e. the bilinear blend over the cell's four
+// edges along k of A + p·B, with A and B from the edge's two corners (which the caster has read
+// already) and the points beyond them. A and B are computed once per cell (a lattice cell
+// solves several rays), from 24 reads; a hit costs what the interpolant's own gradient did.
+// Elsewhere, or where the fast form is not finite, the general form: per corner and axis the
+// central (or one-sided) difference, then the blend; where even that is not finite, the
+// interpolant's gradient.
 template <class T>
-glm::dvec3 smooth_gradient(const GridView<T>& g, const std::array<std::int64_t, 3>& c, glm::dvec3 p,
-                           glm::dvec3 exact) {
-  const T* cell = g.values + c[0] * g.strides[0] + c[1] * g.strides[1] + c[2] * g.strides[2];
-  const auto finite = [](glm::dvec3 v) {
-    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
-  };
-  if (!g.rectilinear && c[0] >= 1 && c[1] >= 1 && c[2] >= 1 && c[0] + 2 < g.dims[0] &&
-      c[1] + 2 < g.dims[1] && c[2] + 2 < g.dims[2]) {
-    glm::dvec3 grad;
+class CellNormals {
+ public:
+  // Cell c of `g`; corner[n] = value − iso at corner n (x + 2y + 4z), as the casters hold them.
+  CellNormals(const GridView<T>& g, const std::array<std::int64_t, 3>& c, const double corner[8],
+              double iso)
+      : g_(g), c_(c), corner_(corner), iso_(iso) {
+    fast_ = !g.rectilinear && c[0] >= 1 && c[1] >= 1 && c[2] >= 1 && c[0] + 2 < g.dims[0] &&
+            c[1] + 2 < g.dims[1] && c[2] + 2 < g.dims[2];
+    if (!fast_) return;
+    const T* cell = g.values + c[0] * g.strides[0] + c[1] * g.strides[1] + c[2] * g.strides[2];
     for (int k = 0; k < 3; ++k) {
       const int u = k == 0 ? 1 : 0, w = k == 2 ? 1 : 2;  // the transverse axes, u < w
       const std::int64_t sk = g.strides[k], su = g.strides[u], sw = g.strides[w];
-      const double pu = p[u], pw = p[w];
-      const auto layer = [&](std::int64_t i) {
-        const T* q = cell + i * sk;
-        const double a = double(q[0]) + pu * (double(q[su]) - double(q[0]));
-        const double b = double(q[sw]) + pu * (double(q[su + sw]) - double(q[sw]));
-        return a + pw * (b - a);
-      };
-      const double l0 = layer(-1), l1 = layer(0), l2 = layer(1), l3 = layer(2);
-      grad[k] = ((1.0 - p[k]) * (l2 - l0) + p[k] * (l3 - l1)) * (0.5 / g.spacing[k]);
-    }
-    if (finite(grad)) return grad;
-  }
-  glm::dvec3 sum(0.0);
-  for (int n = 0; n < 8; ++n) {
-    const std::int64_t q[3] = {c[0] + (n & 1), c[1] + ((n >> 1) & 1), c[2] + ((n >> 2) & 1)};
-    const T* at = cell + (n & 1) * g.strides[0] + ((n >> 1) & 1) * g.strides[1] +
-                  ((n >> 2) & 1) * g.strides[2];
-    glm::dvec3 grad;
-    for (int k = 0; k < 3; ++k) {
-      std::int64_t lo = q[k], hi = q[k];
-      double v_lo = double(at[0]), v_hi = v_lo;
-      if (q[k] > 0) {
-        const double v = double(at[-g.strides[k]]);
-        if (std::isfinite(v)) v_lo = v, lo = q[k] - 1;
+      for (int m = 0; m < 4; ++m) {
+        // Along the cell's edge m across k: the values below the cell, at its two corners and
+        // above it. Per edge, (1 − p)(v₂ − v₀) + p(v₃ − v₁) = A + p·B.
+        const std::int64_t across = (m & 1) * su + (m >> 1) * sw;
+        const int lower = ((m & 1) << u) | ((m >> 1) << w);
+        const double v0 = double(cell[across - sk]) - iso, v1 = corner[lower];
+        const double v2 = corner[lower | (1 << k)], v3 = double(cell[across + 2 * sk]) - iso;
+        a_[k][m] = v2 - v0;
+        b_[k][m] = (v3 - v2) - (v1 - v0);
       }
-      if (q[k] + 1 < g.dims[k]) {
-        const double v = double(at[g.strides[k]]);
-        if (std::isfinite(v)) v_hi = v, hi = q[k] + 1;
-      }
-      // A uniform grid's spacing, not differences of coordinates: the same bits in any part of
-      // the grid (grid_part moves the origin).
-      const double dx =
-          g.rectilinear ? g.coord(k, hi) - g.coord(k, lo) : double(hi - lo) * g.spacing[k];
-      grad[k] = (v_hi - v_lo) / dx;
+      inv_2h_[k] = 0.5 / g.spacing[k];
     }
-    const double w = ((n & 1) ? p.x : 1.0 - p.x) * (((n >> 1) & 1) ? p.y : 1.0 - p.y) *
-                     (((n >> 2) & 1) ? p.z : 1.0 - p.z);
-    sum += w * grad;
   }
-  return finite(sum) ? sum : exact;
-}
+
+  // The gradient at local point p; `inv_size` one over the cell's edges (the fallback's).
+  glm::dvec3 at(glm::dvec3 p, glm::dvec3 inv_size) const {
+    if (fast_) {
+      glm::dvec3 grad;
+      for (int k = 0; k < 3; ++k) {
+        const int u = k == 0 ? 1 : 0, w = k == 2 ? 1 : 2;
+        const double e0 = a_[k][0] + p[k] * b_[k][0], e1 = a_[k][1] + p[k] * b_[k][1];
+        const double e2 = a_[k][2] + p[k] * b_[k][2], e3 = a_[k][3] + p[k] * b_[k][3];
+        const double lo = e0 + p[u] * (e1 - e0), hi = e2 + p[u] * (e3 - e2);
+        grad[k] = (lo + p[w] * (hi - lo)) * inv_2h_[k];
+      }
+      if (finite(grad)) return grad;
+    }
+    const glm::dvec3 grad = general(p);
+    return finite(grad) ? grad : trilinear_gradient(corner_, p, inv_size);
+  }
+
+ private:
+  static bool finite(glm::dvec3 v) {
+    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+  }
+
+  // The general form: per corner and axis the central difference, one-sided where the point
+  // beyond is missing or not finite, then the trilinear blend.
+  glm::dvec3 general(glm::dvec3 p) const {
+    const T* cell =
+        g_.values + c_[0] * g_.strides[0] + c_[1] * g_.strides[1] + c_[2] * g_.strides[2];
+    glm::dvec3 sum(0.0);
+    for (int n = 0; n < 8; ++n) {
+      const std::int64_t q[3] = {c_[0] + (n & 1), c_[1] + ((n >> 1) & 1), c_[2] + ((n >> 2) & 1)};
+      const T* at = cell + (n & 1) * g_.strides[0] + ((n >> 1) & 1) * g_.strides[1] +
+                    ((n >> 2) & 1) * g_.strides[2];
+      glm::dvec3 grad;
+      for (int k = 0; k < 3; ++k) {
+        std::int64_t lo = q[k], hi = q[k];
+        double v_lo = corner_[n], v_hi = v_lo;
+        if (q[k] > 0) {
+          const double v = double(at[-g_.strides[k]]);
+          if (std::isfinite(v)) v_lo = v - iso_, lo = q[k] - 1;
+        }
+        if (q[k] + 1 < g_.dims[k]) {
+          const double v = double(at[g_.strides[k]]);
+          if (std::isfinite(v)) v_hi = v - iso_, hi = q[k] + 1;
+        }
+        // A uniform grid's spacing, not differences of coordinates: the same bits in any part
+        // of the grid (grid_part moves the origin).
+        const double dx =
+            g_.rectilinear ? g_.coord(k, hi) - g_.coord(k, lo) : double(hi - lo) * g_.spacing[k];
+        grad[k] = (v_hi - v_lo) / dx;
+      }
+      const double w = ((n & 1) ? p.x : 1.0 - p.x) * (((n >> 1) & 1) ? p.y : 1.0 - p.y) *
+                       (((n >> 2) & 1) ? p.z : 1.0 - p.z);
+      sum += w * grad;
+    }
+    return sum;
+  }
+
+  const GridView<T>& g_;
+  std::array<std::int64_t, 3> c_;
+  const double* corner_;
+  double iso_;
+  bool fast_ = false;
+  double a_[3][4], b_[3][4];  // per axis and edge across it (u the lower bit), see above
+  glm::dvec3 inv_2h_{0.0};
+};
 
 // The value on a cell face crossed by an axis ray: the bilinear interpolation of the face's
 // four points (f[0..3], b the lower bit) with weights w (trilinear_value's products with the
@@ -234,18 +277,14 @@ inline double face_value(const double w[4], const double f[4]) {
 // The hit of an axis ray (along a, direction `dir`) in a cell whose face values fa (entry) and
 // fb (exit) differ in sign, entered at ta and left at tb: the root of the linear function between
 // the faces (as trilinear_segment_roots computes it for a segment along one axis) and the
-// normal there (as solve_cell). `cell` is the cell's lowest point, `local` holds the ray's local
-// coordinates across it, `inv_size` one over the cell's edges; corner[n] = value − iso at corner
-// n (x + 2y + 4z).
+// normal there (as solve_cell, from the cell's `normals`). `local` holds the ray's local
+// coordinates across it, `inv_size` one over the cell's edges.
 template <class T>
-RayHit axis_root(const GridView<T>& g, const std::array<std::int64_t, 3>& cell,
-                 const double corner[8], int a, int step, glm::dvec3 local, glm::dvec3 inv_size,
-                 double fa, double fb, double ta, double tb, glm::dvec3 dir) {
+RayHit axis_root(const CellNormals<T>& normals, int a, int step, glm::dvec3 local,
+                 glm::dvec3 inv_size, double fa, double fb, double ta, double tb, glm::dvec3 dir) {
   const double s = fa / (fa - fb);
   local[a] = step > 0 ? s : 1.0 - s;
-  const glm::dvec3 grad =
-      smooth_gradient(g, cell, local, trilinear_gradient(corner, local, inv_size));
-  return {segment_point(ta, tb, s), unit_normal(grad, dir), 0.0f};
+  return {segment_point(ta, tb, s), unit_normal(normals.at(local, inv_size), dir), 0.0f};
 }
 
 // The roots of one cell c on the ray segment [ta, tb], appended to `hits`: the cell's cubic
@@ -284,11 +323,11 @@ void solve_cell(const GridView<T>& g, double iso, glm::dvec3 org, glm::dvec3 dir
   double roots[3];
   const int n = trilinear_segment_roots(corner, a, b, roots);
   const glm::dvec3 inv_size = 1.0 / size;
+  const CellNormals<T> normals(g, c, corner, iso);
   for (int r = 0; r < n; ++r) {
     const glm::dvec3 p = a + roots[r] * (b - a);
     const double t = segment_point(ta, tb, roots[r]);
-    const glm::dvec3 grad = smooth_gradient(g, c, p, trilinear_gradient(corner, p, inv_size));
-    hits.push_back({t, unit_normal(grad, dir), 0.0f});
+    hits.push_back({t, unit_normal(normals.at(p, inv_size), dir), 0.0f});
   }
 }
 
@@ -919,13 +958,14 @@ class GridAxisBinding final : public AxisBinding {
         n_candidates = 0;
         return;
       }
+      const CellNormals<T> normals(g_, cell, corner, iso_);  // once for the cell's rays
       for (int m = 0; m < n_candidates; ++m) {
         const Candidate& h = candidates[m];
         glm::dvec3 local;
         local[B] = h.pb;
         local[C] = h.pc;
-        out.push_back({h.k, axis_root(g_, cell, corner, A, step, local, inv_size, h.fa, h.fb, t_in,
-                                      t_out, l.dir)});
+        out.push_back(
+            {h.k, axis_root(normals, A, step, local, inv_size, h.fa, h.fb, t_in, t_out, l.dir)});
       }
       n_candidates = 0;
     };
@@ -1080,7 +1120,8 @@ class GridAxisBinding final : public AxisBinding {
       inv_cell[a] = 1.0 / (g_.coord(a, i + 1) - g_.coord(a, i));
       std::array<std::int64_t, 3> at = cell;
       at[a] = i;
-      hits.push_back(axis_root(g_, at, corner, a, step, local, inv_cell, fa, fb, ta, tb, dir));
+      const CellNormals<T> normals(g_, at, corner, iso_);
+      hits.push_back(axis_root(normals, a, step, local, inv_cell, fa, fb, ta, tb, dir));
     };
     // The cells whose face values differ in sign, solved (emit_root) in ray order when the
     // buffer fills, before solve_cell adds a hit and at the end.
