@@ -505,26 +505,38 @@ class AdaptorImpl final : public Adaptor {
   }
 
   // Root, solver's thread, `mutex_` held, for a due step that runs, `interval` seconds after the
-  // previous due step (0: none): whether "merging": "auto" has stopped merging. It stops for
-  // good when a merged step is still being worked on (with "busy": "coalesce" the solver would
-  // wait for it), or when the last merged step kept the caster thread busy longer than that
-  // interval (the root would skip steps), and says so once.
+  // previous due step (0: none): whether "merging": "auto" has stopped merging. Each merged step
+  // counts once, as slow when it is still being merged at a due step (with "busy": "coalesce"
+  // the solver would wait for it) or when it kept the caster thread busy (cast, reduction,
+  // merge) longer than the solver's time between due steps (the root would skip steps). After
+  // two slow merged steps in a row (one can be a cold start) merging stops for good, and the log
+  // says so once.
   bool auto_merge_stopped(std::uint64_t step, double interval) {
     if (options_.merging != AdaptorOptions::Merging::automatic || !background_) return false;
-    if (!auto_merge_stopped_ && (merging_now_ || (interval > 0.0 && last_merge_seconds_ > 0.0))) {
-      if (merging_now_ || last_merge_seconds_ > interval) {
-        auto_merge_stopped_ = true;
-        if (options_.log)
-          std::printf(
-              "ldimesh: from step %llu on the views are published trimmed, not merged "
-              "(\"merging\": \"auto\"): %s; \"merging\": true merges every step (steps are "
-              "then skipped while the root merges)\n",
-              (unsigned long long)step,
-              merging_now_ ? "the previous step is still being merged"
-                           : ("a merged step took " + std::to_string(last_merge_seconds_) + " s, " +
-                              std::to_string(interval) + " s pass between due steps")
-                                 .c_str());
-      }
+    if (auto_merge_stopped_) return true;
+    std::string why;
+    if (merging_now_ && merging_step_ != counted_step_) {
+      counted_step_ = merging_step_;
+      ++slow_merges_;
+      why = "step " + std::to_string(merging_step_) + " was still being merged";
+    } else if (!merging_now_ && merged_step_ && *merged_step_ != counted_step_ && interval > 0.0) {
+      counted_step_ = *merged_step_;
+      const bool slow = last_merge_seconds_ > interval;
+      slow_merges_ = slow ? slow_merges_ + 1 : 0;
+      char text[160];
+      std::snprintf(text, sizeof text,
+                    "merged step %llu took %.2f s, %.2f s pass between due steps",
+                    (unsigned long long)*merged_step_, last_merge_seconds_, interval);
+      why = text;
+    }
+    if (slow_merges_ >= 2) {
+      auto_merge_stopped_ = true;
+      if (options_.log)
+        std::printf(
+            "ldimesh: from step %llu on the views are published trimmed, not merged "
+            "(\"merging\": \"auto\"): the root does not keep up (%s); \"merging\": true merges "
+            "every step (steps are then skipped while the root merges)\n",
+            (unsigned long long)step, why.c_str());
     }
     return auto_merge_stopped_;
   }
@@ -615,10 +627,7 @@ class AdaptorImpl final : public Adaptor {
     {
       std::lock_guard lock(mutex_);
       caster_job_ = std::move(cj);
-      if (rank_ == 0) {  // busy from now on for the root's next decision
-        casting_ = true;
-        merging_now_ = caster_job_->job.merge;
-      }
+      if (rank_ == 0) casting_ = true;  // busy from now on for the root's next decision
       caster_wake_.notify_all();
     }
     finish_report(start);
@@ -648,11 +657,21 @@ class AdaptorImpl final : public Adaptor {
         MPI_Reduce(&cj.blocked_seconds, &max_blocked, 1, MPI_DOUBLE, MPI_MAX, 0, background_comm_);
         // The snapshot stays until the next step: the ranks serve the root's samples from it.
         if (s && meshing_samples(meshing_options(cj.job.merge))) {
+          const bool merging = rank_ == 0 && cj.job.merge;
+          if (merging) {
+            std::lock_guard lock(mutex_);
+            merging_now_ = true;
+            merging_step_ = cj.job.step;
+          }
           s = mesh_with_samples(background_comm_, casters, cj.job);
           // What a merged step kept this thread busy: cast, reduction, decoding and meshing.
-          if (s && rank_ == 0 && cj.job.merge) {
+          if (merging) {
             std::lock_guard lock(mutex_);
-            last_merge_seconds_ = seconds_since(busy_since);
+            merging_now_ = false;
+            if (s) {
+              last_merge_seconds_ = seconds_since(busy_since);
+              merged_step_ = cj.job.step;
+            }
           }
         }
         LDIMESH_RETURN_IF_ERROR(s);
@@ -870,8 +889,14 @@ class AdaptorImpl final : public Adaptor {
   bool auto_merge_stopped_ = false;          // root, solver thread only
   Clock::time_point last_due_;               // root, solver thread only
   bool due_before_ = false;                  // root, solver thread only
-  double last_merge_seconds_ = 0.0;  // root: the caster thread's time on the last merged step
-  bool merging_now_ = false;         // root: the caster thread works on a merged step (mutex_)
+  // Root, "merging": "auto" (mutex_): the merge running on the caster thread and its step, the
+  // last merged step and what it kept the caster busy, the last step counted, slow ones in a row.
+  bool merging_now_ = false;
+  std::uint64_t merging_step_ = 0;
+  std::optional<std::uint64_t> merged_step_;
+  double last_merge_seconds_ = 0.0;
+  std::uint64_t counted_step_ = UINT64_MAX;
+  int slow_merges_ = 0;
 
   // Root only.
   std::unique_ptr<SnapshotStore> store_;

@@ -530,8 +530,8 @@ TEST(Adaptor, EachIsovalueIsASurfaceOfItsOwnInTheGlb) {
   std::memcpy(&length, glb.data() + 12, 4);
   ASSERT_LE(20 + std::size_t(length), glb.size());
   const std::string json(glb.begin() + 20, glb.begin() + 20 + length);
-  EXPECT_NE(json.find(R"("extras":{"ldimesh":{"surface":0}})"), std::string::npos) << json;
-  EXPECT_NE(json.find(R"("extras":{"ldimesh":{"surface":1}})"), std::string::npos) << json;
+  EXPECT_NE(json.find(R"("extras":{"ldimesh_surface":0})"), std::string::npos) << json;
+  EXPECT_NE(json.find(R"("extras":{"ldimesh_surface":1})"), std::string::npos) << json;
   const Mesh mesh = testing::published_mesh(dir, 1);
   std::size_t inner = 0, outer = 0;
   for (const glm::vec3& p : mesh.positions)

@@ -42,7 +42,7 @@ import json, struct, sys
 data = open(sys.argv[1], "rb").read()
 length = struct.unpack_from("<I", data, 12)[0]
 doc = json.loads(data[20:20 + length])
-surfaces = sorted(n["extras"]["ldimesh"]["surface"] for n in doc["nodes"])
+surfaces = sorted(n["extras"]["ldimesh_surface"] for n in doc["nodes"])
 assert surfaces == [0, 1] and len(doc["meshes"]) == 2, (surfaces, len(doc["meshes"]))
 PY
 cd "$src" || fail "no source folder"

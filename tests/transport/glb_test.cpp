@@ -363,7 +363,7 @@ TEST(Glb, SeveralSurfacesAreAMeshOnANodeEach) {
   EXPECT_EQ(j["scenes"][j.value("scene", 0)]["nodes"], Json::array({0, 1}));
   for (std::size_t k = 0; k < 2; ++k) {
     EXPECT_EQ(j["nodes"][k]["mesh"], k);
-    EXPECT_EQ(j["nodes"][k]["extras"]["ldimesh"]["surface"], k);
+    EXPECT_EQ(j["nodes"][k]["extras"]["ldimesh_surface"], k);
   }
   // Each surface's mesh holds that surface's triangles.
   GlbInfo alone;
@@ -388,7 +388,7 @@ TEST(Glb, SeveralSurfacesAreAMeshOnANodeEach) {
   options.surfaces = {0, 0};
   const Json one = json_chunk(encode(a, options));
   ASSERT_EQ(one["nodes"].size(), 1u);
-  EXPECT_EQ(one["nodes"][0]["extras"]["ldimesh"]["surface"], 1);
+  EXPECT_EQ(one["nodes"][0]["extras"]["ldimesh_surface"], 1);
   // Offsets that do not start at 0, decrease or pass the vertices, and a face whose vertices lie
   // in two surfaces, are errors.
   for (const std::vector<std::uint32_t>& bad :

@@ -421,10 +421,12 @@ void append_part(Json& base, std::vector<std::uint8_t>& bin, const Json& part,
     base["meshes"][0]["primitives"].push_back(std::move(p));
 }
 
-// The extras that name a node's surface (GlbOptions::surfaces).
+// The extras that name a node's surface (GlbOptions::surfaces). A key of its own, not inside
+// "ldimesh": three.js gives a node of a one-primitive mesh and that mesh one object, and the
+// node's extras would replace the mesh's extras.ldimesh (the view directions, the range).
 Json surface_extras(std::size_t surface) {
   Json extras;
-  extras["ldimesh"]["surface"] = surface;
+  extras["ldimesh_surface"] = surface;
   return extras;
 }
 

@@ -219,22 +219,25 @@ function applyColouring(root, meta) {
 }
 
 // A step with several isovalues has a surface each: a GLB node with extras
-// {"ldimesh": {"surface": s}} (three.js: userData), surface s for the step's isovalues[s]. A
-// checkbox each shows or hides it; what the person chose holds from step to step.
+// {"ldimesh_surface": s} (three.js: userData), surface s for the step's isovalues[s]. A
+// checkbox each shows or hides it; what the person chose holds from step to step, by isovalue
+// (a step with other isovalues keeps the choice for those it shares).
 // document.body.dataset.surfaces: the number of surfaces of the step shown.
-const hiddenSurfaces = new Set();
+const hiddenIsovalues = new Set();
 
 function surfaceNodes(root) {
   const nodes = [];
   root.traverse((object) => {
-    const ours = object.userData && object.userData.ldimesh;
-    if (ours && Number.isInteger(ours.surface)) nodes.push([ours.surface, object]);
+    const surface = object.userData && object.userData.ldimesh_surface;
+    if (Number.isInteger(surface)) nodes.push([surface, object]);
   });
   return nodes;
 }
 
-function applySurfaces(root) {
-  for (const [surface, node] of surfaceNodes(root)) node.visible = !hiddenSurfaces.has(surface);
+function applySurfaces(root, meta) {
+  const isovalues = (meta && meta.isovalues) || [];
+  for (const [surface, node] of surfaceNodes(root))
+    node.visible = !hiddenIsovalues.has(String(isovalues[surface]));
   requestRender();
 }
 
@@ -252,11 +255,11 @@ function updateSurfaceControls(meta) {
       const input = document.createElement('input');
       input.type = 'checkbox';
       input.id = `surface-${surface}`;
-      input.checked = !hiddenSurfaces.has(surface);
+      input.checked = !hiddenIsovalues.has(String(value));
       input.addEventListener('change', () => {
-        if (input.checked) hiddenSurfaces.delete(surface);
-        else hiddenSurfaces.add(surface);
-        if (state.mesh) applySurfaces(state.mesh);
+        if (input.checked) hiddenIsovalues.delete(String(value));
+        else hiddenIsovalues.add(String(value));
+        if (state.mesh) applySurfaces(state.mesh, state.loaded);
       });
       const label = document.createElement('label');
       label.append(input, ` isovalue ${value}`);
@@ -335,7 +338,7 @@ async function loadStep(step) {
   updateFieldControls(meta);
   applyColouring(state.mesh, meta);
   updateSurfaceControls(meta);
-  applySurfaces(state.mesh);
+  applySurfaces(state.mesh, meta);
   document.body.dataset.surfaces = String(surfaceNodes(state.mesh).length);
   scene.add(state.mesh);
   frameShown(false);

@@ -322,6 +322,7 @@ void solve_cell(const GridView<T>& g, double iso, glm::dvec3 org, glm::dvec3 dir
   }
   double roots[3];
   const int n = trilinear_segment_roots(corner, a, b, roots);
+  if (n == 0) return;
   const glm::dvec3 inv_size = 1.0 / size;
   const CellNormals<T> normals(g, c, corner, iso);
   for (int r = 0; r < n; ++r) {

@@ -307,7 +307,7 @@ TEST(GridSource, FloatStridedAndRectilinearInputsReadTheSameField) {
       EXPECT_NEAR(la.depth[s], lb.depth[s], 1e-6);
       EXPECT_NEAR(la.depth[s], lc.depth[s], 1e-6);
       // The normals too: the uniform grid's shortcut for the blended central differences
-      // (smooth_gradient) and the rectilinear grid's general form agree up to rounding.
+      // (CellNormals) and the rectilinear grid's general form agree up to rounding.
       EXPECT_LT(glm::length(la.normal[s] - lb.normal[s]), 1e-5f) << "sample " << s;
       EXPECT_LT(glm::length(la.normal[s] - lc.normal[s]), 1e-5f) << "sample " << s;
     }
@@ -517,7 +517,7 @@ void expect_only_bad_cells_lose_hits(const GridSource& grid, const std::vector<I
   }
 }
 
-// Shading normals (smooth_gradient): the trilinear blend of central-difference gradients at the
+// Shading normals (CellNormals): the trilinear blend of central-difference gradients at the
 // cell corners, continuous across cell faces — the interpolant's own gradient jumps there, which
 // shows as bands. Along a row of pixels 64 to a cell, the change of the first hit's normal
 // between neighbouring pixels is as small where they straddle a cell face as within a cell, for

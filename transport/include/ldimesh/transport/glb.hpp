@@ -57,8 +57,8 @@ struct GlbOptions {
   // Several surfaces (a step's isovalues), each a glTF mesh of its own that a viewer can show
   // or hide: surfaces[s] is the first vertex of surface s (surfaces[0] = 0, non-decreasing; a
   // face belongs to the surface of its first vertex and must use only its vertices). Each mesh
-  // sits on a node of the scene whose extras are {"ldimesh": {"surface": s}} (three.js:
-  // node.userData.ldimesh.surface); an empty surface has none. Empty or one entry: one mesh.
+  // sits on a node of the scene whose extras are {"ldimesh_surface": s} (three.js:
+  // node.userData.ldimesh_surface); an empty surface has none. Empty or one entry: one mesh.
   std::vector<std::uint32_t> surfaces;
 };
 
