@@ -11,7 +11,7 @@
 # docs/benchmarks.md.
 # Usage: bench/grayscott_bench.sh [SIZE=192] [SUBSTEPS=60] [STEPS=20] [RESOLUTION=256]
 # (binaries from build/bin, or from $LDIMESH_BIN; COLOUR_BY=U colours the V isosurface by U,
-# option "colour_by")
+# option "colour_by"; MERGING=false|true|auto sets option "merging", default the adaptor's)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 size=${1:-192}
@@ -28,6 +28,10 @@ for mode in none sync background; do
   [ "$mode" = sync ] && extra='"background": false'
   [ "$mode" = none ] && extra='"cadence": {"every_steps": 1000000000}'
   [ -n "${COLOUR_BY:-}" ] && extra="$extra, \"colour_by\": \"$COLOUR_BY\""
+  case "${MERGING:-}" in
+    true | false) extra="$extra, \"merging\": $MERGING" ;;
+    auto) extra="$extra, \"merging\": \"auto\"" ;;
+  esac
   printf '{"server": {"enabled": false}, "output_dir": "%s/%s/steps", "resolution": %d, "keep": 4, %s}\n' \
     "$tmp" "$mode" "$resolution" "$extra" >"$tmp/$mode/options.json"
   # --bind-to none: the ray caster runs threads on every rank.

@@ -507,10 +507,12 @@ class AdaptorImpl final : public Adaptor {
   // Root, solver's thread, `mutex_` held, for a due step that runs, `interval` seconds after the
   // previous due step (0: none): whether "merging": "auto" has stopped merging. Each merged step
   // counts once, as slow when it is still being merged at a due step (with "busy": "coalesce"
-  // the solver would wait for it) or when it kept the caster thread busy (cast, reduction,
-  // merge) longer than the solver's time between due steps (the root would skip steps). After
-  // two slow merged steps in a row (one can be a cold start) merging stops for good, and the log
-  // says so once.
+  // the solver would wait for it) or when its merge took more than kAutoMergeShare of the
+  // solver's time between due steps: the merge runs on the root's cores beside the solver, which
+  // it slows (the Gray–Scott bench on 2 cores: +85 % solver time merging about 60 % of the
+  // interval, against +29 % for the trimmed views; docs/benchmarks.md). After two slow merged
+  // steps in a row (one can be a cold start) merging stops for good, and the log says so once.
+  static constexpr double kAutoMergeShare = 0.25;
   bool auto_merge_stopped(std::uint64_t step, double interval) {
     if (options_.merging != AdaptorOptions::Merging::automatic || !background_) return false;
     if (auto_merge_stopped_) return true;
@@ -521,11 +523,11 @@ class AdaptorImpl final : public Adaptor {
       why = "step " + std::to_string(merging_step_) + " was still being merged";
     } else if (!merging_now_ && merged_step_ && *merged_step_ != counted_step_ && interval > 0.0) {
       counted_step_ = *merged_step_;
-      const bool slow = last_merge_seconds_ > interval;
+      const bool slow = last_merge_seconds_ > kAutoMergeShare * interval;
       slow_merges_ = slow ? slow_merges_ + 1 : 0;
       char text[160];
       std::snprintf(text, sizeof text,
-                    "merged step %llu took %.2f s, %.2f s pass between due steps",
+                    "merging step %llu took %.2f s, over a quarter of the %.2f s between due steps",
                     (unsigned long long)*merged_step_, last_merge_seconds_, interval);
       why = text;
     }
@@ -648,7 +650,6 @@ class AdaptorImpl final : public Adaptor {
         casting_ = true;
       }
       const std::uint64_t step = cj.job.step;
-      const Clock::time_point busy_since = Clock::now();
       const Status failed = guard("", [&] {
         StepCasters casters;
         Status s = collective_step(background_comm_, snapshot_blocks_, cj.domain, cj.status, cj.job,
@@ -663,13 +664,14 @@ class AdaptorImpl final : public Adaptor {
             merging_now_ = true;
             merging_step_ = cj.job.step;
           }
+          const Clock::time_point merge_start = Clock::now();
           s = mesh_with_samples(background_comm_, casters, cj.job);
-          // What a merged step kept this thread busy: cast, reduction, decoding and meshing.
+          // What the merge (decoding and meshing, the samples' round trips included) took.
           if (merging) {
             std::lock_guard lock(mutex_);
             merging_now_ = false;
             if (s) {
-              last_merge_seconds_ = seconds_since(busy_since);
+              last_merge_seconds_ = seconds_since(merge_start);
               merged_step_ = cj.job.step;
             }
           }
