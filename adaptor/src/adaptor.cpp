@@ -326,7 +326,8 @@ class AdaptorImpl final : public Adaptor {
       job.skipped_steps = skipped_since_handoff_;
       skipped_since_handoff_ = 0;
     }
-    // "auto" merges the background steps while the root keeps up; "true" every step.
+    // "auto" merges the background steps within its budget (auto_merge_stopped); "true" every
+    // step.
     job.merge = options_.merging == AdaptorOptions::Merging::on ||
                 (options_.merging == AdaptorOptions::Merging::automatic && background_ &&
                  flags[1] == 0 && flags[2] == 0);
