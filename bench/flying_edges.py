@@ -142,13 +142,19 @@ def main():
                     t, tri = flying_edges(grid_img, 0.5)
                     fe.append(t)
                     triangles["fe"] = tri
-                    r = ldimesh_grid(args.build, grid_info, grid_path, res, caster, args.threads,
-                                     args.steps)
-                    runs.setdefault((res, caster), []).append(r)
+                    # With a baseline, the two builds take turns going first (the machine's
+                    # state drifts; neither always runs warm after the other).
+                    order = [args.build]
                     if args.baseline and caster == "auto":
-                        baseline.setdefault(res, []).append(ldimesh_grid(
-                            args.baseline, grid_info, grid_path, res, caster, args.threads,
-                            args.steps))
+                        order = [args.build, args.baseline] if rep % 2 == 0 else [args.baseline,
+                                                                                 args.build]
+                    for build in order:
+                        r = ldimesh_grid(build, grid_info, grid_path, res, caster, args.threads,
+                                         args.steps)
+                        if build == args.build:
+                            runs.setdefault((res, caster), []).append(r)
+                        else:
+                            baseline.setdefault(res, []).append(r)
             t, _ = flying_edges(fine_img, 0.5)
             fe65.append(t)
             elements.append(element_casts(args.build, 512, args.threads))
