@@ -455,14 +455,19 @@ std::vector<std::uint8_t> published_glb(const std::string& dir, std::uint64_t st
   return s && snapshot.glb ? *snapshot.glb : std::vector<std::uint8_t>{};
 }
 
+// This rank's slab of |x|² and the CLI pipeline's caster over the same block (isovalue 0.36),
+// to compare what the adaptor publishes with (expect_cli_mesh_published).
+struct SlabBesideCli {
+  GridSlab slab{kSlabPoints, 0.0};
+  GridSource source{slab.block};
+  RayCaster caster{source, 0.36};
+  Subdomain sub{source.bounds(), {glm::dvec3(-1.0), glm::dvec3(1.0)}};
+};
+
 // The same for a grid block on both paths: synchronous, and (with --thread-multiple) cast,
 // reduced and — merged — sampled by the caster threads from the snapshot.
 TEST(Adaptor, GridBlocksPublishTheMeshOfTheCommandLinePipelineOnBothPaths) {
-  GridSlab slab(kSlabPoints, 0.0);
-  const Box domain{glm::dvec3(-1.0), glm::dvec3(1.0)};
-  const GridSource source(slab.block);
-  const RayCaster caster(source, 0.36);
-  const Subdomain sub{source.bounds(), domain};
+  SlabBesideCli g;
   for (const MeshingVariant& variant : meshing_variants())
     for (const bool background : {false, true}) {
       SCOPED_TRACE(std::string(variant.name) + (background ? ", background" : ", synchronous"));
@@ -470,13 +475,13 @@ TEST(Adaptor, GridBlocksPublishTheMeshOfTheCommandLinePipelineOnBothPaths) {
           temp_dir(std::string("grid_as_cli_") + variant.name + (background ? "_b" : "_s"));
       const std::string options =
           std::string("{") + variant.keys + grid_options(dir, background).substr(1);
-      auto a = make_grid_adaptor(options, slab);
+      auto a = make_grid_adaptor(options, g.slab);
       if (!a) return;
       EXPECT_TRUE(a->execute(1, 0.0)) << a->last_error();
       EXPECT_EQ(a->last_report().background, background && thread_multiple());
       EXPECT_TRUE(a->finalize()) << a->last_error();
 
-      expect_cli_mesh_published(caster, sub, variant.meshing, dir, 1);
+      expect_cli_mesh_published(g.caster, g.sub, variant.meshing, dir, 1);
       if (rank_of() == 0) expect_on_the_slab_sphere(testing::published_mesh(dir, 1), 0.36);
     }
 }
@@ -485,15 +490,11 @@ TEST(Adaptor, GridBlocksPublishTheMeshOfTheCommandLinePipelineOnBothPaths) {
 // threads serve the merge's samples), the synchronous ones publish the trimmed views (the
 // solver would wait for the merge).
 TEST(Adaptor, ByDefaultBackgroundStepsAreMergedAndSynchronousOnesNot) {
-  GridSlab slab(kSlabPoints, 0.0);
-  const Box domain{glm::dvec3(-1.0), glm::dvec3(1.0)};
-  const GridSource source(slab.block);
-  const RayCaster caster(source, 0.36);
-  const Subdomain sub{source.bounds(), domain};
+  SlabBesideCli g;
   for (const bool background : {false, true}) {
     SCOPED_TRACE(background ? "background" : "synchronous");
     const std::string dir = temp_dir(std::string("auto_merge_") + (background ? "b" : "s"));
-    auto a = make_grid_adaptor(grid_options(dir, background), slab);
+    auto a = make_grid_adaptor(grid_options(dir, background), g.slab);
     if (!a) return;
     EXPECT_TRUE(a->execute(1, 0.0)) << a->last_error();
     const bool merged = background && thread_multiple();
@@ -501,7 +502,7 @@ TEST(Adaptor, ByDefaultBackgroundStepsAreMergedAndSynchronousOnesNot) {
     EXPECT_TRUE(a->finalize()) << a->last_error();
     MeshingOptions meshing;
     meshing.merging.enabled = merged;
-    expect_cli_mesh_published(caster, sub, meshing, dir, 1);
+    expect_cli_mesh_published(g.caster, g.sub, meshing, dir, 1);
     if (rank_of() == 0) {  // merged: one closed surface, V − E + F = 2 with E = 3F/2
       const StepMetadata meta = testing::published_step(dir, 1);
       EXPECT_EQ(meta.triangles == 2 * (meta.vertices - 2), merged)

@@ -369,10 +369,9 @@ std::vector<std::vector<std::uint8_t>> gather(MPI_Comm comm,
 }
 
 // Per ray, the hits of all answers by depth; each run of hits within `tolerance` of its first
-// (a hit on a shared face, seen by two ranks or two blocks) becomes the one whose normal faces
-// the viewer most (smallest normal · dir; then the smaller normal, component by component) —
-// the rule by which one caster merges its own duplicates (RayCaster), so that a ray lying in a
-// face plane between ranks, which both answer, keeps the hit that one process keeps.
+// (a hit on a shared face, seen by two ranks or two blocks) becomes the one kept_before chooses,
+// as one caster merges its own duplicates, so that a ray lying in a face plane between ranks,
+// which both answer, keeps the hit that one process keeps.
 RayHitList merge_hit_lists(const std::vector<RayHitList>& answers,
                            std::span<const SamplePoint> points, std::span<const View> views,
                            double tolerance) {
@@ -383,9 +382,6 @@ RayHitList merge_hit_lists(const std::vector<RayHitList>& answers,
     glm::vec3 normal;
     float scalar;
   };
-  const auto normal_less = [](const glm::vec3& a, const glm::vec3& b) {
-    return std::tie(a.x, a.y, a.z) < std::tie(b.x, b.y, b.z);
-  };
   RayHitList merged;
   merged.offsets.reserve(points.size() + 1);
   merged.offsets.push_back(0);
@@ -395,30 +391,23 @@ RayHitList merge_hit_lists(const std::vector<RayHitList>& answers,
     for (const RayHitList& a : answers)
       for (std::uint32_t s = a.offsets[k]; s < a.offsets[k + 1]; ++s)
         hits.push_back({a.depth[s], a.normal[s], a.scalar.empty() ? 0.0f : a.scalar[s]});
-    std::sort(hits.begin(), hits.end(), [&](const Hit& a, const Hit& b) {
+    std::sort(hits.begin(), hits.end(), [](const Hit& a, const Hit& b) {
       return a.depth != b.depth ? a.depth < b.depth : normal_less(a.normal, b.normal);
     });
     const glm::vec3 dir(views[points[k].view].dir);
-    std::uint32_t kept = 0;
     for (std::size_t i = 0; i < hits.size();) {
-      std::size_t end = i + 1, best = i;
+      std::size_t end = i + 1;
       while (end < hits.size() && double(hits[end].depth) - double(hits[i].depth) <= tolerance)
         ++end;
-      float best_dot = glm::dot(hits[i].normal, dir);
-      for (std::size_t m = i + 1; m < end; ++m) {
-        const float dot = glm::dot(hits[m].normal, dir);
-        if (dot < best_dot || (dot == best_dot && normal_less(hits[m].normal, hits[best].normal))) {
-          best = m;
-          best_dot = dot;
-        }
-      }
-      merged.depth.push_back(hits[best].depth);
-      merged.normal.push_back(hits[best].normal);
-      if (with_scalar) merged.scalar.push_back(hits[best].scalar);
-      ++kept;
+      const Hit& h = *std::min_element(
+          hits.begin() + i, hits.begin() + end,
+          [&](const Hit& a, const Hit& b) { return kept_before(a.normal, b.normal, dir); });
+      merged.depth.push_back(h.depth);
+      merged.normal.push_back(h.normal);
+      if (with_scalar) merged.scalar.push_back(h.scalar);
       i = end;
     }
-    merged.offsets.push_back(merged.offsets.back() + kept);
+    merged.offsets.push_back(std::uint32_t(merged.depth.size()));
   }
   return merged;
 }

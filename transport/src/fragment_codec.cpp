@@ -232,9 +232,8 @@ struct ScalarRange {
   float lo = 0.0f, hi = 0.0f;
 };
 ScalarRange scalar_range(const LdiFragment& f, int bits) {
-  float lo = f.scalar_lo, hi = f.scalar_hi;
-  for (float x : f.scalar)
-    if (std::isfinite(x)) widen_scalar_range(lo, hi, x, x);
+  float lo, hi;
+  fragment_scalar_range(f, lo, hi);
   ScalarRange r;
   if (!std::isnan(lo)) {
     r.lo = lo + 0.0f;

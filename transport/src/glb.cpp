@@ -13,6 +13,7 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
+#include <deque>
 #include <limits>
 #include <memory>
 #include <new>
@@ -461,79 +462,94 @@ Status encode_primitive(draco::Mesh& dm, Json& json, std::vector<std::uint8_t>& 
   return Status::ok();
 }
 
-// One surface's triangles (`tris`, views `tri_view`) as the JSON and BIN of a GLB of one mesh
-// (GltfEncoder's), with `position_bits` and the scalars mapped from [scalar_lo, scalar_hi].
-Status encode_surface(const Mesh& mesh, const std::vector<std::uint32_t>& tris,
-                      const std::vector<std::uint8_t>& tri_view, const GlbOptions& options,
-                      int position_bits, float scalar_lo, float scalar_hi, Json& json,
-                      std::vector<std::uint8_t>& bin) {
-  // Large meshes in parts, encoded concurrently and joined as primitives of one mesh. Each part
-  // takes the whole mesh's position bits over its own (smaller) box: its step is at most the
-  // whole mesh's, so every vertex keeps the stated bound (a vertex two parts share is written
-  // by both, each copy within the bound).
-  const std::size_t triangles = tri_view.size();
-  const std::size_t parts = std::min(kMaxParts, (triangles + kPartTriangles - 1) / kPartTriangles);
-  if (parts <= 1) {
-    draco::Mesh dm;
-    LDIMESH_RETURN_IF_ERROR(
-        build_draco_mesh(mesh, tris, tri_view, options, position_bits, scalar_lo, scalar_hi, dm));
-    LDIMESH_RETURN_IF_ERROR(encode_primitive(dm, json, bin));
-  } else {
-    const std::vector<std::uint8_t> part = split_into_parts(mesh, tris, parts);
-    const BoundingBox box = bounding_box(mesh.positions);
-    std::vector<Json> jsons(parts);
-    std::vector<std::vector<std::uint8_t>> bins(parts);
-    std::vector<Status> status(parts, Status::ok());
-    // Threads of its own (this library needs no TBB): each takes the next part.
-    std::atomic<std::size_t> next{0};
-    const auto encode_parts = [&] {
-      for (std::size_t k = next++; k < parts; k = next++)
-        status[k] = guard("glb: part " + std::to_string(k) + ": ", [&] {
-          Mesh sub;
-          std::vector<std::uint32_t> sub_tris;
-          std::vector<std::uint8_t> sub_view;
-          extract_part(mesh, tris, tri_view, part, std::uint8_t(k), sub, sub_tris, sub_view);
-          if (sub_view.empty()) return Status::ok();  // an empty slab (all in one bin elsewhere)
-          // Two points no face uses, at the whole mesh's box corners and scalar range: every
-          // part quantizes the same box (and range) on the same grid, so a vertex two parts
-          // share decodes to the same point in both (Draco's Edgebreaker keeps no unused point
-          // in its output).
-          sub.positions.insert(sub.positions.end(), {glm::vec3(box.lo), glm::vec3(box.hi)});
-          sub.normals.insert(sub.normals.end(), 2, glm::vec3(0.0f, 0.0f, 1.0f));
-          if (!sub.scalars.empty()) sub.scalars.insert(sub.scalars.end(), {scalar_lo, scalar_hi});
-          draco::Mesh dm;
-          LDIMESH_RETURN_IF_ERROR(build_draco_mesh(sub, sub_tris, sub_view, options, position_bits,
-                                                   scalar_lo, scalar_hi, dm));
-          return encode_primitive(dm, jsons[k], bins[k]);
-        });
-    };
-    const std::size_t threads =
-        std::min(parts, std::size_t(options.threads > 0 ? options.threads : usable_cores()));
-    {
-      // Joined however this block is left; a thread that cannot be started (no memory, no
-      // thread) leaves its parts to the others.
-      std::vector<std::jthread> pool;
-      pool.reserve(threads);
-      try {
-        for (std::size_t t = 1; t < threads; ++t)
-          pool.emplace_back(encode_parts);
-      } catch (...) {
-      }
-      encode_parts();
-    }
-    for (const Status& s : status)
-      LDIMESH_RETURN_IF_ERROR(s);
-    for (std::size_t k = 0; k < parts; ++k) {
-      if (jsons[k].is_null()) continue;
-      if (json.is_null()) {
-        json = std::move(jsons[k]);
-        bin = std::move(bins[k]);
-      } else {
-        append_part(json, bin, jsons[k], bins[k]);
-      }
-    }
-  }
+// One surface of a GLB (the whole mesh, or GlbOptions::surfaces' part of it): its faces, and
+// the slabs they are encoded in when there are more than kPartTriangles (each slab a primitive
+// of the surface's glTF mesh). Each part takes the whole mesh's position bits over its own
+// (smaller) box: its step is at most the whole mesh's, so every vertex keeps the stated bound (a
+// vertex two parts share is written by both, each copy within the bound).
+struct Surface {
+  std::size_t index = 0;  // in GlbOptions::surfaces
+  // Its faces: the mesh's own, or `owned`'s (a surface extracted from the mesh).
+  const Mesh* mesh = nullptr;
+  const std::vector<std::uint32_t>* tris = nullptr;
+  const std::vector<std::uint8_t>* tri_view = nullptr;
+  Mesh owned;
+  std::vector<std::uint32_t> owned_tris;
+  std::vector<std::uint8_t> owned_view;
+  std::size_t parts = 1;
+  std::vector<std::uint8_t> part;  // each face's slab, where parts > 1
+  BoundingBox box;                 // where parts > 1
+  // Per part: its GLB (GltfEncoder's JSON and BIN; null JSON for an empty slab) or its error.
+  std::vector<Json> jsons;
+  std::vector<std::vector<std::uint8_t>> bins;
+  std::vector<Status> status;
+};
 
+// Part `k` of `s` as a GLB of one Draco primitive (in s.jsons[k], s.bins[k]).
+Status encode_part(Surface& s, std::size_t k, const GlbOptions& options, int position_bits,
+                   float scalar_lo, float scalar_hi) {
+  draco::Mesh dm;
+  if (s.parts == 1) {
+    LDIMESH_RETURN_IF_ERROR(build_draco_mesh(*s.mesh, *s.tris, *s.tri_view, options, position_bits,
+                                             scalar_lo, scalar_hi, dm));
+    return encode_primitive(dm, s.jsons[k], s.bins[k]);
+  }
+  Mesh sub;
+  std::vector<std::uint32_t> sub_tris;
+  std::vector<std::uint8_t> sub_view;
+  extract_part(*s.mesh, *s.tris, *s.tri_view, s.part, std::uint8_t(k), sub, sub_tris, sub_view);
+  if (sub_view.empty()) return Status::ok();  // an empty slab (all in one bin elsewhere)
+  // Two points no face uses, at the surface's box corners and the scalar range: every part
+  // quantizes the same box (and range) on the same grid, so a vertex two parts share decodes to
+  // the same point in both (Draco's Edgebreaker keeps no unused point in its output).
+  sub.positions.insert(sub.positions.end(), {glm::vec3(s.box.lo), glm::vec3(s.box.hi)});
+  sub.normals.insert(sub.normals.end(), 2, glm::vec3(0.0f, 0.0f, 1.0f));
+  if (!sub.scalars.empty()) sub.scalars.insert(sub.scalars.end(), {scalar_lo, scalar_hi});
+  LDIMESH_RETURN_IF_ERROR(
+      build_draco_mesh(sub, sub_tris, sub_view, options, position_bits, scalar_lo, scalar_hi, dm));
+  return encode_primitive(dm, s.jsons[k], s.bins[k]);
+}
+
+// Encodes every part of every surface, concurrently: Draco's encoder runs on one thread, and a
+// root that encodes a million triangles on one core falls behind its job. Threads of its own
+// (this library needs no TBB), each taking the next part; the result does not depend on them.
+Status encode_parts(std::deque<Surface>& surfaces, const GlbOptions& options, int position_bits,
+                    float scalar_lo, float scalar_hi) {
+  std::vector<std::pair<Surface*, std::size_t>> jobs;
+  for (Surface& s : surfaces) {
+    s.jsons.resize(s.parts);
+    s.bins.resize(s.parts);
+    s.status.assign(s.parts, Status::ok());
+    for (std::size_t k = 0; k < s.parts; ++k)
+      jobs.emplace_back(&s, k);
+  }
+  std::atomic<std::size_t> next{0};
+  const auto work = [&] {
+    for (std::size_t j = next++; j < jobs.size(); j = next++) {
+      Surface* s = jobs[j].first;
+      const std::size_t k = jobs[j].second;
+      s->status[k] = guard("glb: part " + std::to_string(k) + ": ", [&] {
+        return encode_part(*s, k, options, position_bits, scalar_lo, scalar_hi);
+      });
+    }
+  };
+  const std::size_t threads =
+      std::min(jobs.size(), std::size_t(options.threads > 0 ? options.threads : usable_cores()));
+  {
+    // Joined however this block is left; a thread that cannot be started (no memory, no
+    // thread) leaves its parts to the others.
+    std::vector<std::jthread> pool;
+    pool.reserve(threads);
+    try {
+      for (std::size_t t = 1; t < threads; ++t)
+        pool.emplace_back(work);
+    } catch (...) {
+    }
+    work();
+  }
+  for (const Surface& s : surfaces)
+    for (const Status& st : s.status)
+      LDIMESH_RETURN_IF_ERROR(st);
   return Status::ok();
 }
 
@@ -599,33 +615,62 @@ Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
     result.scalar_max = scalar_hi;
   }
 
-  Json json;
-  std::vector<std::uint8_t> bin;
+  // The surfaces: the whole mesh, or each of GlbOptions::surfaces (its vertices as they are, in
+  // their order) as a mesh on a node of its own; large ones in slabs.
+  std::deque<Surface> surfaces;
   if (options.surfaces.size() <= 1) {
-    LDIMESH_RETURN_IF_ERROR(encode_surface(mesh, tris, tri_view, options, result.position_bits,
-                                           scalar_lo, scalar_hi, json, bin));
+    Surface& s = surfaces.emplace_back();
+    s.mesh = &mesh;
+    s.tris = &tris;
+    s.tri_view = &tri_view;
   } else {
-    // Each surface a mesh on a node of its own (its vertices as they are, in their order).
     std::vector<std::uint32_t> starts(options.surfaces.begin(), options.surfaces.end());
     starts.push_back(std::uint32_t(mesh.vertex_count()));
     for (std::size_t k = 0; k + 1 < starts.size(); ++k) {
-      Mesh sub;
-      std::vector<std::uint32_t> sub_tris;
-      std::vector<std::uint8_t> sub_view;
-      LDIMESH_RETURN_IF_ERROR(
-          extract_surface(mesh, tris, tri_view, starts[k], starts[k + 1], sub, sub_tris, sub_view));
-      if (sub_view.empty()) continue;
-      Json part;
-      std::vector<std::uint8_t> part_bin;
-      LDIMESH_RETURN_IF_ERROR(encode_surface(sub, sub_tris, sub_view, options, result.position_bits,
-                                             scalar_lo, scalar_hi, part, part_bin));
-      if (json.is_null()) {
-        json = std::move(part);
-        bin = std::move(part_bin);
-        json["nodes"][0]["extras"] = surface_extras(k);
-      } else {
-        append_surface(json, bin, part, part_bin, k);
+      Surface& s = surfaces.emplace_back();
+      s.index = k;
+      LDIMESH_RETURN_IF_ERROR(extract_surface(mesh, tris, tri_view, starts[k], starts[k + 1],
+                                              s.owned, s.owned_tris, s.owned_view));
+      if (s.owned_view.empty()) {  // no faces: no node
+        surfaces.pop_back();
+        continue;
       }
+      s.mesh = &s.owned;
+      s.tris = &s.owned_tris;
+      s.tri_view = &s.owned_view;
+    }
+  }
+  for (Surface& s : surfaces) {
+    s.parts = std::min(kMaxParts, (s.tri_view->size() + kPartTriangles - 1) / kPartTriangles);
+    if (s.parts > 1) {
+      s.part = split_into_parts(*s.mesh, *s.tris, s.parts);
+      s.box = bounding_box(s.mesh->positions);
+    }
+  }
+  LDIMESH_RETURN_IF_ERROR(
+      encode_parts(surfaces, options, result.position_bits, scalar_lo, scalar_hi));
+
+  // Joined: each surface's parts as primitives of its mesh, the surfaces as meshes and nodes.
+  Json json;
+  std::vector<std::uint8_t> bin;
+  for (Surface& s : surfaces) {
+    Json surface;
+    std::vector<std::uint8_t> surface_bin;
+    for (std::size_t k = 0; k < s.parts; ++k) {
+      if (s.jsons[k].is_null()) continue;
+      if (surface.is_null()) {
+        surface = std::move(s.jsons[k]);
+        surface_bin = std::move(s.bins[k]);
+      } else {
+        append_part(surface, surface_bin, s.jsons[k], s.bins[k]);
+      }
+    }
+    if (json.is_null()) {
+      json = std::move(surface);
+      bin = std::move(surface_bin);
+      if (options.surfaces.size() > 1) json["nodes"][0]["extras"] = surface_extras(s.index);
+    } else {
+      append_surface(json, bin, surface, surface_bin, s.index);
     }
   }
 

@@ -127,9 +127,8 @@ void agree_on_scalar_ranges(MPI_Comm comm, std::vector<LdiFragment>& fragments) 
   // lo and −hi per fragment, reduced by MIN; +∞ where unset.
   std::vector<double> ends(2 * fragments.size(), INFINITY);
   for (std::size_t v = 0; v < fragments.size(); ++v) {
-    float lo = fragments[v].scalar_lo, hi = fragments[v].scalar_hi;
-    for (float x : fragments[v].scalar)
-      if (std::isfinite(x)) widen_scalar_range(lo, hi, x, x);
+    float lo, hi;
+    fragment_scalar_range(fragments[v], lo, hi);
     if (std::isnan(lo)) continue;
     ends[2 * v] = lo;
     ends[2 * v + 1] = -double(hi);

@@ -76,6 +76,7 @@ struct GridView {
   std::array<const double*, 3> coords;  // all null: uniform
   bool rectilinear;
   std::array<std::int64_t, 3> dims;  // points per axis, ghosts included
+  glm::dvec3 inv_2h;                 // 1 / (2 spacing): the normals' central differences
 
   double coord(int a, std::int64_t i) const {
     return rectilinear ? coords[a][i] : origin[a] + double(i) * spacing[a];
@@ -196,7 +197,6 @@ class CellNormals {
         a_[k][m] = v2 - v0;
         b_[k][m] = (v3 - v2) - (v1 - v0);
       }
-      inv_2h_[k] = 0.5 / g.spacing[k];
     }
   }
 
@@ -209,7 +209,7 @@ class CellNormals {
         const double e0 = a_[k][0] + p[k] * b_[k][0], e1 = a_[k][1] + p[k] * b_[k][1];
         const double e2 = a_[k][2] + p[k] * b_[k][2], e3 = a_[k][3] + p[k] * b_[k][3];
         const double lo = e0 + p[u] * (e1 - e0), hi = e2 + p[u] * (e3 - e2);
-        grad[k] = (lo + p[w] * (hi - lo)) * inv_2h_[k];
+        grad[k] = (lo + p[w] * (hi - lo)) * g_.inv_2h[k];
       }
       if (finite(grad)) return grad;
     }
@@ -263,7 +263,6 @@ class CellNormals {
   double iso_;
   bool fast_ = false;
   double a_[3][4], b_[3][4];  // per axis and edge across it (u the lower bit), see above
-  glm::dvec3 inv_2h_{0.0};
 };
 
 // The value on a cell face crossed by an axis ray: the bilinear interpolation of the face's
@@ -1542,9 +1541,9 @@ std::size_t GridSource::brick_count() const {
 std::unique_ptr<AxisBinding> GridSource::bind_axis(double isovalue) const {
   auto bind_typed = [&](const auto* values) -> std::unique_ptr<AxisBinding> {
     using T = std::remove_cv_t<std::remove_pointer_t<decltype(values)>>;
-    const GridView<T> g{values,         block_.strides, block_.origin,
-                        block_.spacing, block_.coords,  block_.coords[0] != nullptr,
-                        block_.dims};
+    const GridView<T> g{values,         block_.strides,      block_.origin,
+                        block_.spacing, block_.coords,       block_.coords[0] != nullptr,
+                        block_.dims,    0.5 / block_.spacing};
     return std::make_unique<GridAxisBinding<T>>(g, isovalue, first_cell_, last_cell_, bricks_,
                                                 brick_cells_);
   };
@@ -1556,9 +1555,9 @@ std::unique_ptr<AxisBinding> GridSource::bind_axis(double isovalue) const {
 std::unique_ptr<GeometryBinding> GridSource::bind(RTCDevice device, double isovalue) const {
   auto bind_typed = [&](const auto* values) {
     using T = std::remove_cv_t<std::remove_pointer_t<decltype(values)>>;
-    const GridView<T> g{values,         block_.strides, block_.origin,
-                        block_.spacing, block_.coords,  block_.coords[0] != nullptr,
-                        block_.dims};
+    const GridView<T> g{values,         block_.strides,      block_.origin,
+                        block_.spacing, block_.coords,       block_.coords[0] != nullptr,
+                        block_.dims,    0.5 / block_.spacing};
     return bind_grid(device, g, isovalue, first_cell_, last_cell_, bricks_, brick_cells_);
   };
   if (block_.type == ScalarType::float32)

@@ -14,6 +14,13 @@ void widen_scalar_range(float& lo, float& hi, float a, float b) {
   if (!std::isnan(b)) hi = std::isnan(hi) ? b : std::max(hi, b);
 }
 
+void fragment_scalar_range(const LdiFragment& f, float& lo, float& hi) {
+  lo = f.scalar_lo;
+  hi = f.scalar_hi;
+  for (float x : f.scalar)
+    if (std::isfinite(x)) widen_scalar_range(lo, hi, x, x);
+}
+
 LdiFragment make_empty_fragment(const View& view, std::uint32_t view_index) {
   LdiFragment f;
   f.view = view_index;

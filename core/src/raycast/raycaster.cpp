@@ -30,17 +30,8 @@ namespace {
 
 // Sorts one ray's hits by depth and merges hits closer than `tolerance` (a root found by both
 // primitives that share a face, or two roots closer than rounding can tell apart): each run of
-// hits within `tolerance` of its first becomes one hit, the one whose normal faces the viewer
-// most (smallest normal · dir; then the smaller normal, component by component). Where a
-// gradient jumps at a cell face, the duplicates' normals differ in their component along the
-// ray, so the choice does not hang on rounding, and the result does not depend on the order in
-// which the primitives were visited.
+// hits within `tolerance` of its first becomes the one kept_before chooses.
 std::size_t sort_and_merge(std::span<RayHit> hits, double tolerance, glm::dvec3 dir) {
-  const auto normal_less = [](const glm::vec3& a, const glm::vec3& b) {
-    if (a.x != b.x) return a.x < b.x;
-    if (a.y != b.y) return a.y < b.y;
-    return a.z < b.z;
-  };
   const auto less = [&](const RayHit& a, const RayHit& b) {
     if (a.t != b.t) return a.t < b.t;
     return normal_less(a.normal, b.normal);
@@ -59,19 +50,9 @@ std::size_t sort_and_merge(std::span<RayHit> hits, double tolerance, glm::dvec3 
     std::size_t end = k + 1;
     while (end < hits.size() && hits[end].t - first <= tolerance)
       ++end;
-    std::size_t best = k;
-    if (end - k > 1) {  // duplicates: the one described above
-      float best_dot = glm::dot(hits[k].normal, d);
-      for (std::size_t m = k + 1; m < end; ++m) {
-        const float dot = glm::dot(hits[m].normal, d);
-        if (dot < best_dot || (dot == best_dot && normal_less(hits[m].normal, hits[best].normal))) {
-          best = m;
-          best_dot = dot;
-        }
-      }
-    }
-    if (kept != best) hits[kept] = hits[best];
-    ++kept;
+    hits[kept++] = *std::min_element(
+        hits.begin() + k, hits.begin() + end,
+        [&](const RayHit& a, const RayHit& b) { return kept_before(a.normal, b.normal, d); });
     k = end;
   }
   return kept;

@@ -41,6 +41,10 @@ struct LdiFragment {
 // The union of the scalar ranges [lo, hi] and [a, b], NaN ends unset (the other's, or NaN).
 void widen_scalar_range(float& lo, float& hi, float a, float b);
 
+// The fragment's scalar range (scalar_lo, scalar_hi) widened to hold its finite scalars; NaN
+// ends where it has neither: what the ranks agree on and the codec quantizes over.
+void fragment_scalar_range(const LdiFragment& f, float& lo, float& hi);
+
 // An empty fragment of `view` (what a rank with nothing to cast sends).
 LdiFragment make_empty_fragment(const View& view, std::uint32_t view_index);
 
