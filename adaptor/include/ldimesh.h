@@ -120,7 +120,7 @@ typedef struct ldimesh_step_report {
   uint64_t nonfinite_values;  /* NaN/Inf field values met on all ranks (root only; synchronous
                                  path) */
   int background;             /* 1: snapshotted, cast and reduced on the caster thread */
-  uint64_t snapshot_bytes;    /* this rank's copy of its blocks (background path) */
+  uint64_t snapshot_bytes;    /* what this rank's copy of its blocks holds (background path) */
 } ldimesh_step_report;
 
 /* Collective. Creates the adaptor from a JSON options document ("" or NULL: defaults). On

@@ -1,6 +1,7 @@
 #include "ldimesh/adaptor.hpp"
 
 #include <array>
+#include <atomic>
 #include <chrono>
 #include <condition_variable>
 #include <cstdio>
@@ -10,11 +11,15 @@
 #include <mutex>
 #include <new>
 #include <optional>
+#include <span>
 #include <sstream>
 #include <stdexcept>
 #include <thread>
 #include <type_traits>
 #include <vector>
+
+#include <sys/mman.h>
+#include <unistd.h>
 
 #include "ldimesh/core/base/timing.hpp"
 #include "ldimesh/core/field/grid_source.hpp"
@@ -52,51 +57,132 @@ std::size_t scalar_bytes(ScalarType type) {
   return type == ScalarType::float32 ? sizeof(float) : sizeof(double);
 }
 
-// A block's arrays as copied at a due step (background path), kept from step to step so that
-// later copies reuse their pages.
-struct BlockCopy {
-  std::vector<unsigned char> values;
-  std::vector<unsigned char> colour;  // the colour field's, when the block has one
-  std::array<std::vector<double>, 3> coords;
-  std::vector<double> geometry;  // an element block's corners or geometry nodes
-  std::size_t bytes() const {
-    return values.size() + colour.size() +
-           (coords[0].size() + coords[1].size() + coords[2].size() + geometry.size()) *
-               sizeof(double);
+// One array of a block as copied at a due step (background path), of which a step may copy
+// only some stretches (a grid block's needed bricks): anonymous memory, kept from step to step
+// so that later copies reuse its pages, whose pages the step did not write are given back to
+// the system. So the memory it holds is what the step copied, rounded to pages, not the whole
+// array.
+class SparseCopy {
+ public:
+  SparseCopy() = default;
+  SparseCopy(SparseCopy&& other) noexcept { *this = std::move(other); }
+  SparseCopy& operator=(SparseCopy&& other) noexcept {
+    std::swap(data_, other.data_);
+    std::swap(size_, other.size_);
+    std::swap(now_, other.now_);
+    std::swap(before_, other.before_);
+    return *this;
   }
+  ~SparseCopy() { unmap(); }
+
+  // A step's copy of `bytes` bytes begins (a new mapping where the size changed, else the old
+  // pages). Throws std::bad_alloc where the system refuses the memory.
+  unsigned char* begin(std::size_t bytes) {
+    if (bytes != size_) {
+      unmap();
+      if (bytes > 0) {
+        void* p = mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+        if (p == MAP_FAILED) throw std::bad_alloc();
+        data_ = static_cast<unsigned char*>(p);
+      }
+      size_ = bytes;
+      before_.assign(pages(), 0);
+    }
+    now_.assign(pages(), 0);
+    return data_;
+  }
+  // Bytes offset … offset + length − 1 were written by this step (any thread).
+  void written(std::size_t offset, std::size_t length) {
+    if (length == 0) return;
+    for (std::size_t p = offset / page(); p <= (offset + length - 1) / page(); ++p)
+      std::atomic_ref<std::uint8_t>(now_[p]).store(1, std::memory_order_relaxed);
+  }
+  // After the step's copies: gives back the pages that the previous step wrote and this one did
+  // not, and returns the bytes of the pages this step wrote.
+  std::size_t finish() {
+    std::size_t held = 0;
+    for (std::size_t p = 0; p < now_.size();) {
+      held += now_[p] ? std::min(page(), size_ - p * page()) : 0;
+      if (now_[p] || !before_[p]) {
+        ++p;
+        continue;
+      }
+      const std::size_t first = p;
+      while (p < now_.size() && !now_[p])
+        ++p;
+      madvise(data_ + first * page(), std::min(p * page(), size_) - first * page(), MADV_DONTNEED);
+    }
+    std::swap(now_, before_);
+    return held;
+  }
+  const unsigned char* data() const { return data_; }
+
+ private:
+  static std::size_t page() {
+    static const std::size_t size = std::size_t(sysconf(_SC_PAGESIZE));
+    return size;
+  }
+  std::size_t pages() const { return (size_ + page() - 1) / page(); }
+  void unmap() {
+    if (data_) munmap(data_, size_);
+    data_ = nullptr;
+    size_ = 0;
+  }
+  unsigned char* data_ = nullptr;
+  std::size_t size_ = 0;
+  std::vector<std::uint8_t> now_, before_;  // per page: written by this step, by the previous one
 };
 
-// A grid block's array of `type` at `values` (its points, ghosts included) into `out`,
-// contiguous with x fastest.
-void copy_points(const GridBlock& block, const void* values, ScalarType type,
-                 std::vector<unsigned char>& out) {
+// A block's arrays as copied at a due step (background path).
+struct BlockCopy {
+  SparseCopy values;
+  SparseCopy colour;  // the colour field's, when the block has one
+  std::array<std::vector<double>, 3> coords;
+  std::vector<double> geometry;  // an element block's corners or geometry nodes
+  std::size_t bytes = 0;         // what this step's copy holds
+};
+
+// Of a grid block's array of `type` at `values` (its points, ghosts included), the points that
+// `source` (over the block) reads with the bricks `held` into `out`, at their places in an array
+// with x fastest and no gaps; the others are not written. Returns the bytes the copy holds.
+std::size_t copy_points(const GridBlock& block, const GridSource& source,
+                        const std::vector<std::uint8_t>& held, const void* values, ScalarType type,
+                        SparseCopy& out) {
   const std::int64_t nx = block.dims[0], ny = block.dims[1], nz = block.dims[2];
   const std::size_t size = scalar_bytes(type);
   std::array<std::int64_t, 3> stride = block.strides;
   if (stride == std::array<std::int64_t, 3>{0, 0, 0}) stride = {1, nx, nx * ny};
-  out.resize(std::size_t(nx * ny * nz) * size);
+  unsigned char* dst = out.begin(std::size_t(nx * ny * nz) * size);
   const auto* src = static_cast<const unsigned char*>(values);
-  unsigned char* dst = out.data();
-  if (stride == std::array<std::int64_t, 3>{1, nx, nx * ny}) {
-    std::memcpy(dst, src, out.size());
-  } else {
-    for (std::int64_t k = 0; k < nz; ++k)
-      for (std::int64_t j = 0; j < ny; ++j)
-        for (std::int64_t i = 0; i < nx; ++i)
-          std::memcpy(dst + std::size_t((k * ny + j) * nx + i) * size,
-                      src + (i * stride[0] + j * stride[1] + k * stride[2]) * std::int64_t(size),
-                      size);
-  }
+  source.for_each_needed_run(
+      held, [&](std::int64_t j, std::int64_t k, std::int64_t i0, std::int64_t i1) {
+        const std::size_t at = std::size_t((k * ny + j) * nx + i0) * size,
+                          length = std::size_t(i1 - i0 + 1) * size;
+        const unsigned char* from =
+            src + (i0 * stride[0] + j * stride[1] + k * stride[2]) * std::int64_t(size);
+        if (stride[0] == 1) {
+          std::memcpy(dst + at, from, length);
+        } else {
+          for (std::int64_t i = 0; i <= i1 - i0; ++i)
+            std::memcpy(dst + at + std::size_t(i) * size, from + i * stride[0] * std::int64_t(size),
+                        size);
+        }
+        out.written(at, length);
+      });
+  return out.finish();
 }
 
-// The grid block's points (ghosts included) and colour field, contiguous with x fastest, and its
-// coordinates.
-GridBlock copy_grid(const GridBlock& block, BlockCopy& copy) {
+// The points of the grid block that `source` (over it) reads for `isovalues`, and its colour
+// field's there, contiguous with x fastest; its coordinates; and in `held` the bricks copied.
+GridBlock copy_grid(const GridBlock& block, const GridSource& source,
+                    std::span<const double> isovalues, BlockCopy& copy,
+                    std::vector<std::uint8_t>& held) {
+  held = source.needed_bricks(isovalues);
   GridBlock out = block;
-  copy_points(block, block.values, block.type, copy.values);
+  copy.bytes = copy_points(block, source, held, block.values, block.type, copy.values);
   out.values = copy.values.data();
   if (block.colour) {
-    copy_points(block, block.colour, block.colour_type, copy.colour);
+    copy.bytes += copy_points(block, source, held, block.colour, block.colour_type, copy.colour);
     out.colour = copy.colour.data();
   }
   out.strides = {0, 0, 0};
@@ -104,6 +190,7 @@ GridBlock copy_grid(const GridBlock& block, BlockCopy& copy) {
     if (!block.coords[a]) continue;
     copy.coords[a].assign(block.coords[a], block.coords[a] + block.dims[a]);
     out.coords[a] = copy.coords[a].data();
+    copy.bytes += copy.coords[a].size() * sizeof(double);
   }
   return out;
 }
@@ -115,20 +202,23 @@ std::size_t geometry_doubles(const HexBlock& block) {
 }
 
 // An element block's nodal array of `type` at `values` into `out`, element after element without
-// gaps.
-void copy_nodal(const HexBlock& block, const void* values, ScalarType type,
-                std::vector<unsigned char>& out) {
+// gaps; returns the bytes copied.
+std::size_t copy_nodal(const HexBlock& block, const void* values, ScalarType type,
+                       SparseCopy& out) {
   const std::size_t n = std::size_t(block.order + 1) * (block.order + 1) * (block.order + 1);
   const std::size_t size = scalar_bytes(type);
   const std::size_t stride = block.element_stride == 0 ? n : block.element_stride;
-  out.resize(block.element_count * n * size);
+  const std::size_t bytes = block.element_count * n * size;
+  unsigned char* dst = out.begin(bytes);
   const auto* src = static_cast<const unsigned char*>(values);
   if (stride == n) {
-    std::memcpy(out.data(), src, out.size());
+    std::memcpy(dst, src, bytes);
   } else {
     for (std::size_t e = 0; e < block.element_count; ++e)
-      std::memcpy(out.data() + e * n * size, src + e * stride * size, n * size);
+      std::memcpy(dst + e * n * size, src + e * stride * size, n * size);
   }
+  out.written(0, bytes);
+  return out.finish();
 }
 
 // The high-order block's geometry, nodal values and colour field, element after element without
@@ -136,13 +226,14 @@ void copy_nodal(const HexBlock& block, const void* values, ScalarType type,
 HexBlock copy_hex(const HexBlock& block, BlockCopy& copy) {
   const double* geometry = block.geometry_order > 0 ? block.geometry : block.corners;
   copy.geometry.assign(geometry, geometry + geometry_doubles(block) * block.element_count);
-  copy_nodal(block, block.values, block.type, copy.values);
+  copy.bytes = copy.geometry.size() * sizeof(double) +
+               copy_nodal(block, block.values, block.type, copy.values);
   HexBlock out = block;
   out.corners = block.geometry_order > 0 ? nullptr : copy.geometry.data();
   out.geometry = block.geometry_order > 0 ? copy.geometry.data() : nullptr;
   out.values = copy.values.data();
   if (block.colour) {
-    copy_nodal(block, block.colour, block.colour_type, copy.colour);
+    copy.bytes += copy_nodal(block, block.colour, block.colour_type, copy.colour);
     out.colour = copy.colour.data();
   }
   out.element_stride = 0;
@@ -562,7 +653,9 @@ class AdaptorImpl final : public Adaptor {
   // ---- The background path: the solver waits for a copy of its blocks only.
 
   // Whether the domain is set, every block can be copied (grid and high-order blocks: a
-  // FieldSource cannot) and the copies fit memory_mb; `bytes` is their size.
+  // FieldSource cannot) and the whole blocks fit memory_mb; `bytes` is their size, a bound of
+  // the copy known before the field is read (a grid block's copy holds only what the step's
+  // isovalues need).
   bool snapshot_possible(std::size_t& bytes) const {
     bytes = 0;
     if (!has_domain_) return false;  // the synchronous path fails the step on every rank
@@ -587,7 +680,8 @@ class AdaptorImpl final : public Adaptor {
     return bytes <= (options_.memory_mb << 20);
   }
 
-  // Copies the blocks into the snapshot buffers (kept from step to step) and hands the step to
+  // Copies what the step reads of the blocks into the snapshot buffers (kept from step to step;
+  // copy_grid) and hands the step to
   // this rank's caster thread. Every rank does, even after a local failure (the caster thread
   // then sends empty fragments and the step fails everywhere, as on the synchronous path).
   Status hand_to_background(Job job, Clock::time_point start) {
@@ -606,15 +700,18 @@ class AdaptorImpl final : public Adaptor {
         const Block& b = blocks_[k];
         Block copy;
         copy.owned = b.owned;
-        if (b.grid) {
-          copy.grid = copy_grid(*b.grid, snapshot_[k]);
-          copy.source = std::make_shared<GridSource>(*copy.grid);
+        if (b.grid) {  // the bricks the step's isovalues need, with the points around them
+          const auto& live = static_cast<const GridSource&>(*b.source);
+          std::vector<std::uint8_t> held;
+          copy.grid = copy_grid(*b.grid, live, options_.isovalues, snapshot_[k], held);
+          copy.source =
+              std::make_shared<GridSource>(*copy.grid, live.brick_cells(), std::move(held));
         } else {  // the geometry as the block's source prepared it (converted and checked once)
           copy.hex = copy_hex(*b.hex, snapshot_[k]);
           copy.source = std::make_shared<HexElementSource>(
               static_cast<const HexElementSource&>(*b.source), *copy.hex);
         }
-        bytes += snapshot_[k].bytes();
+        bytes += snapshot_[k].bytes;
         snapshot_blocks_.push_back(std::move(copy));
       }
       return Status::ok();

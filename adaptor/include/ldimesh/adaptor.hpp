@@ -13,11 +13,12 @@
 // "coalesce").
 //
 // What the solver waits for depends on MPI's thread level. With MPI_THREAD_MULTIPLE (and
-// option "background", the default) execute() copies the grid and high-order blocks' arrays
-// (a snapshot; the solver may overwrite its arrays as soon as execute() returns) and returns:
+// option "background", the default) execute() copies what the step reads of the grid and
+// high-order blocks' arrays (a snapshot: of a grid block the bricks that hold the surface; the
+// solver may overwrite its arrays as soon as execute() returns) and returns:
 // the ray casting and the reduction run on a caster thread of every rank, over a duplicate of
 // the communicator. With less (MPI_THREAD_FUNNELED at least), or when a block is a FieldSource
-// (nothing to copy) or the copies would exceed "memory_mb", the step runs synchronously: the
+// (nothing to copy) or the whole blocks would exceed "memory_mb", the step runs synchronously: the
 // solver waits for the ray casting and the reduction, and MPI is called from the thread that
 // calls execute() only.
 //
@@ -57,8 +58,9 @@ struct StepReport {
   // they touch are left out of the surface; the step is still published.
   // (Synchronous path; in the background path the count comes with the published step.)
   std::uint64_t nonfinite_values = 0;
-  bool background = false;         // the step was snapshotted and runs on the caster thread
-  std::size_t snapshot_bytes = 0;  // this rank's copy of its blocks (background path)
+  bool background = false;  // the step was snapshotted and runs on the caster thread
+  // What this rank's copy of its blocks holds (background path; a grid block's in whole pages).
+  std::size_t snapshot_bytes = 0;
 };
 
 class Adaptor {

@@ -77,6 +77,8 @@ struct GridView {
   bool rectilinear;
   std::array<std::int64_t, 3> dims;  // points per axis, ghosts included
   glm::dvec3 inv_2h;                 // 1 / (2 spacing): the normals' central differences
+  // Per brick (x fastest): its points are there to be read; null: all are (GridSource::held).
+  const std::uint8_t* held = nullptr;
 
   double coord(int a, std::int64_t i) const {
     return rectilinear ? coords[a][i] : origin[a] + double(i) * spacing[a];
@@ -460,6 +462,58 @@ void scan_row(const GridView<T>& g, std::int64_t i0, std::int64_t i1, std::int64
   sum += sum0 + sum1;
 }
 
+// Brick n of `bricks` (x fastest) of a block's owned cells first … last.
+Brick brick_at(std::int64_t n, const std::array<std::int64_t, 3>& first,
+               const std::array<std::int64_t, 3>& last, const std::array<std::int64_t, 3>& bricks,
+               int brick_cells) {
+  const std::array<std::int64_t, 3> idx{n % bricks[0], (n / bricks[0]) % bricks[1],
+                                        n / (bricks[0] * bricks[1])};
+  Brick b;
+  for (int a = 0; a < 3; ++a) {
+    b.lo[a] = first[a] + idx[a] * brick_cells;
+    b.hi[a] = std::min(last[a], b.lo[a] + brick_cells - 1);
+  }
+  return b;
+}
+
+// The range [lo, hi] of the finite values among brick b's points (lo > hi: none), i.e. of the
+// trilinear interpolant over its cells that have no non-finite corner. Sets b.nonfinite where a
+// point is NaN or ±Inf, and returns how many of those b owns: a brick owns the points below its
+// upper layer of points along each axis, which the next brick reads as its lower layer, and the
+// last brick along an axis (ending at cell `last`) owns that layer too, so that every point read
+// is counted by exactly one brick.
+template <class T>
+std::uint64_t brick_range(const GridView<T>& grid, Brick& b,
+                          const std::array<std::int64_t, 3>& last, double& lo, double& hi) {
+  // The sum of the values is finite unless one of them is NaN or ±Inf (or the sum overflows): a
+  // closer look only then.
+  double sum = 0.0;
+  lo = INFINITY, hi = -INFINITY;
+  for (std::int64_t k = b.lo[2]; k <= b.hi[2] + 1; ++k)
+    for (std::int64_t j = b.lo[1]; j <= b.hi[1] + 1; ++j)
+      scan_row(grid, b.lo[0], b.hi[0] + 1, j, k, lo, hi, sum);
+  if (std::isfinite(sum)) [[likely]]
+    return 0;
+  std::array<std::int64_t, 3> owned_hi;
+  for (int a = 0; a < 3; ++a)
+    owned_hi[a] = b.hi[a] == last[a] ? b.hi[a] + 1 : b.hi[a];
+  lo = INFINITY, hi = -INFINITY;
+  std::uint64_t bad = 0;
+  for (std::int64_t k = b.lo[2]; k <= b.hi[2] + 1; ++k)
+    for (std::int64_t j = b.lo[1]; j <= b.hi[1] + 1; ++j)
+      for (std::int64_t i = b.lo[0]; i <= b.hi[0] + 1; ++i) {
+        const double v = grid.value(i, j, k);
+        if (std::isfinite(v)) {
+          lo = std::min(lo, v);
+          hi = std::max(hi, v);
+        } else {
+          b.nonfinite = true;
+          bad += i <= owned_hi[0] && j <= owned_hi[1] && k <= owned_hi[2];
+        }
+      }
+  return bad;
+}
+
 // The bricks of a block, which of them may hold the isosurface, and the non-finite count.
 struct BrickCulling {
   std::vector<Brick> bricks;         // all, x fastest
@@ -468,6 +522,8 @@ struct BrickCulling {
   std::size_t active_count = 0;
 };
 
+// Bricks the view does not hold (GridView::held) are not read: none of them is active or holds a
+// non-finite value (GridSource::needed_bricks).
 template <class T>
 BrickCulling cull_bricks(const GridView<T>& grid, double iso,
                          const std::array<std::int64_t, 3>& first,
@@ -479,47 +535,18 @@ BrickCulling cull_bricks(const GridView<T>& grid, double iso,
   out.bricks.resize(total);
   std::atomic<std::uint64_t> nonfinite{0};
   tbb::parallel_for(std::int64_t(0), total, [&](std::int64_t n) {
-    const std::array<std::int64_t, 3> idx{n % bricks[0], (n / bricks[0]) % bricks[1],
-                                          n / (bricks[0] * bricks[1])};
     Brick& b = out.bricks[n];
+    b = brick_at(n, first, last, bricks, brick_cells);
     for (int a = 0; a < 3; ++a) {
-      b.lo[a] = first[a] + idx[a] * brick_cells;
-      b.hi[a] = std::min(last[a], b.lo[a] + brick_cells - 1);
       b.box_lo[a] = grid.coord(a, b.lo[a]);
       b.box_hi[a] = grid.coord(a, b.hi[a] + 1);
     }
-    // Range of the trilinear interpolant over the brick = range of its points. The sum of the
-    // values is finite unless one of them is NaN or ±Inf (or the sum overflows): a closer look
-    // only then.
-    double lo = INFINITY, hi = -INFINITY, sum = 0.0;
-    for (std::int64_t k = b.lo[2]; k <= b.hi[2] + 1; ++k)
-      for (std::int64_t j = b.lo[1]; j <= b.hi[1] + 1; ++j)
-        scan_row(grid, b.lo[0], b.hi[0] + 1, j, k, lo, hi, sum);
-    if (!std::isfinite(sum)) [[unlikely]] {
-      // Non-finite points are left out of the range (their cells produce no hits, the others
-      // keep theirs) and counted by the one brick that owns them: a brick owns the points below
-      // its upper layer of points along each axis, which the next brick reads as its lower
-      // layer, and the last brick along an axis owns that layer too. So every point read is
-      // counted exactly once.
-      std::array<std::int64_t, 3> owned_hi;
-      for (int a = 0; a < 3; ++a)
-        owned_hi[a] = b.hi[a] == last[a] ? b.hi[a] + 1 : b.hi[a];
-      lo = INFINITY, hi = -INFINITY;
-      std::uint64_t bad = 0;
-      for (std::int64_t k = b.lo[2]; k <= b.hi[2] + 1; ++k)
-        for (std::int64_t j = b.lo[1]; j <= b.hi[1] + 1; ++j)
-          for (std::int64_t i = b.lo[0]; i <= b.hi[0] + 1; ++i) {
-            const double v = grid.value(i, j, k);
-            if (std::isfinite(v)) {
-              lo = std::min(lo, v);
-              hi = std::max(hi, v);
-            } else {
-              b.nonfinite = true;
-              bad += i <= owned_hi[0] && j <= owned_hi[1] && k <= owned_hi[2];
-            }
-          }
-      if (bad > 0) nonfinite.fetch_add(bad, std::memory_order_relaxed);
-    }
+    if (grid.held && !grid.held[n]) return;
+    // Range of the trilinear interpolant over the brick = range of its points. Non-finite points
+    // are left out of the range (their cells produce no hits, the others keep theirs).
+    double lo, hi;
+    if (const std::uint64_t bad = brick_range(grid, b, last, lo, hi); bad > 0)
+      nonfinite.fetch_add(bad, std::memory_order_relaxed);
     out.active[n] = lo <= iso && iso <= hi;
   });
   out.nonfinite = nonfinite.load();
@@ -568,15 +595,18 @@ std::unique_ptr<GeometryBinding> bind_grid(RTCDevice device, const GridView<T>& 
 template <class T>
 class GridAxisBinding final : public AxisBinding {
  public:
+  // `held`: the source's (GridSource::held_), kept alive for primitive_count().
   GridAxisBinding(const GridView<T>& grid, double iso, std::array<std::int64_t, 3> first,
                   std::array<std::int64_t, 3> last, std::array<std::int64_t, 3> bricks,
-                  int brick_cells)
+                  int brick_cells, std::shared_ptr<const std::vector<std::uint8_t>> held)
       : g_(grid),
+        held_(std::move(held)),
         iso_(iso),
         first_(first),
         last_(last),
         bricks_(bricks),
         brick_cells_(brick_cells) {
+    g_.held = held_ ? held_->data() : nullptr;
     for (int a = 0; a < 3; ++a)
       cells_[a] = last_[a] - first_[a] + 1;
     classify();
@@ -642,12 +672,42 @@ class GridAxisBinding final : public AxisBinding {
   };
 
   std::size_t row_words() const { return std::size_t((cells_[0] + 63) / 64); }
-  // The sign bits of the points and the cells' straddle bits, and the non-finite count.
+  // Bits from … to (inclusive) of a row of words.
+  static void set_bits(std::uint64_t* words, std::int64_t from, std::int64_t to) {
+    for (std::int64_t i = from; i <= to; ++i)
+      words[i / 64] |= std::uint64_t(1) << (i % 64);
+  }
+  // The bricks along one axis whose points include relative point index i: brick b holds points
+  // b·brick_cells … b·brick_cells + brick_cells (the last one up to the last point).
+  std::pair<std::int64_t, std::int64_t> bricks_of_point(int a, std::int64_t i) const {
+    const std::int64_t hi = std::min(i / brick_cells_, bricks_[a] - 1);
+    return {i % brick_cells_ == 0 && i > 0 ? i / brick_cells_ - 1 : hi, hi};
+  }
+
+  // The sign bits of the points and the cells' straddle bits, and the non-finite count. With a
+  // held mask (GridView::held) only the held bricks' points count and only their cells
+  // straddle: the others' points may be anything (a snapshot did not copy them), but none of
+  // them is non-finite and none of their cells straddles (GridSource::needed_bricks), so the
+  // result is the one of the whole field.
   void classify() {
     const std::int64_t px = cells_[0] + 1, py = cells_[1] + 1, pz = cells_[2] + 1;
-    const std::size_t pw = std::size_t((px + 63) / 64);
+    const std::size_t pw = std::size_t((px + 63) / 64), cw = row_words();
     std::vector<std::uint64_t> sign(pw * std::size_t(py * pz), 0);
     std::atomic<std::uint64_t> nonfinite{0};
+    // Per brick row (y fastest): the held bricks' cells and points along x.
+    std::vector<std::uint64_t> held_cells, held_points;
+    if (g_.held) {
+      const std::int64_t rows = bricks_[1] * bricks_[2];
+      held_cells.assign(std::size_t(rows) * cw, 0);
+      held_points.assign(std::size_t(rows) * pw, 0);
+      for (std::int64_t r = 0; r < rows; ++r)
+        for (std::int64_t b = 0; b < bricks_[0]; ++b) {
+          if (!g_.held[b + bricks_[0] * r]) continue;
+          const std::int64_t lo = b * brick_cells_, hi = std::min(lo + brick_cells_, cells_[0]);
+          set_bits(&held_cells[std::size_t(r) * cw], lo, hi - 1);
+          set_bits(&held_points[std::size_t(r) * pw], lo, hi);
+        }
+    }
     // The sign test in T: for a float v, v − iso ≥ 0 in double iff v ≥ the least float whose
     // double is ≥ iso (NaN fails both), so the rows compare in their own type, in bulk.
     T threshold = T(iso_);
@@ -655,8 +715,18 @@ class GridAxisBinding final : public AxisBinding {
     tbb::parallel_for(std::int64_t(0), pz, [&](std::int64_t z) {
       std::uint64_t bad = 0;
       T line[64];
+      std::vector<std::uint64_t> held(g_.held ? pw : 0);  // this row's held points
       for (std::int64_t y = 0; y < py; ++y) {
         std::uint64_t* row = &sign[std::size_t(y + py * z) * pw];
+        if (g_.held) {
+          std::fill(held.begin(), held.end(), 0);
+          const auto [y0, y1] = bricks_of_point(1, y);
+          const auto [z0, z1] = bricks_of_point(2, z);
+          for (std::int64_t bz = z0; bz <= z1; ++bz)
+            for (std::int64_t by = y0; by <= y1; ++by)
+              for (std::size_t w = 0; w < pw; ++w)
+                held[w] |= held_points[std::size_t(by + bricks_[1] * bz) * pw + w];
+        }
         const T* v = g_.values + (first_[0]) * g_.strides[0] + (first_[1] + y) * g_.strides[1] +
                      (first_[2] + z) * g_.strides[2];
         const std::int64_t sx = g_.strides[0];
@@ -671,14 +741,16 @@ class GridAxisBinding final : public AxisBinding {
           }
           std::uint64_t finite = 0;
           row[x0 / 64] = sign_bits(src, threshold, finite);
-          bad += std::uint64_t(64 - std::popcount(finite)) - std::uint64_t(64 - n);
+          if (g_.held)
+            bad += std::uint64_t(std::popcount(~finite & held[x0 / 64]));
+          else
+            bad += std::uint64_t(64 - std::popcount(finite)) - std::uint64_t(64 - n);
         }
       }
       if (bad > 0) nonfinite.fetch_add(bad, std::memory_order_relaxed);
     });
     nonfinite_ = nonfinite.load();
     // A cell straddles iff its 8 corner bits are neither all set nor all clear.
-    const std::size_t cw = row_words();
     straddle_.assign(cw * std::size_t(cells_[1] * cells_[2]), 0);
     tbb::parallel_for(std::int64_t(0), cells_[2], [&](std::int64_t z) {
       for (std::int64_t y = 0; y < cells_[1]; ++y) {
@@ -698,6 +770,10 @@ class GridAxisBinding final : public AxisBinding {
           std::uint64_t bits = any & ~all;
           const std::int64_t valid = cells_[0] - std::int64_t(w) * 64;
           if (valid < 64) bits &= (std::uint64_t(1) << valid) - 1;
+          if (g_.held)
+            bits &=
+                held_cells[std::size_t(y / brick_cells_ + bricks_[1] * (z / brick_cells_)) * cw +
+                           w];
           out[w] = bits;
         }
       }
@@ -1291,6 +1367,7 @@ class GridAxisBinding final : public AxisBinding {
   }
 
   GridView<T> g_;
+  std::shared_ptr<const std::vector<std::uint8_t>> held_;
   double iso_;
   std::array<std::int64_t, 3> first_, last_, bricks_, cells_;
   int brick_cells_;
@@ -1423,6 +1500,14 @@ GridPart grid_part(const GridBlock& whole, std::array<int, 3> blocks, std::array
   return part;
 }
 
+GridSource::GridSource(const GridBlock& block, int brick_cells, std::vector<std::uint8_t> held)
+    : GridSource(block, brick_cells) {
+  if (held.size() != brick_count())
+    throw std::invalid_argument("grid block: " + std::to_string(held.size()) + " brick flags for " +
+                                std::to_string(brick_count()) + " bricks");
+  held_ = std::make_shared<const std::vector<std::uint8_t>>(std::move(held));
+}
+
 GridSource::GridSource(const GridBlock& block, int brick_cells)
     : block_(block), brick_cells_(brick_cells) {
   if (brick_cells < 1)
@@ -1538,14 +1623,102 @@ std::size_t GridSource::brick_count() const {
   return std::size_t(bricks_[0] * bricks_[1] * bricks_[2]);
 }
 
+namespace {
+
+// The casters' view of `block` (strides filled in) with `values` and the held mask.
+template <class T>
+GridView<T> make_view(const GridBlock& block, const T* values,
+                      const std::shared_ptr<const std::vector<std::uint8_t>>& held) {
+  return {values,        block.strides,       block.origin,
+          block.spacing, block.coords,        block.coords[0] != nullptr,
+          block.dims,    0.5 / block.spacing, held ? held->data() : nullptr};
+}
+
+}  // namespace
+
+std::vector<std::uint8_t> GridSource::needed_bricks(std::span<const double> isovalues) const {
+  std::vector<std::uint8_t> needed(brick_count(), 0);
+  const auto scan = [&](const auto* values) {
+    const auto g = make_view(block_, values, held_);
+    tbb::parallel_for(std::int64_t(0), std::int64_t(needed.size()), [&](std::int64_t n) {
+      if (g.held && !g.held[n]) return;
+      Brick b = brick_at(n, first_cell_, last_cell_, bricks_, brick_cells_);
+      double lo, hi;
+      brick_range(g, b, last_cell_, lo, hi);
+      bool any = b.nonfinite;
+      for (const double iso : isovalues)
+        any = any || (lo <= iso && iso <= hi);
+      needed[n] = any;
+    });
+  };
+  if (block_.type == ScalarType::float32)
+    scan(static_cast<const float*>(block_.values));
+  else
+    scan(static_cast<const double*>(block_.values));
+  return needed;
+}
+
+void GridSource::for_each_needed_run(
+    std::span<const std::uint8_t> held,
+    const std::function<void(std::int64_t, std::int64_t, std::int64_t, std::int64_t)>& f) const {
+  if (held.size() != brick_count())
+    throw std::invalid_argument("for_each_needed_run: " + std::to_string(held.size()) +
+                                " brick flags for " + std::to_string(brick_count()) + " bricks");
+  // Per axis and point index: the bricks whose points, one layer more below and two more above,
+  // include it (at most a few: consecutive).
+  std::array<std::vector<std::pair<std::int64_t, std::int64_t>>, 3> near;
+  for (int a = 0; a < 3; ++a) {
+    near[a].assign(std::size_t(block_.dims[a]), {0, -1});
+    for (std::int64_t b = 0; b < bricks_[a]; ++b) {
+      const std::int64_t lo = first_cell_[a] + b * brick_cells_,
+                         hi = std::min(last_cell_[a], lo + brick_cells_ - 1);
+      for (std::int64_t i = std::max<std::int64_t>(0, lo - 1);
+           i <= std::min(block_.dims[a] - 1, hi + 2); ++i) {
+        auto& [b0, b1] = near[a][std::size_t(i)];
+        if (b1 < b0) b0 = b;
+        b1 = b;
+      }
+    }
+  }
+  tbb::parallel_for(std::int64_t(0), block_.dims[2], [&](std::int64_t k) {
+    const auto [z0, z1] = near[2][std::size_t(k)];
+    if (z1 < z0) return;
+    std::vector<std::uint8_t> row(static_cast<std::size_t>(bricks_[0]));
+    for (std::int64_t j = 0; j < block_.dims[1]; ++j) {
+      const auto [y0, y1] = near[1][std::size_t(j)];
+      if (y1 < y0) continue;
+      std::fill(row.begin(), row.end(), 0);
+      for (std::int64_t bz = z0; bz <= z1; ++bz)
+        for (std::int64_t by = y0; by <= y1; ++by) {
+          const std::uint8_t* h = &held[std::size_t(bricks_[0] * (by + bricks_[1] * bz))];
+          for (std::size_t bx = 0; bx < row.size(); ++bx)
+            row[bx] |= h[bx];
+        }
+      // The held bricks' points along x with their margins, joined where they touch.
+      std::int64_t run_lo = 0, run_hi = -2;
+      for (std::int64_t bx = 0; bx < bricks_[0]; ++bx) {
+        if (!row[std::size_t(bx)]) continue;
+        const std::int64_t lo = first_cell_[0] + bx * brick_cells_,
+                           hi = std::min(last_cell_[0], lo + brick_cells_ - 1);
+        const std::int64_t i0 = std::max<std::int64_t>(0, lo - 1),
+                           i1 = std::min(block_.dims[0] - 1, hi + 2);
+        if (i0 > run_hi + 1) {
+          if (run_hi >= run_lo) f(j, k, run_lo, run_hi);
+          run_lo = i0;
+        }
+        run_hi = i1;
+      }
+      if (run_hi >= run_lo) f(j, k, run_lo, run_hi);
+    }
+  });
+}
+
 std::unique_ptr<AxisBinding> GridSource::bind_axis(double isovalue) const {
   auto bind_typed = [&](const auto* values) -> std::unique_ptr<AxisBinding> {
     using T = std::remove_cv_t<std::remove_pointer_t<decltype(values)>>;
-    const GridView<T> g{values,         block_.strides,      block_.origin,
-                        block_.spacing, block_.coords,       block_.coords[0] != nullptr,
-                        block_.dims,    0.5 / block_.spacing};
-    return std::make_unique<GridAxisBinding<T>>(g, isovalue, first_cell_, last_cell_, bricks_,
-                                                brick_cells_);
+    return std::make_unique<GridAxisBinding<T>>(make_view(block_, values, held_), isovalue,
+                                                first_cell_, last_cell_, bricks_, brick_cells_,
+                                                held_);
   };
   if (block_.type == ScalarType::float32)
     return bind_typed(static_cast<const float*>(block_.values));
@@ -1554,11 +1727,8 @@ std::unique_ptr<AxisBinding> GridSource::bind_axis(double isovalue) const {
 
 std::unique_ptr<GeometryBinding> GridSource::bind(RTCDevice device, double isovalue) const {
   auto bind_typed = [&](const auto* values) {
-    using T = std::remove_cv_t<std::remove_pointer_t<decltype(values)>>;
-    const GridView<T> g{values,         block_.strides,      block_.origin,
-                        block_.spacing, block_.coords,       block_.coords[0] != nullptr,
-                        block_.dims,    0.5 / block_.spacing};
-    return bind_grid(device, g, isovalue, first_cell_, last_cell_, bricks_, brick_cells_);
+    return bind_grid(device, make_view(block_, values, held_), isovalue, first_cell_, last_cell_,
+                     bricks_, brick_cells_);
   };
   if (block_.type == ScalarType::float32)
     return bind_typed(static_cast<const float*>(block_.values));

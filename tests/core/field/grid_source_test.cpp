@@ -1,6 +1,7 @@
 #include "ldimesh/core/field/grid_source.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <random>
@@ -712,6 +713,83 @@ TEST(GridSource, RayCasterSumsNonFiniteCountsOverBlocks) {
   EXPECT_EQ(RayCaster(block_b, 0.5).nonfinite_values(), 2u);
   EXPECT_EQ(RayCaster(pair, 0.5).nonfinite_values(), 5u);
   EXPECT_EQ(RayCaster(one, 0.5).nonfinite_values(), 4u);
+}
+
+TEST(GridSource, ACopyOfTheNeededBricksCastsWhatTheWholeBlockCasts) {
+  // What the adaptor's snapshot does: copy the points of the bricks that needed_bricks names
+  // (for_each_needed_run) into a buffer whose other points hold anything, and cast that with
+  // the mask. Two nested spheres with ghost layers, non-finite points near the surface and far
+  // from it; the buffer's other points NaN or wild values.
+  const int n = 41;
+  const std::vector<double> isovalues{0.3, 0.9};
+  for (const ScalarType type : {ScalarType::float64, ScalarType::float32})
+    for (const int brick_cells : {3, 8}) {
+      std::vector<double> values = sample<double>(n, -1.3, 1.3, sphere_field);
+      const auto at = [&](int i, int j, int k) -> double& {
+        return values[(std::size_t(k) * n + j) * n + i];
+      };
+      at(20, 20, 20) = kNaN;  // the centre, far from both spheres
+      at(2, 3, 38) = kInf;    // a corner, far too
+      at(31, 20, 20) = kNaN;  // next to the inner sphere (r ≈ 0.55 there)
+      std::vector<float> floats(values.begin(), values.end());
+      GridBlock block = uniform_block(
+          type == ScalarType::float64 ? (const void*)values.data() : (const void*)floats.data(),
+          type, n, -1.3, 1.3);
+      block.ghost_lo = {1, 1, 1};
+      block.ghost_hi = {2, 2, 2};
+      const GridSource whole(block, brick_cells);
+      const std::vector<std::uint8_t> needed = whole.needed_bricks(isovalues);
+      const std::size_t held = std::size_t(std::count(needed.begin(), needed.end(), 1));
+      SCOPED_TRACE(std::to_string(held) + " of " + std::to_string(needed.size()) + " bricks, " +
+                   std::to_string(brick_cells) + " cells each");
+      ASSERT_GT(held, needed.size() / 10);
+      ASSERT_LT(held, needed.size() * 9 / 10);  // the copy leaves much out
+      for (const bool wild : {false, true}) {
+        std::vector<double> copy(values.size(), kNaN);
+        std::mt19937 rng(7);
+        std::uniform_real_distribution<double> any(-2.0, 2.0);
+        if (wild)
+          for (double& v : copy)
+            v = any(rng);
+        std::vector<float> copy_floats(copy.begin(), copy.end());
+        std::atomic<std::size_t> copied{0};
+        whole.for_each_needed_run(
+            needed, [&](std::int64_t j, std::int64_t k, std::int64_t i0, std::int64_t i1) {
+              const std::size_t row = (std::size_t(k) * n + std::size_t(j)) * n;
+              for (std::int64_t i = i0; i <= i1; ++i) {
+                copy[row + std::size_t(i)] = values[row + std::size_t(i)];
+                copy_floats[row + std::size_t(i)] = floats[row + std::size_t(i)];
+              }
+              copied += std::size_t(i1 - i0 + 1);
+            });
+        EXPECT_LT(copied.load(), values.size() * 9 / 10);
+        GridBlock sparse = block;
+        sparse.values = type == ScalarType::float64 ? (const void*)copy.data()
+                                                    : (const void*)copy_floats.data();
+        const GridSource part(sparse, brick_cells, needed);
+        for (const double iso : isovalues) {
+          const RayCaster a(whole, iso), b(part, iso);
+          EXPECT_EQ(a.nonfinite_values(), 3u);
+          EXPECT_EQ(b.nonfinite_values(), a.nonfinite_values());
+          EXPECT_EQ(b.primitive_count(), a.primitive_count());
+          std::size_t samples = 0;
+          for (const View& view : axis_and_oblique_views(whole.bounds(), 48)) {
+            const Ldi la = a.cast(view), lb = b.cast(view);
+            ASSERT_EQ(la.offsets, lb.offsets) << "isovalue " << iso << (wild ? ", wild" : "");
+            for (std::size_t s = 0; s < la.sample_count(); ++s) {
+              ASSERT_EQ(la.depth[s], lb.depth[s]);
+              ASSERT_EQ(la.normal[s], lb.normal[s]);
+            }
+            samples += la.sample_count();
+          }
+          EXPECT_GT(samples, 2000u);
+        }
+      }
+    }
+  // A mask of the wrong size is refused.
+  const std::vector<double> values = sample<double>(9, -1.0, 1.0, sphere_field);
+  const GridBlock block = uniform_block(values.data(), ScalarType::float64, 9, -1.0, 1.0);
+  EXPECT_THROW(GridSource(block, 4, std::vector<std::uint8_t>(3, 1)), std::invalid_argument);
 }
 
 TEST(GridSource, CubicRootsOfACellSegment) {

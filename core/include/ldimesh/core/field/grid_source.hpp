@@ -5,7 +5,10 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <memory>
+#include <span>
+#include <vector>
 
 #include "ldimesh/core/field/blocks.hpp"
 #include "ldimesh/core/field/field_source.hpp"
@@ -20,6 +23,13 @@ class GridSource final : public FieldSource {
   // owned cells are the ray-caster primitives. The arrays are read in place: they must outlive
   // the source (threads: see field_source.hpp).
   explicit GridSource(const GridBlock& block, int brick_cells = 8);
+  // A source over a block of which only some bricks' points are there (a snapshot that copied
+  // what a cast reads, for_each_needed_run): `held` has a flag per brick (x fastest,
+  // brick_count() of them) and must mark at least the bricks needed_bricks() names for every
+  // isovalue bound; the points of the others may hold anything, they are not read. It casts
+  // what a source over the whole block casts. Also throws std::invalid_argument for a mask of
+  // the wrong size.
+  GridSource(const GridBlock& block, int brick_cells, std::vector<std::uint8_t> held);
 
   // The owned region: the cells this block produces hits in.
   Box bounds() const override;
@@ -40,10 +50,25 @@ class GridSource final : public FieldSource {
   // each hit; null without one.
   std::unique_ptr<ScalarProbe> bind_scalar() const override;
 
-  // Bricks before culling.
+  // Bricks before culling, and their size in cells per axis.
   std::size_t brick_count() const;
+  int brick_cells() const { return brick_cells_; }
+  // Per brick (x fastest): whether its points' finite range holds one of `isovalues` or one of
+  // its points is NaN or ±Inf. bind() and bind_axis() for these isovalues read the points of
+  // these bricks only, with the points around them that the hits' normals read. Reads the
+  // values in place, on all cores.
+  std::vector<std::uint8_t> needed_bricks(std::span<const double> isovalues) const;
+  // Calls f(j, k, i0, i1) for each stretch of points i0 … i1 of point row (j, k) (indices of the
+  // block's points, ghosts included) that a source holding the bricks `held` marks reads: each
+  // brick's points and, where the block has them, one layer more below and two more above
+  // along each axis (the normals' central differences). The stretches do not overlap; f runs
+  // concurrently for different k (rows of one k in order, on one thread). Throws
+  // std::invalid_argument for a mask of the wrong size.
+  void for_each_needed_run(
+      std::span<const std::uint8_t> held,
+      const std::function<void(std::int64_t, std::int64_t, std::int64_t, std::int64_t)>& f) const;
   // The value at point (i, j, k) (ghosts included), as a double. The indices must lie within the
-  // block's points (0 … dims[a] − 1; not checked).
+  // block's points (0 … dims[a] − 1; not checked); with a held mask, within what it holds.
   double value(std::int64_t i, std::int64_t j, std::int64_t k) const;
   // The trilinear interpolant of the values at world point `p`, in the cell that holds it (ghost
   // cells included); NaN where p lies more than `slack` (a fraction of a cell) outside the
@@ -59,6 +84,7 @@ class GridSource final : public FieldSource {
   GridBlock block_;
   int brick_cells_;
   std::array<std::int64_t, 3> first_cell_{}, last_cell_{}, bricks_{};
+  std::shared_ptr<const std::vector<std::uint8_t>> held_;  // null: every brick's points
 };
 
 // Part `index` of `whole` split into blocks[0] × blocks[1] × blocks[2] blocks of cells (as
