@@ -202,38 +202,46 @@ std::size_t geometry_doubles(const HexBlock& block) {
 }
 
 // An element block's nodal array of `type` at `values` into `out`, element after element without
-// gaps; returns the bytes copied.
+// gaps: the elements `held` marks (all where it is empty), the others' places not written.
+// Returns the bytes the copy holds.
 std::size_t copy_nodal(const HexBlock& block, const void* values, ScalarType type,
-                       SparseCopy& out) {
+                       const std::vector<std::uint8_t>& held, SparseCopy& out) {
   const std::size_t n = std::size_t(block.order + 1) * (block.order + 1) * (block.order + 1);
   const std::size_t size = scalar_bytes(type);
   const std::size_t stride = block.element_stride == 0 ? n : block.element_stride;
-  const std::size_t bytes = block.element_count * n * size;
-  unsigned char* dst = out.begin(bytes);
+  unsigned char* dst = out.begin(block.element_count * n * size);
   const auto* src = static_cast<const unsigned char*>(values);
-  if (stride == n) {
-    std::memcpy(dst, src, bytes);
+  if (stride == n && held.empty()) {
+    std::memcpy(dst, src, block.element_count * n * size);
+    out.written(0, block.element_count * n * size);
   } else {
-    for (std::size_t e = 0; e < block.element_count; ++e)
+    for (std::size_t e = 0; e < block.element_count; ++e) {
+      if (!held.empty() && !held[e]) continue;
       std::memcpy(dst + e * n * size, src + e * stride * size, n * size);
+      out.written(e * n * size, n * size);
+    }
   }
-  out.written(0, bytes);
   return out.finish();
 }
 
-// The high-order block's geometry, nodal values and colour field, element after element without
+// The high-order block's geometry, the nodal values of the elements that `source` (over it)
+// may keep for `isovalues` (in `held`), and the whole colour field (a hit on a face the kept
+// element shares with another may be coloured from that one), element after element without
 // gaps.
-HexBlock copy_hex(const HexBlock& block, BlockCopy& copy) {
+HexBlock copy_hex(const HexBlock& block, const HexElementSource& source,
+                  std::span<const double> isovalues, BlockCopy& copy,
+                  std::vector<std::uint8_t>& held) {
+  held = source.needed_elements(isovalues);
   const double* geometry = block.geometry_order > 0 ? block.geometry : block.corners;
   copy.geometry.assign(geometry, geometry + geometry_doubles(block) * block.element_count);
   copy.bytes = copy.geometry.size() * sizeof(double) +
-               copy_nodal(block, block.values, block.type, copy.values);
+               copy_nodal(block, block.values, block.type, held, copy.values);
   HexBlock out = block;
   out.corners = block.geometry_order > 0 ? nullptr : copy.geometry.data();
   out.geometry = block.geometry_order > 0 ? copy.geometry.data() : nullptr;
   out.values = copy.values.data();
   if (block.colour) {
-    copy.bytes += copy_nodal(block, block.colour, block.colour_type, copy.colour);
+    copy.bytes += copy_nodal(block, block.colour, block.colour_type, {}, copy.colour);
     out.colour = copy.colour.data();
   }
   out.element_stride = 0;
@@ -707,9 +715,10 @@ class AdaptorImpl final : public Adaptor {
           copy.source =
               std::make_shared<GridSource>(*copy.grid, live.brick_cells(), std::move(held));
         } else {  // the geometry as the block's source prepared it (converted and checked once)
-          copy.hex = copy_hex(*b.hex, snapshot_[k]);
-          copy.source = std::make_shared<HexElementSource>(
-              static_cast<const HexElementSource&>(*b.source), *copy.hex);
+          const auto& live = static_cast<const HexElementSource&>(*b.source);
+          std::vector<std::uint8_t> held;
+          copy.hex = copy_hex(*b.hex, live, options_.isovalues, snapshot_[k], held);
+          copy.source = std::make_shared<HexElementSource>(live, *copy.hex, std::move(held));
         }
         bytes += snapshot_[k].bytes;
         snapshot_blocks_.push_back(std::move(copy));

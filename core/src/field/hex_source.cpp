@@ -1769,6 +1769,65 @@ HexElementSource::HexElementSource(const HexElementSource& prepared, const HexBl
                                 " below (order + 1)^3 = " + std::to_string(n));
 }
 
+HexElementSource::HexElementSource(const HexElementSource& prepared, const HexBlock& block,
+                                   std::vector<std::uint8_t> held)
+    : HexElementSource(prepared, block) {
+  if (held.size() != block_.element_count)
+    throw std::invalid_argument("hex source: " + std::to_string(held.size()) +
+                                " element flags for " + std::to_string(block_.element_count) +
+                                " elements");
+  held_ = std::make_shared<const std::vector<std::uint8_t>>(std::move(held));
+}
+
+namespace {
+
+// Calls range(e, lo, hi) with the least and greatest Bernstein coefficient of every element e of
+// `source` whose values it holds (HexElementSource::held) and that has no non-finite nodal
+// value, in parallel, converting each element; returns how many non-finite nodal values the
+// others have.
+template <class Range>
+std::uint64_t coefficient_ranges(const HexElementSource& source, Range range) {
+  const HexBlock& block = source.block();
+  const int p = block.order;
+  const std::size_t n = nodes_per_element(p);
+  const std::span<const std::uint8_t> held = source.held();
+  const ConversionMatrix& matrix = conversion_matrix(p, block.nodes);
+  std::atomic<std::uint64_t> nonfinite{0};
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, block.element_count, 64),
+                    [&](const tbb::blocked_range<std::size_t>& elements) {
+                      double nodal[kMaxElementValues], b[kMaxElementValues];
+                      std::uint64_t bad = 0;
+                      for (std::size_t e = elements.begin(); e != elements.end(); ++e) {
+                        if (!held.empty() && !held[e]) continue;
+                        if (const std::size_t k = read_nodal(block, e, n, nodal); k > 0) {
+                          bad += k;
+                          continue;
+                        }
+                        convert_element(p, matrix, nodal, b);
+                        const auto [lo, hi] = std::minmax_element(b, b + n);
+                        range(e, *lo, *hi);
+                      }
+                      if (bad > 0) nonfinite.fetch_add(bad, std::memory_order_relaxed);
+                    });
+  return nonfinite.load();
+}
+
+}  // namespace
+
+std::vector<std::uint8_t> HexElementSource::needed_elements(
+    std::span<const double> isovalues) const {
+  // The elements bind() keeps for one of the isovalues, and those it leaves out for a NaN or
+  // ±Inf value (flagged first, then cleared where the range comes).
+  std::vector<std::uint8_t> needed(block_.element_count, 1);
+  for (std::size_t e = 0; e < needed.size(); ++e)
+    if (held_ && !(*held_)[e]) needed[e] = 0;
+  coefficient_ranges(*this, [&](std::size_t e, double lo, double hi) {
+    needed[e] = std::any_of(isovalues.begin(), isovalues.end(),
+                            [&](double iso) { return lo <= iso && iso <= hi; });
+  });
+  return needed;
+}
+
 namespace {
 
 // The colour field of an element block: a source over the colour's nodal values with the block's
@@ -1952,25 +2011,10 @@ Activation activate(const HexElementSource& source, double isovalue) {
   // Pass 1: which elements may hold the isosurface (convex hull of the Bernstein coefficients).
   // Flags only, so memory does not grow with the block. An element with a non-finite nodal
   // value has no polynomial to intersect: it is left out.
-  std::vector<std::uint8_t> active(count);
-  std::atomic<std::uint64_t> nonfinite{0};
-  const ConversionMatrix& matrix = conversion_matrix(p, block.nodes);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 64),
-                    [&](const tbb::blocked_range<std::size_t>& range) {
-                      double nodal[kMaxElementValues], b[kMaxElementValues];
-                      std::uint64_t bad = 0;
-                      for (std::size_t e = range.begin(); e != range.end(); ++e) {
-                        if (const std::size_t k = read_nodal(block, e, n, nodal); k > 0) {
-                          bad += k;
-                          active[e] = 0;
-                          continue;
-                        }
-                        convert_element(p, matrix, nodal, b);
-                        const auto [lo, hi] = std::minmax_element(b, b + n);
-                        active[e] = *lo <= isovalue && isovalue <= *hi;
-                      }
-                      if (bad > 0) nonfinite.fetch_add(bad, std::memory_order_relaxed);
-                    });
+  std::vector<std::uint8_t> active(count, 0);
+  const std::uint64_t nonfinite = coefficient_ranges(
+      source,
+      [&](std::size_t e, double lo, double hi) { active[e] = lo <= isovalue && isovalue <= hi; });
   std::vector<std::size_t> kept;
   for (std::size_t e = 0; e < count; ++e)
     if (active[e]) kept.push_back(e);
@@ -1979,7 +2023,7 @@ Activation activate(const HexElementSource& source, double isovalue) {
   Activation out;
   out.order = p;
   out.values_per_element = n;
-  out.nonfinite = nonfinite.load();
+  out.nonfinite = nonfinite;
   out.elements.resize(kept.size());
   out.coefficients.resize(kept.size() * n);
   // The curved ones' geometry, numbered in element order.

@@ -18,6 +18,9 @@
 namespace ldimesh {
 namespace {
 
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
 constexpr NodeSet kNodeSets[] = {NodeSet::gauss_lobatto_legendre, NodeSet::gauss_legendre,
                                  NodeSet::equispaced};
 
@@ -372,6 +375,75 @@ TEST(HexElementSource, CullingNeverDropsAnElementThatHoldsARoot) {
     }
 }
 
+TEST(HexElementSource, ACopyOfTheNeededElementsCastsWhatAllValuesCast) {
+  // What the adaptor's snapshot does: copy the values of the elements needed_elements names and
+  // cast them with the mask, the other elements' values NaN. A ramp in x with waves (two
+  // isovalues: two bands of elements), and non-finite values in elements far from the surface
+  // and on it.
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> wave(-4.0, 4.0);
+  const std::vector<double> corners =
+      tiled_corners({6, 4, 4}, {0.0, 0.0, 0.0}, {1.0, 1.0, 1.0}, skew_map());
+  const std::size_t elements = corners.size() / 24;
+  const std::vector<double> isovalues{0.3, 0.7};
+  for (int order : {2, 4, 7})
+    for (NodeSet nodes : kNodeSets) {
+      SCOPED_TRACE(describe(order, nodes));
+      glm::dvec3 k[3];
+      double phase[3];
+      for (int w = 0; w < 3; ++w)
+        k[w] = {wave(rng), wave(rng), wave(rng)}, phase[w] = wave(rng);
+      std::vector<double> values = sample_nodes(order, nodes, corners, [&](glm::dvec3 x) {
+        double v = x.x;
+        for (int w = 0; w < 3; ++w)
+          v += 0.02 * std::sin(glm::dot(k[w], x) + phase[w]);
+        return v;
+      });
+      const int n = values_per_element(order);
+      values[0 * std::size_t(n) + 1] = kNaN;  // x < 1/6: far from both surfaces
+      values[3 * std::size_t(n) + 2] = kInf;  // x in [0.5, 0.67]: near 0.7
+      const HexElementSource source(make_block(order, nodes, corners, values));
+      const std::vector<std::uint8_t> needed = source.needed_elements(isovalues);
+      ASSERT_EQ(needed.size(), elements);
+      // The elements bind() keeps for either isovalue, and those with a non-finite value.
+      std::vector<double> b(n);
+      for (std::size_t e = 0; e < elements; ++e) {
+        source.element_bernstein(e, b);
+        const auto [lo, hi] = std::minmax_element(b.begin(), b.end());
+        bool kept = !std::all_of(b.begin(), b.end(), [](double v) { return std::isfinite(v); });
+        for (const double iso : isovalues)
+          kept = kept || (*lo <= iso && iso <= *hi);
+        ASSERT_EQ(bool(needed[e]), kept) << "element " << e;
+      }
+      const std::size_t held = std::size_t(std::count(needed.begin(), needed.end(), 1));
+      EXPECT_LE(held, elements * 3 / 4);  // the copy leaves much out
+      std::vector<double> copy(values.size(), kNaN);
+      for (std::size_t e = 0; e < elements; ++e)
+        if (needed[e]) std::copy_n(&values[e * n], n, &copy[e * n]);
+      const HexElementSource part(source, make_block(order, nodes, corners, copy), needed);
+      for (const double iso : isovalues) {
+        const RayCaster a(source, iso), c(part, iso);
+        EXPECT_EQ(a.nonfinite_values(), 2u);
+        EXPECT_EQ(c.nonfinite_values(), a.nonfinite_values());
+        EXPECT_EQ(c.primitive_count(), a.primitive_count());
+        std::size_t samples = 0;
+        for (const View& view : axis_and_oblique_views(source.bounds(), 40)) {
+          const Ldi la = a.cast(view), lc = c.cast(view);
+          ASSERT_EQ(la.offsets, lc.offsets) << "isovalue " << iso;
+          for (std::size_t s = 0; s < la.sample_count(); ++s) {
+            ASSERT_EQ(la.depth[s], lc.depth[s]);
+            ASSERT_EQ(la.normal[s], lc.normal[s]);
+          }
+          samples += la.sample_count();
+        }
+        EXPECT_GT(samples, 1000u);
+      }
+      EXPECT_THROW(HexElementSource(source, make_block(order, nodes, corners, copy),
+                                    std::vector<std::uint8_t>(elements - 1, 1)),
+                   std::invalid_argument);
+    }
+}
+
 TEST(HexElementSource, BernsteinConversionChecksItsSpans) {
   const int n = values_per_element(2);
   std::vector<double> nodal(2 * n, 1.0), out(n);
@@ -482,9 +554,6 @@ TEST(HexElementSource, InvalidBlocksAreRejected) {
 
 // ---------------------------------------------------------------------------------------------
 // Non-finite values
-
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-constexpr double kInf = std::numeric_limits<double>::infinity();
 
 // Whether the reference point r lies in the unit cube grown by `pad` (pad < 0 shrinks it).
 bool in_unit_cube(glm::dvec3 r, double pad) {

@@ -84,6 +84,14 @@ class HexElementSource final : public FieldSource {
   // node set, ordering, element count or geometry order differ, or for a null value array or
   // an element stride below (p + 1)³.
   HexElementSource(const HexElementSource& prepared, const HexBlock& block);
+  // The same, over a copy of only some elements' values (the adaptor's snapshot of what a cast
+  // reads): `held` has a flag per element and must mark at least the elements
+  // needed_elements() names for every isovalue bound; the values of the others may be anything,
+  // bind() and bind_axis() do not read them (the colour field, bind_scalar, is read whole). It
+  // casts what a source over all values casts. Also throws std::invalid_argument for a mask of
+  // the wrong size.
+  HexElementSource(const HexElementSource& prepared, const HexBlock& block,
+                   std::vector<std::uint8_t> held);
 
   // The axis-aligned box around all elements.
   Box bounds() const override;
@@ -104,6 +112,15 @@ class HexElementSource final : public FieldSource {
   std::unique_ptr<ScalarProbe> bind_scalar() const override;
 
   // Threads: see field_source.hpp; to_reference and element_bernstein are const and reentrant.
+
+  // Per element: whether bind() or bind_axis() for one of `isovalues` keeps it or finds a NaN
+  // or ±Inf among its values. Reads the values in place, on all cores; converts to Bernstein
+  // form only the elements whose nodal range comes near an isovalue.
+  std::vector<std::uint8_t> needed_elements(std::span<const double> isovalues) const;
+  // The held mask (empty: every element's values are there).
+  std::span<const std::uint8_t> held() const {
+    return held_ ? std::span<const std::uint8_t>(*held_) : std::span<const std::uint8_t>();
+  }
 
   // The block as given, with element_stride 0 replaced by (p + 1)³.
   const HexBlock& block() const { return block_; }
@@ -143,6 +160,7 @@ class HexElementSource final : public FieldSource {
   std::vector<double> corners_;              // from the geometry's vertices (geometry_order > 0)
   std::vector<glm::dvec3> curved_geometry_;  // (q + 1)³ per curved element
   std::vector<std::uint32_t> curved_of_;     // per element: its index among the curved ones
+  std::shared_ptr<const std::vector<std::uint8_t>> held_;  // null: every element's values
 };
 
 }  // namespace ldimesh
