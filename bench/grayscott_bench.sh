@@ -61,9 +61,9 @@ executed = [s for s, r in sorted(reports.items()) if r["executed"] == "1"]
 every = max(1, -(-len(executed) // 20))  # at most about 20 rows; the median covers them all
 if every > 1:
     print(f"Every {every}th executed step:\n")
-print("| step | compute s | blocked s | blocked / compute | triangles | bytes / triangle | "
-      + " | ".join(f"{s} s" for s in stages) + " |")
-print("|---" * (6 + len(stages)) + "|")
+print("| step | compute s | blocked s | blocked / compute | snapshot MB | triangles | "
+      "bytes / triangle | " + " | ".join(f"{s} s" for s in stages) + " |")
+print("|---" * (7 + len(stages)) + "|")
 rows = []
 for i, s in enumerate(executed):
     r = reports[s]
@@ -74,7 +74,7 @@ for i, s in enumerate(executed):
     if i % every and i != len(executed) - 1:
         continue
     cells = [str(s), f"{compute:.3f}", f"{blocked:.3f}", f"{100 * blocked / compute:.1f} %",
-             str(meta["triangles"]) if meta else "(replaced)",
+             r.get("snapshot_mb", "?"), str(meta["triangles"]) if meta else "(replaced)",
              f"{meta['bytes'] / max(meta['triangles'], 1):.2f}" if meta else ""]
     cells += [f"{meta['seconds'].get(st, 0):.3f}" if meta else "" for st in stages]
     print("| " + " | ".join(cells) + " |")

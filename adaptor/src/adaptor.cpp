@@ -83,12 +83,20 @@ class SparseCopy {
       if (bytes > 0) {
         void* p = mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
         if (p == MAP_FAILED) throw std::bad_alloc();
+          // Small pages: a huge page would make one written stretch hold 2 MiB.
+#ifdef MADV_NOHUGEPAGE
+        madvise(p, bytes, MADV_NOHUGEPAGE);
+#endif
         data_ = static_cast<unsigned char*>(p);
       }
       size_ = bytes;
       before_.assign(pages(), 0);
+      now_.assign(pages(), 0);
     }
-    now_.assign(pages(), 0);
+    // Pages written by a step whose copy failed before finish() count as the previous step's.
+    for (std::size_t p = 0; p < now_.size(); ++p)
+      before_[p] |= now_[p];
+    std::fill(now_.begin(), now_.end(), 0);
     return data_;
   }
   // Bytes offset … offset + length − 1 were written by this step (any thread).
@@ -113,20 +121,31 @@ class SparseCopy {
       madvise(data_ + first * page(), std::min(p * page(), size_) - first * page(), MADV_DONTNEED);
     }
     std::swap(now_, before_);
+    std::fill(now_.begin(), now_.end(), 0);
     return held;
   }
-  const unsigned char* data() const { return data_; }
+  // No copy: gives the memory back.
+  void clear() {
+    unmap();
+  }
+  const unsigned char* data() const {
+    return data_;
+  }
 
  private:
   static std::size_t page() {
     static const std::size_t size = std::size_t(sysconf(_SC_PAGESIZE));
     return size;
   }
-  std::size_t pages() const { return (size_ + page() - 1) / page(); }
+  std::size_t pages() const {
+    return (size_ + page() - 1) / page();
+  }
   void unmap() {
     if (data_) munmap(data_, size_);
     data_ = nullptr;
     size_ = 0;
+    now_.clear();
+    before_.clear();
   }
   unsigned char* data_ = nullptr;
   std::size_t size_ = 0;
@@ -138,8 +157,7 @@ struct BlockCopy {
   SparseCopy values;
   SparseCopy colour;  // the colour field's, when the block has one
   std::array<std::vector<double>, 3> coords;
-  std::vector<double> geometry;  // an element block's corners or geometry nodes
-  std::size_t bytes = 0;         // what this step's copy holds
+  std::size_t bytes = 0;  // what this step's copy holds
 };
 
 // Of a grid block's array of `type` at `values` (its points, ghosts included), the points that
@@ -184,6 +202,8 @@ GridBlock copy_grid(const GridBlock& block, const GridSource& source,
   if (block.colour) {
     copy.bytes += copy_points(block, source, held, block.colour, block.colour_type, copy.colour);
     out.colour = copy.colour.data();
+  } else {
+    copy.colour.clear();
   }
   out.strides = {0, 0, 0};
   for (int a = 0; a < 3; ++a) {
@@ -193,12 +213,6 @@ GridBlock copy_grid(const GridBlock& block, const GridSource& source,
     copy.bytes += copy.coords[a].size() * sizeof(double);
   }
   return out;
-}
-
-// Doubles of an element block's geometry per element: 8 corners, or the geometry nodes.
-std::size_t geometry_doubles(const HexBlock& block) {
-  const std::size_t q = std::size_t(block.geometry_order);
-  return block.geometry_order > 0 ? 3 * (q + 1) * (q + 1) * (q + 1) : 24;
 }
 
 // An element block's nodal array of `type` at `values` into `out`, element after element without
@@ -224,25 +238,24 @@ std::size_t copy_nodal(const HexBlock& block, const void* values, ScalarType typ
   return out.finish();
 }
 
-// The high-order block's geometry, the nodal values of the elements that `source` (over it)
-// may keep for `isovalues` (in `held`), and the whole colour field (a hit on a face the kept
-// element shares with another may be coloured from that one), element after element without
-// gaps.
+// Of the high-order block, the nodal values of the elements that `source` (over it) keeps for
+// `isovalues` (in `held`) and the whole colour field (a hit on a face the kept element shares
+// with another may be coloured from that one), element after element without gaps. Not the
+// geometry: the source over the copy shares the one `source` prepared.
 HexBlock copy_hex(const HexBlock& block, const HexElementSource& source,
                   std::span<const double> isovalues, BlockCopy& copy,
                   std::vector<std::uint8_t>& held) {
   held = source.needed_elements(isovalues);
-  const double* geometry = block.geometry_order > 0 ? block.geometry : block.corners;
-  copy.geometry.assign(geometry, geometry + geometry_doubles(block) * block.element_count);
-  copy.bytes = copy.geometry.size() * sizeof(double) +
-               copy_nodal(block, block.values, block.type, held, copy.values);
+  copy.bytes = copy_nodal(block, block.values, block.type, held, copy.values);
   HexBlock out = block;
-  out.corners = block.geometry_order > 0 ? nullptr : copy.geometry.data();
-  out.geometry = block.geometry_order > 0 ? copy.geometry.data() : nullptr;
+  out.corners = nullptr;
+  out.geometry = nullptr;
   out.values = copy.values.data();
   if (block.colour) {
     copy.bytes += copy_nodal(block, block.colour, block.colour_type, {}, copy.colour);
     out.colour = copy.colour.data();
+  } else {
+    copy.colour.clear();
   }
   out.element_stride = 0;
   return out;
@@ -678,9 +691,8 @@ class AdaptorImpl final : public Adaptor {
         const std::size_t n =
             std::size_t(b.hex->order + 1) * (b.hex->order + 1) * (b.hex->order + 1);
         bytes +=
-            b.hex->element_count * (n * (scalar_bytes(b.hex->type) +
-                                         (b.hex->colour ? scalar_bytes(b.hex->colour_type) : 0)) +
-                                    geometry_doubles(*b.hex) * sizeof(double));
+            b.hex->element_count * n *
+            (scalar_bytes(b.hex->type) + (b.hex->colour ? scalar_bytes(b.hex->colour_type) : 0));
       } else {
         return false;
       }

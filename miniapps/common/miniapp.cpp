@@ -90,12 +90,16 @@ void MiniApp::run(Adaptor& adaptor, const CommonArgs& args,
       double slowest = 0.0;
       MPI_Reduce(&compute, &slowest, 1, MPI_DOUBLE, MPI_MAX, 0, comm());
       const StepReport& r = adaptor.last_report();
+      // What all ranks' snapshots hold (background path).
+      const double mine = double(r.snapshot_bytes) / (1 << 20);
+      double snapshots = 0.0;
+      MPI_Reduce(&mine, &snapshots, 1, MPI_DOUBLE, MPI_SUM, 0, comm());
       char line[256];
       std::snprintf(line, sizeof line,
                     "report step=%llu time=%g compute_s=%.4f blocked_s=%.4f executed=%d "
-                    "skipped_busy=%d replaced=%d",
+                    "skipped_busy=%d replaced=%d snapshot_mb=%.2f",
                     static_cast<unsigned long long>(step), time, slowest, r.max_blocked_seconds,
-                    int(r.executed), int(r.skipped_busy), int(r.replaced_pending));
+                    int(r.executed), int(r.skipped_busy), int(r.replaced_pending), snapshots);
       print(line);
     }
   }

@@ -1579,6 +1579,7 @@ double GridSource::interpolate(glm::dvec3 p, double slack) const {
     cell[a] = i;
     f[a] = std::clamp(t, 0.0, 1.0);
   }
+  if (held_ && !cell_held(cell)) return std::numeric_limits<double>::quiet_NaN();
   const auto [i, j, k] = cell;
   const auto lerp = [](double u, double v, double t) { return u + t * (v - u); };
   const double c00 = lerp(value(i, j, k), value(i + 1, j, k), f.x);
@@ -1591,10 +1592,11 @@ double GridSource::interpolate(glm::dvec3 p, double slack) const {
 
 namespace {
 
-// The colour field of a grid block: its interpolant, read in place.
+// The colour field of a grid block: its interpolant, read in place (a source over the colour
+// array with the block's held mask).
 class GridScalarProbe final : public ScalarProbe {
  public:
-  explicit GridScalarProbe(const GridBlock& colour) : grid_(colour) {}
+  explicit GridScalarProbe(GridSource colour) : grid_(std::move(colour)) {}
   double at(glm::dvec3 p) const override { return grid_.interpolate(p, 0.0); }
   // Points rounded onto the wrong side of the block's faces.
   double near(glm::dvec3 p) const override { return grid_.interpolate(p, 1e-6); }
@@ -1607,7 +1609,33 @@ class GridScalarProbe final : public ScalarProbe {
 
 std::unique_ptr<ScalarProbe> GridSource::bind_scalar() const {
   if (!block_.colour) return nullptr;
-  return std::make_unique<GridScalarProbe>(colour_as_values(block_));
+  GridSource colour = *this;
+  colour.block_ = colour_as_values(block_);
+  return std::make_unique<GridScalarProbe>(std::move(colour));
+}
+
+bool GridSource::cell_held(const std::array<std::int64_t, 3>& cell) const {
+  // Per axis, the bricks whose copy holds both point layers of the cell: cells lo − 1 … hi + 1.
+  std::array<std::array<std::int64_t, 3>, 3> bricks;
+  std::array<int, 3> count{};
+  for (int a = 0; a < 3; ++a) {
+    const std::int64_t rel = cell[a] - first_cell_[a];
+    const std::int64_t q =
+        std::clamp<std::int64_t>(rel < 0 ? -1 : rel / brick_cells_, 0, bricks_[a] - 1);
+    for (std::int64_t b = std::max<std::int64_t>(0, q - 1); b <= std::min(bricks_[a] - 1, q + 1);
+         ++b) {
+      const std::int64_t lo = first_cell_[a] + b * brick_cells_,
+                         hi = std::min(last_cell_[a], lo + brick_cells_ - 1);
+      if (cell[a] >= lo - 1 && cell[a] <= hi + 1) bricks[a][count[a]++] = b;
+    }
+  }
+  for (int z = 0; z < count[2]; ++z)
+    for (int y = 0; y < count[1]; ++y)
+      for (int x = 0; x < count[0]; ++x)
+        if ((*held_)[std::size_t(bricks[0][x] +
+                                 bricks_[0] * (bricks[1][y] + bricks_[1] * bricks[2][z]))])
+          return true;
+  return false;
 }
 
 Box GridSource::bounds() const {
@@ -1637,24 +1665,49 @@ GridView<T> make_view(const GridBlock& block, const T* values,
 }  // namespace
 
 std::vector<std::uint8_t> GridSource::needed_bricks(std::span<const double> isovalues) const {
-  std::vector<std::uint8_t> needed(brick_count(), 0);
+  // The bricks' ranges from the rows of points in memory order (a brick at a time would jump
+  // between rows and pages: three times slower on the Gray–Scott block), one layer of bricks
+  // along z per task. A brick whose values' sum is not finite (a NaN or ±Inf, or an overflow of
+  // huge values) is needed whatever its range: a superset of the bricks a bind keeps or finds
+  // non-finite values in, which is all the snapshot needs.
+  const std::size_t count = brick_count();
+  std::vector<double> lo(count, INFINITY), hi(count, -INFINITY);
+  std::vector<std::uint8_t> bad(count, 0);
   const auto scan = [&](const auto* values) {
     const auto g = make_view(block_, values, held_);
-    tbb::parallel_for(std::int64_t(0), std::int64_t(needed.size()), [&](std::int64_t n) {
-      if (g.held && !g.held[n]) return;
-      Brick b = brick_at(n, first_cell_, last_cell_, bricks_, brick_cells_);
-      double lo, hi;
-      brick_range(g, b, last_cell_, lo, hi);
-      bool any = b.nonfinite;
-      for (const double iso : isovalues)
-        any = any || (lo <= iso && iso <= hi);
-      needed[n] = any;
+    tbb::parallel_for(std::int64_t(0), bricks_[2], [&](std::int64_t bz) {
+      const std::int64_t z0 = first_cell_[2] + bz * brick_cells_,
+                         z1 = std::min(last_cell_[2], z0 + brick_cells_ - 1) + 1;
+      for (std::int64_t k = z0; k <= z1; ++k)
+        for (std::int64_t by = 0; by < bricks_[1]; ++by) {
+          const std::int64_t y0 = first_cell_[1] + by * brick_cells_,
+                             y1 = std::min(last_cell_[1], y0 + brick_cells_ - 1) + 1;
+          const std::size_t row = std::size_t(bricks_[0] * (by + bricks_[1] * bz));
+          for (std::int64_t j = y0; j <= y1; ++j)
+            for (std::int64_t bx = 0; bx < bricks_[0]; ++bx) {
+              const std::size_t n = row + std::size_t(bx);
+              if (g.held && !g.held[n]) continue;
+              const std::int64_t x0 = first_cell_[0] + bx * brick_cells_,
+                                 x1 = std::min(last_cell_[0], x0 + brick_cells_ - 1) + 1;
+              double sum = 0.0;
+              scan_row(g, x0, x1, j, k, lo[n], hi[n], sum);
+              if (!std::isfinite(sum)) bad[n] = 1;
+            }
+        }
     });
   };
   if (block_.type == ScalarType::float32)
     scan(static_cast<const float*>(block_.values));
   else
     scan(static_cast<const double*>(block_.values));
+  std::vector<std::uint8_t> needed(count, 0);
+  for (std::size_t n = 0; n < count; ++n) {
+    if (held_ && !(*held_)[n]) continue;
+    bool any = bad[n];
+    for (const double iso : isovalues)
+      any = any || (lo[n] <= iso && iso <= hi[n]);
+    needed[n] = any;
+  }
   return needed;
 }
 
@@ -1664,8 +1717,8 @@ void GridSource::for_each_needed_run(
   if (held.size() != brick_count())
     throw std::invalid_argument("for_each_needed_run: " + std::to_string(held.size()) +
                                 " brick flags for " + std::to_string(brick_count()) + " bricks");
-  // Per axis and point index: the bricks whose points, one layer more below and two more above,
-  // include it (at most a few: consecutive).
+  // Per axis and point index: the bricks of cells lo … hi whose points lo − 1 … hi + 2 include
+  // it (a few consecutive ones).
   std::array<std::vector<std::pair<std::int64_t, std::int64_t>>, 3> near;
   for (int a = 0; a < 3; ++a) {
     near[a].assign(std::size_t(block_.dims[a]), {0, -1});

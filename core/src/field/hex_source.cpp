@@ -1677,8 +1677,10 @@ HexElementSource::HexElementSource(const HexBlock& block) : block_(block) {
   geometry_degree_ = q > 0 ? q : 1;
   const int gm = geometry_degree_ + 1;
   const std::size_t gn = std::size_t(gm) * gm * gm;
-  if (q > 0) corners_.resize(24 * block.element_count);
-  curved_of_.assign(block.element_count, kNotCurved);
+  const auto prepared = std::make_shared<Prepared>();
+  geometry_ = prepared;
+  prepared->corners.resize(24 * block.element_count);
+  prepared->curved_of.assign(block.element_count, kNotCurved);
   std::vector<glm::dvec3> x(gn);
   std::vector<double> nodal(gn), bernstein(gn);
   constexpr double inf = std::numeric_limits<double>::infinity();
@@ -1701,8 +1703,9 @@ HexElementSource::HexElementSource(const HexBlock& block) : block_(block) {
       }
       for (int c = 0; c < 8; ++c)
         for (int axis = 0; axis < 3; ++axis)
-          corners_[24 * e + 3 * c + axis] = x[vertex(c)][axis];
+          prepared->corners[24 * e + 3 * c + axis] = x[vertex(c)][axis];
     } else {
+      std::copy_n(block.corners + 24 * e, 24, &prepared->corners[24 * e]);
       for (int c = 0; c < 8; ++c)
         x[c] = corner(block.corners + 24 * e, c);
     }
@@ -1731,8 +1734,8 @@ HexElementSource::HexElementSource(const HexBlock& block) : block_(block) {
       box = bounding_box(f);
     } else {
       check_jacobian(e, x);
-      curved_of_[e] = std::uint32_t(curved_geometry_.size() / gn);
-      curved_geometry_.insert(curved_geometry_.end(), x.begin(), x.end());
+      prepared->curved_of[e] = std::uint32_t(prepared->curved.size() / gn);
+      prepared->curved.insert(prepared->curved.end(), x.begin(), x.end());
       box = {x[0], x[0]};
       for (const glm::dvec3& v : x)  // the convex hull property
         box.lo = glm::min(box.lo, v), box.hi = glm::max(box.hi, v);
@@ -1746,19 +1749,13 @@ HexElementSource::HexElementSource(const HexElementSource& prepared, const HexBl
     : block_(block),
       bounds_(prepared.bounds_),
       geometry_degree_(prepared.geometry_degree_),
-      corners_(prepared.corners_),
-      curved_geometry_(prepared.curved_geometry_),
-      curved_of_(prepared.curved_of_) {
+      geometry_(prepared.geometry_) {
   const HexBlock& p = prepared.block_;
   if (block.order != p.order || block.nodes != p.nodes || block.ordering != p.ordering ||
       block.element_count != p.element_count || block.geometry_order != p.geometry_order)
     throw std::invalid_argument(
         "hex source: the block's layout (order, node set, ordering, element count, geometry "
         "order) differs from the prepared source's");
-  if (block.geometry_order > 0 && !block.geometry)
-    throw std::invalid_argument("hex source: null geometry array");
-  if (block.geometry_order == 0 && !block.corners)
-    throw std::invalid_argument("hex source: null corner array");
   if (!block.values) throw std::invalid_argument("hex source: null value array");
   check_scalar_types(block);
   const std::size_t n = nodes_per_element(block.order);
@@ -1955,19 +1952,19 @@ Box HexElementSource::bounds() const {
 }
 
 const double* HexElementSource::corners_of(std::size_t element) const {
-  return block_.geometry_order > 0 ? &corners_[24 * element] : block_.corners + 24 * element;
+  return &geometry_->corners[24 * element];
 }
 
 std::span<const glm::dvec3> HexElementSource::curved_geometry(std::size_t element) const {
-  const std::uint32_t k = curved_of_[element];
+  const std::uint32_t k = geometry_->curved_of[element];
   if (k == kNotCurved) return {};
   const std::size_t gn =
       std::size_t(geometry_degree_ + 1) * (geometry_degree_ + 1) * (geometry_degree_ + 1);
-  return {&curved_geometry_[k * gn], gn};
+  return {&geometry_->curved[k * gn], gn};
 }
 
 glm::dvec3 HexElementSource::to_world(std::size_t element, glm::dvec3 reference) const {
-  if (curved_of_[element] != kNotCurved) {
+  if (is_curved(element)) {
     const curved::Element ce{block_.order, geometry_degree_, nullptr,
                              curved_geometry(element).data()};
     return curved::evaluate(ce, reference).x;
@@ -1977,7 +1974,7 @@ glm::dvec3 HexElementSource::to_world(std::size_t element, glm::dvec3 reference)
 }
 
 glm::dvec3 HexElementSource::to_reference(std::size_t element, glm::dvec3 world) const {
-  if (curved_of_[element] != kNotCurved) {
+  if (is_curved(element)) {
     const curved::Element ce{block_.order, geometry_degree_, nullptr,
                              curved_geometry(element).data()};
     glm::dvec3 xi;

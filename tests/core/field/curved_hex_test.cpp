@@ -689,8 +689,16 @@ TEST(CurvedHex, SourceOverACopyReusesThePreparedGeometry) {
   refused([](HexBlock& b) { b.nodes = NodeSet::gauss_legendre; }, "node set");
   refused([](HexBlock& b) { b.ordering = NodeOrdering::vtk_lagrange; }, "ordering");
   refused([](HexBlock& b) { b.values = nullptr; }, "values");
-  refused([](HexBlock& b) { b.geometry = nullptr; }, "geometry");
   refused([](HexBlock& b) { b.element_stride = 10; }, "stride");
+  // The geometry is prepared's, shared: the block's arrays are not read, and may be null.
+  HexBlock no_geometry = shell.block;
+  no_geometry.geometry = nullptr;
+  const HexElementSource shared(prepared, no_geometry);
+  for (std::size_t e = 0; e < shell.block.element_count; e += 7) {
+    EXPECT_EQ(shared.to_world(e, glm::dvec3(0.3, 0.6, 0.2)),
+              prepared.to_world(e, glm::dvec3(0.3, 0.6, 0.2)));
+    EXPECT_EQ(shared.curved_geometry(e).data(), prepared.curved_geometry(e).data());
+  }
 }
 
 TEST(CurvedHex, InvalidCurvedBlocksAreRejected) {

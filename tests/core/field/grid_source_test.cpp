@@ -719,7 +719,8 @@ TEST(GridSource, ACopyOfTheNeededBricksCastsWhatTheWholeBlockCasts) {
   // What the adaptor's snapshot does: copy the points of the bricks that needed_bricks names
   // (for_each_needed_run) into a buffer whose other points hold anything, and cast that with
   // the mask. Two nested spheres with ghost layers, non-finite points near the surface and far
-  // from it; the buffer's other points NaN or wild values.
+  // from it, a colour field copied at the same points; the buffer's other points NaN or wild
+  // values. Fine views (object order) and coarse ones (rays walking their columns).
   const int n = 41;
   const std::vector<double> isovalues{0.3, 0.9};
   for (const ScalarType type : {ScalarType::float64, ScalarType::float32})
@@ -732,11 +733,15 @@ TEST(GridSource, ACopyOfTheNeededBricksCastsWhatTheWholeBlockCasts) {
       at(2, 3, 38) = kInf;    // a corner, far too
       at(31, 20, 20) = kNaN;  // next to the inner sphere (r ≈ 0.55 there)
       std::vector<float> floats(values.begin(), values.end());
+      const std::vector<double> colour =
+          sample<double>(n, -1.3, 1.3, [](double x, double y, double z) { return x + 2 * y - z; });
       GridBlock block = uniform_block(
           type == ScalarType::float64 ? (const void*)values.data() : (const void*)floats.data(),
           type, n, -1.3, 1.3);
       block.ghost_lo = {1, 1, 1};
       block.ghost_hi = {2, 2, 2};
+      block.colour = colour.data();
+      block.colour_type = ScalarType::float64;
       const GridSource whole(block, brick_cells);
       const std::vector<std::uint8_t> needed = whole.needed_bricks(isovalues);
       const std::size_t held = std::size_t(std::count(needed.begin(), needed.end(), 1));
@@ -752,6 +757,7 @@ TEST(GridSource, ACopyOfTheNeededBricksCastsWhatTheWholeBlockCasts) {
           for (double& v : copy)
             v = any(rng);
         std::vector<float> copy_floats(copy.begin(), copy.end());
+        std::vector<double> copy_colour = copy;
         std::atomic<std::size_t> copied{0};
         whole.for_each_needed_run(
             needed, [&](std::int64_t j, std::int64_t k, std::int64_t i0, std::int64_t i1) {
@@ -759,6 +765,7 @@ TEST(GridSource, ACopyOfTheNeededBricksCastsWhatTheWholeBlockCasts) {
               for (std::int64_t i = i0; i <= i1; ++i) {
                 copy[row + std::size_t(i)] = values[row + std::size_t(i)];
                 copy_floats[row + std::size_t(i)] = floats[row + std::size_t(i)];
+                copy_colour[row + std::size_t(i)] = colour[row + std::size_t(i)];
               }
               copied += std::size_t(i1 - i0 + 1);
             });
@@ -766,22 +773,31 @@ TEST(GridSource, ACopyOfTheNeededBricksCastsWhatTheWholeBlockCasts) {
         GridBlock sparse = block;
         sparse.values = type == ScalarType::float64 ? (const void*)copy.data()
                                                     : (const void*)copy_floats.data();
+        sparse.colour = copy_colour.data();
         const GridSource part(sparse, brick_cells, needed);
+        // Far from both surfaces the copy holds nothing: its colour probe answers NaN there,
+        // not what the buffer holds.
+        const glm::dvec3 far(1.2, 1.2, 1.2);
+        EXPECT_TRUE(std::isfinite(whole.bind_scalar()->at(far)));
+        EXPECT_TRUE(std::isnan(part.bind_scalar()->at(far)));
         for (const double iso : isovalues) {
           const RayCaster a(whole, iso), b(part, iso);
           EXPECT_EQ(a.nonfinite_values(), 3u);
           EXPECT_EQ(b.nonfinite_values(), a.nonfinite_values());
           EXPECT_EQ(b.primitive_count(), a.primitive_count());
           std::size_t samples = 0;
-          for (const View& view : axis_and_oblique_views(whole.bounds(), 48)) {
-            const Ldi la = a.cast(view), lb = b.cast(view);
-            ASSERT_EQ(la.offsets, lb.offsets) << "isovalue " << iso << (wild ? ", wild" : "");
-            for (std::size_t s = 0; s < la.sample_count(); ++s) {
-              ASSERT_EQ(la.depth[s], lb.depth[s]);
-              ASSERT_EQ(la.normal[s], lb.normal[s]);
+          for (const int resolution : {48, 20})
+            for (const View& view : axis_and_oblique_views(whole.bounds(), resolution)) {
+              const Ldi la = a.cast(view), lb = b.cast(view);
+              ASSERT_EQ(la.offsets, lb.offsets) << "isovalue " << iso << (wild ? ", wild" : "");
+              ASSERT_EQ(la.scalar.size(), la.sample_count());
+              for (std::size_t s = 0; s < la.sample_count(); ++s) {
+                ASSERT_EQ(la.depth[s], lb.depth[s]);
+                ASSERT_EQ(la.normal[s], lb.normal[s]);
+                ASSERT_EQ(la.scalar[s], lb.scalar[s]);
+              }
+              samples += la.sample_count();
             }
-            samples += la.sample_count();
-          }
           EXPECT_GT(samples, 2000u);
         }
       }
@@ -790,6 +806,9 @@ TEST(GridSource, ACopyOfTheNeededBricksCastsWhatTheWholeBlockCasts) {
   const std::vector<double> values = sample<double>(9, -1.0, 1.0, sphere_field);
   const GridBlock block = uniform_block(values.data(), ScalarType::float64, 9, -1.0, 1.0);
   EXPECT_THROW(GridSource(block, 4, std::vector<std::uint8_t>(3, 1)), std::invalid_argument);
+  EXPECT_THROW(
+      GridSource(block, 4).for_each_needed_run(std::vector<std::uint8_t>(3, 1), [](auto...) {}),
+      std::invalid_argument);
 }
 
 TEST(GridSource, CubicRootsOfACellSegment) {

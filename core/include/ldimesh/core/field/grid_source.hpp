@@ -59,9 +59,10 @@ class GridSource final : public FieldSource {
   // values in place, on all cores.
   std::vector<std::uint8_t> needed_bricks(std::span<const double> isovalues) const;
   // Calls f(j, k, i0, i1) for each stretch of points i0 … i1 of point row (j, k) (indices of the
-  // block's points, ghosts included) that a source holding the bricks `held` marks reads: each
-  // brick's points and, where the block has them, one layer more below and two more above
-  // along each axis (the normals' central differences). The stretches do not overlap; f runs
+  // block's points, ghosts included) that a source holding the bricks `held` marks reads: for a
+  // brick of cells lo … hi along an axis, points lo − 1 … hi + 2 where the block has them (its
+  // cells' points and one layer more on each side: the normals' central differences, and the
+  // colour probe in the cells beside its faces). The stretches do not overlap; f runs
   // concurrently for different k (rows of one k in order, on one thread). Throws
   // std::invalid_argument for a mask of the wrong size.
   void for_each_needed_run(
@@ -72,7 +73,8 @@ class GridSource final : public FieldSource {
   double value(std::int64_t i, std::int64_t j, std::int64_t k) const;
   // The trilinear interpolant of the values at world point `p`, in the cell that holds it (ghost
   // cells included); NaN where p lies more than `slack` (a fraction of a cell) outside the
-  // block's points, or where the interpolant there is not finite.
+  // block's points, or where the interpolant there is not finite; with a held mask, also in a
+  // cell whose points the mask's copy does not hold (for_each_needed_run).
   double interpolate(glm::dvec3 p, double slack = 0.0) const;
   // The coordinate of point index i along axis a (0 ≤ i < dims[a], 0 ≤ a < 3; not checked).
   double coordinate(int axis, std::int64_t i) const;
@@ -85,6 +87,8 @@ class GridSource final : public FieldSource {
   int brick_cells_;
   std::array<std::int64_t, 3> first_cell_{}, last_cell_{}, bricks_{};
   std::shared_ptr<const std::vector<std::uint8_t>> held_;  // null: every brick's points
+  // Whether some held brick's copy holds the points of `cell` (lower corner indices).
+  bool cell_held(const std::array<std::int64_t, 3>& cell) const;
 };
 
 // Part `index` of `whole` split into blocks[0] × blocks[1] × blocks[2] blocks of cells (as

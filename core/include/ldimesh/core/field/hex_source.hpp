@@ -72,17 +72,17 @@ class HexElementSource final : public FieldSource {
   // first element (named by index) with a non-finite geometry node or that is degenerate or
   // inverted (an affine one of zero volume; a curved one whose Jacobian determinant vanishes or
   // changes sign). Elements whose map is not affine (trilinear or of geometry order q) are
-  // intersected by the curved search (docs/method.md). The arrays must outlive the source;
-  // corners and geometry must not change while it lives (they are read here), values may:
-  // every bind() reads them.
+  // intersected by the curved search (docs/method.md). The corners or geometry nodes are read
+  // here only (the source keeps what it needs of them); the value arrays must outlive the
+  // source and may change: every bind() reads them.
   explicit HexElementSource(const HexBlock& block);
-  // A source over `block`, whose geometry is that of `prepared`'s block (a copy of its arrays:
-  // the adaptor's snapshot of a block at each due step), with its own values: the geometry's
-  // Bernstein form, bounds and checks are taken from `prepared` instead of computed again
-  // (for curved elements most of the constructor's time). `block`'s geometry arrays are not
-  // compared with prepared's, only its layout: throws std::invalid_argument where the order,
-  // node set, ordering, element count or geometry order differ, or for a null value array or
-  // an element stride below (p + 1)³.
+  // A source over `block`, whose geometry is that of `prepared`'s block, with its own values
+  // (the adaptor's snapshot of a block at each due step): the geometry as `prepared` prepared
+  // it (its Bernstein form, bounds and checks, for curved elements most of the constructor's
+  // time) is shared, not copied; `block`'s geometry arrays are not read (they may be null),
+  // only its layout: throws std::invalid_argument where the order, node set, ordering, element
+  // count or geometry order differ, or for a null value array or an element stride below
+  // (p + 1)³.
   HexElementSource(const HexElementSource& prepared, const HexBlock& block);
   // The same, over a copy of only some elements' values (the adaptor's snapshot of what a cast
   // reads): `held` has a flag per element and must mark at least the elements
@@ -114,8 +114,8 @@ class HexElementSource final : public FieldSource {
   // Threads: see field_source.hpp; to_reference and element_bernstein are const and reentrant.
 
   // Per element: whether bind() or bind_axis() for one of `isovalues` keeps it or finds a NaN
-  // or ±Inf among its values. Reads the values in place, on all cores; converts to Bernstein
-  // form only the elements whose nodal range comes near an isovalue.
+  // or ±Inf among its values. Reads the values in place and converts every element to
+  // Bernstein form (as bind() does), on all cores.
   std::vector<std::uint8_t> needed_elements(std::span<const double> isovalues) const;
   // The held mask (empty: every element's values are there).
   std::span<const std::uint8_t> held() const {
@@ -143,7 +143,7 @@ class HexElementSource final : public FieldSource {
   // geometry nodes).
   const double* corners_of(std::size_t element) const;
   // Whether element `element` is curved (its map from the reference cube is not affine).
-  bool is_curved(std::size_t element) const { return curved_of_[element] != kNotCurved; }
+  bool is_curved(std::size_t element) const { return geometry_->curved_of[element] != kNotCurved; }
   // The geometry's degree per axis: geometry_order, or 1 for a block of corners.
   int geometry_degree() const { return geometry_degree_; }
   // The Bernstein coefficients of a curved element's geometry, (q + 1)³ points in the values'
@@ -157,9 +157,13 @@ class HexElementSource final : public FieldSource {
   HexBlock block_;
   Box bounds_;
   int geometry_degree_ = 1;
-  std::vector<double> corners_;              // from the geometry's vertices (geometry_order > 0)
-  std::vector<glm::dvec3> curved_geometry_;  // (q + 1)³ per curved element
-  std::vector<std::uint32_t> curved_of_;     // per element: its index among the curved ones
+  // The geometry as prepared by the constructor, shared by the sources made from this one.
+  struct Prepared {
+    std::vector<double> corners;           // 24 per element: the block's, or the vertices
+    std::vector<glm::dvec3> curved;        // (q + 1)³ per curved element, Bernstein form
+    std::vector<std::uint32_t> curved_of;  // per element: its index among the curved ones
+  };
+  std::shared_ptr<const Prepared> geometry_;
   std::shared_ptr<const std::vector<std::uint8_t>> held_;  // null: every element's values
 };
 
