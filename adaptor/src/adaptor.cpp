@@ -207,7 +207,10 @@ GridBlock copy_grid(const GridBlock& block, const GridSource& source,
   }
   out.strides = {0, 0, 0};
   for (int a = 0; a < 3; ++a) {
-    if (!block.coords[a]) continue;
+    if (!block.coords[a]) {
+      copy.coords[a] = {};
+      continue;
+    }
     copy.coords[a].assign(block.coords[a], block.coords[a] + block.dims[a]);
     out.coords[a] = copy.coords[a].data();
     copy.bytes += copy.coords[a].size() * sizeof(double);
@@ -246,6 +249,7 @@ HexBlock copy_hex(const HexBlock& block, const HexElementSource& source,
                   std::span<const double> isovalues, BlockCopy& copy,
                   std::vector<std::uint8_t>& held) {
   held = source.needed_elements(isovalues);
+  copy.coords = {};  // the block k of an earlier step may have been a grid
   copy.bytes = copy_nodal(block, block.values, block.type, held, copy.values);
   HexBlock out = block;
   out.corners = nullptr;

@@ -731,7 +731,8 @@ class GridAxisBinding final : public AxisBinding {
                      (first_[2] + z) * g_.strides[2];
         const std::int64_t sx = g_.strides[0];
         for (std::int64_t x0 = 0; x0 < px; x0 += 64) {
-          // No held point here: not read at all (a snapshot's pages there may be unmapped).
+          // No held point here: not read at all (a snapshot may have given these pages back to
+          // the system; reading them would fault zero pages in).
           if (g_.held && held[std::size_t(x0 / 64)] == 0) continue;
           const int n = int(std::min<std::int64_t>(64, px - x0));
           const T* src = v + x0 * sx;

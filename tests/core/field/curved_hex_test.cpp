@@ -694,11 +694,34 @@ TEST(CurvedHex, SourceOverACopyReusesThePreparedGeometry) {
   HexBlock no_geometry = shell.block;
   no_geometry.geometry = nullptr;
   const HexElementSource shared(prepared, no_geometry);
+  std::size_t curved = 0;
   for (std::size_t e = 0; e < shell.block.element_count; e += 7) {
     EXPECT_EQ(shared.to_world(e, glm::dvec3(0.3, 0.6, 0.2)),
               prepared.to_world(e, glm::dvec3(0.3, 0.6, 0.2)));
+    ASSERT_EQ(shared.is_curved(e), prepared.is_curved(e));
+    if (!prepared.is_curved(e)) continue;
+    ++curved;
     EXPECT_EQ(shared.curved_geometry(e).data(), prepared.curved_geometry(e).data());
   }
+  EXPECT_GT(curved, 0u);
+  // A block of corners likewise: the source keeps them.
+  std::vector<double> corners(24);
+  for (int c = 0; c < 8; ++c)
+    for (int a = 0; a < 3; ++a)
+      corners[std::size_t(3 * c + a)] = ((c >> a) & 1) + 0.1 * a;
+  const std::vector<double> values(8, 1.0);
+  HexBlock cube;
+  cube.order = 1;
+  cube.element_count = 1;
+  cube.corners = corners.data();
+  cube.values = values.data();
+  const HexElementSource box_source(cube);
+  const std::vector<double> kept(box_source.corners_of(0), box_source.corners_of(0) + 24);
+  std::fill(corners.begin(), corners.end(), -7.0);  // the block's array is not read again
+  cube.corners = nullptr;
+  const HexElementSource box_shared(box_source, cube);
+  EXPECT_EQ(std::vector<double>(box_shared.corners_of(0), box_shared.corners_of(0) + 24), kept);
+  EXPECT_EQ(kept[3], 1.0);  // corner 1 at x = 1
 }
 
 TEST(CurvedHex, InvalidCurvedBlocksAreRejected) {

@@ -417,30 +417,38 @@ TEST(HexElementSource, ACopyOfTheNeededElementsCastsWhatAllValuesCast) {
       }
       const std::size_t held = std::size_t(std::count(needed.begin(), needed.end(), 1));
       EXPECT_LE(held, elements * 3 / 4);  // the copy leaves much out
-      std::vector<double> copy(values.size(), kNaN);
-      for (std::size_t e = 0; e < elements; ++e)
-        if (needed[e]) std::copy_n(&values[e * n], n, &copy[e * n]);
-      const HexElementSource part(source, make_block(order, nodes, corners, copy), needed);
-      for (const double iso : isovalues) {
-        const RayCaster a(source, iso), c(part, iso);
-        EXPECT_EQ(a.nonfinite_values(), 2u);
-        EXPECT_EQ(c.nonfinite_values(), a.nonfinite_values());
-        EXPECT_EQ(c.primitive_count(), a.primitive_count());
-        std::size_t samples = 0;
-        for (const View& view : axis_and_oblique_views(source.bounds(), 40)) {
-          const Ldi la = a.cast(view), lc = c.cast(view);
-          ASSERT_EQ(la.offsets, lc.offsets) << "isovalue " << iso;
-          for (std::size_t s = 0; s < la.sample_count(); ++s) {
-            ASSERT_EQ(la.depth[s], lc.depth[s]);
-            ASSERT_EQ(la.normal[s], lc.normal[s]);
+      for (const bool wild : {false, true}) {
+        // The other elements' values NaN, or anything; the geometry not given (shared).
+        std::vector<double> copy(values.size(), kNaN);
+        std::uniform_real_distribution<double> any(-2.0, 2.0);
+        if (wild)
+          for (double& v : copy)
+            v = any(rng);
+        for (std::size_t e = 0; e < elements; ++e)
+          if (needed[e]) std::copy_n(&values[e * n], n, &copy[e * n]);
+        HexBlock copied = make_block(order, nodes, corners, copy);
+        copied.corners = nullptr;
+        const HexElementSource part(source, copied, needed);
+        for (const double iso : isovalues) {
+          const RayCaster a(source, iso), c(part, iso);
+          EXPECT_EQ(a.nonfinite_values(), 2u);
+          EXPECT_EQ(c.nonfinite_values(), a.nonfinite_values());
+          EXPECT_EQ(c.primitive_count(), a.primitive_count());
+          std::size_t samples = 0;
+          for (const View& view : axis_and_oblique_views(source.bounds(), 40)) {
+            const Ldi la = a.cast(view), lc = c.cast(view);
+            ASSERT_EQ(la.offsets, lc.offsets) << "isovalue " << iso;
+            for (std::size_t s = 0; s < la.sample_count(); ++s) {
+              ASSERT_EQ(la.depth[s], lc.depth[s]);
+              ASSERT_EQ(la.normal[s], lc.normal[s]);
+            }
+            samples += la.sample_count();
           }
-          samples += la.sample_count();
+          EXPECT_GT(samples, 1000u);
         }
-        EXPECT_GT(samples, 1000u);
+        EXPECT_THROW(HexElementSource(source, copied, std::vector<std::uint8_t>(elements - 1, 1)),
+                     std::invalid_argument);
       }
-      EXPECT_THROW(HexElementSource(source, make_block(order, nodes, corners, copy),
-                                    std::vector<std::uint8_t>(elements - 1, 1)),
-                   std::invalid_argument);
     }
 }
 

@@ -53,10 +53,10 @@ class GridSource final : public FieldSource {
   // Bricks before culling, and their size in cells per axis.
   std::size_t brick_count() const;
   int brick_cells() const { return brick_cells_; }
-  // Per brick (x fastest): whether its points' finite range holds one of `isovalues` or one of
-  // its points is NaN or ±Inf. bind() and bind_axis() for these isovalues read the points of
-  // these bricks only, with the points around them that the hits' normals read. Reads the
-  // values in place, on all cores.
+  // Per brick (x fastest): whether the range of its points holds one of `isovalues` or one of
+  // them is NaN or ±Inf (or their sum overflows): a superset of the bricks that bind() and
+  // bind_axis() for these isovalues read, with the points around them that the hits' normals
+  // read. Reads the values in place, on all cores.
   std::vector<std::uint8_t> needed_bricks(std::span<const double> isovalues) const;
   // Calls f(j, k, i0, i1) for each stretch of points i0 … i1 of point row (j, k) (indices of the
   // block's points, ghosts included) that a source holding the bricks `held` marks reads: for a

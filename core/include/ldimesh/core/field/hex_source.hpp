@@ -73,8 +73,9 @@ class HexElementSource final : public FieldSource {
   // inverted (an affine one of zero volume; a curved one whose Jacobian determinant vanishes or
   // changes sign). Elements whose map is not affine (trilinear or of geometry order q) are
   // intersected by the curved search (docs/method.md). The corners or geometry nodes are read
-  // here only (the source keeps what it needs of them); the value arrays must outlive the
-  // source and may change: every bind() reads them.
+  // here only: the source keeps what it needs of them (every element's 8 corners, 24 doubles,
+  // and a curved element's geometry in Bernstein form), shared with the sources made from it.
+  // The value arrays must outlive the source and may change: every bind() reads them.
   explicit HexElementSource(const HexBlock& block);
   // A source over `block`, whose geometry is that of `prepared`'s block, with its own values
   // (the adaptor's snapshot of a block at each due step): the geometry as `prepared` prepared
