@@ -57,11 +57,45 @@ std::size_t scalar_bytes(ScalarType type) {
   return type == ScalarType::float32 ? sizeof(float) : sizeof(double);
 }
 
+// The pages of an array of `bytes` bytes that some of its stretches touch.
+class PageSet {
+ public:
+  static std::size_t page() {
+    static const std::size_t size = std::size_t(sysconf(_SC_PAGESIZE));
+    return size;
+  }
+  explicit PageSet(std::size_t bytes = 0) : bytes_(bytes), marked_((bytes + page() - 1) / page()) {}
+  // Bytes offset … offset + length − 1 are touched (any thread).
+  void mark(std::size_t offset, std::size_t length) {
+    if (length == 0) return;
+    for (std::size_t p = offset / page(); p <= (offset + length - 1) / page(); ++p)
+      std::atomic_ref<std::uint8_t>(marked_[p]).store(1, std::memory_order_relaxed);
+  }
+  bool marked(std::size_t p) const { return marked_[p] != 0; }
+  std::size_t pages() const { return marked_.size(); }
+  // The bytes of the touched pages (the last one as far as the array goes).
+  std::size_t bytes() const {
+    std::size_t total = 0;
+    for (std::size_t p = 0; p < marked_.size(); ++p)
+      total += marked_[p] ? std::min(page(), bytes_ - p * page()) : 0;
+    return total;
+  }
+  // Adds the other's pages (of the same array).
+  void add(const PageSet& other) {
+    for (std::size_t p = 0; p < marked_.size(); ++p)
+      marked_[p] |= other.marked_[p];
+  }
+
+ private:
+  std::size_t bytes_;
+  std::vector<std::uint8_t> marked_;
+};
+
 // One array of a block as copied at a due step (background path), of which a step may copy
-// only some stretches (a grid block's needed bricks): anonymous memory, kept from step to step
-// so that later copies reuse its pages, whose pages the step did not write are given back to
-// the system. So the memory it holds is what the step copied, rounded to pages, not the whole
-// array.
+// only some stretches (a grid block's needed bricks, an element block's needed elements):
+// anonymous memory, kept from step to step so that later copies reuse its pages, whose pages the
+// step did not write are given back to the system. So the memory it holds is what the step
+// copied, rounded to pages, not the whole array.
 class SparseCopy {
  public:
   SparseCopy() = default;
@@ -83,73 +117,59 @@ class SparseCopy {
       if (bytes > 0) {
         void* p = mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
         if (p == MAP_FAILED) throw std::bad_alloc();
-          // Small pages: a huge page would make one written stretch hold 2 MiB.
-#ifdef MADV_NOHUGEPAGE
-        madvise(p, bytes, MADV_NOHUGEPAGE);
-#endif
+        // Small pages: a huge page would make one written stretch hold 2 MiB.
+        advise_small_pages(p, bytes);
         data_ = static_cast<unsigned char*>(p);
       }
       size_ = bytes;
-      before_.assign(pages(), 0);
-      now_.assign(pages(), 0);
+      before_ = PageSet(bytes);
+    } else {
+      // Pages written by a step whose copy failed before finish() count as the previous step's.
+      before_.add(now_);
     }
-    // Pages written by a step whose copy failed before finish() count as the previous step's.
-    for (std::size_t p = 0; p < now_.size(); ++p)
-      before_[p] |= now_[p];
-    std::fill(now_.begin(), now_.end(), 0);
+    now_ = PageSet(bytes);
     return data_;
   }
   // Bytes offset … offset + length − 1 were written by this step (any thread).
-  void written(std::size_t offset, std::size_t length) {
-    if (length == 0) return;
-    for (std::size_t p = offset / page(); p <= (offset + length - 1) / page(); ++p)
-      std::atomic_ref<std::uint8_t>(now_[p]).store(1, std::memory_order_relaxed);
-  }
+  void written(std::size_t offset, std::size_t length) { now_.mark(offset, length); }
   // After the step's copies: gives back the pages that the previous step wrote and this one did
   // not, and returns the bytes of the pages this step wrote.
   std::size_t finish() {
-    std::size_t held = 0;
-    for (std::size_t p = 0; p < now_.size();) {
-      held += now_[p] ? std::min(page(), size_ - p * page()) : 0;
-      if (now_[p] || !before_[p]) {
+    const std::size_t page = PageSet::page();
+    for (std::size_t p = 0; p < now_.pages();) {
+      if (now_.marked(p) || !before_.marked(p)) {
         ++p;
         continue;
       }
       const std::size_t first = p;
-      while (p < now_.size() && !now_[p])
+      while (p < now_.pages() && !now_.marked(p))
         ++p;
-      madvise(data_ + first * page(), std::min(p * page(), size_) - first * page(), MADV_DONTNEED);
+      madvise(data_ + first * page, std::min(p * page, size_) - first * page, MADV_DONTNEED);
     }
-    std::swap(now_, before_);
-    std::fill(now_.begin(), now_.end(), 0);
+    const std::size_t held = now_.bytes();
+    before_ = std::move(now_);
+    now_ = PageSet(size_);
     return held;
   }
   // No copy: gives the memory back.
-  void clear() {
-    unmap();
-  }
-  const unsigned char* data() const {
-    return data_;
-  }
+  void clear() { unmap(); }
+  const unsigned char* data() const { return data_; }
 
  private:
-  static std::size_t page() {
-    static const std::size_t size = std::size_t(sysconf(_SC_PAGESIZE));
-    return size;
-  }
-  std::size_t pages() const {
-    return (size_ + page() - 1) / page();
+  static void advise_small_pages([[maybe_unused]] void* p, [[maybe_unused]] std::size_t bytes) {
+#ifdef MADV_NOHUGEPAGE
+    madvise(p, bytes, MADV_NOHUGEPAGE);
+#endif
   }
   void unmap() {
     if (data_) munmap(data_, size_);
     data_ = nullptr;
     size_ = 0;
-    now_.clear();
-    before_.clear();
+    now_ = before_ = PageSet();
   }
   unsigned char* data_ = nullptr;
   std::size_t size_ = 0;
-  std::vector<std::uint8_t> now_, before_;  // per page: written by this step, by the previous one
+  PageSet now_, before_;  // written by this step, by the previous one
 };
 
 // A block's arrays as copied at a due step (background path).
@@ -190,12 +210,31 @@ std::size_t copy_points(const GridBlock& block, const GridSource& source,
   return out.finish();
 }
 
-// The points of the grid block that `source` (over it) reads for `isovalues`, and its colour
-// field's there, contiguous with x fastest; its coordinates; and in `held` the bricks copied.
+// What copying the bricks `held` of a grid block that `source` is over will hold: the pages of
+// the points a source holding them reads (for_each_needed_run), of the values and the colour
+// field, and the coordinates.
+std::size_t grid_copy_bytes(const GridBlock& block, const GridSource& source,
+                            const std::vector<std::uint8_t>& held) {
+  const std::int64_t nx = block.dims[0], ny = block.dims[1], nz = block.dims[2];
+  const auto pages = [&](ScalarType type) {
+    const std::size_t size = scalar_bytes(type);
+    PageSet set(std::size_t(nx * ny * nz) * size);
+    source.for_each_needed_run(
+        held, [&](std::int64_t j, std::int64_t k, std::int64_t i0, std::int64_t i1) {
+          set.mark(std::size_t((k * ny + j) * nx + i0) * size, std::size_t(i1 - i0 + 1) * size);
+        });
+    return set.bytes();
+  };
+  std::size_t bytes = pages(block.type) + (block.colour ? pages(block.colour_type) : 0);
+  for (int a = 0; a < 3; ++a)
+    if (block.coords[a]) bytes += std::size_t(block.dims[a]) * sizeof(double);
+  return bytes;
+}
+
+// Of the grid block that `source` is over, the points a source holding the bricks `held` reads,
+// and its colour field's there, contiguous with x fastest; and its coordinates.
 GridBlock copy_grid(const GridBlock& block, const GridSource& source,
-                    std::span<const double> isovalues, BlockCopy& copy,
-                    std::vector<std::uint8_t>& held) {
-  held = source.needed_bricks(isovalues);
+                    const std::vector<std::uint8_t>& held, BlockCopy& copy) {
   GridBlock out = block;
   copy.bytes = copy_points(block, source, held, block.values, block.type, copy.values);
   out.values = copy.values.data();
@@ -241,14 +280,24 @@ std::size_t copy_nodal(const HexBlock& block, const void* values, ScalarType typ
   return out.finish();
 }
 
-// Of the high-order block, the nodal values of the elements that `source` (over it) keeps for
-// `isovalues` (in `held`) and the whole colour field (a hit on a face the kept element shares
-// with another may be coloured from that one), element after element without gaps. Not the
-// geometry: the source over the copy shares the one `source` prepared.
-HexBlock copy_hex(const HexBlock& block, const HexElementSource& source,
-                  std::span<const double> isovalues, BlockCopy& copy,
-                  std::vector<std::uint8_t>& held) {
-  held = source.needed_elements(isovalues);
+// What copying the elements `held` of a high-order block will hold: the pages of their nodal
+// values, and the whole colour field.
+std::size_t hex_copy_bytes(const HexBlock& block, const std::vector<std::uint8_t>& held) {
+  const std::size_t n = std::size_t(block.order + 1) * (block.order + 1) * (block.order + 1);
+  const std::size_t size = scalar_bytes(block.type);
+  PageSet set(block.element_count * n * size);
+  for (std::size_t e = 0; e < block.element_count; ++e)
+    if (held[e]) set.mark(e * n * size, n * size);
+  return set.bytes() +
+         (block.colour ? block.element_count * n * scalar_bytes(block.colour_type) : 0);
+}
+
+// Of the high-order block, the nodal values of the elements `held` marks (those a source over it
+// keeps: HexElementSource::needed_elements) and the whole colour field (a hit on a face the kept
+// element shares with another may be coloured from that one), element after element without
+// gaps. Not the geometry: the source over the copy shares the one prepared when the block was
+// added.
+HexBlock copy_hex(const HexBlock& block, const std::vector<std::uint8_t>& held, BlockCopy& copy) {
   copy.coords = {};  // the block k of an earlier step may have been a grid
   copy.bytes = copy_nodal(block, block.values, block.type, held, copy.values);
   HexBlock out = block;
@@ -398,8 +447,7 @@ class AdaptorImpl final : public Adaptor {
     // The root decides whether the step runs (cadence, busy worker); everyone follows. Each rank
     // says whether it can take a snapshot (background path): all must, or the step runs
     // synchronously everywhere. One collective for both.
-    std::size_t snapshot_bytes = 0;
-    const bool can_snapshot = background_ && snapshot_possible(snapshot_bytes);
+    const bool can_snapshot = background_ && snapshot_copyable();
     // The root's decision, whether a rank cannot snapshot, whether "auto" merging has stopped.
     int flags[3] = {0, background_ && !can_snapshot ? 1 : 0, 0};
     if (rank_ == 0) {
@@ -447,10 +495,20 @@ class AdaptorImpl final : public Adaptor {
     job.merge = options_.merging == AdaptorOptions::Merging::on ||
                 (options_.merging == AdaptorOptions::Merging::automatic && background_ &&
                  flags[1] == 0 && flags[2] == 0);
-    if (background_ && flags[1] == 0) return hand_to_background(std::move(job), start);
+    std::string why = "a rank's blocks cannot be copied (a FieldSource)";
+    if (background_ && flags[1] == 0) {
+      long long largest = 0;
+      if (hand_to_background(job, start, largest)) return Status::ok();
+      char text[160];
+      std::snprintf(text, sizeof text,
+                    "a rank's copy of what it reads (%.1f MiB) would exceed memory_mb (%zu)",
+                    double(largest) / (1 << 20), options_.memory_mb);
+      why = text;
+      job.merge = options_.merging == AdaptorOptions::Merging::on;
+    }
     if (background_ && rank_ == 0 && options_.log)
       std::printf("ldimesh: step %llu runs synchronously: %s%s\n", (unsigned long long)step,
-                  "a rank's blocks cannot be copied (a FieldSource) or exceed memory_mb",
+                  why.c_str(),
                   options_.merging == AdaptorOptions::Merging::automatic
                       ? "; its views are published trimmed, not merged (\"merging\": \"auto\")"
                       : "");
@@ -677,38 +735,24 @@ class AdaptorImpl final : public Adaptor {
 
   // ---- The background path: the solver waits for a copy of its blocks only.
 
-  // Whether the domain is set, every block can be copied (grid and high-order blocks: a
-  // FieldSource cannot) and the whole blocks fit memory_mb; `bytes` is their size, a bound of
-  // the copy known before the field is read (a grid block's copy holds only what the step's
-  // isovalues need).
-  bool snapshot_possible(std::size_t& bytes) const {
-    bytes = 0;
+  // Whether the domain is set and every block can be copied (grid and high-order blocks: a
+  // FieldSource cannot). Whether the copy fits memory_mb is known once the field is read
+  // (hand_to_background).
+  bool snapshot_copyable() const {
     if (!has_domain_) return false;  // the synchronous path fails the step on every rank
-    for (const Block& b : blocks_) {
-      if (b.grid) {
-        const auto& d = b.grid->dims;
-        bytes +=
-            std::size_t(d[0] * d[1] * d[2]) *
-            (scalar_bytes(b.grid->type) + (b.grid->colour ? scalar_bytes(b.grid->colour_type) : 0));
-        if (b.grid->coords[0]) bytes += std::size_t(d[0] + d[1] + d[2]) * sizeof(double);
-      } else if (b.hex) {
-        const std::size_t n =
-            std::size_t(b.hex->order + 1) * (b.hex->order + 1) * (b.hex->order + 1);
-        bytes +=
-            b.hex->element_count * n *
-            (scalar_bytes(b.hex->type) + (b.hex->colour ? scalar_bytes(b.hex->colour_type) : 0));
-      } else {
-        return false;
-      }
-    }
-    return bytes <= (options_.memory_mb << 20);
+    for (const Block& b : blocks_)
+      if (!b.grid && !b.hex) return false;
+    return true;
   }
 
   // Copies what the step reads of the blocks into the snapshot buffers (kept from step to step;
   // copy_grid) and hands the step to
   // this rank's caster thread. Every rank does, even after a local failure (the caster thread
   // then sends empty fragments and the step fails everywhere, as on the synchronous path).
-  Status hand_to_background(Job job, Clock::time_point start) {
+  // Collective. Returns false, `job` untouched, where a rank's copy would exceed memory_mb (known
+  // once each rank has chosen what to copy; `largest` is the largest copy's bytes): the step
+  // then runs synchronously on every rank.
+  bool hand_to_background(Job& job, Clock::time_point start, long long& largest) {
     {
       // With "skip" the root decided the step runs because its own caster was idle, and the
       // others' finish the previous step's reduction with it: a short wait. With "coalesce"
@@ -716,31 +760,55 @@ class AdaptorImpl final : public Adaptor {
       std::unique_lock lock(mutex_);
       caster_idle_.wait(lock, [&] { return !caster_job_ && !casting_; });
     }
-    std::size_t bytes = 0;
-    const Status copied = guard("snapshot: ", [&] {
-      snapshot_.resize(blocks_.size());
-      snapshot_blocks_.clear();
+    // What the step reads of each block: a grid block's bricks, an element block's elements.
+    std::vector<std::vector<std::uint8_t>> held(blocks_.size());
+    std::size_t planned = 0;
+    Status copied = guard("snapshot: ", [&] {
       for (std::size_t k = 0; k < blocks_.size(); ++k) {
         const Block& b = blocks_[k];
-        Block copy;
-        copy.owned = b.owned;
-        if (b.grid) {  // the bricks the step's isovalues need, with the points around them
+        if (b.grid) {
           const auto& live = static_cast<const GridSource&>(*b.source);
-          std::vector<std::uint8_t> held;
-          copy.grid = copy_grid(*b.grid, live, options_.isovalues, snapshot_[k], held);
-          copy.source =
-              std::make_shared<GridSource>(*copy.grid, live.brick_cells(), std::move(held));
-        } else {  // the geometry as the block's source prepared it (converted and checked once)
-          const auto& live = static_cast<const HexElementSource&>(*b.source);
-          std::vector<std::uint8_t> held;
-          copy.hex = copy_hex(*b.hex, live, options_.isovalues, snapshot_[k], held);
-          copy.source = std::make_shared<HexElementSource>(live, *copy.hex, std::move(held));
+          held[k] = live.needed_bricks(options_.isovalues);
+          planned += grid_copy_bytes(*b.grid, live, held[k]);
+        } else {
+          held[k] =
+              static_cast<const HexElementSource&>(*b.source).needed_elements(options_.isovalues);
+          planned += hex_copy_bytes(*b.hex, held[k]);
         }
-        bytes += snapshot_[k].bytes;
-        snapshot_blocks_.push_back(std::move(copy));
       }
       return Status::ok();
     });
+    // Whether some rank's copy exceeds memory_mb, and the largest copy. (A rank that failed
+    // goes on: its caster thread fails the step everywhere, as on the synchronous path.)
+    long long over[2] = {copied && planned > (options_.memory_mb << 20) ? 1 : 0,
+                         static_cast<long long>(planned)};
+    MPI_Allreduce(MPI_IN_PLACE, over, 2, MPI_LONG_LONG, MPI_MAX, comm_);
+    largest = over[1];
+    if (over[0]) return false;
+    std::size_t bytes = 0;
+    if (copied)
+      copied = guard("snapshot: ", [&] {
+        snapshot_.resize(blocks_.size());
+        snapshot_blocks_.clear();
+        for (std::size_t k = 0; k < blocks_.size(); ++k) {
+          const Block& b = blocks_[k];
+          Block copy;
+          copy.owned = b.owned;
+          if (b.grid) {  // the bricks the step's isovalues need, with the points around them
+            const auto& live = static_cast<const GridSource&>(*b.source);
+            copy.grid = copy_grid(*b.grid, live, held[k], snapshot_[k]);
+            copy.source =
+                std::make_shared<GridSource>(*copy.grid, live.brick_cells(), std::move(held[k]));
+          } else {  // the geometry as the block's source prepared it (converted and checked once)
+            copy.hex = copy_hex(*b.hex, held[k], snapshot_[k]);
+            copy.source = std::make_shared<HexElementSource>(
+                static_cast<const HexElementSource&>(*b.source), *copy.hex, std::move(held[k]));
+          }
+          bytes += snapshot_[k].bytes;
+          snapshot_blocks_.push_back(std::move(copy));
+        }
+        return Status::ok();
+      });
     if (!copied) snapshot_blocks_.clear();
     report_.background = true;
     report_.snapshot_bytes = bytes;
@@ -756,7 +824,7 @@ class AdaptorImpl final : public Adaptor {
       caster_wake_.notify_all();
     }
     finish_report(start);
-    return Status::ok();
+    return true;
   }
 
   // Every rank's caster thread: the collective half of each snapshotted step on the duplicated

@@ -602,6 +602,37 @@ TEST(Adaptor, GridBlocksRunInTheBackgroundWhereMpiAllowsIt) {
   EXPECT_TRUE(b->finalize());
 }
 
+// "memory_mb" bounds what the snapshot holds, not the blocks: with 1 MiB, 100³ float points
+// (3.8 MiB over all ranks) are snapshotted while the surface is a small sphere, and the step runs
+// synchronously once the surface is large.
+TEST(Adaptor, MemoryMbBoundsTheSnapshotNotTheBlocks) {
+  const std::string dir = temp_dir("memory_mb");
+  GridSlab small(100, 0.36 - 0.0225), large(100, 0.0);
+  auto a = make_grid_adaptor(R"({"memory_mb": 1, )" + grid_options(dir, true).substr(1), small);
+  if (!a) return;
+  for (std::uint64_t step = 0; step < 2; ++step) {
+    const bool fits = step == 0;
+    SCOPED_TRACE(fits ? "a sphere of radius 0.15" : "a sphere of radius 0.6");
+    a->clear_blocks();
+    EXPECT_TRUE(a->add_grid_block((fits ? small : large).block));
+    EXPECT_TRUE(a->execute(step, 0.0)) << a->last_error();
+    EXPECT_EQ(a->last_report().background, thread_multiple() && fits);
+    if (a->last_report().background) {
+      EXPECT_LE(a->last_report().snapshot_bytes, std::size_t(1) << 20);
+    } else {
+      EXPECT_EQ(a->last_report().snapshot_bytes, 0u);
+    }
+    // Published before the next step (which would otherwise find the worker busy).
+    for (int wait = 0; rank_of() == 0 && a->published_steps() < step + 1 && wait < 1000; ++wait)
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  EXPECT_TRUE(a->finalize()) << a->last_error();
+  if (rank_of() == 0) {
+    EXPECT_EQ(a->published_steps(), 2u);
+    expect_on_the_slab_sphere(testing::published_mesh(dir, 1), 0.36);
+  }
+}
+
 // Both paths publish the same bytes; and the solver may overwrite its arrays as soon as
 // execute() returns: the published mesh is that of the values at the call. Merged, so that the
 // snapshot also answers the merge's samples after the solver has moved on.

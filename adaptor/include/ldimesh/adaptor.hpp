@@ -18,7 +18,7 @@
 // solver may overwrite its arrays as soon as execute() returns) and returns:
 // the ray casting and the reduction run on a caster thread of every rank, over a duplicate of
 // the communicator. With less (MPI_THREAD_FUNNELED at least), or when a block is a FieldSource
-// (nothing to copy) or the whole blocks would exceed "memory_mb", the step runs synchronously: the
+// (nothing to copy) or a rank's copy would exceed "memory_mb", the step runs synchronously: the
 // solver waits for the ray casting and the reduction, and MPI is called from the thread that
 // calls execute() only.
 //
