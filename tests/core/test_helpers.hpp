@@ -2,7 +2,9 @@
 #pragma once
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstdint>
 #include <optional>
 #include <vector>
 
@@ -13,6 +15,7 @@
 #include "ldimesh/core/base/mesh.hpp"
 #include "ldimesh/core/base/view.hpp"
 #include "ldimesh/core/raycast/ldi.hpp"
+#include "ldimesh/core/raycast/raycaster.hpp"
 
 namespace ldimesh::testing {
 
@@ -116,6 +119,29 @@ inline std::vector<View> axis_and_oblique_views(const Box& box, int res) {
   std::vector<View> views = make_axis_views(box, res, "xyz");
   views.push_back(make_view(box, {0.3, -0.5, 0.8}, res));
   return views;
+}
+
+// Casts `views` with both casters and expects the same LDIs, bit for bit: offsets, depths,
+// normals and colours (NaN equal to NaN). Returns the samples compared.
+inline std::size_t expect_same_casts(const RayCaster& a, const RayCaster& b,
+                                     const std::vector<View>& views) {
+  std::size_t samples = 0;
+  for (const View& view : views) {
+    const Ldi la = a.cast(view), lb = b.cast(view);
+    EXPECT_EQ(la.offsets, lb.offsets);
+    EXPECT_EQ(la.scalar.size(), lb.scalar.size());
+    if (la.offsets != lb.offsets || la.scalar.size() != lb.scalar.size()) return samples;
+    for (std::size_t s = 0; s < la.sample_count(); ++s) {
+      const bool same_scalar = la.scalar.empty() || std::bit_cast<std::uint32_t>(la.scalar[s]) ==
+                                                        std::bit_cast<std::uint32_t>(lb.scalar[s]);
+      if (la.depth[s] != lb.depth[s] || la.normal[s] != lb.normal[s] || !same_scalar) {
+        ADD_FAILURE() << "sample " << s << " differs";
+        return samples;
+      }
+    }
+    samples += la.sample_count();
+  }
+  return samples;
 }
 
 }  // namespace ldimesh::testing

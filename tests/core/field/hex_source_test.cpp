@@ -314,28 +314,35 @@ TEST(HexElementSource, RandomPolynomialRootsMatchADenseScan) {
     }
 }
 
+// Nodal values of x plus three random waves of `amplitude` (random directions and phases from
+// `rng`): only the elements near a level x = c can hold the isosurface of c.
+std::vector<double> wavy_ramp(int order, NodeSet nodes, const std::vector<double>& corners,
+                              double amplitude, std::mt19937& rng) {
+  std::uniform_real_distribution<double> wave(-4.0, 4.0);
+  glm::dvec3 k[3];
+  double phase[3];
+  for (int w = 0; w < 3; ++w)
+    k[w] = {wave(rng), wave(rng), wave(rng)}, phase[w] = wave(rng);
+  return sample_nodes(order, nodes, corners, [&](glm::dvec3 x) {
+    double v = x.x;
+    for (int w = 0; w < 3; ++w)
+      v += amplitude * std::sin(glm::dot(k[w], x) + phase[w]);
+    return v;
+  });
+}
+
 TEST(HexElementSource, CullingNeverDropsAnElementThatHoldsARoot) {
   // Random smooth fields: a ramp in x plus random waves, so that only elements near x = 0.5
   // can hold the isosurface. (On rough data such as random nodal values the Bernstein
   // coefficients bound the element only loosely, and little is culled.)
   std::mt19937 rng(11);
-  std::uniform_real_distribution<double> wave(-4.0, 4.0);
   const std::vector<double> corners =
       tiled_corners({4, 4, 4}, {0.0, 0.0, 0.0}, {1.0, 1.0, 1.0}, skew_map());
   const double iso = 0.5;
   for (int order : {3, 6})
     for (NodeSet nodes : kNodeSets) {
       SCOPED_TRACE(describe(order, nodes));
-      glm::dvec3 k[3];
-      double phase[3];
-      for (int w = 0; w < 3; ++w)
-        k[w] = {wave(rng), wave(rng), wave(rng)}, phase[w] = wave(rng);
-      const std::vector<double> values = sample_nodes(order, nodes, corners, [&](glm::dvec3 x) {
-        double v = x.x;
-        for (int w = 0; w < 3; ++w)
-          v += 0.03 * std::sin(glm::dot(k[w], x) + phase[w]);
-        return v;
-      });
+      const std::vector<double> values = wavy_ramp(order, nodes, corners, 0.03, rng);
       const HexElementSource source(make_block(order, nodes, corners, values));
       const std::vector<double> x = node_positions(order, nodes);
       const int n = values_per_element(order);
@@ -381,7 +388,6 @@ TEST(HexElementSource, ACopyOfTheNeededElementsCastsWhatAllValuesCast) {
   // isovalues: two bands of elements), and non-finite values in elements far from the surface
   // and on it.
   std::mt19937 rng(3);
-  std::uniform_real_distribution<double> wave(-4.0, 4.0);
   const std::vector<double> corners =
       tiled_corners({6, 4, 4}, {0.0, 0.0, 0.0}, {1.0, 1.0, 1.0}, skew_map());
   const std::size_t elements = corners.size() / 24;
@@ -389,16 +395,7 @@ TEST(HexElementSource, ACopyOfTheNeededElementsCastsWhatAllValuesCast) {
   for (int order : {2, 4, 7})
     for (NodeSet nodes : kNodeSets) {
       SCOPED_TRACE(describe(order, nodes));
-      glm::dvec3 k[3];
-      double phase[3];
-      for (int w = 0; w < 3; ++w)
-        k[w] = {wave(rng), wave(rng), wave(rng)}, phase[w] = wave(rng);
-      std::vector<double> values = sample_nodes(order, nodes, corners, [&](glm::dvec3 x) {
-        double v = x.x;
-        for (int w = 0; w < 3; ++w)
-          v += 0.02 * std::sin(glm::dot(k[w], x) + phase[w]);
-        return v;
-      });
+      std::vector<double> values = wavy_ramp(order, nodes, corners, 0.02, rng);
       const int n = values_per_element(order);
       values[0 * std::size_t(n) + 1] = kNaN;  // x < 1/6: far from both surfaces
       values[3 * std::size_t(n) + 2] = kInf;  // x in [0.5, 0.67]: near 0.7
@@ -434,17 +431,9 @@ TEST(HexElementSource, ACopyOfTheNeededElementsCastsWhatAllValuesCast) {
           EXPECT_EQ(a.nonfinite_values(), 2u);
           EXPECT_EQ(c.nonfinite_values(), a.nonfinite_values());
           EXPECT_EQ(c.primitive_count(), a.primitive_count());
-          std::size_t samples = 0;
-          for (const View& view : axis_and_oblique_views(source.bounds(), 40)) {
-            const Ldi la = a.cast(view), lc = c.cast(view);
-            ASSERT_EQ(la.offsets, lc.offsets) << "isovalue " << iso;
-            for (std::size_t s = 0; s < la.sample_count(); ++s) {
-              ASSERT_EQ(la.depth[s], lc.depth[s]);
-              ASSERT_EQ(la.normal[s], lc.normal[s]);
-            }
-            samples += la.sample_count();
-          }
-          EXPECT_GT(samples, 1000u);
+          SCOPED_TRACE("isovalue " + std::to_string(iso));
+          EXPECT_GT(testing::expect_same_casts(a, c, axis_and_oblique_views(source.bounds(), 40)),
+                    1000u);
         }
         EXPECT_THROW(HexElementSource(source, copied, std::vector<std::uint8_t>(elements - 1, 1)),
                      std::invalid_argument);
