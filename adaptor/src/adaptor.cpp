@@ -93,9 +93,9 @@ class PageSet {
 
 // One array of a block as copied at a due step (background path), of which a step may copy
 // only some stretches (a grid block's needed bricks, an element block's needed elements):
-// anonymous memory, kept from step to step so that later copies reuse its pages, whose pages the
-// step did not write are given back to the system. So the memory it holds is what the step
-// copied, rounded to pages, not the whole array.
+// anonymous memory, kept from step to step so that later copies reuse its pages. Before a step
+// writes, the pages it will not write are given back to the system, so the memory the array
+// holds, during the copy as after it, is the pages the step copies into, not the whole array.
 class SparseCopy {
  public:
   SparseCopy() = default;
@@ -103,15 +103,15 @@ class SparseCopy {
   SparseCopy& operator=(SparseCopy&& other) noexcept {
     std::swap(data_, other.data_);
     std::swap(size_, other.size_);
-    std::swap(now_, other.now_);
-    std::swap(before_, other.before_);
+    std::swap(held_, other.held_);
     return *this;
   }
   ~SparseCopy() { unmap(); }
 
-  // A step's copy of `bytes` bytes begins (a new mapping where the size changed, else the old
-  // pages). Throws std::bad_alloc where the system refuses the memory.
-  unsigned char* begin(std::size_t bytes) {
+  // Prepares the array of `bytes` bytes for a step that writes into the pages `planned` (of an
+  // array of `bytes`): gives back the other pages it holds (a new mapping where the size
+  // changed). Throws std::bad_alloc where the system refuses the memory.
+  unsigned char* begin(std::size_t bytes, PageSet planned) {
     if (bytes != size_) {
       unmap();
       if (bytes > 0) {
@@ -122,38 +122,27 @@ class SparseCopy {
         data_ = static_cast<unsigned char*>(p);
       }
       size_ = bytes;
-      before_ = PageSet(bytes);
     } else {
-      // Pages written by a step whose copy failed before finish() count as the previous step's.
-      before_.add(now_);
+      const std::size_t page = PageSet::page();
+      for (std::size_t p = 0; p < held_.pages();) {
+        if (!held_.marked(p) || planned.marked(p)) {
+          ++p;
+          continue;
+        }
+        const std::size_t first = p;
+        while (p < held_.pages() && !planned.marked(p))
+          ++p;
+        madvise(data_ + first * page, std::min(p * page, size_) - first * page, MADV_DONTNEED);
+      }
     }
-    now_ = PageSet(bytes);
+    held_ = std::move(planned);
     return data_;
   }
-  // Bytes offset … offset + length − 1 were written by this step (any thread).
-  void written(std::size_t offset, std::size_t length) { now_.mark(offset, length); }
-  // After the step's copies: gives back the pages that the previous step wrote and this one did
-  // not, and returns the bytes of the pages this step wrote.
-  std::size_t finish() {
-    const std::size_t page = PageSet::page();
-    for (std::size_t p = 0; p < now_.pages();) {
-      if (now_.marked(p) || !before_.marked(p)) {
-        ++p;
-        continue;
-      }
-      const std::size_t first = p;
-      while (p < now_.pages() && !now_.marked(p))
-        ++p;
-      madvise(data_ + first * page, std::min(p * page, size_) - first * page, MADV_DONTNEED);
-    }
-    const std::size_t held = now_.bytes();
-    before_ = std::move(now_);
-    now_ = PageSet(size_);
-    return held;
-  }
+  // What it holds: the pages of the last step's copy.
+  std::size_t bytes() const { return held_.bytes(); }
   // No copy: gives the memory back.
   void clear() { unmap(); }
-  const unsigned char* data() const { return data_; }
+  unsigned char* data() { return data_; }
 
  private:
   static void advise_small_pages([[maybe_unused]] void* p, [[maybe_unused]] std::size_t bytes) {
@@ -165,11 +154,11 @@ class SparseCopy {
     if (data_) munmap(data_, size_);
     data_ = nullptr;
     size_ = 0;
-    now_ = before_ = PageSet();
+    held_ = PageSet();
   }
   unsigned char* data_ = nullptr;
   std::size_t size_ = 0;
-  PageSet now_, before_;  // written by this step, by the previous one
+  PageSet held_;
 };
 
 // A block's arrays as copied at a due step (background path).
@@ -177,72 +166,116 @@ struct BlockCopy {
   SparseCopy values;
   SparseCopy colour;  // the colour field's, when the block has one
   std::array<std::vector<double>, 3> coords;
-  std::size_t bytes = 0;  // what this step's copy holds
+  std::size_t bytes() const {
+    return values.bytes() + colour.bytes() +
+           (coords[0].size() + coords[1].size() + coords[2].size()) * sizeof(double);
+  }
 };
 
-// Of a grid block's array of `type` at `values` (its points, ghosts included), the points that
-// `source` (over the block) reads with the bricks `held` into `out`, at their places in an array
-// with x fastest and no gaps; the others are not written. Returns the bytes the copy holds.
-std::size_t copy_points(const GridBlock& block, const GridSource& source,
-                        const std::vector<std::uint8_t>& held, const void* values, ScalarType type,
-                        SparseCopy& out) {
-  const std::int64_t nx = block.dims[0], ny = block.dims[1], nz = block.dims[2];
-  const std::size_t size = scalar_bytes(type);
-  std::array<std::int64_t, 3> stride = block.strides;
-  if (stride == std::array<std::int64_t, 3>{0, 0, 0}) stride = {1, nx, nx * ny};
-  unsigned char* dst = out.begin(std::size_t(nx * ny * nz) * size);
-  const auto* src = static_cast<const unsigned char*>(values);
-  source.for_each_needed_run(
-      held, [&](std::int64_t j, std::int64_t k, std::int64_t i0, std::int64_t i1) {
-        const std::size_t at = std::size_t((k * ny + j) * nx + i0) * size,
-                          length = std::size_t(i1 - i0 + 1) * size;
-        const unsigned char* from =
-            src + (i0 * stride[0] + j * stride[1] + k * stride[2]) * std::int64_t(size);
-        if (stride[0] == 1) {
-          std::memcpy(dst + at, from, length);
-        } else {
-          for (std::int64_t i = 0; i <= i1 - i0; ++i)
-            std::memcpy(dst + at + std::size_t(i) * size, from + i * stride[0] * std::int64_t(size),
-                        size);
-        }
-        out.written(at, length);
-      });
-  return out.finish();
+// What a due step copies of one block: the bricks or elements a cast reads (`held`), and the
+// pages of its arrays they lie in (no colour field: none).
+struct CopyPlan {
+  std::vector<std::uint8_t> held;
+  std::size_t values_size = 0, colour_size = 0;  // the arrays' bytes
+  PageSet values, colour;
+  std::size_t coords_bytes = 0;
+  std::size_t bytes() const { return values.bytes() + colour.bytes() + coords_bytes; }
+};
+
+// Where point (i, j, k) of a grid block lies in its copy (x fastest, no gaps), in values.
+std::size_t copy_index(const GridBlock& block, std::int64_t i, std::int64_t j, std::int64_t k) {
+  return std::size_t((k * block.dims[1] + j) * block.dims[0] + i);
 }
 
-// What copying the bricks `held` of a grid block that `source` is over will hold: the pages of
-// the points a source holding them reads (for_each_needed_run), of the values and the colour
-// field, and the coordinates.
-std::size_t grid_copy_bytes(const GridBlock& block, const GridSource& source,
-                            const std::vector<std::uint8_t>& held) {
-  const std::int64_t nx = block.dims[0], ny = block.dims[1], nz = block.dims[2];
-  const auto pages = [&](ScalarType type) {
-    const std::size_t size = scalar_bytes(type);
-    PageSet set(std::size_t(nx * ny * nz) * size);
-    source.for_each_needed_run(
-        held, [&](std::int64_t j, std::int64_t k, std::int64_t i0, std::int64_t i1) {
-          set.mark(std::size_t((k * ny + j) * nx + i0) * size, std::size_t(i1 - i0 + 1) * size);
-        });
-    return set.bytes();
-  };
-  std::size_t bytes = pages(block.type) + (block.colour ? pages(block.colour_type) : 0);
+// The bricks of the grid block that `source` is over that a cast for `isovalues` reads, and the
+// pages of their points (those a source holding them reads: for_each_needed_run) in its copies.
+CopyPlan plan_grid(const GridBlock& block, const GridSource& source,
+                   std::span<const double> isovalues) {
+  CopyPlan plan;
+  plan.held = source.needed_bricks(isovalues);
+  const std::size_t points = std::size_t(block.dims[0] * block.dims[1] * block.dims[2]);
+  const std::size_t size = scalar_bytes(block.type),
+                    colour = block.colour ? scalar_bytes(block.colour_type) : 0;
+  plan.values_size = points * size;
+  plan.colour_size = points * colour;
+  plan.values = PageSet(plan.values_size);
+  plan.colour = PageSet(plan.colour_size);
+  source.for_each_needed_run(
+      plan.held, [&](std::int64_t j, std::int64_t k, std::int64_t i0, std::int64_t i1) {
+        const std::size_t at = copy_index(block, i0, j, k), n = std::size_t(i1 - i0 + 1);
+        plan.values.mark(at * size, n * size);
+        plan.colour.mark(at * colour, n * colour);
+      });
   for (int a = 0; a < 3; ++a)
-    if (block.coords[a]) bytes += std::size_t(block.dims[a]) * sizeof(double);
-  return bytes;
+    if (block.coords[a]) plan.coords_bytes += std::size_t(block.dims[a]) * sizeof(double);
+  return plan;
+}
+
+// The elements of the high-order block that `source` is over that a cast for `isovalues` keeps,
+// the pages of their nodal values in the copy (element after element, no gaps), and all of the
+// colour field's (a hit on a face a kept element shares with another may be coloured from that
+// one).
+CopyPlan plan_hex(const HexBlock& block, const HexElementSource& source,
+                  std::span<const double> isovalues) {
+  CopyPlan plan;
+  plan.held = source.needed_elements(isovalues);
+  const std::size_t n = std::size_t(block.order + 1) * (block.order + 1) * (block.order + 1);
+  const std::size_t size = scalar_bytes(block.type);
+  plan.values_size = block.element_count * n * size;
+  plan.colour_size = block.colour ? block.element_count * n * scalar_bytes(block.colour_type) : 0;
+  plan.values = PageSet(plan.values_size);
+  for (std::size_t e = 0; e < block.element_count; ++e)
+    if (plan.held[e]) plan.values.mark(e * n * size, n * size);
+  plan.colour = PageSet(plan.colour_size);
+  plan.colour.mark(0, plan.colour_size);
+  return plan;
+}
+
+// Gives back the pages of block k's copies that `plan` does not write (all of a colour copy the
+// block no longer has) before any is written.
+void begin_copy(CopyPlan& plan, BlockCopy& copy) {
+  copy.values.begin(plan.values_size, std::move(plan.values));
+  if (plan.colour_size > 0)
+    copy.colour.begin(plan.colour_size, std::move(plan.colour));
+  else
+    copy.colour.clear();
+}
+
+// Of a grid block's array of `type` at `values` (its points, ghosts included), the points a
+// source holding the bricks `held` reads into `dst`, at their places (copy_index).
+void copy_points(const GridBlock& block, const GridSource& source,
+                 const std::vector<std::uint8_t>& held, const void* values, ScalarType type,
+                 unsigned char* dst) {
+  const std::size_t size = scalar_bytes(type);
+  std::array<std::int64_t, 3> stride = block.strides;
+  if (stride == std::array<std::int64_t, 3>{0, 0, 0})
+    stride = {1, block.dims[0], block.dims[0] * block.dims[1]};
+  const auto* src = static_cast<const unsigned char*>(values);
+  source.for_each_needed_run(held, [&](std::int64_t j, std::int64_t k, std::int64_t i0,
+                                       std::int64_t i1) {
+    unsigned char* to = dst + copy_index(block, i0, j, k) * size;
+    const unsigned char* from =
+        src + (i0 * stride[0] + j * stride[1] + k * stride[2]) * std::int64_t(size);
+    if (stride[0] == 1) {
+      std::memcpy(to, from, std::size_t(i1 - i0 + 1) * size);
+    } else {
+      for (std::int64_t i = 0; i <= i1 - i0; ++i)
+        std::memcpy(to + std::size_t(i) * size, from + i * stride[0] * std::int64_t(size), size);
+    }
+  });
 }
 
 // Of the grid block that `source` is over, the points a source holding the bricks `held` reads,
-// and its colour field's there, contiguous with x fastest; and its coordinates.
+// and its colour field's there, into the copies begun for them (begin_copy); and its
+// coordinates.
 GridBlock copy_grid(const GridBlock& block, const GridSource& source,
                     const std::vector<std::uint8_t>& held, BlockCopy& copy) {
   GridBlock out = block;
-  copy.bytes = copy_points(block, source, held, block.values, block.type, copy.values);
+  copy_points(block, source, held, block.values, block.type, copy.values.data());
   out.values = copy.values.data();
   if (block.colour) {
-    copy.bytes += copy_points(block, source, held, block.colour, block.colour_type, copy.colour);
+    copy_points(block, source, held, block.colour, block.colour_type, copy.colour.data());
     out.colour = copy.colour.data();
-  } else {
-    copy.colour.clear();
   }
   out.strides = {0, 0, 0};
   for (int a = 0; a < 3; ++a) {
@@ -252,63 +285,39 @@ GridBlock copy_grid(const GridBlock& block, const GridSource& source,
     }
     copy.coords[a].assign(block.coords[a], block.coords[a] + block.dims[a]);
     out.coords[a] = copy.coords[a].data();
-    copy.bytes += copy.coords[a].size() * sizeof(double);
   }
   return out;
 }
 
-// An element block's nodal array of `type` at `values` into `out`, element after element without
-// gaps: the elements `held` marks (all where it is empty), the others' places not written.
-// Returns the bytes the copy holds.
-std::size_t copy_nodal(const HexBlock& block, const void* values, ScalarType type,
-                       const std::vector<std::uint8_t>& held, SparseCopy& out) {
+// An element block's nodal array of `type` at `values` into `dst`, element after element without
+// gaps: the elements `held` marks (all where it is empty).
+void copy_nodal(const HexBlock& block, const void* values, ScalarType type,
+                const std::vector<std::uint8_t>& held, unsigned char* dst) {
   const std::size_t n = std::size_t(block.order + 1) * (block.order + 1) * (block.order + 1);
   const std::size_t size = scalar_bytes(type);
   const std::size_t stride = block.element_stride == 0 ? n : block.element_stride;
-  unsigned char* dst = out.begin(block.element_count * n * size);
   const auto* src = static_cast<const unsigned char*>(values);
   if (stride == n && held.empty()) {
     std::memcpy(dst, src, block.element_count * n * size);
-    out.written(0, block.element_count * n * size);
-  } else {
-    for (std::size_t e = 0; e < block.element_count; ++e) {
-      if (!held.empty() && !held[e]) continue;
-      std::memcpy(dst + e * n * size, src + e * stride * size, n * size);
-      out.written(e * n * size, n * size);
-    }
+    return;
   }
-  return out.finish();
-}
-
-// What copying the elements `held` of a high-order block will hold: the pages of their nodal
-// values, and the whole colour field.
-std::size_t hex_copy_bytes(const HexBlock& block, const std::vector<std::uint8_t>& held) {
-  const std::size_t n = std::size_t(block.order + 1) * (block.order + 1) * (block.order + 1);
-  const std::size_t size = scalar_bytes(block.type);
-  PageSet set(block.element_count * n * size);
   for (std::size_t e = 0; e < block.element_count; ++e)
-    if (held[e]) set.mark(e * n * size, n * size);
-  return set.bytes() +
-         (block.colour ? block.element_count * n * scalar_bytes(block.colour_type) : 0);
+    if (held.empty() || held[e]) std::memcpy(dst + e * n * size, src + e * stride * size, n * size);
 }
 
-// Of the high-order block, the nodal values of the elements `held` marks (those a source over it
-// keeps: HexElementSource::needed_elements) and the whole colour field (a hit on a face the kept
-// element shares with another may be coloured from that one), element after element without
-// gaps. Not the geometry: the source over the copy shares the one prepared when the block was
-// added.
+// Of the high-order block, the nodal values of the elements `held` marks (plan_hex) and the
+// whole colour field, into the copies begun for them (begin_copy). Not the geometry: the source
+// over the copy shares the one prepared when the block was added.
 HexBlock copy_hex(const HexBlock& block, const std::vector<std::uint8_t>& held, BlockCopy& copy) {
   copy.coords = {};  // the block k of an earlier step may have been a grid
-  copy.bytes = copy_nodal(block, block.values, block.type, held, copy.values);
+  copy_nodal(block, block.values, block.type, held, copy.values.data());
   HexBlock out = block;
   out.corners = nullptr;
   out.geometry = nullptr;
   out.values = copy.values.data();
   if (block.colour) {
-    copy.bytes += copy_nodal(block, block.colour, block.colour_type, {}, copy.colour);
+    copy_nodal(block, block.colour, block.colour_type, {}, copy.colour.data());
     out.colour = copy.colour.data();
-  } else {
-    copy.colour.clear();
   }
   out.element_stride = 0;
   return out;
@@ -761,20 +770,17 @@ class AdaptorImpl final : public Adaptor {
       caster_idle_.wait(lock, [&] { return !caster_job_ && !casting_; });
     }
     // What the step reads of each block: a grid block's bricks, an element block's elements.
-    std::vector<std::vector<std::uint8_t>> held(blocks_.size());
+    std::vector<CopyPlan> plans;
     std::size_t planned = 0;
     Status copied = guard("snapshot: ", [&] {
+      plans.resize(blocks_.size());
       for (std::size_t k = 0; k < blocks_.size(); ++k) {
         const Block& b = blocks_[k];
-        if (b.grid) {
-          const auto& live = static_cast<const GridSource&>(*b.source);
-          held[k] = live.needed_bricks(options_.isovalues);
-          planned += grid_copy_bytes(*b.grid, live, held[k]);
-        } else {
-          held[k] =
-              static_cast<const HexElementSource&>(*b.source).needed_elements(options_.isovalues);
-          planned += hex_copy_bytes(*b.hex, held[k]);
-        }
+        plans[k] = b.grid ? plan_grid(*b.grid, static_cast<const GridSource&>(*b.source),
+                                      options_.isovalues)
+                          : plan_hex(*b.hex, static_cast<const HexElementSource&>(*b.source),
+                                     options_.isovalues);
+        planned += plans[k].bytes();
       }
       return Status::ok();
     });
@@ -784,27 +790,35 @@ class AdaptorImpl final : public Adaptor {
                          static_cast<long long>(planned)};
     MPI_Allreduce(MPI_IN_PLACE, over, 2, MPI_LONG_LONG, MPI_MAX, comm_);
     largest = over[1];
-    if (over[0]) return false;
+    if (over[0]) {  // synchronous: the previous snapshot is no longer needed (the caster is idle)
+      snapshot_blocks_.clear();
+      snapshot_.clear();
+      return false;
+    }
     std::size_t bytes = 0;
     if (copied)
       copied = guard("snapshot: ", [&] {
+        // Every page the copies will not write is given back before any is written.
         snapshot_.resize(blocks_.size());
         snapshot_blocks_.clear();
+        for (std::size_t k = 0; k < blocks_.size(); ++k)
+          begin_copy(plans[k], snapshot_[k]);
         for (std::size_t k = 0; k < blocks_.size(); ++k) {
           const Block& b = blocks_[k];
           Block copy;
           copy.owned = b.owned;
           if (b.grid) {  // the bricks the step's isovalues need, with the points around them
             const auto& live = static_cast<const GridSource&>(*b.source);
-            copy.grid = copy_grid(*b.grid, live, held[k], snapshot_[k]);
-            copy.source =
-                std::make_shared<GridSource>(*copy.grid, live.brick_cells(), std::move(held[k]));
+            copy.grid = copy_grid(*b.grid, live, plans[k].held, snapshot_[k]);
+            copy.source = std::make_shared<GridSource>(*copy.grid, live.brick_cells(),
+                                                       std::move(plans[k].held));
           } else {  // the geometry as the block's source prepared it (converted and checked once)
-            copy.hex = copy_hex(*b.hex, held[k], snapshot_[k]);
-            copy.source = std::make_shared<HexElementSource>(
-                static_cast<const HexElementSource&>(*b.source), *copy.hex, std::move(held[k]));
+            copy.hex = copy_hex(*b.hex, plans[k].held, snapshot_[k]);
+            copy.source =
+                std::make_shared<HexElementSource>(static_cast<const HexElementSource&>(*b.source),
+                                                   *copy.hex, std::move(plans[k].held));
           }
-          bytes += snapshot_[k].bytes;
+          bytes += snapshot_[k].bytes();
           snapshot_blocks_.push_back(std::move(copy));
         }
         return Status::ok();

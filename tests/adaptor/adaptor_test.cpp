@@ -450,24 +450,26 @@ std::string grid_options(const std::string& dir, bool background) {
          std::string(background ? "true" : "false") + R"(, "output_dir": ")" + dir + R"("})";
 }
 
-// What the snapshot of a grid block holds for `isovalues`, arrays of `size`-byte values: at least
-// the points of the bricks that hold the surface, with the points around them the normals read
-// (GridSource::for_each_needed_run), and at most those rounded out to whole pages (two partial
-// pages per stretch of a row).
-struct SnapshotExtent {
-  std::size_t least = 0, most = 0;
-};
-SnapshotExtent snapshot_extent(const GridBlock& block, const std::vector<double>& isovalues,
-                               std::size_t size) {
+// What the snapshot of a grid block's array of `size`-byte values holds for `isovalues`: the
+// pages, in an array with x fastest, of the points of the bricks that hold the surface and of
+// the points around them that the normals read (GridSource::for_each_needed_run).
+std::size_t snapshot_pages(const GridBlock& block, const std::vector<double>& isovalues,
+                           std::size_t size) {
   const GridSource source(block);
-  std::atomic<std::size_t> points{0}, runs{0};
-  source.for_each_needed_run(source.needed_bricks(isovalues),
-                             [&](std::int64_t, std::int64_t, std::int64_t i0, std::int64_t i1) {
-                               points += std::size_t(i1 - i0 + 1);
-                               ++runs;
-                             });
   const std::size_t page = std::size_t(sysconf(_SC_PAGESIZE));
-  return {points * size, points * size + 2 * runs * page};
+  const std::size_t bytes = std::size_t(block.dims[0] * block.dims[1] * block.dims[2]) * size;
+  std::vector<std::atomic<bool>> touched((bytes + page - 1) / page);
+  source.for_each_needed_run(
+      source.needed_bricks(isovalues),
+      [&](std::int64_t j, std::int64_t k, std::int64_t i0, std::int64_t i1) {
+        const std::size_t at = std::size_t((k * block.dims[1] + j) * block.dims[0] + i0) * size;
+        for (std::size_t p = at / page; p <= (at + std::size_t(i1 - i0 + 1) * size - 1) / page; ++p)
+          touched[p] = true;
+      });
+  std::size_t total = 0;
+  for (std::size_t p = 0; p < touched.size(); ++p)
+    total += touched[p] ? std::min(page, bytes - p * page) : 0;
+  return total;
 }
 
 std::vector<std::uint8_t> published_glb(const std::string& dir, std::uint64_t step) {
@@ -574,9 +576,7 @@ TEST(Adaptor, GridBlocksRunInTheBackgroundWhereMpiAllowsIt) {
   const auto expect_copied = [&](const GridSlab& s, double share) {
     if (!thread_multiple()) return;
     const std::size_t bytes = a->last_report().snapshot_bytes;
-    const SnapshotExtent e = snapshot_extent(s.block, {0.36}, sizeof(float));
-    EXPECT_GE(bytes, e.least);
-    EXPECT_LE(bytes, e.most);
+    EXPECT_EQ(bytes, snapshot_pages(s.block, {0.36}, sizeof(float)));
     std::uint64_t sums[2] = {bytes, s.values.size() * sizeof(float)};
     MPI_Allreduce(MPI_IN_PLACE, sums, 2, MPI_UINT64_T, MPI_SUM, MPI_COMM_WORLD);
     EXPECT_LE(double(sums[0]), share * double(sums[1]));
@@ -602,23 +602,29 @@ TEST(Adaptor, GridBlocksRunInTheBackgroundWhereMpiAllowsIt) {
   EXPECT_TRUE(b->finalize());
 }
 
-// "memory_mb" bounds what the snapshot holds, not the blocks: with 1 MiB, 100³ float points
-// (3.8 MiB over all ranks) are snapshotted while the surface is a small sphere, and the step runs
-// synchronously once the surface is large.
+// "memory_mb" bounds what the snapshot holds, not the blocks: with 1 MiB, 120³ float points
+// (6.6 MiB over all ranks) are snapshotted while the surface is a small sphere, and the step runs
+// synchronously once the surface is large. (Whether a rank's copy fits is computed here from the
+// pages its points lie in; the two spheres are chosen so that one fits on every rank and the
+// other not, as the test checks.)
 TEST(Adaptor, MemoryMbBoundsTheSnapshotNotTheBlocks) {
   const std::string dir = temp_dir("memory_mb");
-  GridSlab small(100, 0.36 - 0.0225), large(100, 0.0);
+  GridSlab small(120, 0.36 - 0.01), large(120, 0.0);
   auto a = make_grid_adaptor(R"({"memory_mb": 1, )" + grid_options(dir, true).substr(1), small);
   if (!a) return;
   for (std::uint64_t step = 0; step < 2; ++step) {
-    const bool fits = step == 0;
-    SCOPED_TRACE(fits ? "a sphere of radius 0.15" : "a sphere of radius 0.6");
+    const GridSlab& slab = step == 0 ? small : large;
+    SCOPED_TRACE(step == 0 ? "a sphere of radius 0.1" : "a sphere of radius 0.6");
+    std::uint64_t largest = snapshot_pages(slab.block, {0.36}, sizeof(float));
+    MPI_Allreduce(MPI_IN_PLACE, &largest, 1, MPI_UINT64_T, MPI_MAX, MPI_COMM_WORLD);
+    const bool fits = largest <= (std::uint64_t(1) << 20);
+    EXPECT_EQ(fits, step == 0) << largest << " bytes on the largest rank";
     a->clear_blocks();
-    EXPECT_TRUE(a->add_grid_block((fits ? small : large).block));
+    EXPECT_TRUE(a->add_grid_block(slab.block));
     EXPECT_TRUE(a->execute(step, 0.0)) << a->last_error();
     EXPECT_EQ(a->last_report().background, thread_multiple() && fits);
     if (a->last_report().background) {
-      EXPECT_LE(a->last_report().snapshot_bytes, std::size_t(1) << 20);
+      EXPECT_EQ(a->last_report().snapshot_bytes, snapshot_pages(slab.block, {0.36}, sizeof(float)));
     } else {
       EXPECT_EQ(a->last_report().snapshot_bytes, 0u);
     }
@@ -629,7 +635,16 @@ TEST(Adaptor, MemoryMbBoundsTheSnapshotNotTheBlocks) {
   EXPECT_TRUE(a->finalize()) << a->last_error();
   if (rank_of() == 0) {
     EXPECT_EQ(a->published_steps(), 2u);
-    expect_on_the_slab_sphere(testing::published_mesh(dir, 1), 0.36);
+    const double h = 2.0 / 119;
+    testing::expect_on_grid_sphere(testing::published_mesh(dir, 1), 0.36, h, 40);
+    // The small sphere (4 pixels across): its vertices at radius 0.1, within the grid's
+    // interpolation error (inwards) and the GLB's quantization.
+    const Mesh small_mesh = testing::published_mesh(dir, 0);
+    EXPECT_GT(small_mesh.vertex_count(), 20u);
+    for (const glm::vec3& p : small_mesh.positions) {
+      EXPECT_GE(glm::length(glm::dvec3(p)), 0.1 - 3.0 * h * h / 0.8 - 0.1 * 2.0 / 40);
+      EXPECT_LE(glm::length(glm::dvec3(p)), 0.1 + 0.1 * 2.0 / 40);
+    }
   }
 }
 
@@ -724,9 +739,8 @@ TEST(Adaptor, GridBlocksAreColouredByANamedFieldOnBothPaths) {
       EXPECT_TRUE(a->add_field("C", colour.data(), ScalarType::float32));
       EXPECT_TRUE(a->execute(1, 0.0)) << a->last_error();
       if (background && thread_multiple()) {  // the copy: the values and the colour there
-        const SnapshotExtent e = snapshot_extent(slab.block, {0.36}, sizeof(float));
-        EXPECT_GE(a->last_report().snapshot_bytes, 2 * e.least);
-        EXPECT_LE(a->last_report().snapshot_bytes, 2 * e.most);
+        EXPECT_EQ(a->last_report().snapshot_bytes,
+                  2 * snapshot_pages(slab.block, {0.36}, sizeof(float)));
       }
       // The solver overwrites both arrays at once: the published step is that of the call.
       std::fill(colour.begin(), colour.end(), 1e6f);
