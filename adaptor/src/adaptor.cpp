@@ -505,22 +505,22 @@ class AdaptorImpl final : public Adaptor {
                 (options_.merging == AdaptorOptions::Merging::automatic && background_ &&
                  flags[1] == 0 && flags[2] == 0);
     std::string why = "a rank's blocks cannot be copied (a FieldSource)";
+    SyncReason reason = SyncReason::field_source;
     if (background_ && flags[1] == 0) {
       long long largest = 0;
-      if (hand_to_background(job, start, largest)) return Status::ok();
+      if (hand_to_background(job, start, largest)) {
+        log_path(step, SyncReason::none, "");
+        return Status::ok();
+      }
       char text[160];
       std::snprintf(text, sizeof text,
                     "a rank's copy of what it reads (%.1f MiB) would exceed memory_mb (%zu)",
                     double(largest) / (1 << 20), options_.memory_mb);
       why = text;
+      reason = SyncReason::memory;
       job.merge = options_.merging == AdaptorOptions::Merging::on;
     }
-    if (background_ && rank_ == 0 && options_.log)
-      std::printf("ldimesh: step %llu runs synchronously: %s%s\n", (unsigned long long)step,
-                  why.c_str(),
-                  options_.merging == AdaptorOptions::Merging::automatic
-                      ? "; its views are published trimmed, not merged (\"merging\": \"auto\")"
-                      : "");
+    if (background_) log_path(step, reason, why);
 
     // The synchronous path: the solver waits for the cast and the reduction (and for the
     // meshing, where it needs every rank's samples).
@@ -725,6 +725,28 @@ class AdaptorImpl final : public Adaptor {
             (unsigned long long)step, why.c_str());
     }
     return auto_merge_stopped_;
+  }
+
+  // Why a step on the background path ran synchronously (none: it did not).
+  enum class SyncReason { none, field_source, memory };
+  // Root's log, where the path of executed steps changes (not at every step): a step that runs
+  // synchronously for `reason` (`why`), or in the background again.
+  void log_path(std::uint64_t step, SyncReason reason, const std::string& why) {
+    if (rank_ != 0 || reason == logged_reason_) return;
+    logged_reason_ = reason;
+    if (!options_.log) return;
+    if (reason == SyncReason::none) {
+      std::printf("ldimesh: from step %llu on, steps run in the background again\n",
+                  (unsigned long long)step);
+      return;
+    }
+    std::printf(
+        "ldimesh: from step %llu on, steps run synchronously: %s%s (the log says when this "
+        "changes)\n",
+        (unsigned long long)step, why.c_str(),
+        options_.merging == AdaptorOptions::Merging::automatic
+            ? "; their views are published trimmed, not merged (\"merging\": \"auto\")"
+            : "");
   }
 
   // Root: gives `job` to the worker; true when it replaced a step still waiting ("coalesce").
@@ -1092,10 +1114,11 @@ class AdaptorImpl final : public Adaptor {
   bool finalized_ = false;
   Clock::time_point last_run_;
   bool ran_before_ = false;
-  std::uint64_t skipped_since_handoff_ = 0;  // root, solver thread only
-  bool auto_merge_stopped_ = false;          // root, solver thread only
-  Clock::time_point last_due_;               // root, solver thread only
-  bool due_before_ = false;                  // root, solver thread only
+  std::uint64_t skipped_since_handoff_ = 0;      // root, solver thread only
+  bool auto_merge_stopped_ = false;              // root, solver thread only
+  SyncReason logged_reason_ = SyncReason::none;  // root, solver thread only: log_path
+  Clock::time_point last_due_;                   // root, solver thread only
+  bool due_before_ = false;                      // root, solver thread only
   // Root, "merging": "auto" (mutex_): the merge running on the caster thread and its step, the
   // last merged step and what it kept the caster busy, the last step counted, slow ones in a row.
   bool merging_now_ = false;

@@ -610,15 +610,20 @@ TEST(Adaptor, GridBlocksRunInTheBackgroundWhereMpiAllowsIt) {
 TEST(Adaptor, MemoryMbBoundsTheSnapshotNotTheBlocks) {
   const std::string dir = temp_dir("memory_mb");
   GridSlab small(120, 0.36 - 0.01), large(120, 0.0);
-  auto a = make_grid_adaptor(R"({"memory_mb": 1, )" + grid_options(dir, true).substr(1), small);
+  std::string options = R"({"memory_mb": 1, )" + grid_options(dir, true).substr(1);
+  options.replace(options.find(R"("log": false)"), 12, R"("log": true)");
+  auto a = make_grid_adaptor(options, small);
   if (!a) return;
-  for (std::uint64_t step = 0; step < 2; ++step) {
-    const GridSlab& slab = step == 0 ? small : large;
-    SCOPED_TRACE(step == 0 ? "a sphere of radius 0.1" : "a sphere of radius 0.6");
+  // Small, large, large, small: the log says where the path changes, not at every step.
+  ::testing::internal::CaptureStdout();
+  for (std::uint64_t step = 0; step < 4; ++step) {
+    const bool is_small = step == 0 || step == 3;
+    const GridSlab& slab = is_small ? small : large;
+    SCOPED_TRACE(is_small ? "a sphere of radius 0.1" : "a sphere of radius 0.6");
     std::uint64_t largest = snapshot_pages(slab.block, {0.36}, sizeof(float));
     MPI_Allreduce(MPI_IN_PLACE, &largest, 1, MPI_UINT64_T, MPI_MAX, MPI_COMM_WORLD);
     const bool fits = largest <= (std::uint64_t(1) << 20);
-    EXPECT_EQ(fits, step == 0) << largest << " bytes on the largest rank";
+    EXPECT_EQ(fits, is_small) << largest << " bytes on the largest rank";
     a->clear_blocks();
     EXPECT_TRUE(a->add_grid_block(slab.block));
     EXPECT_TRUE(a->execute(step, 0.0)) << a->last_error();
@@ -633,8 +638,21 @@ TEST(Adaptor, MemoryMbBoundsTheSnapshotNotTheBlocks) {
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   EXPECT_TRUE(a->finalize()) << a->last_error();
+  const std::string log = ::testing::internal::GetCapturedStdout();
   if (rank_of() == 0) {
-    EXPECT_EQ(a->published_steps(), 2u);
+    const auto count = [&](const std::string& what) {
+      std::size_t n = 0;
+      for (std::size_t at = log.find(what); at != std::string::npos; at = log.find(what, at + 1))
+        ++n;
+      return n;
+    };
+    const std::size_t changes = thread_multiple() ? 1 : 0;
+    EXPECT_EQ(count("from step 1 on, steps run synchronously: a rank's copy of what it reads"),
+              changes)
+        << log;
+    EXPECT_EQ(count("runs synchronously"), 0u) << log;  // not step by step
+    EXPECT_EQ(count("from step 3 on, steps run in the background again"), changes) << log;
+    EXPECT_EQ(a->published_steps(), 4u);
     const double h = 2.0 / 119;
     testing::expect_on_grid_sphere(testing::published_mesh(dir, 1), 0.36, h, 40);
     // The small sphere (4 pixels across): its vertices at radius 0.1, within the grid's
