@@ -80,11 +80,6 @@ class PageSet {
       total += marked_[p] ? std::min(page(), bytes_ - p * page()) : 0;
     return total;
   }
-  // Adds the other's pages (of the same array).
-  void add(const PageSet& other) {
-    for (std::size_t p = 0; p < marked_.size(); ++p)
-      marked_[p] |= other.marked_[p];
-  }
 
  private:
   std::size_t bytes_;

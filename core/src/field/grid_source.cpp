@@ -462,58 +462,6 @@ void scan_row(const GridView<T>& g, std::int64_t i0, std::int64_t i1, std::int64
   sum += sum0 + sum1;
 }
 
-// Brick n of `bricks` (x fastest) of a block's owned cells first … last.
-Brick brick_at(std::int64_t n, const std::array<std::int64_t, 3>& first,
-               const std::array<std::int64_t, 3>& last, const std::array<std::int64_t, 3>& bricks,
-               int brick_cells) {
-  const std::array<std::int64_t, 3> idx{n % bricks[0], (n / bricks[0]) % bricks[1],
-                                        n / (bricks[0] * bricks[1])};
-  Brick b;
-  for (int a = 0; a < 3; ++a) {
-    b.lo[a] = first[a] + idx[a] * brick_cells;
-    b.hi[a] = std::min(last[a], b.lo[a] + brick_cells - 1);
-  }
-  return b;
-}
-
-// The range [lo, hi] of the finite values among brick b's points (lo > hi: none), i.e. of the
-// trilinear interpolant over its cells that have no non-finite corner. Sets b.nonfinite where a
-// point is NaN or ±Inf, and returns how many of those b owns: a brick owns the points below its
-// upper layer of points along each axis, which the next brick reads as its lower layer, and the
-// last brick along an axis (ending at cell `last`) owns that layer too, so that every point read
-// is counted by exactly one brick.
-template <class T>
-std::uint64_t brick_range(const GridView<T>& grid, Brick& b,
-                          const std::array<std::int64_t, 3>& last, double& lo, double& hi) {
-  // The sum of the values is finite unless one of them is NaN or ±Inf (or the sum overflows): a
-  // closer look only then.
-  double sum = 0.0;
-  lo = INFINITY, hi = -INFINITY;
-  for (std::int64_t k = b.lo[2]; k <= b.hi[2] + 1; ++k)
-    for (std::int64_t j = b.lo[1]; j <= b.hi[1] + 1; ++j)
-      scan_row(grid, b.lo[0], b.hi[0] + 1, j, k, lo, hi, sum);
-  if (std::isfinite(sum)) [[likely]]
-    return 0;
-  std::array<std::int64_t, 3> owned_hi;
-  for (int a = 0; a < 3; ++a)
-    owned_hi[a] = b.hi[a] == last[a] ? b.hi[a] + 1 : b.hi[a];
-  lo = INFINITY, hi = -INFINITY;
-  std::uint64_t bad = 0;
-  for (std::int64_t k = b.lo[2]; k <= b.hi[2] + 1; ++k)
-    for (std::int64_t j = b.lo[1]; j <= b.hi[1] + 1; ++j)
-      for (std::int64_t i = b.lo[0]; i <= b.hi[0] + 1; ++i) {
-        const double v = grid.value(i, j, k);
-        if (std::isfinite(v)) {
-          lo = std::min(lo, v);
-          hi = std::max(hi, v);
-        } else {
-          b.nonfinite = true;
-          bad += i <= owned_hi[0] && j <= owned_hi[1] && k <= owned_hi[2];
-        }
-      }
-  return bad;
-}
-
 // The bricks of a block, which of them may hold the isosurface, and the non-finite count.
 struct BrickCulling {
   std::vector<Brick> bricks;         // all, x fastest
@@ -535,18 +483,48 @@ BrickCulling cull_bricks(const GridView<T>& grid, double iso,
   out.bricks.resize(total);
   std::atomic<std::uint64_t> nonfinite{0};
   tbb::parallel_for(std::int64_t(0), total, [&](std::int64_t n) {
+    const std::array<std::int64_t, 3> idx{n % bricks[0], (n / bricks[0]) % bricks[1],
+                                          n / (bricks[0] * bricks[1])};
     Brick& b = out.bricks[n];
-    b = brick_at(n, first, last, bricks, brick_cells);
     for (int a = 0; a < 3; ++a) {
+      b.lo[a] = first[a] + idx[a] * brick_cells;
+      b.hi[a] = std::min(last[a], b.lo[a] + brick_cells - 1);
       b.box_lo[a] = grid.coord(a, b.lo[a]);
       b.box_hi[a] = grid.coord(a, b.hi[a] + 1);
     }
     if (grid.held && !grid.held[n]) return;
-    // Range of the trilinear interpolant over the brick = range of its points. Non-finite points
-    // are left out of the range (their cells produce no hits, the others keep theirs).
-    double lo, hi;
-    if (const std::uint64_t bad = brick_range(grid, b, last, lo, hi); bad > 0)
-      nonfinite.fetch_add(bad, std::memory_order_relaxed);
+    // Range of the trilinear interpolant over the brick = range of its points. The sum of the
+    // values is finite unless one of them is NaN or ±Inf (or the sum overflows): a closer look
+    // only then.
+    double lo = INFINITY, hi = -INFINITY, sum = 0.0;
+    for (std::int64_t k = b.lo[2]; k <= b.hi[2] + 1; ++k)
+      for (std::int64_t j = b.lo[1]; j <= b.hi[1] + 1; ++j)
+        scan_row(grid, b.lo[0], b.hi[0] + 1, j, k, lo, hi, sum);
+    if (!std::isfinite(sum)) [[unlikely]] {
+      // Non-finite points are left out of the range (their cells produce no hits, the others
+      // keep theirs) and counted by the one brick that owns them: a brick owns the points below
+      // its upper layer of points along each axis, which the next brick reads as its lower
+      // layer, and the last brick along an axis owns that layer too. So every point read is
+      // counted exactly once.
+      std::array<std::int64_t, 3> owned_hi;
+      for (int a = 0; a < 3; ++a)
+        owned_hi[a] = b.hi[a] == last[a] ? b.hi[a] + 1 : b.hi[a];
+      lo = INFINITY, hi = -INFINITY;
+      std::uint64_t bad = 0;
+      for (std::int64_t k = b.lo[2]; k <= b.hi[2] + 1; ++k)
+        for (std::int64_t j = b.lo[1]; j <= b.hi[1] + 1; ++j)
+          for (std::int64_t i = b.lo[0]; i <= b.hi[0] + 1; ++i) {
+            const double v = grid.value(i, j, k);
+            if (std::isfinite(v)) {
+              lo = std::min(lo, v);
+              hi = std::max(hi, v);
+            } else {
+              b.nonfinite = true;
+              bad += i <= owned_hi[0] && j <= owned_hi[1] && k <= owned_hi[2];
+            }
+          }
+      if (bad > 0) nonfinite.fetch_add(bad, std::memory_order_relaxed);
+    }
     out.active[n] = lo <= iso && iso <= hi;
   });
   out.nonfinite = nonfinite.load();
