@@ -5,6 +5,7 @@
 #   ply       parse_ply: meshes given to `ldimesh distance`
 #   glb       decode_glb: what ldimesh-fetch and `ldimesh distance` read from a server or disk
 #   options   parse_adaptor_options: the adaptor's JSON options document
+#   http      the job's HTTP server: raw requests over a loopback connection
 # Builds with clang++ straight from the sources into build-fuzz/TARGET/ (no CMake), writes a
 # seed corpus of valid inputs (the target's own encoder's output and hand-written files) into
 # build-fuzz/TARGET/corpus (which keeps what the fuzzer finds between runs), and exits non-zero
@@ -37,12 +38,18 @@ case $target in
     timeout=30
     sources=(transport/src/glb.cpp core/src/base/mesh.cpp core/src/base/status.cpp)
     libs=(-I/usr/include/eigen3 -ldraco) ;;
+  http)
+    name=http_request_fuzz
+    sources=(transport/src/http_server.cpp transport/src/snapshot_store.cpp core/src/base/status.cpp)
+    # Debian's cpp-httplib is a library built with these definitions (class layouts follow them).
+    libs=($(pkg-config --cflags --libs cpp-httplib) -DLDIMESH_SOURCE_DIR=\"/nonexistent\"
+          -DLDIMESH_BINARY_DIR=\"/nonexistent\" -DLDIMESH_INSTALL_DATA_DIR=\"/nonexistent\") ;;
   options)
     name=options_fuzz
     sources=(adaptor/src/options.cpp core/src/base/status.cpp)
     libs=() ;;
   *)
-    echo "fuzz: unknown target '$target' (one of: fragment, ply, glb, options)" >&2
+    echo "fuzz: unknown target '$target' (one of: fragment, ply, glb, options, http)" >&2
     exit 2 ;;
 esac
 seconds=${1:-30}

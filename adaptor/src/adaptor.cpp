@@ -341,6 +341,7 @@ class AdaptorImpl final : public Adaptor {
     if (options_.server) {
       HttpServerOptions o;
       o.bind_address = options_.bind;
+      o.allow_remote = options_.allow_remote;
       o.port = options_.port;
       o.token = options_.token;
       // The viewer's files: the checkout the library was built in, or where it is installed.
@@ -349,6 +350,8 @@ class AdaptorImpl final : public Adaptor {
       o.vendor_three_dir = files.vendor_three_dir;
       server_ = std::make_unique<HttpServer>(*store_, o);
       if (Status s = server_->start(); !s) return s;
+      if (!is_loopback_address(o.bind_address) && options_.log)
+        std::fprintf(stderr, "ldimesh: %s", remote_server_warning(o.bind_address).c_str());
     }
     if (!options_.output_dir.empty()) {
       std::error_code ec;

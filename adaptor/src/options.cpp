@@ -115,10 +115,13 @@ Status parse_object(const nlohmann::json& j, AdaptorOptions& o) {
     }
     if (j.contains("server")) {
       const auto& s = j["server"];
-      if (Status st = check_keys(s, "server.", {"enabled", "bind", "port", "token"}); !st)
+      if (Status st =
+              check_keys(s, "server.", {"enabled", "bind", "allow_remote", "port", "token"});
+          !st)
         return st;
       if (s.contains("enabled")) o.server = s["enabled"].get<bool>();
       if (s.contains("bind")) o.bind = s["bind"].get<std::string>();
+      if (s.contains("allow_remote")) o.allow_remote = s["allow_remote"].get<bool>();
       if (Status st = integer(s, "port", "server.", 0, 65535, o.port); !st) return st;
       if (s.contains("token")) o.token = s["token"].get<std::string>();
     }

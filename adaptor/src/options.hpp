@@ -31,6 +31,7 @@ struct AdaptorOptions {
   bool coalesce = false;
   bool server = true;
   std::string bind = "127.0.0.1";
+  bool allow_remote = false;
   int port = 0;
   std::string token;
   std::string output_dir;

@@ -130,6 +130,22 @@ status=$?
 server_pid=
 [ "$status" -eq 0 ] || fail "ldimesh-serve after SIGTERM: exit status $status"
 
+# A non-loopback address only when asked for (--allow-remote), and then with a warning.
+timeout 10 "$serve" --dir "$tmp/run" --port 0 --bind 0.0.0.0 >"$tmp/remote.out" 2>"$tmp/remote.err"
+[ $? -ne 0 ] || fail "--bind 0.0.0.0 without --allow-remote: started"
+grep -q 'not a loopback address.*--allow-remote' "$tmp/remote.err" ||
+  fail "--bind 0.0.0.0 without --allow-remote: $(cat "$tmp/remote.err")"
+"$serve" --dir "$tmp/run" --port 0 --bind 0.0.0.0 --allow-remote >"$tmp/remote.out" 2>"$tmp/remote.err" &
+server_pid=$!
+for _ in $(seq 100); do grep -q 'http://' "$tmp/remote.out" && break; sleep 0.1; done
+grep -q '^http://0\.0\.0\.0:[0-9]*/?token=\|serving .* at http://0\.0\.0\.0:' "$tmp/remote.out" ||
+  fail "--allow-remote: no URL: $(cat "$tmp/remote.out")"
+grep -q 'warning: the HTTP server listens on 0\.0\.0\.0, reachable from the network' "$tmp/remote.err" ||
+  fail "--allow-remote: no warning: $(cat "$tmp/remote.err")"
+kill -TERM "$server_pid"
+wait_for "$server_pid" 5
+server_pid=
+
 if [ "$failures" -ne 0 ]; then
   echo "$failures failure(s)"
   exit 1

@@ -19,7 +19,7 @@ void ldimesh::fuzz::write_seeds(const std::string& dir) {
       "{}",
       R"({"isovalues": [0.25, 0.5], "views": "xz", "resolution": 512, "r": 0.5})",
       R"({"cadence": {"every_steps": 10, "every_seconds": 2.5}, "busy": "coalesce"})",
-      R"({"server": {"enabled": true, "bind": "0.0.0.0", "port": 8080, "token": "abc"},
+      R"({"server": {"enabled": true, "bind": "0.0.0.0", "allow_remote": true, "port": 8080, "token": "abc"},
           "output_dir": "out/steps", "keep": 4, "memory_mb": 256})",
       R"({"encoding": {"lossless": false, "depth_bits": 16, "normal_bits": 10},
           "glb": {"compression_level": 3}, "log": false, "background": true,

@@ -307,6 +307,7 @@ TEST(Glb, ALargeMeshIsEncodedInPartsTheSameOnAnyNumberOfThreads) {
   EXPECT_EQ(split_copies, 0u) << "copies of a vertex on a slab border decode apart";
   EXPECT_TRUE(std::all_of(used.begin(), used.end(), [](int u) { return u >= 1; }));
   EXPECT_LE(worst_scalar, glb_scalar_error_bound({}) * range);
+  EXPECT_LE(glb_scalar_error_bound({}), unit_interval_cap(GlbOptions{}.scalar_bits));
 }
 
 // Every compression level gives the same mesh; level 0 (sequential) keeps the vertex order,

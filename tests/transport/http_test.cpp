@@ -573,7 +573,11 @@ TEST_F(Http, EventsKeepAliveWithComments) {
 
 TEST_F(Http, ConcurrentDownloadsAreNeverTorn) {
   // Steps are published and evicted while 8 clients download; every GLB that arrives must be
-  // exactly the one published under its step number.
+  // exactly the one published under its step number. They ask as fast as they can, from one
+  // address: no rate limit here (RequestsBeyondAnAddressRateGet429 tests it).
+  options_.requests_per_second = 0;
+  server_.reset();
+  start();
   std::mutex mutex;
   std::map<std::uint64_t, std::vector<std::uint8_t>> published;
   for (std::uint64_t step = 1; step <= 3; ++step)
@@ -747,6 +751,64 @@ TEST_F(Http, TooManyStreamsGet503) {
   EXPECT_EQ(raw.Get("/api/v1/latest?after=3&wait=1")->status, 503);
   EXPECT_EQ(raw.Get("/api/v1/steps")->status, 200);  // plain requests still served
   poll.join();
+}
+
+TEST_F(Http, RequestsBeyondAnAddressRateGet429) {
+  options_.requests_per_second = 2;
+  options_.request_burst = 10;
+  server_.reset();
+  start();
+  httplib::Client raw("127.0.0.1", port_);
+  raw.set_bearer_token_auth(server_->token());
+  const auto begin = Clock::now();
+  // The burst: every request passes (the viewer's files and the API alike), then the rate.
+  for (int i = 0; i < 10; ++i)
+    ASSERT_EQ(raw.Get(i % 2 ? "/api/v1/steps" : "/")->status, 200) << "request " << i;
+  int passed = 10, refused = 0;
+  for (int i = 0; i < 20; ++i) {
+    const auto res = raw.Get("/api/v1/steps");
+    ASSERT_TRUE(res);
+    if (res->status == 200) {
+      ++passed;
+    } else {
+      ASSERT_EQ(res->status, 429);
+      EXPECT_EQ(res->get_header_value("Retry-After"), "1");
+      EXPECT_NE(res->body.find("too many requests"), std::string::npos) << res->body;
+      ++refused;
+    }
+  }
+  // At most the burst and what the rate refilled meanwhile.
+  EXPECT_LE(passed, 10 + int(2.0 * seconds_since(begin)) + 1);
+  EXPECT_GE(refused, 1);
+  std::this_thread::sleep_for(1200ms);  // two tokens back
+  EXPECT_EQ(raw.Get("/api/v1/steps")->status, 200);
+}
+
+TEST_F(Http, ANonLoopbackAddressIsRefusedUnlessAllowed) {
+  for (const char* address :
+       {"127.0.0.1", "127.1.2.3", "::1", "0:0:0:0:0:0:0:1", "::ffff:127.0.0.1", "localhost"})
+    EXPECT_TRUE(is_loopback_address(address)) << address;
+  for (const char* address :
+       {"0.0.0.0", "::", "10.0.0.1", "128.0.0.1", "::ffff:10.0.0.1", "example.org", ""})
+    EXPECT_FALSE(is_loopback_address(address)) << address;
+
+  HttpServerOptions any = options_;
+  any.bind_address = "0.0.0.0";
+  HttpServer refused(store_, any);
+  const Status s = refused.start();
+  EXPECT_FALSE(s);
+  EXPECT_FALSE(refused.running());
+  EXPECT_NE(s.message().find("not a loopback address"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("allow_remote"), std::string::npos) << s.message();
+  EXPECT_EQ(s.message().find(server_->token()), std::string::npos);
+
+  any.allow_remote = true;
+  HttpServer allowed(store_, any);
+  ASSERT_TRUE(allowed.start());
+  httplib::Client raw("127.0.0.1", allowed.port());  // 0.0.0.0 takes loopback too
+  raw.set_bearer_token_auth(allowed.token());
+  EXPECT_EQ(raw.Get("/api/v1/steps")->status, 200);
+  EXPECT_NE(remote_server_warning("0.0.0.0").find("0.0.0.0"), std::string::npos);
 }
 
 TEST_F(Http, StartReportsAPortInUseAndBadOptions) {

@@ -1,5 +1,6 @@
 #include "ldimesh/transport/http_server.hpp"
 
+#include <arpa/inet.h>
 #include <pthread.h>
 #include <signal.h>
 #include <sys/socket.h>
@@ -11,11 +12,13 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <mutex>
 #include <optional>
 #include <random>
 #include <stop_token>
 #include <thread>
 #include <tuple>
+#include <unordered_map>
 #include <utility>
 #include <vector>
 
@@ -123,6 +126,47 @@ std::string step_event(const Snapshot& snapshot) {
   return event;
 }
 
+// Requests per client address, as a token bucket each: `burst` at once, refilled at `rate` per
+// second. Buckets that have refilled are forgotten once there are many (a scan of addresses
+// cannot grow the map without bound).
+class RequestLimiter {
+ public:
+  RequestLimiter(int rate, int burst) : rate_(rate), burst_(burst) {}
+
+  // Whether a request from `address` may go on now; takes one token when it may.
+  bool allow(const std::string& address) {
+    if (rate_ <= 0 || burst_ <= 0) return true;
+    const auto now = std::chrono::steady_clock::now();
+    const std::lock_guard lock(mutex_);
+    if (buckets_.size() >= kMaxAddresses) forget_full(now);
+    auto [it, fresh] = buckets_.try_emplace(address, Bucket{double(burst_), now});
+    Bucket& b = it->second;
+    if (!fresh) b = Bucket{level(b, now), now};
+    if (b.tokens < 1.0) return false;
+    b.tokens -= 1.0;
+    return true;
+  }
+
+ private:
+  struct Bucket {
+    double tokens;
+    std::chrono::steady_clock::time_point last;
+  };
+  static constexpr std::size_t kMaxAddresses = 4096;
+
+  double level(const Bucket& b, std::chrono::steady_clock::time_point now) const {
+    const double seconds = std::chrono::duration<double>(now - b.last).count();
+    return std::min(double(burst_), b.tokens + seconds * rate_);
+  }
+  void forget_full(std::chrono::steady_clock::time_point now) {
+    std::erase_if(buckets_, [&](const auto& entry) { return level(entry.second, now) >= burst_; });
+  }
+
+  const int rate_, burst_;
+  std::mutex mutex_;
+  std::unordered_map<std::string, Bucket> buckets_;
+};
+
 std::string describe_kept_steps(const SnapshotStore& store) {
   const auto kept = store.list();
   if (kept.empty()) return "it has no step yet";
@@ -134,7 +178,10 @@ std::string describe_kept_steps(const SnapshotStore& store) {
 }  // namespace
 
 struct HttpServer::Impl {
-  Impl(const SnapshotStore& s, HttpServerOptions o) : store(s), options(std::move(o)) {}
+  Impl(const SnapshotStore& s, HttpServerOptions o)
+      : store(s),
+        options(std::move(o)),
+        limiter(options.requests_per_second, options.request_burst) {}
 
   const SnapshotStore& store;
   HttpServerOptions options;
@@ -147,6 +194,7 @@ struct HttpServer::Impl {
   std::stop_source stop_source;  // ends long polls and event streams at stop()
   std::atomic<int> open_streams{0};
   std::atomic<int> port{0};
+  RequestLimiter limiter;
 
   httplib::Server::HandlerResponse handle(const Request& req, Response& res);
   void dispatch(const Request& req, Response& res);
@@ -177,6 +225,10 @@ httplib::Server::HandlerResponse HttpServer::Impl::handle(const Request& req, Re
 }
 
 void HttpServer::Impl::dispatch(const Request& req, Response& res) {
+  if (!limiter.allow(req.remote_addr)) {
+    res.set_header("Retry-After", "1");
+    return set_error(res, 429, "too many requests from this address: slow down");
+  }
   std::size_t header_bytes = req.target.size();
   for (const auto& [key, value] : req.headers)
     header_bytes += key.size() + value.size() + 4;
@@ -412,6 +464,14 @@ Status HttpServer::start() {
   if (o.threads < 2) return Status::invalid_argument("the HTTP server needs at least 2 threads");
   if (o.max_streams < 1 || o.max_streams >= o.threads)
     return Status::invalid_argument("max_streams must be at least 1 and less than threads");
+  if (o.requests_per_second < 0 || o.request_burst < 0)
+    return Status::invalid_argument("requests_per_second and request_burst must be ≥ 0");
+  if (!o.allow_remote && !is_loopback_address(o.bind_address))
+    return Status::invalid_argument(
+        "refusing to listen on " + o.bind_address +
+        ", which is not a loopback address: the server speaks plain HTTP, so its token would "
+        "travel over the network unencrypted. Use 127.0.0.1 with an SSH tunnel, or allow it "
+        "explicitly (server option \"allow_remote\": true, ldimesh serve --allow-remote)");
   if (o.max_request_bytes == 0 || o.read_timeout.count() <= 0 || o.write_timeout.count() <= 0 ||
       o.keep_alive_timeout.count() <= 0 || o.event_keep_alive.count() <= 0) {
     return Status::invalid_argument("the request size limit and the timeouts must be positive");
@@ -531,6 +591,23 @@ std::string HttpServer::url() const {
   const bool ipv6 = address.find(':') != std::string::npos;
   return "http://" + (ipv6 ? "[" + address + "]" : address) + ":" + std::to_string(port()) +
          "/?token=" + impl_->token;
+}
+
+bool is_loopback_address(std::string_view address) {
+  if (address == "localhost") return true;
+  const std::string text(address);
+  in_addr v4{};
+  if (::inet_pton(AF_INET, text.c_str(), &v4) == 1) return (ntohl(v4.s_addr) >> 24) == 127;
+  in6_addr v6{};
+  if (::inet_pton(AF_INET6, text.c_str(), &v6) == 1)
+    return IN6_IS_ADDR_LOOPBACK(&v6) || (IN6_IS_ADDR_V4MAPPED(&v6) && v6.s6_addr[12] == 127);
+  return false;
+}
+
+std::string remote_server_warning(std::string_view address) {
+  return "warning: the HTTP server listens on " + std::string(address) +
+         ", reachable from the network in plain HTTP: anyone who sees the URL (with its token) "
+         "or the traffic can fetch the meshes\n";
 }
 
 std::string random_token() {

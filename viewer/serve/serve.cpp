@@ -59,6 +59,7 @@ int run_serve(const ServeArgs& args, const std::string& program) {
 
   ldimesh::HttpServerOptions options;
   options.bind_address = args.bind;
+  options.allow_remote = args.allow_remote;
   options.port = args.port;
   options.token = args.token;
   const ldimesh::ViewerFiles files = ldimesh::find_viewer_files();
@@ -68,6 +69,9 @@ int run_serve(const ServeArgs& args, const std::string& program) {
                                     "--vendor-dir", program);
   ldimesh::HttpServer server(store, options);
   if (ldimesh::Status s = server.start(); !s) throw std::runtime_error(s.message());
+  if (!ldimesh::is_loopback_address(args.bind))
+    std::fprintf(stderr, "%s: %s", program.c_str(),
+                 ldimesh::remote_server_warning(args.bind).c_str());
   std::printf("%s: serving %zu step(s) from %s at %s\n", program.c_str(), store.list().size(),
               args.dir.c_str(), server.url().c_str());
   std::fflush(stdout);
@@ -99,6 +103,9 @@ void add_serve_options(CLI::App& app, ServeArgs& args) {
       ->check(CLI::Range(0, 65535))
       ->capture_default_str();
   app.add_option("--bind", args.bind, "the address to listen on")->capture_default_str();
+  app.add_flag("--allow-remote", args.allow_remote,
+               "allow a --bind address other than loopback (plain HTTP: the token travels "
+               "unencrypted)");
   app.add_option("--token", args.token,
                  "the access token (letters, digits, -._~); default: a random one");
   app.add_option("--keep", args.keep, "how many of the newest steps to serve")

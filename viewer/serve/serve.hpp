@@ -14,13 +14,14 @@ struct ServeArgs {
   std::string dir;
   int port = 8080;
   std::string bind = "127.0.0.1";
+  bool allow_remote = false;
   std::string token;
   std::size_t keep = 16;
   std::string static_dir;
   std::string vendor_dir;
 };
 
-// Adds --dir, --port, --bind, --token, --keep, --static-dir and --vendor-dir to `app`.
+// Adds --dir, --port, --bind, --allow-remote, --token, --keep, --static-dir and --vendor-dir to `app`.
 void add_serve_options(CLI::App& app, ServeArgs& args);
 
 // Serves until SIGINT or SIGTERM, then returns 0. Messages start with `program`. Throws

@@ -18,8 +18,11 @@ namespace ldimesh {
 
 struct HttpServerOptions {
   // The address to listen on. The default keeps the server off the network: remote people
-  // come through an SSH tunnel.
+  // come through an SSH tunnel. An address that is not loopback (is_loopback_address) is
+  // refused unless allow_remote is set: the server speaks plain HTTP, so the token, the only
+  // protection then, travels over the network unencrypted (callers print a warning).
   std::string bind_address = "127.0.0.1";
+  bool allow_remote = false;
   // 0 = any free port (HttpServer::port() tells which).
   int port = 0;
   // The access token every /api/ request must carry; empty = a random 128-bit token (32 hex
@@ -37,6 +40,11 @@ struct HttpServerOptions {
   int max_streams = 4;
   // The largest request: headers (431 beyond) and body (413 beyond). The API takes no body.
   std::size_t max_request_bytes = 16 * 1024;
+  // Requests per client address: at most request_burst at once, refilled at
+  // requests_per_second; beyond, 429 with Retry-After. 0 for either = no limit. A viewer
+  // loads about 20 files at start, then a request per step.
+  int requests_per_second = 50;
+  int request_burst = 200;
   // Per read or write on a connection: a stalled client holds a worker at most this long.
   std::chrono::seconds read_timeout{5};
   std::chrono::seconds write_timeout{5};
@@ -94,6 +102,14 @@ class HttpServer {
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
+
+// Whether `address` (as given to bind_address) is a loopback address: 127.0.0.0/8, ::1 (also
+// written out or as ::ffff:127.x.y.z) or "localhost".
+bool is_loopback_address(std::string_view address);
+
+// The warning a program prints when its server listens on a non-loopback `address`
+// (allow_remote), one line ending in a newline.
+std::string remote_server_warning(std::string_view address);
 
 // A random 128-bit token as 32 lowercase hex digits, from std::random_device (throws
 // std::runtime_error, as std::random_device does, where the system has no entropy source).
