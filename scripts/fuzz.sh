@@ -42,6 +42,7 @@ case $target in
     name=http_request_fuzz
     sources=(transport/src/http_server.cpp transport/src/snapshot_store.cpp core/src/base/status.cpp)
     # Debian's cpp-httplib is a library built with these definitions (class layouts follow them).
+    pkg-config --exists cpp-httplib || { echo "fuzz: cpp-httplib not found (scripts/setup.sh)" >&2; exit 1; }
     libs=($(pkg-config --cflags --libs cpp-httplib) -DLDIMESH_SOURCE_DIR=\"/nonexistent\"
           -DLDIMESH_BINARY_DIR=\"/nonexistent\" -DLDIMESH_INSTALL_DATA_DIR=\"/nonexistent\") ;;
   options)

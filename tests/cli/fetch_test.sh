@@ -132,7 +132,8 @@ server_pid=
 
 # A non-loopback address only when asked for (--allow-remote), and then with a warning.
 timeout 10 "$serve" --dir "$tmp/run" --port 0 --bind 0.0.0.0 >"$tmp/remote.out" 2>"$tmp/remote.err"
-[ $? -ne 0 ] || fail "--bind 0.0.0.0 without --allow-remote: started"
+status=$?
+[ "$status" -eq 1 ] || fail "--bind 0.0.0.0 without --allow-remote: exit status $status"
 grep -q 'not a loopback address.*--allow-remote' "$tmp/remote.err" ||
   fail "--bind 0.0.0.0 without --allow-remote: $(cat "$tmp/remote.err")"
 "$serve" --dir "$tmp/run" --port 0 --bind 0.0.0.0 --allow-remote >"$tmp/remote.out" 2>"$tmp/remote.err" &

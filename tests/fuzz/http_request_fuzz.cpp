@@ -1,7 +1,8 @@
 // libFuzzer target for the job's HTTP server (scripts/fuzz.sh http builds and runs it with ASan
 // and UBSan): what a browser, ldimesh-fetch or anyone who can reach the port sends. A real
 // HttpServer listens on loopback over a store of three steps, with the viewer's files in a
-// folder beside a secret one (and a symlink pointing at it); each input is sent as the raw bytes
+// folder beside a secret file (and a symlink pointing at it; binary, so that httplib never
+// compresses it and the check below sees its bytes); each input is sent as the raw bytes
 // of one connection (several requests when it holds several, keep-alive), the sending side is
 // then shut so that the server sees the end of the request, and the whole answer is read. The
 // server must answer every input that holds a request line with HTTP responses
@@ -58,9 +59,9 @@ struct Server {
     std::ofstream(root / "web/index.html") << "<html>viewer</html>";
     std::ofstream(root / "web/viewer.js") << "export {};";
     std::ofstream(root / "three/build/three.module.js") << "export const REVISION = '0';";
-    std::ofstream(root / "secret.txt") << kSecret;
+    std::ofstream(root / "secret.bin") << kSecret;
     std::error_code ec;
-    fs::create_symlink("../secret.txt", root / "web/escape", ec);
+    fs::create_symlink("../secret.bin", root / "web/escape", ec);
     for (std::uint64_t step = 1; step <= 3; ++step)
       if (!store.publish(ldimesh::testing::fake_snapshot(step, 100 * step))) std::abort();
     store.shutdown();  // long polls and streams answer at once
@@ -141,8 +142,8 @@ void ldimesh::fuzz::write_seeds(const std::string& dir) {
       "GET /api/v1/latest?after=3&wait=2&token=" + t + " HTTP/1.1\r\n\r\n",
       "GET /api/v1/events?token=" + t + " HTTP/1.1\r\nLast-Event-ID: 1\r\n\r\n",
       "GET /api/v1/steps HTTP/1.1\r\n\r\n",
-      "GET /viewer/../secret.txt HTTP/1.1\r\n\r\nGET /viewer/escape HTTP/1.1\r\n\r\n",
-      "GET /viewer/%2e%2e/secret.txt HTTP/1.1\r\n\r\nGET /vendor/three/..%2f..%2fsecret.txt "
+      "GET /viewer/../secret.bin HTTP/1.1\r\n\r\nGET /viewer/escape HTTP/1.1\r\n\r\n",
+      "GET /viewer/%2e%2e/secret.bin HTTP/1.1\r\n\r\nGET /vendor/three/..%2f..%2fsecret.bin "
       "HTTP/1.1\r\n\r\n",
       "POST /api/v1/steps?token=" + t + " HTTP/1.1\r\nContent-Length: 5\r\n\r\nhello",
       "GET /api/v1/steps HTTP/1.1\r\nTransfer-Encoding: chunked\r\n\r\n0\r\n\r\n",
@@ -166,6 +167,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     __builtin_trap();
   }
   // Every answer the server gives is a sequence of HTTP responses; none is an internal error.
+  // (The search looks into bodies too: none served here holds that text or echoes a request.)
   if (!answer.empty() && answer.rfind("HTTP/1.1 ", 0) != 0) {
     std::fprintf(stderr, "fuzz: not an HTTP response: %.80s\n", answer.c_str());
     __builtin_trap();

@@ -126,9 +126,10 @@ std::string step_event(const Snapshot& snapshot) {
   return event;
 }
 
-// Requests per client address, as a token bucket each: `burst` at once, refilled at `rate` per
-// second. Buckets that have refilled are forgotten once there are many (a scan of addresses
-// cannot grow the map without bound).
+// Requests without a valid token per client address, as a token bucket each: `burst` at once,
+// refilled at `rate` per second. Buckets that have refilled are forgotten once there are many,
+// and all of them if that frees nothing (so many addresses cannot grow the map without bound;
+// they get a fresh burst instead).
 class RequestLimiter {
  public:
   RequestLimiter(int rate, int burst) : rate_(rate), burst_(burst) {}
@@ -136,9 +137,12 @@ class RequestLimiter {
   // Whether a request from `address` may go on now; takes one token when it may.
   bool allow(const std::string& address) {
     if (rate_ <= 0 || burst_ <= 0) return true;
-    const auto now = std::chrono::steady_clock::now();
     const std::lock_guard lock(mutex_);
-    if (buckets_.size() >= kMaxAddresses) forget_full(now);
+    const auto now = std::chrono::steady_clock::now();  // under the lock: times only increase
+    if (buckets_.size() >= kMaxAddresses) {
+      forget_full(now);
+      if (buckets_.size() >= kMaxAddresses) buckets_.clear();
+    }
     auto [it, fresh] = buckets_.try_emplace(address, Bucket{double(burst_), now});
     Bucket& b = it->second;
     if (!fresh) b = Bucket{level(b, now), now};
@@ -225,10 +229,6 @@ httplib::Server::HandlerResponse HttpServer::Impl::handle(const Request& req, Re
 }
 
 void HttpServer::Impl::dispatch(const Request& req, Response& res) {
-  if (!limiter.allow(req.remote_addr)) {
-    res.set_header("Retry-After", "1");
-    return set_error(res, 429, "too many requests from this address: slow down");
-  }
   std::size_t header_bytes = req.target.size();
   for (const auto& [key, value] : req.headers)
     header_bytes += key.size() + value.size() + 4;
@@ -261,6 +261,12 @@ void HttpServer::Impl::dispatch(const Request& req, Response& res) {
   if (path == "/api" || path.starts_with("/api/")) {
     res.set_header("Cache-Control", "no-store");
     if (!authorized(req)) {
+      // Guessing the token: requests without it are limited per address; the owner's, with
+      // it, never are (everyone through an SSH tunnel comes from 127.0.0.1).
+      if (!limiter.allow(req.remote_addr)) {
+        res.set_header("Retry-After", "1");
+        return set_error(res, 429, "too many requests without a valid token from this address");
+      }
       res.set_header("WWW-Authenticate", "Bearer");
       return set_error(res, 401,
                        "missing or wrong token: open the URL the job printed (…/?token=…)");

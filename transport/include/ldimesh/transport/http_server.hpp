@@ -40,11 +40,12 @@ struct HttpServerOptions {
   int max_streams = 4;
   // The largest request: headers (431 beyond) and body (413 beyond). The API takes no body.
   std::size_t max_request_bytes = 16 * 1024;
-  // Requests per client address: at most request_burst at once, refilled at
-  // requests_per_second; beyond, 429 with Retry-After. 0 for either = no limit. A viewer
-  // loads about 20 files at start, then a request per step.
-  int requests_per_second = 50;
-  int request_burst = 200;
+  // API requests without a valid token (a 401 each), per client address: at most request_burst
+  // at once, refilled at requests_per_second; beyond, 429 with Retry-After for that address's
+  // requests without the token. Requests with the token and the viewer's files are never
+  // limited. 0 for either = no limit.
+  int requests_per_second = 10;
+  int request_burst = 100;
   // Per read or write on a connection: a stalled client holds a worker at most this long.
   std::chrono::seconds read_timeout{5};
   std::chrono::seconds write_timeout{5};
