@@ -1,4 +1,4 @@
-// Soak test (issue 26; a benchmark, not in CI): a mini-app publishes many steps while every kind
+// Soak test (issue 26; a benchmark, not in CI): the Gray–Scott mini-app publishes many steps while every kind
 // of client is attached, and the root rank's resources are sampled from /proc. Attached for the
 // whole run: the web viewer in Debian's chromium (playwright-core), `ldimesh-fetch --follow`
 // (writing every step it gets), and an event-stream client that connects and never reads a byte.
@@ -28,8 +28,10 @@ writeFileSync(optionsPath, JSON.stringify({
 }));
 const env = { ...process.env, OMPI_ALLOW_RUN_AS_ROOT: '1', OMPI_ALLOW_RUN_AS_ROOT_CONFIRM: '1',
   OMPI_MCA_rmaps_base_oversubscribe: '1' };
-const jobArgs = ['-n', String(ranks), '--oversubscribe', '--bind-to', 'none', `${bin}/ldimesh-analytic`,
-  '--surface', 'torus', '--steps', String(steps), '--options', optionsPath];
+// Gray–Scott at 48³ with 50 solver steps per output step: tens of milliseconds a step, so that
+// the clients see a job that runs for a while, not one that is over before they attach.
+const jobArgs = ['-n', String(ranks), '--oversubscribe', '--bind-to', 'none', `${bin}/ldimesh-grayscott`,
+  '--size', '48', '--substeps', '50', '--steps', String(steps), '--options', optionsPath];
 console.log(`job: mpiexec ${jobArgs.join(' ')}`);
 const job = spawn('mpiexec', jobArgs, { detached: true, stdio: ['ignore', 'pipe', 'pipe'], env });
 let viewerLine;
@@ -46,7 +48,7 @@ function rootPid() {
   for (const entry of readdirSync('/proc')) {
     if (!/^\d+$/.test(entry)) continue;
     try {
-      if (!readFileSync(`/proc/${entry}/cmdline`, 'latin1').includes('ldimesh-analytic')) continue;
+      if (!readFileSync(`/proc/${entry}/cmdline`, 'latin1').includes('ldimesh-grayscott')) continue;
       if (readFileSync(`/proc/${entry}/environ`, 'latin1').split('\0').includes('OMPI_COMM_WORLD_RANK=0'))
         return Number(entry);
     } catch { /* gone */ }
