@@ -21,7 +21,8 @@ struct ServeArgs {
   std::string vendor_dir;
 };
 
-// Adds --dir, --port, --bind, --allow-remote, --token, --keep, --static-dir and --vendor-dir to `app`.
+// Adds --dir, --port, --bind, --allow-remote, --token, --keep, --static-dir and --vendor-dir to
+// `app`.
 void add_serve_options(CLI::App& app, ServeArgs& args);
 
 // Serves until SIGINT or SIGTERM, then returns 0. Messages start with `program`. Throws
