@@ -13,7 +13,7 @@ without a second point field to colour by, c(x) = sin(4x) + y·z (float32, the s
   quantizing the fragments and the reduction.
 
 Also the GLB each writes (ldimesh's `--out .glb`: Draco, positions, normals, view colours and,
-with the field, TEXCOORD_0) in bytes per triangle. Runs alternate; every figure is the median of
+with the field, _SCALAR) in bytes per triangle. Runs alternate; every figure is the median of
 --repeats runs. glibc keeps freed memory on both sides, as in bench/flying_edges.py.
 
     /usr/bin/python3 bench/colour_cost.py [--build build] [--repeats 5] [--threads 2] [--steps 4]

@@ -789,7 +789,7 @@ int main(int argc, char** argv) {
   mesh->add_option("--field", args.field, "point array of --vtu to mesh");
   mesh->add_option("--colour-by", args.colour_by,
                    "colour the isosurface by a second field: a point array of --vtu, or for "
-                   "--grid a raw volume file of the same layout (kept per vertex: GLB TEXCOORD_0, "
+                   "--grid a raw volume file of the same layout (kept per vertex: GLB _SCALAR, "
                    "docs/api.md; PLY property 'value')");
   mesh->add_option("--res", args.res, "pixels along the longer side of each view")
       ->check(CLI::Range(1, 16384))

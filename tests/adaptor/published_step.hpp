@@ -65,7 +65,7 @@ inline void expect_on_grid_sphere(const Mesh& mesh, double iso, double h, int re
 // Every vertex's colour is `colour(vertex)` within what the wire and the GLB allow, computed
 // here from their bit budgets: positions within a tenth of a pixel (`pixel`) per axis, times the
 // field's largest slope `slope` per axis; the value within half a step of 12 bits (the fragments'
-// scalar_bits) and of 10 bits (the published GLB's TEXCOORD_0) over the range; and float rounding.
+// scalar_bits) and of 10 bits (the published GLB's _SCALAR) over the range; and float rounding.
 template <class Colour>
 inline void expect_coloured_by(const Mesh& mesh, const StepMetadata& meta, const std::string& name,
                                Colour colour, double slope, double pixel) {
@@ -73,7 +73,7 @@ inline void expect_coloured_by(const Mesh& mesh, const StepMetadata& meta, const
   EXPECT_EQ(meta.scalar->name, name);
   ASSERT_EQ(mesh.scalars.size(), mesh.vertex_count());
   ASSERT_GT(mesh.vertex_count(), 300u);
-  // The decoded scalars are TEXCOORD_0.u: 0 and 1 at the range's ends.
+  // The decoded scalars are the GLB's _SCALAR: 0 and 1 at the range's ends.
   const auto [lo, hi] = std::minmax_element(mesh.scalars.begin(), mesh.scalars.end());
   EXPECT_NEAR(*lo, 0.0f, 1e-6f);
   EXPECT_NEAR(*hi, 1.0f, 1e-6f);

@@ -2,7 +2,7 @@
 # Every kind of GLB ldimesh writes passes Khronos' glTF validator (npm gltf-validator) with no
 # error and no warning: a small mesh (one Draco primitive), a mesh of more than 200 000
 # triangles (encoded in slabs: several primitives of one mesh), a mesh coloured by a second
-# field (TEXCOORD_0), small and large, and an in situ step of two isovalues (a mesh and node
+# field (_SCALAR), small and large, and an in situ step of two isovalues (a mesh and node
 # each, the node's extras naming the surface).
 #   gltf_validator_test.sh LDIMESH SOURCE_DIR LDIMESH_ANALYTIC
 set -u

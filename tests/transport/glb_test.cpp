@@ -1,6 +1,7 @@
 #include "ldimesh/transport/glb.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -19,6 +20,11 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 #include <nlohmann/json.hpp>
+
+#include <draco/compression/draco_compression_options.h>
+#include <draco/core/encoder_buffer.h>
+#include <draco/io/gltf_encoder.h>
+#include <draco/mesh/mesh.h>
 
 #include "ldimesh/core/field/surfaces.hpp"
 #include "ldimesh/core/pipeline.hpp"
@@ -470,6 +476,7 @@ TEST(Glb, TheGlbIsDracoCompressedGltfWithTheContractsAttributes) {
     EXPECT_TRUE(p["attributes"].contains(name)) << name;
     EXPECT_TRUE(draco["attributes"].contains(name)) << name;
   }
+  EXPECT_FALSE(p["attributes"].contains("_SCALAR"));
   EXPECT_FALSE(p["attributes"].contains("TEXCOORD_0"));
   const Json& colour = j["accessors"][p["attributes"]["COLOR_0"].get<int>()];
   EXPECT_EQ(colour["type"], "VEC3");
@@ -532,28 +539,68 @@ TEST(Glb, DracosOwnDecoderToolReadsCountsAndColours) {
   EXPECT_NE(header.find("property uchar red"), std::string::npos) << header;
 }
 
-// TEXCOORD_0 as any glTF reader sees it (Draco's values are glTF's): u in [0, 1], v = 0.
-TEST(Glb, DracosOwnDecoderToolSeesTexcoordVZero) {
+// The scalar is a GENERIC attribute in the Draco data: a decoder that knows nothing of it (the
+// tool writes no such property) still reads the mesh.
+TEST(Glb, DracosOwnDecoderToolReadsAMeshWithTheScalar) {
   if (!have_draco_decoder()) GTEST_SKIP() << "draco_decoder not installed (Debian: draco)";
   const Mesh mesh = with_scalar(barth_triangles());
-  std::istringstream obj(draco_decoder_output(encode(mesh), ".obj"));
-  std::size_t count = 0;
-  float lo = 1, hi = 0;
-  for (std::string line; std::getline(obj, line);) {
-    if (line.rfind("vt ", 0) != 0) continue;
-    float u = -1, v = -1;
-    ASSERT_EQ(std::sscanf(line.c_str(), "vt %f %f", &u, &v), 2) << line;
-    EXPECT_EQ(v, 0.0f) << line;
-    lo = std::min(lo, u);
-    hi = std::max(hi, u);
-    ++count;
-  }
-  EXPECT_EQ(count, mesh.vertex_count());
-  EXPECT_EQ(lo, 0.0f);
-  EXPECT_EQ(hi, 1.0f);
+  const std::string ply = draco_decoder_output(encode(mesh), ".ply");
+  const std::string header = ply.substr(0, ply.find("end_header"));
+  EXPECT_NE(header.find("element vertex " + std::to_string(mesh.vertex_count()) + "\n"),
+            std::string::npos)
+      << header;
+  EXPECT_NE(header.find("element face " + std::to_string(mesh.triangle_count()) + "\n"),
+            std::string::npos)
+      << header;
 }
 
-TEST(Glb, ScalarsTravelAsTexcoordUNormalizedToTheirRange) {
+// A GLB as ldimesh wrote them before _SCALAR: the scalar as TEXCOORD_0 = (u, 0), by Draco's glTF
+// encoder itself (so v = 1 here, flipped on the way out). decode_glb reads u as the scalar.
+TEST(Glb, AnOlderGlbWithTheScalarAsTexcoordStillDecodes) {
+  const Mesh& mesh = barth_triangles();
+  const std::size_t n = mesh.vertex_count();
+  draco::Mesh dm;
+  dm.set_num_points(std::uint32_t(n));
+  const auto add = [&](draco::GeometryAttribute::Type type, int components, const void* data) {
+    draco::GeometryAttribute ga;
+    ga.Init(type, nullptr, std::uint8_t(components), draco::DT_FLOAT32, false,
+            std::int64_t(sizeof(float)) * components, 0);
+    const int id = dm.AddAttribute(ga, true, std::uint32_t(n));
+    dm.attribute(id)->buffer()->Write(0, data, n * sizeof(float) * components);
+  };
+  std::vector<std::array<float, 2>> uv(n);
+  for (std::size_t i = 0; i < n; ++i)
+    uv[i] = {float(i % 101) / 100.0f, 1.0f};
+  add(draco::GeometryAttribute::POSITION, 3, mesh.positions.data());
+  add(draco::GeometryAttribute::NORMAL, 3, mesh.normals.data());
+  add(draco::GeometryAttribute::TEX_COORD, 2, uv.data());
+  dm.SetNumFaces(mesh.triangle_count());
+  for (std::size_t f = 0; f < mesh.triangle_count(); ++f)
+    dm.SetFace(draco::FaceIndex(std::uint32_t(f)), {draco::PointIndex(mesh.triangles[3 * f]),
+                                                    draco::PointIndex(mesh.triangles[3 * f + 1]),
+                                                    draco::PointIndex(mesh.triangles[3 * f + 2])});
+  draco::DracoCompressionOptions compression;
+  compression.compression_level = 0;  // sequential: keeps the vertex order
+  compression.quantization_position.SetQuantizationBits(16);
+  compression.quantization_bits_tex_coord = 12;
+  dm.SetCompressionEnabled(true);
+  dm.SetCompressionOptions(compression);
+  draco::EncoderBuffer buffer;
+  ASSERT_TRUE(draco::GltfEncoder().EncodeToBuffer(dm, &buffer).ok());
+  const Bytes glb(buffer.data(), buffer.data() + buffer.size());
+  ASSERT_TRUE(json_chunk(glb)["meshes"][0]["primitives"][0]["attributes"].contains("TEXCOORD_0"));
+
+  Mesh back;
+  GlbInfo info;
+  const Status s = decode_glb(glb, back, &info);
+  ASSERT_TRUE(s) << s.message();
+  EXPECT_TRUE(info.has_scalar);
+  ASSERT_EQ(back.scalars.size(), n);
+  for (std::size_t i = 0; i < n; ++i)
+    ASSERT_NEAR(back.scalars[i], uv[i][0], 1.0 / 4095) << i;
+}
+
+TEST(Glb, ScalarsTravelAsAnAttributeNormalizedToTheirRange) {
   const Mesh mesh = with_scalar(barth_triangles());
   const auto [lo, hi] = std::minmax_element(mesh.scalars.begin(), mesh.scalars.end());
   GlbOptions options;
@@ -565,8 +612,13 @@ TEST(Glb, ScalarsTravelAsTexcoordUNormalizedToTheirRange) {
   EXPECT_EQ(info.scalar_max, *hi);
   const Json j = json_chunk(glb);
   const Json& p = j["meshes"][0]["primitives"][0];
-  ASSERT_TRUE(p["attributes"].contains("TEXCOORD_0"));
-  EXPECT_TRUE(p["extensions"]["KHR_draco_mesh_compression"]["attributes"].contains("TEXCOORD_0"));
+  ASSERT_TRUE(p["attributes"].contains("_SCALAR"));
+  EXPECT_TRUE(p["extensions"]["KHR_draco_mesh_compression"]["attributes"].contains("_SCALAR"));
+  EXPECT_FALSE(p["attributes"].contains("TEXCOORD_0"));
+  const Json& accessor = j["accessors"][p["attributes"]["_SCALAR"].get<int>()];
+  EXPECT_EQ(accessor["type"], "SCALAR");
+  EXPECT_EQ(accessor["componentType"], 5126);  // FLOAT
+  EXPECT_EQ(accessor["count"], mesh.vertex_count());
   EXPECT_EQ(j["meshes"][0]["extras"]["ldimesh"]["scalar_range"],
             Json::array({double(*lo), double(*hi)}));
 

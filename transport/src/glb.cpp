@@ -30,6 +30,7 @@
 #include <draco/core/encoder_buffer.h>
 #include <draco/io/gltf_encoder.h>
 #include <draco/mesh/mesh.h>
+#include <draco/metadata/geometry_metadata.h>
 #include <nlohmann/json.hpp>
 
 namespace ldimesh {
@@ -43,6 +44,9 @@ constexpr std::uint32_t kChunkJson = 0x4E4F534Au;  // "JSON"
 constexpr std::uint32_t kChunkBin = 0x004E4942u;   // "BIN\0"
 constexpr std::size_t kGlbHeader = 12, kChunkHeader = 8;
 constexpr const char* kDraco = "KHR_draco_mesh_compression";
+// The scalar's attribute (glTF: an application-specific semantic starts with "_"); GLBs written
+// before it carried the scalar as TEXCOORD_0.u, which decode_glb still reads.
+constexpr const char* kScalarAttribute = "_SCALAR";
 constexpr int kMaxAutoPositionBits = 24;  // a float has 24 significant bits
 constexpr std::size_t kMaxIndex = std::numeric_limits<std::int32_t>::max();  // Draco: int32
 
@@ -268,18 +272,27 @@ Status build_draco_mesh(const Mesh& m, const std::vector<std::uint32_t>& tris,
   col->buffer()->Write(0, colour.data(), n * 3);
 
   if (!m.scalars.empty()) {
-    draco::PointAttribute* uv =
-        add(draco::GeometryAttribute::TEX_COORD, 2, draco::DT_FLOAT32, false);
-    if (!uv) return Status::internal("glb: Draco could not add an attribute");
-    // GltfEncoder flips v (v ↦ 1 − v, draco::MeshUtils::FlipTextureUvValues) because Draco
-    // keeps texture coordinates upside down relative to glTF: v = 1 here is v = 0 in the GLB.
-    std::vector<std::array<float, 2>> uvs(n);
+    // The scalar as the custom attribute _SCALAR, one float per vertex (GltfEncoder writes a
+    // GENERIC attribute under the name its metadata gives). Draco predicts a GENERIC attribute
+    // from its neighbours (parallelogram): as TEXCOORD_0 it took the texture-coordinate
+    // predictor, made for 2-D maps, and cost about half as much again (docs/benchmarks.md).
+    const int id = dm.AddAttribute(
+        [] {
+          draco::GeometryAttribute ga;
+          ga.Init(draco::GeometryAttribute::GENERIC, nullptr, 1, draco::DT_FLOAT32, false,
+                  sizeof(float), 0);
+          return ga;
+        }(),
+        /*identity_mapping=*/true, std::uint32_t(n));
+    if (id < 0) return Status::internal("glb: Draco could not add an attribute");
+    auto metadata = std::make_unique<draco::AttributeMetadata>();
+    metadata->AddEntryString(draco::GltfEncoder::kDracoMetadataGltfAttributeName, kScalarAttribute);
+    dm.AddAttributeMetadata(id, std::move(metadata));
+    std::vector<float> u(n);
     const double scale = scalar_hi > scalar_lo ? 1.0 / (double(scalar_hi) - scalar_lo) : 0.0;
-    for (std::size_t i = 0; i < n; ++i) {
-      const double u = (double(m.scalars[i]) - scalar_lo) * scale;
-      uvs[i] = {float(std::clamp(u, 0.0, 1.0)), 1.0f};
-    }
-    uv->buffer()->Write(0, uvs.data(), n * sizeof(uvs[0]));
+    for (std::size_t i = 0; i < n; ++i)
+      u[i] = float(std::clamp((double(m.scalars[i]) - scalar_lo) * scale, 0.0, 1.0));
+    dm.attribute(id)->buffer()->Write(0, u.data(), n * sizeof(float));
   }
 
   const std::size_t t = tri_view.size();
@@ -293,7 +306,7 @@ Status build_draco_mesh(const Mesh& m, const std::vector<std::uint32_t>& tris,
   compression.compression_level = options.compression_level;
   compression.quantization_position.SetQuantizationBits(position_bits);
   compression.quantization_bits_normal = options.normal_bits;
-  compression.quantization_bits_tex_coord = options.scalar_bits;
+  compression.quantization_bits_generic = options.scalar_bits;
   // COLOR needs no setting: GltfEncoder does not quantize colours (no COLOR case in
   // GltfAsset::CompressMeshWithDraco), so 8-bit colours travel exactly.
   dm.SetCompressionEnabled(true);
@@ -773,10 +786,12 @@ Status decode_primitive(const Json& json, const Json& primitive, std::span<const
   const draco::PointAttribute* pos = attribute("POSITION", 3);
   const draco::PointAttribute* nrm = attribute("NORMAL", 3);
   const draco::PointAttribute* col = attribute("COLOR_0", 3);
-  const draco::PointAttribute* tex = attribute("TEXCOORD_0", 2);
+  const draco::PointAttribute* tex = attributes->contains(kScalarAttribute)
+                                         ? attribute(kScalarAttribute, 1)
+                                         : attribute("TEXCOORD_0", 2);
   if (!pos || !nrm) return Status::corrupt_input("glb: a Draco primitive lacks POSITION or NORMAL");
   if (!out.positions.empty() && !out.scalars.empty() != (tex != nullptr))
-    return Status::corrupt_input("glb: primitives disagree on TEXCOORD_0");
+    return Status::corrupt_input("glb: primitives disagree on the scalar (_SCALAR)");
   const std::size_t base = out.positions.size();
   if (base + n > kMaxIndex || out.triangle_count() + t > kMaxIndex)
     return Status::corrupt_input("glb: more than 2^31 - 1 vertices or triangles");
@@ -810,7 +825,7 @@ Status decode_primitive(const Json& json, const Json& primitive, std::span<const
     if (tex) {
       float uv[3];
       if (!value(tex, i, uv) || !std::isfinite(uv[0]))
-        return Status::corrupt_input("glb: a decoded TEXCOORD_0 is missing or not finite");
+        return Status::corrupt_input("glb: a decoded scalar is missing or not finite");
       out.scalars[base + i] = uv[0];
     }
     if (col) {

@@ -182,8 +182,8 @@ function updateFieldControls(meta) {
   }
 }
 
-// Colours by view (the GLB's COLOR_0), by the field (TEXCOORD_0.u, the value's place in the
-// step's range, through the colour map over colourRange) or plain. The colour attributes are
+// Colours by view (the GLB's COLOR_0), by the field (_SCALAR, the value's place in the step's
+// range, through the colour map over colourRange; TEXCOORD_0.u in GLBs written before) or plain. The colour attributes are
 // swapped, never modified, so the GLB's own (which the Draco loader may hand over interleaved:
 // cloning it would de-interleave it, with a warning) is kept as it is.
 function applyColouring(root, meta) {
@@ -195,12 +195,13 @@ function applyColouring(root, meta) {
     if (!object.isMesh) return;
     const g = object.geometry;
     if (!g.userData.viewColours && g.attributes.color) g.userData.viewColours = g.attributes.color;
-    if (mode === 'scalar' && field && g.attributes.uv) {
+    const scalar = g.attributes._scalar || g.attributes.uv;
+    if (mode === 'scalar' && field && scalar) {
       if (g.userData.scalarKey !== key) {
-        const uv = g.attributes.uv, colours = new Float32Array(uv.count * 3);
+        const colours = new Float32Array(scalar.count * 3);
         const span = field.max - field.min, width = hi - lo;
-        for (let i = 0; i < uv.count; ++i) {
-          const value = field.min + uv.getX(i) * span;
+        for (let i = 0; i < scalar.count; ++i) {
+          const value = field.min + scalar.getX(i) * span;
           const rgb = colourmap($('colourmap').value, width > 0 ? (value - lo) / width : 0.5);
           colours.set(rgb.map(linear), 3 * i);
         }

@@ -9,8 +9,9 @@
 //   COLOR_0     unsigned byte VEC3 (normalized), the colour of the view each vertex's faces
 //               came from: views along ±x red, ±y yellow, ±z green, any other view k
 //               view_colour(k, ·) from a fixed palette; stored exactly (not quantized);
-//   TEXCOORD_0  float VEC2, u = (scalar − min) / (max − min) clamped to [0, 1], v = 0; only
-//               when the mesh has scalars; quantized to `scalar_bits`.
+//   _SCALAR     float SCALAR (an application-specific attribute; a Draco GENERIC one), u =
+//               (scalar − min) / (max − min) clamped to [0, 1]; only when the mesh has scalars;
+//               quantized to `scalar_bits`.
 // and meshes[0].extras.ldimesh = {"view_dirs": [[x,y,z], …], "scalar_range": [min, max]}
 // (scalar_range only with scalars), so that a client can recover views and scalar units.
 //
@@ -39,7 +40,7 @@ struct GlbOptions {
   double pixel_size = 0.0;
   // Octahedral normal quantization bits, 2..30 (Draco's octahedron transform needs ≥ 2).
   int normal_bits = 10;
-  // TEXCOORD_0 (normalized scalar) quantization bits, 1..30.
+  // _SCALAR (normalized scalar) quantization bits, 1..30.
   int scalar_bits = 12;
   // Draco compression level 0..10 (GltfEncoder maps it to speed 10 − level; 0 = sequential
   // encoding that keeps the vertex order — of a mesh of up to 200 000 triangles; a larger one,
@@ -68,7 +69,7 @@ struct GlbInfo {
   std::size_t vertices = 0;           // vertices in the GLB (Draco may split non-manifold ones)
   int position_bits = 0;              // encode only (0 from decode_glb): the bits used
   double position_error_bound = 0.0;  // encode only (0 from decode_glb): the bound used
-  bool has_scalar = false;            // TEXCOORD_0 present
+  bool has_scalar = false;            // _SCALAR (or an older GLB's TEXCOORD_0) present
   // The scalar range behind u ∈ [0, 1] when has_scalar (decode_glb: from extras.ldimesh,
   // 0 and 0 when a GLB from elsewhere lacks it).
   float scalar_min = 0.0f;
@@ -77,8 +78,9 @@ struct GlbInfo {
 
 // The options of a published step's GLB, the same for the CLI and the adaptor: positions
 // quantized to a tenth of `view`'s pixel (the step's first view), Draco `compression_level`, the
-// colour field's TEXCOORD_0 to 10 bits (1023 steps over the step's range, finer than a colour
-// map shows: 0.52 bytes per triangle where 12 bits took 0.73, docs/benchmarks.md).
+// colour field's _SCALAR to 10 bits (1023 steps over the step's range, finer than a colour map
+// shows; as TEXCOORD_0, 10 bits took 0.52 bytes per triangle where 12 took 0.73,
+// docs/benchmarks.md).
 inline GlbOptions step_glb_options(const View& view, int compression_level = 7) {
   GlbOptions options;
   options.pixel_size = view.spacing;
@@ -116,7 +118,7 @@ double glb_position_error_bound(const Mesh& mesh, const GlbOptions& options);
 // draco/compression/attributes/normal_compression_utils.h): 3·√2 / (2^n − 2) + 2⁻²⁰.
 double glb_normal_error_bound(const GlbOptions& options);
 
-// The largest error of a decoded TEXCOORD_0.u (normalized scalar): 1 / (2·(2^s − 1)) + 2⁻²⁰,
+// The largest error of a decoded _SCALAR (normalized scalar): 1 / (2·(2^s − 1)) + 2⁻²⁰,
 // s = options.scalar_bits (u ∈ [0, 1], quantized like positions).
 double glb_scalar_error_bound(const GlbOptions& options);
 
@@ -126,9 +128,9 @@ double glb_scalar_error_bound(const GlbOptions& options);
 std::array<std::uint8_t, 3> view_colour(std::size_t k, const glm::dvec3& dir);
 
 // Decodes a GLB into `out` (replaced): positions, unit normals, triangles, per-vertex scalars
-// = TEXCOORD_0.u (normalized, in [0, 1]) when present, view_dirs from extras.ldimesh when
-// present, and per triangle the view whose view_colour matches the colour of its first
-// vertex (view 0 when none does). Vertices come in Draco's decoding order, which for
+// = _SCALAR (normalized, in [0, 1]; TEXCOORD_0.u in GLBs written before it) when present, view_dirs
+// from extras.ldimesh when present, and per triangle the view whose view_colour matches the colour
+// of its first vertex (view 0 when none does). Vertices come in Draco's decoding order, which for
 // Edgebreaker (compression level ≥ 1) differs from the encoder's input order.
 // Accepts GLBs whose every primitive (of every mesh; they are concatenated; node transforms
 // are ignored) is a KHR_draco_mesh_compression triangle primitive with POSITION and NORMAL;

@@ -35,7 +35,7 @@
 
 namespace ldimesh {
 
-// The scalar the mesh carries (TEXCOORD_0 u = (scalar − min) / (max − min), docs/api.md).
+// The scalar the mesh carries (the GLB's _SCALAR u = (scalar − min) / (max − min), docs/api.md).
 struct ScalarRange {
   std::string name;
   double min = 0.0;
