@@ -27,6 +27,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -90,15 +91,28 @@ struct Server {
 
 // Sends `bytes` on a fresh connection, shuts the sending side and returns all the server said.
 std::string exchange(int port, std::string_view bytes) {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  if (fd < 0) std::abort();
   sockaddr_in address{};
   address.sin_family = AF_INET;
   address.sin_port = htons(std::uint16_t(port));
   address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  // Thousands of connections a second can run this machine out of local ports for a moment
+  // (EADDRNOTAVAIL, the fuzzer's side): wait and try again, for at most 10 s. Any other failure
+  // (the server no longer listening) is a finding.
+  int fd = -1;
+  for (int attempt = 0;; ++attempt) {
+    fd = ::socket(AF_INET, SOCK_STREAM, 0);
+    if (fd < 0) std::abort();
+    if (::connect(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) == 0) break;
+    const int error = errno;
+    ::close(fd);
+    if ((error != EADDRNOTAVAIL && error != EAGAIN && error != EINTR) || attempt == 1000) {
+      std::fprintf(stderr, "fuzz: cannot connect to the server: %s\n", std::strerror(error));
+      __builtin_trap();
+    }
+    ::usleep(10000);
+  }
   timeval timeout{5, 0};  // longer than any server timeout: a silent server is a hang
   ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof timeout);
-  if (::connect(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) std::abort();
   std::size_t sent = 0;
   while (sent < bytes.size()) {
     const ssize_t n = ::send(fd, bytes.data() + sent, bytes.size() - sent, MSG_NOSIGNAL);
