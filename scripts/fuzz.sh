@@ -6,6 +6,7 @@
 #   glb       decode_glb: what ldimesh-fetch and `ldimesh distance` read from a server or disk
 #   options   parse_adaptor_options: the adaptor's JSON options document
 #   http      the job's HTTP server: raw requests over a loopback connection
+#   raw       read_raw_volume: the volume files `ldimesh mesh --grid` reads
 # Builds with clang++ straight from the sources into build-fuzz/TARGET/ (no CMake), writes a
 # seed corpus of valid inputs (the target's own encoder's output and hand-written files) into
 # build-fuzz/TARGET/corpus (which keeps what the fuzzer finds between runs), and exits non-zero
@@ -45,12 +46,16 @@ case $target in
     pkg-config --exists cpp-httplib || { echo "fuzz: cpp-httplib not found (scripts/setup.sh)" >&2; exit 1; }
     libs=($(pkg-config --cflags --libs cpp-httplib) -DLDIMESH_SOURCE_DIR=\"/nonexistent\"
           -DLDIMESH_BINARY_DIR=\"/nonexistent\" -DLDIMESH_INSTALL_DATA_DIR=\"/nonexistent\") ;;
+  raw)
+    name=raw_volume_fuzz
+    sources=(core/src/io/raw_volume.cpp core/src/base/status.cpp)
+    libs=() ;;
   options)
     name=options_fuzz
     sources=(adaptor/src/options.cpp core/src/base/status.cpp)
     libs=() ;;
   *)
-    echo "fuzz: unknown target '$target' (one of: fragment, ply, glb, options, http)" >&2
+    echo "fuzz: unknown target '$target' (one of: fragment, ply, glb, options, http, raw)" >&2
     exit 2 ;;
 esac
 seconds=${1:-30}

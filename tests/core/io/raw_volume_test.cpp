@@ -67,5 +67,19 @@ TEST_F(RawVolumeTest, WrongSizeMissingFileAndNaNAreErrors) {
   EXPECT_FALSE(read_raw_volume(path_, {4, 5, 5}, ScalarType::float32, {}, glm::dvec3(1.0), vol));
 }
 
+// Found by fuzzing (scripts/fuzz.sh raw): 2⁸·2⁴⁰·2¹⁵ = 2⁶³ float32 values fit a 64-bit count but
+// their 2⁶⁵ bytes wrapped to 0, so an empty file was read as that volume.
+TEST_F(RawVolumeTest, DimensionsWhoseByteCountOverflowsAreRefused) {
+  write({});
+  RawVolume vol;
+  const std::int64_t big = std::int64_t(1) << 40;
+  const Status s =
+      read_raw_volume(path_, {256, big, 32768}, ScalarType::float32, {}, glm::dvec3(1.0), vol);
+  ASSERT_FALSE(s);
+  EXPECT_NE(s.message().find("overflow"), std::string::npos) << s.message();
+  EXPECT_FALSE(
+      read_raw_volume(path_, {big, big, 2}, ScalarType::float64, {}, glm::dvec3(1.0), vol));
+}
+
 }  // namespace
 }  // namespace ldimesh
