@@ -8,11 +8,13 @@
                                components, and "h" = x + 2y (exact on every cell: to colour by).
   make_vtu.py tetra OUT.vtu    one VTK_TETRA beside one Lagrange hexahedron
   make_vtu.py degrees OUT.vtu  one order-2 Lagrange hexahedron whose HigherOrderDegrees say 2, 2, 3
+  make_vtu.py badpoint OUT.vtu two order-2 Lagrange hexahedra, the second naming point 1000 of 54
+                               (VTK writes and reads such a file without a word)
   make_vtu.py pieces OUT.pvtu  the sphere's cells as a .pvtu record over two .vtu pieces
 """
 import sys
 
-from vtkmodules.vtkCommonCore import vtkDoubleArray, vtkPoints
+from vtkmodules.vtkCommonCore import vtkDoubleArray, vtkIdList, vtkPoints
 from vtkmodules.vtkCommonDataModel import (VTK_HEXAHEDRON, VTK_LAGRANGE_HEXAHEDRON, VTK_TETRA,
                                            vtkLagrangeHexahedron, vtkUnstructuredGrid)
 from vtkmodules.vtkIOParallelXML import vtkXMLPUnstructuredGridWriter
@@ -80,6 +82,13 @@ def main():
         degrees.SetNumberOfComponents(3)
         degrees.InsertNextTuple((2, 2, 3))
         grid.GetCellData().AddArray(degrees)
+    elif kind == "badpoint":
+        lagrange_cell(grid, points, values, [0, 0, 0], 1, 2, r2)
+        second = lagrange_cell(grid, points, values, [1, 0, 0], 1, 2, r2)
+        ids = vtkIdList()
+        grid.GetCellPoints(second, ids)
+        ids.SetId(5, 1000)
+        grid.ReplaceCell(second, ids.GetNumberOfIds(), [ids.GetId(k) for k in range(ids.GetNumberOfIds())])
     else:
         sys.exit(f"make_vtu.py: unknown kind {kind}")
     grid.SetPoints(points)

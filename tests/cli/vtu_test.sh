@@ -4,14 +4,15 @@
 # sphere of radius 0.7 (`ldimesh distance` to the sphere, and the same figures to the file's own
 # isosurface with `distance --vtu`), also from a .pvtu over two pieces; one-line errors naming the field or
 # the cell for a missing field, a vector field, an unsupported cell type, orders that differ
-# along the axes, a missing piece.
+# along the axes, a cell naming a point the file does not have, more points declared than the
+# file can hold, a missing piece.
 #   vtu_test.sh LDIMESH SOURCE_DIR
 set -u
 ldimesh=$1
 src=$2
 . "$(dirname "$0")/../lib.sh"
 test_setup
-for kind in sphere tetra degrees; do
+for kind in sphere tetra degrees badpoint; do
   /usr/bin/python3 "$src/tests/cli/make_vtu.py" $kind "$tmp/$kind.vtu" || fail "make_vtu.py $kind"
 done
 /usr/bin/python3 "$src/tests/cli/make_vtu.py" pieces "$tmp/pieces.pvtu" || fail "make_vtu.py pieces"
@@ -107,6 +108,15 @@ expect_error "'vec' has 3 components" --vtu "$tmp/sphere.vtu" --field r --colour
 expect_error "--colour-by needs --grid or --vtu" --surface sphere --colour-by h
 expect_error "cell 1 is VTK_TETRA" --vtu "$tmp/tetra.vtu" --field r
 expect_error "cell 0: orders 2, 2, 3 differ" --vtu "$tmp/degrees.vtu" --field r
+expect_error "cell 1 names point 1000 of 54" --vtu "$tmp/badpoint.vtu" --field r
+# A damaged count: NumberOfPoints with digits put in front (VTK would allocate what it says).
+/usr/bin/python3 - "$tmp/sphere.vtu" "$tmp/huge.vtu" <<'PY' || fail "cannot write huge.vtu"
+import sys
+data = open(sys.argv[1], "rb").read()
+assert b'NumberOfPoints="' in data
+open(sys.argv[2], "wb").write(data.replace(b'NumberOfPoints="', b'NumberOfPoints="90000000000', 1))
+PY
+expect_error "declares 900000000001744 points and 66 cells, more than its" --vtu "$tmp/huge.vtu" --field r
 expect_error "no such file" --vtu "$tmp/none.vtu" --field r
 expect_error "VTK cannot read it" --vtu "$src/README.md" --field r
 rm -f "$tmp"/pieces_1.vtu "$tmp"/pieces/pieces_1.vtu

@@ -3,9 +3,12 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstdint>
+#include <cstdio>
 #include <filesystem>
 #include <limits>
 #include <map>
+#include <new>
 #include <stdexcept>
 
 #include <vtkCellData.h>
@@ -20,6 +23,7 @@
 #include <vtkSmartPointer.h>
 #include <vtkUnstructuredGrid.h>
 #include <vtkXMLPUnstructuredGridReader.h>
+#include <vtkXMLUnstructuredDataReader.h>
 #include <vtkXMLUnstructuredGridReader.h>
 
 namespace ldimesh {
@@ -121,11 +125,23 @@ Status scalar_point_array(vtkUnstructuredGrid* grid, const std::string& path,
   return Status::ok();
 }
 
-}  // namespace
+// A point takes at least 3 coordinates of 4 bytes (Float32), a cell at least its type (1
+// byte), one offset and one connectivity entry (1 byte each in Int8 arrays), and no compressor
+// VTK writes (zlib, LZ4, LZMA) shrinks data by more than 10 000 : 1 (zlib at most 1 032 : 1;
+// LZMA reaches ≈ 7 000 : 1 on zeros). Counts above that cannot be the file's.
+Status check_declared_counts(const std::string& path, std::uintmax_t bytes, vtkIdType points,
+                             vtkIdType cells) {
+  constexpr double kMaxCompression = 10000.0;
+  const double room = double(bytes) * kMaxCompression;
+  if (points < 0 || cells < 0 || 12.0 * double(points) > room || 3.0 * double(cells) > room)
+    return Status::corrupt_input("'" + path + "': it declares " + std::to_string(points) +
+                                 " points and " + std::to_string(cells) + " cells, more than its " +
+                                 std::to_string(bytes) + " bytes can hold (a damaged file?)");
+  return Status::ok();
+}
 
-Status read_vtu(const std::string& path, const std::string& field, VtuElements& out,
-                const std::string& colour_field) {
-  out = {};
+Status read_vtu_unguarded(const std::string& path, const std::string& field, VtuElements& out,
+                          const std::string& colour_field) {
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec))
     return Status::io("'" + path + "': no such file");
@@ -139,6 +155,21 @@ Status read_vtu(const std::string& path, const std::string& field, VtuElements& 
   vtkNew<ErrorCollector> errors;
   reader->AddObserver(vtkCommand::ErrorEvent, errors);
   reader->SetFileName(path.c_str());
+  // VTK allocates (and fills) its arrays at the sizes the file declares before it reads them: a
+  // damaged or hostile file of a few KB can ask for gigabytes (found by fuzzing). The XML
+  // structure first, then the declared counts against what the file's bytes can hold at all.
+  if (auto* data = vtkXMLUnstructuredDataReader::SafeDownCast(reader)) {
+    data->UpdateInformation();
+    data->SetupUpdateExtent(0, 1, 0);  // the whole file, as Update reads it
+    if (!errors->message.empty())
+      return Status::corrupt_input("'" + path +
+                                   "': VTK cannot read it: " + first_line(errors->message));
+    const std::uintmax_t bytes = std::filesystem::file_size(path, ec);
+    if (Status st = check_declared_counts(path, ec ? 0 : bytes, data->GetNumberOfPoints(),
+                                          data->GetNumberOfCells());
+        !st)
+      return st;
+  }
   reader->Update();
   vtkUnstructuredGrid* grid = vtkUnstructuredGrid::SafeDownCast(reader->GetOutputDataObject(0));
   if (!errors->message.empty())
@@ -153,10 +184,22 @@ Status read_vtu(const std::string& path, const std::string& field, VtuElements& 
   if (!colour_field.empty())
     if (Status st = scalar_point_array(grid, path, colour_field, colour); !st) return st;
   vtkDataArray* degrees = grid->GetCellData()->GetArray("HigherOrderDegrees");
-  if (degrees && degrees->GetNumberOfComponents() != 3) degrees = nullptr;
+  if (degrees && (degrees->GetNumberOfComponents() != 3 ||
+                  degrees->GetNumberOfTuples() < grid->GetNumberOfCells()))
+    degrees = nullptr;
+
+  // What VTK returns is as the file says: a cell may name a point the file does not have, and
+  // an array may be shorter than the points (VTK checks neither).
+  vtkPoints* points = grid->GetPoints();
+  const vtkIdType point_count = points ? points->GetNumberOfPoints() : 0;
+  if (point_count == 0) return Status::corrupt_input("'" + path + "': no points");
+  for (const auto& [array, name] : {std::pair{values, field}, std::pair{colour, colour_field}})
+    if (array && array->GetNumberOfTuples() < point_count)
+      return Status::corrupt_input("'" + path + "': point array '" + name + "' has " +
+                                   std::to_string(array->GetNumberOfTuples()) + " values for " +
+                                   std::to_string(point_count) + " points");
 
   std::map<int, VtuElements::Group> groups;
-  vtkPoints* points = grid->GetPoints();
   vtkNew<vtkIdList> ids;
   out.bounds = {glm::dvec3(std::numeric_limits<double>::infinity()),
                 glm::dvec3(-std::numeric_limits<double>::infinity())};
@@ -178,14 +221,19 @@ Status read_vtu(const std::string& path, const std::string& field, VtuElements& 
       if (degrees) {
         double d[3];
         degrees->GetTuple(c, d);
+        // Any double (the array may be a float one, with NaN or 1e300): compared as doubles and
+        // printed with %g, never converted to int.
+        const auto text = [](double x) {
+          char b[32];
+          std::snprintf(b, sizeof b, "%g", x);
+          return std::string(b);
+        };
         if (d[0] != d[1] || d[1] != d[2])
-          return Status::corrupt_input(
-              cell + ": orders " + std::to_string(int(d[0])) + ", " + std::to_string(int(d[1])) +
-              ", " + std::to_string(int(d[2])) + " differ along the axes (not supported)");
-        if (int(d[0]) != order)
-          return Status::corrupt_input(cell + ": HigherOrderDegrees says order " +
-                                       std::to_string(int(d[0])) + " but it has " +
-                                       std::to_string(count) + " points");
+          return Status::corrupt_input(cell + ": orders " + text(d[0]) + ", " + text(d[1]) + ", " +
+                                       text(d[2]) + " differ along the axes (not supported)");
+        if (d[0] != double(order))
+          return Status::corrupt_input(cell + ": HigherOrderDegrees says order " + text(d[0]) +
+                                       " but it has " + std::to_string(count) + " points");
       }
     }
     if (order < 1 || order > kMaxHexOrder ||
@@ -196,6 +244,10 @@ Status read_vtu(const std::string& path, const std::string& field, VtuElements& 
     VtuElements::Group& g = groups[order];
     g.order = order;
     ++g.cells;
+    for (vtkIdType k = 0; k < count; ++k)
+      if (ids->GetId(k) < 0 || ids->GetId(k) >= point_count)
+        return Status::corrupt_input(cell + " names point " + std::to_string(ids->GetId(k)) +
+                                     " of " + std::to_string(point_count));
     for (vtkIdType k = 0; k < count; ++k) {
       double x[3];
       points->GetPoint(ids->GetId(k), x);
@@ -217,20 +269,22 @@ Status read_vtu(const std::string& path, const std::string& field, VtuElements& 
   return Status::ok();
 }
 
-Status read_vtu_field(const std::string& path, const std::string& field, VtuField& out) {
+}  // namespace
+
+// VTK allocates each array at the size the file declares and throws std::bad_alloc where that
+// cannot be had (found by fuzzing: a mutated NumberOfPoints); that, like any exception from VTK
+// or our containers, is an error Status here.
+Status read_vtu(const std::string& path, const std::string& field, VtuElements& out,
+                const std::string& colour_field) {
   out = {};
-  if (Status st = read_vtu(path, field, out.elements); !st) return st;
   try {
-    std::vector<const HexElementSource*> list;
-    for (const VtuElements::Group& g : out.elements.groups) {
-      out.sources.push_back(std::make_unique<HexElementSource>(g.block()));
-      list.push_back(out.sources.back().get());
-    }
-    out.lookup = std::make_unique<HexFieldLookup>(list);
-  } catch (const std::invalid_argument& e) {
-    return Status::invalid_argument(path + ": " + e.what());
+    return read_vtu_unguarded(path, field, out, colour_field);
+  } catch (const std::bad_alloc&) {
+    return Status::out_of_memory("'" + path +
+                                 "': out of memory while reading it (a damaged size?)");
+  } catch (const std::exception& e) {
+    return Status::corrupt_input("'" + path + "': reading it failed: " + e.what());
   }
-  return Status::ok();
 }
 
 }  // namespace ldimesh

@@ -1,0 +1,28 @@
+// read_vtu_field: the cells read_vtu returns as sources and a lookup over them. A file of its own,
+// apart from the reader, so that the reader builds without the rest of the core (the fuzz
+// target, scripts/fuzz.sh vtu).
+#include <memory>
+#include <stdexcept>
+#include <vector>
+
+#include "ldimesh/core/io/vtu.hpp"
+
+namespace ldimesh {
+
+Status read_vtu_field(const std::string& path, const std::string& field, VtuField& out) {
+  out = {};
+  if (Status st = read_vtu(path, field, out.elements); !st) return st;
+  try {
+    std::vector<const HexElementSource*> list;
+    for (const VtuElements::Group& g : out.elements.groups) {
+      out.sources.push_back(std::make_unique<HexElementSource>(g.block()));
+      list.push_back(out.sources.back().get());
+    }
+    out.lookup = std::make_unique<HexFieldLookup>(list);
+  } catch (const std::invalid_argument& e) {
+    return Status::invalid_argument(path + ": " + e.what());
+  }
+  return Status::ok();
+}
+
+}  // namespace ldimesh
