@@ -4,7 +4,7 @@
 // through our checks of what VTK returns, and a memory error inside VTK shows only as a crash).
 // Each input is one file, read with the field "f" and the colour field "c". A file the reader
 // accepts must give groups of one order each, in increasing order, whose arrays hold (p + 1)³
-// finite points, values and colours per cell, cell counts that add up, and bounds that hold
+// points (finite), values and colours per cell, cell counts that add up, and bounds that hold
 // every point; refused, a message.
 //
 // With LDIMESH_FUZZ_WRITE_SEEDS=DIR set, the binary writes a seed corpus into DIR and exits:

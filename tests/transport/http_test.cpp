@@ -795,6 +795,21 @@ TEST_F(Http, RequestsWithoutTheTokenBeyondAnAddressRateGet429) {
   EXPECT_EQ(guesser.Get("/api/v1/steps")->status, 401);
 }
 
+// The rate limit counts an IPv6 client by its /64 (one host can take any address in it), an IPv4
+// one by its address, however written.
+TEST(RateLimitKey, IPv4ByAddressIPv6ByItsSlash64) {
+  EXPECT_EQ(rate_limit_key("10.1.2.3"), "10.1.2.3");
+  EXPECT_EQ(rate_limit_key("::ffff:10.1.2.3"), "10.1.2.3");
+  EXPECT_EQ(rate_limit_key("2001:db8:1:2:aaaa:bbbb:cccc:dddd"), "2001:db8:1:2::/64");
+  EXPECT_EQ(rate_limit_key("2001:db8:1:2::1"), rate_limit_key("2001:db8:1:2:ffff::7"));
+  EXPECT_NE(rate_limit_key("2001:db8:1:2::1"), rate_limit_key("2001:db8:1:3::1"));
+  EXPECT_EQ(rate_limit_key("::1"), "::/64");
+  EXPECT_EQ(rate_limit_key("fe80::1%eth0"), "fe80::/64");  // a link-local peer, with its zone
+  EXPECT_EQ(rate_limit_key("fe80::1%eth0"), rate_limit_key("fe80::2:3:4:5%eth1"));
+  EXPECT_EQ(rate_limit_key("not an address"), "not an address");
+  EXPECT_EQ(rate_limit_key(""), "");
+}
+
 TEST_F(Http, ANonLoopbackAddressIsRefusedUnlessAllowed) {
   for (const char* address :
        {"127.0.0.1", "127.1.2.3", "::1", "0:0:0:0:0:0:0:1", "::ffff:127.0.0.1", "localhost"})

@@ -126,9 +126,9 @@ std::string step_event(const Snapshot& snapshot) {
   return event;
 }
 
-// Requests without a valid token per client address, as a token bucket each: `burst` at once,
-// refilled at `rate` per second. Buckets that have refilled are forgotten once there are many,
-// and all of them if that frees nothing (so many addresses cannot grow the map without bound;
+// Requests without a valid token per client (rate_limit_key), as a token bucket each: `burst` at
+// once, refilled at `rate` per second. Buckets that have refilled are forgotten once there are
+// many, and all of them if that frees nothing (so many addresses cannot grow the map without bound;
 // they get a fresh burst instead).
 class RequestLimiter {
  public:
@@ -263,7 +263,7 @@ void HttpServer::Impl::dispatch(const Request& req, Response& res) {
     if (!authorized(req)) {
       // Guessing the token: requests without it are limited per address; the owner's, with
       // it, never are (everyone through an SSH tunnel comes from 127.0.0.1).
-      if (!limiter.allow(req.remote_addr)) {
+      if (!limiter.allow(rate_limit_key(req.remote_addr))) {
         res.set_header("Retry-After", "1");
         return set_error(res, 429, "too many requests without a valid token from this address");
       }
@@ -608,6 +608,19 @@ bool is_loopback_address(std::string_view address) {
   if (::inet_pton(AF_INET6, text.c_str(), &v6) == 1)
     return IN6_IS_ADDR_LOOPBACK(&v6) || (IN6_IS_ADDR_V4MAPPED(&v6) && v6.s6_addr[12] == 127);
   return false;
+}
+
+std::string rate_limit_key(std::string_view address) {
+  const std::string text(address);
+  // A link-local peer comes with its zone ("fe80::1%eth0"), which inet_pton does not read.
+  const std::string bare = text.substr(0, text.find('%'));
+  in6_addr v6{};
+  if (::inet_pton(AF_INET6, bare.c_str(), &v6) != 1) return text;
+  char buffer[INET6_ADDRSTRLEN];
+  if (IN6_IS_ADDR_V4MAPPED(&v6))
+    return ::inet_ntop(AF_INET, &v6.s6_addr[12], buffer, sizeof buffer) ? buffer : text;
+  std::memset(&v6.s6_addr[8], 0, 8);
+  return ::inet_ntop(AF_INET6, &v6, buffer, sizeof buffer) ? std::string(buffer) + "/64" : text;
 }
 
 std::string remote_server_warning(std::string_view address) {

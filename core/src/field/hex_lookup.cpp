@@ -95,8 +95,8 @@ HexFieldLookup::HexFieldLookup(std::span<const HexElementSource* const> sources)
                      hi = (boxes_[e].hi - bounds_.lo) / cell_size_;
     glm::ivec3 a, b;
     for (int k = 0; k < 3; ++k) {
-      a[k] = std::clamp(int(std::floor(lo[k])), 0, dims_[k] - 1);
-      b[k] = std::clamp(int(std::floor(hi[k])), 0, dims_[k] - 1);
+      a[k] = clamped_floor(lo[k], 0, dims_[k] - 1);
+      b[k] = clamped_floor(hi[k], 0, dims_[k] - 1);
     }
     ranges[e] = {a, b};
     for (int z = a.z; z <= b.z; ++z)
@@ -147,8 +147,9 @@ std::size_t HexFieldLookup::locate(glm::dvec3 world, Hint& hint, glm::dvec3& xi_
   glm::ivec3 c;
   for (int a = 0; a < 3; ++a) {
     const double u = (world[a] - bounds_.lo[a]) / cell_size_[a];
-    if (u < -1.0 || u > dims_[a] + 1.0) return none;  // well outside every element's box
-    c[a] = std::clamp(int(std::floor(u)), 0, dims_[a] - 1);
+    // Well outside every element's box, or not a number.
+    if (!(u >= -1.0 && u <= dims_[a] + 1.0)) return none;
+    c[a] = clamped_floor(u, 0, dims_[a] - 1);
   }
   const std::size_t cell =
       std::size_t(c.x) + dims_.x * (std::size_t(c.y) + std::size_t(dims_.y) * c.z);

@@ -3,6 +3,7 @@
 #include "bernstein_basis.hpp"
 #include "colour_block.hpp"
 #include "curved_element.hpp"
+#include "ldimesh/core/base/geometry.hpp"
 #include "ldimesh/core/field/hex_lookup.hpp"
 
 #include <algorithm>
@@ -946,8 +947,8 @@ struct ElementBins {
   std::vector<std::uint32_t> first;  // CSR over bins (b fastest)
   std::vector<std::uint32_t> elements;
 
-  int bin_b(double x) const { return std::clamp(int(std::floor((x - lo_b) / size_b)), 0, nb - 1); }
-  int bin_c(double x) const { return std::clamp(int(std::floor((x - lo_c) / size_c)), 0, nc - 1); }
+  int bin_b(double x) const { return clamped_floor((x - lo_b) / size_b, 0, nb - 1); }
+  int bin_c(double x) const { return clamped_floor((x - lo_c) / size_c, 0, nc - 1); }
 };
 
 ElementBins bin_elements(const std::vector<ActiveElement>& elements, int axis) {

@@ -77,8 +77,12 @@ TEST_F(RawVolumeTest, DimensionsWhoseByteCountOverflowsAreRefused) {
       read_raw_volume(path_, {256, big, 32768}, ScalarType::float32, {}, glm::dvec3(1.0), vol);
   ASSERT_FALSE(s);
   EXPECT_NE(s.message().find("overflow"), std::string::npos) << s.message();
-  EXPECT_FALSE(
-      read_raw_volume(path_, {big, big, 2}, ScalarType::float64, {}, glm::dvec3(1.0), vol));
+  // 2⁶¹ float64 values: 2⁶⁴ bytes, which wraps to exactly 0.
+  const std::int64_t m = std::int64_t(1) << 20;
+  const Status wide =
+      read_raw_volume(path_, {m, m, 2 * m}, ScalarType::float64, {}, glm::dvec3(1.0), vol);
+  ASSERT_FALSE(wide);
+  EXPECT_NE(wide.message().find("overflow"), std::string::npos) << wide.message();
 }
 
 }  // namespace

@@ -40,7 +40,8 @@ struct HttpServerOptions {
   int max_streams = 4;
   // The largest request: headers (431 beyond) and body (413 beyond). The API takes no body.
   std::size_t max_request_bytes = 16 * 1024;
-  // API requests without a valid token (a 401 each), per client address: at most request_burst
+  // API requests without a valid token (a 401 each), per client (rate_limit_key: an IPv4
+  // address, an IPv6 /64): at most request_burst
   // at once, refilled at requests_per_second; beyond, 429 with Retry-After for that address's
   // requests without the token. Requests with the token and the viewer's files are never
   // limited. 0 for either = no limit.
@@ -107,6 +108,13 @@ class HttpServer {
 // Whether `address` (as given to bind_address) is a loopback address: 127.0.0.0/8, ::1 (also
 // written out or as ::ffff:127.x.y.z) or "localhost".
 bool is_loopback_address(std::string_view address);
+
+// Whose requests the rate limit (HttpServerOptions::requests_per_second) counts together, for a
+// client's `address` as the server sees it: an IPv4 address itself (also written as an
+// IPv4-mapped IPv6 one), an IPv6 address's /64 prefix ("2001:db8:1:2::/64": one host or
+// network usually holds a whole /64 and can take any address in it; a link-local address's zone,
+// "%eth0", is left out), anything else as given.
+std::string rate_limit_key(std::string_view address);
 
 // The warning a program prints when its server listens on a non-loopback `address`
 // (allow_remote), one line ending in a newline.

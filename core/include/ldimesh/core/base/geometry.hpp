@@ -21,6 +21,14 @@ struct Box {
   bool is_valid() const { return lo.x < hi.x && lo.y < hi.y && lo.z < hi.z; }
 };
 
+// ⌊x⌋ clamped to [lo, hi] (lo ≤ hi), converting only what an int holds: a double outside int's
+// range or NaN (lo for NaN) never reaches the conversion, which would be undefined behaviour.
+inline int clamped_floor(double x, int lo, int hi) {
+  if (!(x >= double(lo))) return lo;
+  if (x >= double(hi)) return hi;
+  return int(std::floor(x));
+}
+
 // Newell's normal of the polygon p[0], …, p[count − 1] (counter-clockwise seen from where it
 // points), not normalised: twice its area vector when it is planar, a robust mean normal when it
 // is not.
