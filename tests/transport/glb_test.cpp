@@ -525,9 +525,8 @@ bool have_draco_decoder() {
   return std::system("command -v draco_decoder > /dev/null 2>&1") == 0;
 }
 
-TEST(Glb, DracosOwnDecoderToolReadsCountsAndColours) {
-  if (!have_draco_decoder()) GTEST_SKIP() << "draco_decoder not installed (Debian: draco)";
-  const Mesh& mesh = barth_triangles();
+// The PLY header draco_decoder writes for `mesh`'s GLB, checked for its vertex and face counts.
+std::string expect_draco_decoder_counts(const Mesh& mesh) {
   const std::string ply = draco_decoder_output(encode(mesh), ".ply");
   const std::string header = ply.substr(0, ply.find("end_header"));
   EXPECT_NE(header.find("element vertex " + std::to_string(mesh.vertex_count()) + "\n"),
@@ -536,6 +535,12 @@ TEST(Glb, DracosOwnDecoderToolReadsCountsAndColours) {
   EXPECT_NE(header.find("element face " + std::to_string(mesh.triangle_count()) + "\n"),
             std::string::npos)
       << header;
+  return header;
+}
+
+TEST(Glb, DracosOwnDecoderToolReadsCountsAndColours) {
+  if (!have_draco_decoder()) GTEST_SKIP() << "draco_decoder not installed (Debian: draco)";
+  const std::string header = expect_draco_decoder_counts(barth_triangles());
   EXPECT_NE(header.find("property uchar red"), std::string::npos) << header;
 }
 
@@ -543,15 +548,7 @@ TEST(Glb, DracosOwnDecoderToolReadsCountsAndColours) {
 // tool writes no such property) still reads the mesh.
 TEST(Glb, DracosOwnDecoderToolReadsAMeshWithTheScalar) {
   if (!have_draco_decoder()) GTEST_SKIP() << "draco_decoder not installed (Debian: draco)";
-  const Mesh mesh = with_scalar(barth_triangles());
-  const std::string ply = draco_decoder_output(encode(mesh), ".ply");
-  const std::string header = ply.substr(0, ply.find("end_header"));
-  EXPECT_NE(header.find("element vertex " + std::to_string(mesh.vertex_count()) + "\n"),
-            std::string::npos)
-      << header;
-  EXPECT_NE(header.find("element face " + std::to_string(mesh.triangle_count()) + "\n"),
-            std::string::npos)
-      << header;
+  expect_draco_decoder_counts(with_scalar(barth_triangles()));
 }
 
 // A GLB as ldimesh wrote them before _SCALAR: the scalar as TEXCOORD_0 = (u, 0), by Draco's glTF
