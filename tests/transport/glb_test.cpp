@@ -755,6 +755,16 @@ TEST(Glb, InvalidMeshesAndOptionsAreRejected) {
   m = with_scalar(good);
   m.scalars.pop_back();
   EXPECT_TRUE(rejects(m, {}));
+  // Finite, but a box wider than float's range / 2 (Draco's quantization overflows, and its
+  // encoder crashed: found by fuzzing); one just inside is encoded.
+  m = good;
+  m.positions[0] = glm::vec3(-1.7e38f, 0.0f, 0.0f);
+  m.positions[1] = glm::vec3(1.7e38f, 0.0f, 0.0f);
+  EXPECT_TRUE(rejects(m, {}));
+  m.positions[1] = glm::vec3(0.0f);
+  m.positions[0] = glm::vec3(-1.6e38f, 0.0f, 0.0f);
+  Bytes wide;
+  EXPECT_TRUE(encode_glb(m, {}, wide));
   for (const auto& change : std::vector<void (*)(GlbOptions&)>{
            [](GlbOptions& o) { o.position_bits = 31; }, [](GlbOptions& o) { o.position_bits = -1; },
            [](GlbOptions& o) { o.normal_bits = 1; }, [](GlbOptions& o) { o.scalar_bits = 0; },

@@ -195,11 +195,23 @@ Status check_options(const GlbOptions& o) {
 }
 
 // What the encoder needs beyond check_mesh: glTF's 31-bit index counts.
+// Draco quantizes positions over their range in float: a box wider than half of float's largest
+// value overflows there, and Draco's encoder then crashes (found by fuzzing: finite coordinates
+// of ±1.7e38 decoded from a GLB and encoded again). Such meshes are refused on both ways.
+bool extent_fits_float(const std::vector<glm::vec3>& positions) {
+  const BoundingBox b = bounding_box(positions);
+  const glm::dvec3 e = b.hi - b.lo;
+  const double limit = 0.5 * double(std::numeric_limits<float>::max());
+  return b.empty || (e.x <= limit && e.y <= limit && e.z <= limit);
+}
+
 Status check_encodable(const Mesh& m) {
   const std::size_t n = m.vertex_count();
   if (n > kMaxIndex) return Status::invalid_argument("glb: more than 2^31 - 1 vertices");
   LDIMESH_RETURN_IF_ERROR(
       check_mesh(m, {.views_per_face = true, .finite = true}).prefixed("glb: "));
+  if (!extent_fits_float(m.positions))
+    return Status::invalid_argument("glb: the positions span more than half of float's range");
   if (2 * m.quad_count() + m.triangle_count() > kMaxIndex)
     return Status::invalid_argument("glb: more than 2^31 - 1 triangles");
   return Status::ok();
@@ -914,6 +926,8 @@ Status decode_glb_unguarded(std::span<const std::uint8_t> glb, Mesh& out, GlbInf
       }
     }
   }
+  if (!extent_fits_float(mesh.positions))
+    return Status::corrupt_input("glb: the positions span more than half of float's range");
   if (!result.has_scalar) result.scalar_min = result.scalar_max = 0.0f;
   result.vertices = mesh.vertex_count();
   result.triangles = mesh.triangle_count();
