@@ -9,6 +9,8 @@
 #include <string_view>
 #include <vector>
 
+#include <unistd.h>
+
 namespace ldimesh::fuzz {
 
 // Writes the target's seeds into `dir`; exits non-zero on failure.
@@ -22,6 +24,14 @@ inline void write_file(const std::string& path, std::string_view bytes) {
   }
   std::fclose(out);
 }
+// A scratch file of this process for a target whose decoder reads a path: $TMPDIR (or /tmp)
+// /ldimesh_fuzz_PID.`extension`.
+inline std::string scratch_path(const std::string& extension) {
+  const char* dir = std::getenv("TMPDIR");
+  return std::string(dir && *dir ? dir : "/tmp") + "/ldimesh_fuzz_" + std::to_string(::getpid()) +
+         extension;
+}
+
 inline void write_file(const std::string& path, const std::vector<unsigned char>& bytes) {
   write_file(path, std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
 }

@@ -51,12 +51,6 @@ std::string sphere(int n) {
   return bytes;
 }
 
-std::string temp_path() {
-  const char* dir = std::getenv("TMPDIR");
-  return std::string(dir && *dir ? dir : "/tmp") + "/ldimesh_raw_fuzz_" +
-         std::to_string(::getpid()) + ".raw";
-}
-
 }  // namespace
 
 void ldimesh::fuzz::write_seeds(const std::string& dir) {
@@ -87,7 +81,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       dims[a] = 2 + data[1 + a] % 16;
     at += 3;
   }
-  static const std::string path = temp_path();
+  static const std::string path = ldimesh::fuzz::scratch_path(".raw");
   std::FILE* f = std::fopen(path.c_str(), "wb");
   if (!f || std::fwrite(data + at, 1, size - at, f) != size - at) std::abort();
   std::fclose(f);

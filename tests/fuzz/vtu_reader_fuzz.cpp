@@ -83,12 +83,6 @@ void write_grid(const std::string& path, int mode, bool header64) {
   }
 }
 
-std::string temp_path() {
-  const char* dir = std::getenv("TMPDIR");
-  return std::string(dir && *dir ? dir : "/tmp") + "/ldimesh_vtu_fuzz_" +
-         std::to_string(::getpid()) + ".vtu";
-}
-
 }  // namespace
 
 void ldimesh::fuzz::write_seeds(const std::string& dir) {
@@ -108,7 +102,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     return 0;
   static const std::string path = [] {
     ldimesh::quiet_vtk_logging();
-    return temp_path();
+    return ldimesh::fuzz::scratch_path(".vtu");
   }();
   std::FILE* out = std::fopen(path.c_str(), "wb");
   if (!out || std::fwrite(data, 1, size, out) != size) std::abort();

@@ -288,23 +288,17 @@ Status build_draco_mesh(const Mesh& m, const std::vector<std::uint32_t>& tris,
     // GENERIC attribute under the name its metadata gives). Draco predicts a GENERIC attribute
     // from its neighbours (parallelogram): as TEXCOORD_0 it took the texture-coordinate
     // predictor, made for 2-D maps, and cost about half as much again (docs/benchmarks.md).
-    const int id = dm.AddAttribute(
-        [] {
-          draco::GeometryAttribute ga;
-          ga.Init(draco::GeometryAttribute::GENERIC, nullptr, 1, draco::DT_FLOAT32, false,
-                  sizeof(float), 0);
-          return ga;
-        }(),
-        /*identity_mapping=*/true, std::uint32_t(n));
-    if (id < 0) return Status::internal("glb: Draco could not add an attribute");
+    draco::PointAttribute* scalar =
+        add(draco::GeometryAttribute::GENERIC, 1, draco::DT_FLOAT32, false);
+    if (!scalar) return Status::internal("glb: Draco could not add an attribute");
     auto metadata = std::make_unique<draco::AttributeMetadata>();
     metadata->AddEntryString(draco::GltfEncoder::kDracoMetadataGltfAttributeName, kScalarAttribute);
-    dm.AddAttributeMetadata(id, std::move(metadata));
+    dm.AddAttributeMetadata(dm.num_attributes() - 1, std::move(metadata));  // the one just added
     std::vector<float> u(n);
     const double scale = scalar_hi > scalar_lo ? 1.0 / (double(scalar_hi) - scalar_lo) : 0.0;
     for (std::size_t i = 0; i < n; ++i)
       u[i] = float(std::clamp((double(m.scalars[i]) - scalar_lo) * scale, 0.0, 1.0));
-    dm.attribute(id)->buffer()->Write(0, u.data(), n * sizeof(float));
+    scalar->buffer()->Write(0, u.data(), n * sizeof(float));
   }
 
   const std::size_t t = tri_view.size();
