@@ -81,6 +81,7 @@ struct MeshArgs {
   double time = 0.0;
   int depth_bits = ldimesh::FragmentEncoding{}.depth_bits;
   int normal_bits = ldimesh::FragmentEncoding{}.normal_bits;
+  ldimesh::StepGlbSettings glb;
   ldimesh::RefinementOptions refinement;
   bool no_grow = false;
   bool merge = false;
@@ -337,7 +338,7 @@ int run_mesh(const MeshArgs& args) {
   if (want_glb) {
     start = std::chrono::steady_clock::now();
     if (const ldimesh::Status s = ldimesh::encode_glb(
-            result.mesh, ldimesh::step_glb_options(views.front()), glb, &glb_info);
+            result.mesh, ldimesh::step_glb_options(views.front(), args.glb), glb, &glb_info);
         !s)
       throw std::runtime_error(s.message());
     glb_seconds = seconds_since(start);
@@ -855,6 +856,19 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   mesh->add_option("--normal-bits", args.normal_bits, "bits per octahedral normal coordinate")
       ->check(CLI::Range(2, 16))
+      ->capture_default_str();
+  mesh->add_option("--glb-level", args.glb.compression_level,
+                   "Draco compression level of a .glb (--out, --steps-dir)")
+      ->check(CLI::Range(0, 10))
+      ->capture_default_str();
+  mesh->add_option("--glb-normal-bits", args.glb.normal_bits,
+                   "octahedral normal bits of a .glb (largest error 3·√2 / (2^n − 2) rad)")
+      ->check(CLI::Range(2, 16))
+      ->capture_default_str();
+  mesh->add_option("--glb-scalar-bits", args.glb.scalar_bits,
+                   "bits of a .glb's _SCALAR (--colour-by; largest error 1 / (2·(2^s − 1)) of "
+                   "the range)")
+      ->check(CLI::Range(1, 16))
       ->capture_default_str();
 
   // `ldimesh serve` is a plain server process and `ldimesh distance` a plain tool: no MPI.

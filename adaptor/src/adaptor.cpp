@@ -1032,7 +1032,7 @@ class AdaptorImpl final : public Adaptor {
     // Vertices where the colour field has no finite value (NaN/Inf in the solver's array)
     // take the lowest colour, and the log says how many.
     const std::size_t uncoloured = replace_nonfinite_scalars(mesh);
-    GlbOptions glb_options = step_glb_options(job.views.front(), options_.compression_level);
+    GlbOptions glb_options = step_glb_options(job.views.front(), options_.glb);
     // Several isovalues: a mesh each, which the viewer shows or hides.
     if (surfaces.size() > 1) glb_options.surfaces = std::move(surfaces);
     std::vector<std::uint8_t> glb;

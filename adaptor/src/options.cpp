@@ -144,9 +144,12 @@ Status parse_object(const nlohmann::json& j, AdaptorOptions& o) {
     }
     if (j.contains("glb")) {
       const auto& g = j["glb"];
-      if (Status s = check_keys(g, "glb.", {"compression_level"}); !s) return s;
-      if (Status s = integer(g, "compression_level", "glb.", 0, 10, o.compression_level); !s)
+      if (Status s = check_keys(g, "glb.", {"compression_level", "normal_bits", "scalar_bits"}); !s)
         return s;
+      if (Status s = integer(g, "compression_level", "glb.", 0, 10, o.glb.compression_level); !s)
+        return s;
+      if (Status s = integer(g, "normal_bits", "glb.", 2, 16, o.glb.normal_bits); !s) return s;
+      if (Status s = integer(g, "scalar_bits", "glb.", 1, 16, o.glb.scalar_bits); !s) return s;
     }
     if (j.contains("log")) o.log = j["log"].get<bool>();
     if (j.contains("background")) o.background = j["background"].get<bool>();

@@ -11,6 +11,7 @@
 
 #include "ldimesh/core/base/status.hpp"
 #include "ldimesh/transport/fragment_codec.hpp"
+#include "ldimesh/transport/glb.hpp"
 
 namespace ldimesh {
 
@@ -38,7 +39,7 @@ struct AdaptorOptions {
   std::size_t keep = 16;
   std::size_t memory_mb = 512;
   FragmentEncoding encoding;
-  int compression_level = 7;
+  StepGlbSettings glb;  // the published GLB: Draco level, normal and scalar bits
   bool log = true;
   bool background = true;          // with MPI_THREAD_MULTIPLE: the solver waits for a snapshot only
   double slow_root_seconds = 0.0;  // testing only: the worker sleeps this long per step

@@ -3,12 +3,14 @@
 #include <mpi.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <set>
 #include <thread>
 #include <vector>
 
@@ -94,7 +96,9 @@ TEST(Adaptor, InvalidOptionsAreReportedOnEveryRankWithTheKey) {
   for (const char* doc :
        {R"({"resolution": 1e20})", R"({"resolution": 512.5})", R"({"keep": 1.5e19})",
         R"({"server": {"port": -1e30}})", R"({"encoding": {"depth_bits": "16"}})",
-        R"({"encoding": {"scalar_bits": 1}})", R"({"encoding": {"scalar_bits": 25}})"}) {
+        R"({"encoding": {"scalar_bits": 1}})", R"({"encoding": {"scalar_bits": 25}})",
+        R"({"glb": {"normal_bits": 1}})", R"({"glb": {"normal_bits": 17}})",
+        R"({"glb": {"scalar_bits": 0}})", R"({"glb": {"scalar_bits": 8.5}})"}) {
     s = Adaptor::create(MPI_COMM_WORLD, doc, a);
     EXPECT_EQ(s.code(), StatusCode::invalid_options) << doc;
     EXPECT_NE(s.message().find("must be an integer in"), std::string::npos) << s.message();
@@ -778,6 +782,49 @@ TEST(Adaptor, GridBlocksAreColouredByANamedFieldOnBothPaths) {
       }
     }
   }
+}
+
+// Option "glb": the published GLB's normals and _SCALAR take the bits asked for. With 3 scalar
+// bits a decoded u is one of the 8 values k/7 and the colour stays within half of such a step;
+// with 4 normal bits every decoded normal is one of the 16 × 16 points of Draco's unfolded
+// octahedron (coordinates 0..2^4 − 1; the default's bits give more distinct normals here); the
+// GLB shrinks.
+TEST(Adaptor, TheGlbOptionSetsThePublishedNormalAndScalarBits) {
+  std::size_t bytes[2] = {0, 0};
+  std::size_t normals[2] = {0, 0}, values[2] = {0, 0};
+  for (const bool coarse : {false, true}) {
+    SCOPED_TRACE(coarse ? "4 normal bits, 3 scalar bits" : "default bits");
+    GridSlab slab(kSlabPoints, 0.0);
+    std::vector<float> colour = slab_colour(slab);
+    const std::string dir = temp_dir(coarse ? "glb_bits_coarse" : "glb_bits_default");
+    std::string options =
+        R"({"colour_by": "C", "merging": false, )" + grid_options(dir, false).substr(1);
+    if (coarse) options = R"({"glb": {"normal_bits": 4, "scalar_bits": 3}, )" + options.substr(1);
+    auto a = make_grid_adaptor(options, slab);
+    if (!a) return;
+    EXPECT_TRUE(a->add_field("C", colour.data(), ScalarType::float32));
+    EXPECT_TRUE(a->execute(1, 0.0)) << a->last_error();
+    EXPECT_TRUE(a->finalize()) << a->last_error();
+    if (rank_of() != 0) continue;
+    const Mesh mesh = testing::published_mesh(dir, 1);
+    ASSERT_GT(mesh.vertex_count(), 300u);
+    testing::expect_coloured_by(
+        mesh, testing::published_step(dir, 1), "C",
+        [](glm::dvec3 x) { return x.x + 2.0 * x.y - x.z; }, 2.0, 2.0 / 40,
+        coarse ? 3 : StepGlbSettings{}.scalar_bits);
+    std::set<std::array<float, 3>> n;
+    for (const glm::vec3& v : mesh.normals)
+      n.insert({v.x, v.y, v.z});
+    normals[coarse] = n.size();
+    values[coarse] = std::set<float>(mesh.scalars.begin(), mesh.scalars.end()).size();
+    bytes[coarse] = published_glb(dir, 1).size();
+  }
+  if (rank_of() != 0) return;
+  EXPECT_LE(values[1], 8u);
+  EXPECT_GT(values[0], 8u);
+  EXPECT_LE(normals[1], 16u * 16u);
+  EXPECT_GT(normals[0], 16u * 16u);
+  EXPECT_LT(bytes[1], bytes[0]);
 }
 
 TEST(Adaptor, ColourByAFieldABlockLacksFailsTheStepNamingIt) {

@@ -65,10 +65,12 @@ inline void expect_on_grid_sphere(const Mesh& mesh, double iso, double h, int re
 // Every vertex's colour is `colour(vertex)` within what the wire and the GLB allow, computed
 // here from their bit budgets: positions within a tenth of a pixel (`pixel`) per axis, times the
 // field's largest slope `slope` per axis; the value within half a step of 12 bits (the fragments'
-// scalar_bits) and of 10 bits (the published GLB's _SCALAR) over the range; and float rounding.
+// scalar_bits) and of `glb_scalar_bits` (the published GLB's _SCALAR, option glb.scalar_bits) over
+// the range; and float rounding.
 template <class Colour>
 inline void expect_coloured_by(const Mesh& mesh, const StepMetadata& meta, const std::string& name,
-                               Colour colour, double slope, double pixel) {
+                               Colour colour, double slope, double pixel,
+                               int glb_scalar_bits = StepGlbSettings{}.scalar_bits) {
   ASSERT_TRUE(meta.scalar.has_value()) << "the step's metadata names no field";
   EXPECT_EQ(meta.scalar->name, name);
   ASSERT_EQ(mesh.scalars.size(), mesh.vertex_count());
@@ -78,8 +80,8 @@ inline void expect_coloured_by(const Mesh& mesh, const StepMetadata& meta, const
   EXPECT_NEAR(*lo, 0.0f, 1e-6f);
   EXPECT_NEAR(*hi, 1.0f, 1e-6f);
   const double range = meta.scalar->max - meta.scalar->min;
-  const double bound =
-      3.0 * slope * 0.1 * pixel + range / (2.0 * 4094.0) + range / (2.0 * 1023.0) + 1e-5;
+  const double bound = 3.0 * slope * 0.1 * pixel + range / (2.0 * 4094.0) +
+                       range / (2.0 * double((1 << glb_scalar_bits) - 1)) + 1e-5;
   double worst = 0.0;
   for (std::size_t v = 0; v < mesh.vertex_count(); ++v) {
     const double value = meta.scalar->min + double(mesh.scalars[v]) * range;

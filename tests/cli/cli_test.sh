@@ -199,6 +199,19 @@ d = json.load(open(sys.argv[1]))
 # Draco quantizes positions to a tenth of a pixel (2.5/32 here): far below 1e-3 of the diagonal.
 assert d["max"] < 1e-3 * d["diagonal"], d
 PY
+# --glb-normal-bits reaches the encoder: 4 bits give a smaller file of the same positions.
+"$ldimesh" mesh --surface sphere --res 32 --glb-normal-bits 4 --glb-scalar-bits 3 \
+  --out "$tmp/s32n4.glb" >/dev/null || fail "mesh --out GLB --glb-normal-bits 4"
+[ "$(stat -c %s "$tmp/s32n4.glb")" -lt "$(stat -c %s "$tmp/s32.glb")" ] ||
+  fail "--glb-normal-bits 4 did not shrink the GLB"
+"$ldimesh" distance "$tmp/s32n4.glb" "$tmp/s32.glb" --json >"$tmp/dn.json" || fail "distance n4"
+python3 - "$tmp/dn.json" <<'PY' || fail "distance: 4 normal bits moved the positions"
+import json, sys
+d = json.load(open(sys.argv[1]))
+assert d["max"] < 1e-3 * d["diagonal"], d
+PY
+expect_error "--glb-normal-bits 1" mesh --surface sphere --res 16 --glb-normal-bits 1
+expect_error "--glb-scalar-bits 17" mesh --surface sphere --res 16 --glb-scalar-bits 17
 head -c 200 "$tmp/s32.glb" >"$tmp/cut.glb"
 expect_error "distance: truncated GLB" distance "$tmp/cut.glb" --surface sphere
 expect_error "distance: unknown format" distance "$tmp/s32.obj" --surface sphere

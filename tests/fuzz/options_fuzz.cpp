@@ -22,7 +22,7 @@ void ldimesh::fuzz::write_seeds(const std::string& dir) {
       R"({"server": {"enabled": true, "bind": "0.0.0.0", "allow_remote": true, "port": 8080, "token": "abc"},
           "output_dir": "out/steps", "keep": 4, "memory_mb": 256})",
       R"({"encoding": {"lossless": false, "depth_bits": 16, "normal_bits": 10},
-          "glb": {"compression_level": 3}, "log": false, "background": true,
+          "glb": {"compression_level": 3, "normal_bits": 8, "scalar_bits": 9}, "log": false, "background": true,
           "merging": true, "refinement": false})",
       R"({"testing": {"slow_root_seconds": 0.5,
                       "fault": {"kind": "corrupt_message", "step": 3, "rank": 1}}})",
@@ -49,7 +49,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       o.every_seconds >= 0.0 && std::isfinite(o.every_seconds) && o.port >= 0 && o.port <= 65535 &&
       o.keep >= 1 && o.memory_mb >= 1 && o.encoding.depth_bits >= 1 &&
       o.encoding.depth_bits <= 24 && o.encoding.normal_bits >= 2 && o.encoding.normal_bits <= 16 &&
-      o.compression_level >= 0 && o.compression_level <= 10;
+      o.glb.compression_level >= 0 && o.glb.compression_level <= 10 && o.glb.normal_bits >= 2 &&
+      o.glb.normal_bits <= 16 && o.glb.scalar_bits >= 1 && o.glb.scalar_bits <= 16;
   if (!in_range) __builtin_trap();
   return 0;
 }

@@ -76,16 +76,26 @@ struct GlbInfo {
   float scalar_max = 0.0f;
 };
 
+// What a published step's GLB trades between bytes and precision (the adaptor's "glb" options,
+// the CLI's --glb-* flags): Draco's compression level and the bits of the normals and of the
+// colour field's _SCALAR. The defaults are draco_encoder's own (-cl 7, -qn 8, -qg 8): normals
+// within 0.96°, the scalar within 1/510 of its range, half an entry of the viewer's 256-entry
+// colour map. Against 10 and 10 bits they cost 19 % fewer bytes on Gray–Scott coloured by U and
+// change the viewer's picture by at most 6 of 255 levels (docs/benchmarks.md, "Eight bits").
+struct StepGlbSettings {
+  int compression_level = 7;
+  int normal_bits = 8;
+  int scalar_bits = 8;
+};
+
 // The options of a published step's GLB, the same for the CLI and the adaptor: positions
-// quantized to a tenth of `view`'s pixel (the step's first view), Draco `compression_level`, the
-// colour field's _SCALAR to 10 bits (1023 steps over the step's range, finer than a colour map
-// shows; as TEXCOORD_0, 10 bits took 0.52 bytes per triangle where 12 took 0.73,
-// docs/benchmarks.md).
-inline GlbOptions step_glb_options(const View& view, int compression_level = 7) {
+// quantized to a tenth of `view`'s pixel (the step's first view), the rest from `settings`.
+inline GlbOptions step_glb_options(const View& view, const StepGlbSettings& settings = {}) {
   GlbOptions options;
   options.pixel_size = view.spacing;
-  options.compression_level = compression_level;
-  options.scalar_bits = 10;
+  options.compression_level = settings.compression_level;
+  options.normal_bits = settings.normal_bits;
+  options.scalar_bits = settings.scalar_bits;
   return options;
 }
 
