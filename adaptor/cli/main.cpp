@@ -552,14 +552,14 @@ struct DistanceArgs {
 };
 
 // A PLY mesh, or a GLB as ldimesh writes and publishes it (a step's .glb: Draco, decoded and
-// checked by decode_glb).
+// checked by decode_glb in a child process with a CPU limit: decode_glb_isolated).
 ldimesh::Mesh read_mesh_file(const std::string& path) {
   ldimesh::Mesh mesh;
   if (has_extension(path, ".glb")) {
     std::vector<std::uint8_t> bytes;
     if (ldimesh::Status s = ldimesh::read_file(path, bytes); !s)
       throw std::runtime_error(s.message());
-    if (ldimesh::Status s = ldimesh::decode_glb(bytes, mesh); !s)
+    if (ldimesh::Status s = ldimesh::decode_glb_isolated(bytes, mesh); !s)
       throw std::runtime_error("'" + path + "': " + s.message());
   } else if (has_extension(path, ".ply")) {
     if (const ldimesh::Status s = ldimesh::read_ply(path, mesh); !s)

@@ -214,6 +214,11 @@ expect_error "--glb-normal-bits 1" mesh --surface sphere --res 16 --glb-normal-b
 expect_error "--glb-scalar-bits 17" mesh --surface sphere --res 16 --glb-scalar-bits 17
 head -c 200 "$tmp/s32.glb" >"$tmp/cut.glb"
 expect_error "distance: truncated GLB" distance "$tmp/cut.glb" --surface sphere
+# A GLB on which Draco's decoder spends seconds (tests/transport/glb_test.cpp says how it was
+# made) is refused once the decoding process has used its CPU limit.
+expect_error "distance: a GLB Draco decodes slowly" distance \
+  "$(dirname "$0")/../transport/data/slow_texcoord_predictor.glb" --surface sphere
+grep -q "took more than 2 s of CPU" "$tmp/err" || { fail "distance: no CPU limit"; cat "$tmp/err"; }
 expect_error "distance: unknown format" distance "$tmp/s32.obj" --surface sphere
 
 if [ "$failures" -ne 0 ]; then echo "$failures check(s) failed"; exit 1; fi

@@ -123,6 +123,18 @@ follower_pid=
 [ "$status" -eq 0 ] || fail "--follow after SIGINT: exit status $status: $(cat "$tmp/g.err")"
 [ -s "$tmp/g.err" ] && fail "--follow after SIGINT: printed to stderr: $(cat "$tmp/g.err")"
 
+# A served GLB on which Draco's decoder spends seconds (tests/transport/glb_test.cpp says how it
+# was made): --ply decodes it in a process with a CPU limit, and fetch ends with one line.
+cp "$(dirname "$0")/../transport/data/slow_texcoord_predictor.glb" "$tmp/run/step_000007.glb"
+printf '{"step":7,"time":0.07,"isovalues":[1.0],"triangles":204,"vertices":168,"bytes":2064}\n' \
+  >"$tmp/run/step_000007.json"
+for _ in $(seq 50); do  # until the server lists it (without --ply the GLB is only saved)
+  timeout 20 "$fetch" --url "$url" --step 7 -o "$tmp/s0" >/dev/null 2>&1 && break
+  sleep 0.1
+done
+cmp -s "$tmp/run/step_000007.glb" "$tmp/s0/step_000007.glb" || fail "the slow GLB was not served"
+expect_error "a GLB Draco decodes slowly" "took more than 2 s of CPU" --url "$url" --step 7 --ply -o "$tmp/s"
+
 # SIGTERM stops the server cleanly.
 kill -TERM "$server_pid"
 wait_for "$server_pid" 5

@@ -597,6 +597,55 @@ TEST(Glb, AnOlderGlbWithTheScalarAsTexcoordStillDecodes) {
     ASSERT_NEAR(back.scalars[i], uv[i][0], 1.0 / 4095) << i;
 }
 
+// decode_glb_isolated gives decode_glb's mesh, info and errors, from a child process.
+TEST(Glb, AnIsolatedDecodeGivesWhatDecodeGlbGives) {
+  const Bytes glb = encode(with_scalar(barth_triangles()));
+  Mesh a, b;
+  GlbInfo ia, ib;
+  ASSERT_TRUE(decode_glb(glb, a, &ia));
+  const Status s = decode_glb_isolated(glb, b, &ib);
+  ASSERT_TRUE(s) << s.message();
+  EXPECT_GT(b.triangle_count(), 1000u);
+  EXPECT_EQ(b.positions, a.positions);
+  EXPECT_EQ(b.normals, a.normals);
+  EXPECT_EQ(b.scalars, a.scalars);
+  EXPECT_EQ(b.quads, a.quads);
+  EXPECT_EQ(b.triangles, a.triangles);
+  EXPECT_EQ(b.quad_view, a.quad_view);
+  EXPECT_EQ(b.triangle_view, a.triangle_view);
+  EXPECT_EQ(b.view_dirs, a.view_dirs);
+  EXPECT_EQ(std::memcmp(&ia, &ib, sizeof ia), 0);
+  // An error comes back as decode_glb's, and `out` stays as it was.
+  const Bytes cut(glb.begin(), glb.begin() + std::ptrdiff_t(glb.size() / 2));
+  const Status direct = decode_glb(cut, a);
+  ASSERT_FALSE(direct);
+  const Status isolated = decode_glb_isolated(cut, b);
+  EXPECT_EQ(isolated.code(), direct.code());
+  EXPECT_EQ(isolated.message(), direct.message());
+  EXPECT_EQ(b.positions, a.positions);
+  EXPECT_EQ(decode_glb_isolated(glb, b, nullptr, 0.5).code(), StatusCode::invalid_argument);
+}
+
+// A GLB whose Draco stream makes Debian's Draco 1.5.5 spend seconds (7.7 s here in the Release
+// build): made from `ldimesh mesh --surface sphere --res 8 --out s.glb`, re-encoded by
+// draco::GltfEncoder at level 7 with a TEXCOORD_0 (as ldimesh wrote the colour field before
+// _SCALAR), then the texture-coordinate predictor's orientation count (the int32 at offset 1017
+// of the BIN chunk, 114) set to 2^31 − 1: the decoder decodes that many orientation bits from
+// the stream's few bytes (docs/reliability.md). decode_glb_isolated stops it at its CPU limit.
+TEST(Glb, AnIsolatedDecodeStopsDracoAtItsCpuLimit) {
+  std::ifstream in(LDIMESH_TRANSPORT_TEST_DATA "/slow_texcoord_predictor.glb", std::ios::binary);
+  const Bytes glb((std::istreambuf_iterator<char>(in)), {});
+  ASSERT_EQ(glb.size(), 2064u);
+  EXPECT_EQ(glb_decode_cpu_limit(glb.size()), 2.0);
+  EXPECT_EQ(glb_decode_cpu_limit(std::size_t(3) << 20), 17.0);
+  Mesh out;
+  out.positions = {{1, 2, 3}};
+  const Status s = decode_glb_isolated(glb, out, nullptr, 1.0);
+  EXPECT_EQ(s.code(), StatusCode::corrupt_input);
+  EXPECT_NE(s.message().find("took more than 1 s of CPU"), std::string::npos) << s.message();
+  EXPECT_EQ(out.positions.size(), 1u);
+}
+
 TEST(Glb, ScalarsTravelAsAnAttributeNormalizedToTheirRange) {
   const Mesh mesh = with_scalar(barth_triangles());
   const auto [lo, hi] = std::minmax_element(mesh.scalars.begin(), mesh.scalars.end());

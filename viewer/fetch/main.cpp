@@ -107,7 +107,7 @@ ldimesh::Status fetch_step(ldimesh::HttpClient& client, const ldimesh::RemoteSte
   }
   ldimesh::Mesh mesh;
   if (args.ply) {
-    if (ldimesh::Status s = ldimesh::decode_glb(glb, mesh); !s)
+    if (ldimesh::Status s = ldimesh::decode_glb_isolated(glb, mesh); !s)
       return s.prefixed("step " + std::to_string(m.step) + ": ");
   }
   ldimesh::Snapshot snapshot;

@@ -152,4 +152,24 @@ std::array<std::uint8_t, 3> view_colour(std::size_t k, const glm::dvec3& dir);
 // from extras. On error `out` is left unchanged.
 Status decode_glb(std::span<const std::uint8_t> glb, Mesh& out, GlbInfo* info = nullptr);
 
+// decode_glb in a child process (fork) whose CPU time is limited to `cpu_seconds` (rounded up to
+// whole seconds; 0: glb_decode_cpu_limit(glb.size())), for tools that read GLBs from elsewhere
+// (ldimesh-fetch, `ldimesh distance`): Debian's Draco 1.5.5 spends up to ≈ 15 s on a hostile
+// stream of a few KB (an unchecked count in its texture-coordinate predictor;
+// docs/reliability.md), which the limit turns into an error. The same mesh and info as
+// decode_glb, or its error; beyond that a corrupt_input Status when the limit stops the decoder
+// ("took more than N s of CPU") or the decoder dies of a signal, out_of_memory, io when no
+// process can be started. `out` changes only on success. The calling thread alone goes on in the
+// child (fork), which calls decode_glb only and leaves with _exit: safe from a multithreaded
+// caller as long as no other thread holds a lock decode_glb needs (the allocator's are reset by
+// glibc's fork). cpu_seconds outside [1, 10⁶] is invalid_argument.
+Status decode_glb_isolated(std::span<const std::uint8_t> glb, Mesh& out, GlbInfo* info = nullptr,
+                           double cpu_seconds = 0.0);
+
+// The automatic CPU limit of decode_glb_isolated, in whole seconds: 2 s + 5 s per MiB of GLB
+// (rounded down). Draco decodes about 1.6 MiB of a published step's GLB per second on one core
+// here (docs/benchmarks.md: 3.9 M triangles, 2.6 MB in 1.6 s), so a real file has more than 8×
+// its time.
+double glb_decode_cpu_limit(std::size_t glb_bytes);
+
 }  // namespace ldimesh
