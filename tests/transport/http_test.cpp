@@ -757,6 +757,62 @@ TEST_F(Http, TooManyStreamsGet503) {
   poll.join();
 }
 
+// The client asks again after a 503 or 429 as Retry-After says (a server whose long polls are all
+// taken answers 503, Retry-After: 1), up to HttpClientOptions::retries times.
+TEST_F(Http, ClientRetriesWhatTheServerRefusesForNow) {
+  httplib::Server fake;
+  std::atomic<int> asked{0};
+  fake.Get("/api/v1/latest", [&](const httplib::Request&, httplib::Response& res) {
+    const int n = ++asked;
+    if (n <= 2) {  // busy twice, rate-limited once (Retry-After 0), then a step
+      res.status = 503;
+      res.set_header("Retry-After", "1");
+      res.set_content(R"({"error": "too many long polls and event streams open"})",
+                      "application/json");
+    } else if (n == 3) {
+      res.status = 429;
+      res.set_header("Retry-After", "0");
+    } else {
+      res.set_content(R"({"step": 4, "time": 0.5, "bytes": 100})", "application/json");
+    }
+  });
+  const int port = fake.bind_to_any_port("127.0.0.1");
+  std::thread serving([&] { fake.listen_after_bind(); });
+  while (!fake.is_running())
+    std::this_thread::sleep_for(1ms);
+  const std::string url = "http://127.0.0.1:" + std::to_string(port);
+
+  HttpClient patient(url, "t");
+  std::optional<RemoteStep> got;
+  Status s = patient.wait_for_newer(3, 1s, got);
+  ASSERT_TRUE(s) << s.message();
+  ASSERT_TRUE(got.has_value());
+  EXPECT_EQ(got->metadata.step, 4u);
+  EXPECT_EQ(asked, 4);
+  // With fewer retries than refusals: the server's message.
+  asked = 0;
+  HttpClient hasty(url, "t", {.retries = 1});
+  s = hasty.wait_for_newer(3, 1s, got);
+  EXPECT_FALSE(s);
+  EXPECT_NE(s.message().find("HTTP 503 (too many long polls and event streams open)"),
+            std::string::npos)
+      << s.message();
+  EXPECT_EQ(asked, 2);
+  // cancel() ends the wait between tries.
+  asked = 0;
+  HttpClient cancelled(url, "t");
+  std::thread canceller([&] {
+    std::this_thread::sleep_for(300ms);
+    cancelled.cancel();
+  });
+  s = cancelled.wait_for_newer(3, 1s, got);
+  canceller.join();
+  EXPECT_NE(s.message().find("interrupted"), std::string::npos) << s.message();
+  EXPECT_EQ(asked, 1);
+  fake.stop();
+  serving.join();
+}
+
 TEST_F(Http, RequestsWithoutTheTokenBeyondAnAddressRateGet429) {
   options_.requests_per_second = 2;
   options_.request_burst = 10;

@@ -4,9 +4,12 @@
 #include <sys/socket.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cctype>
 #include <charconv>
+#include <chrono>
 #include <stdexcept>
+#include <thread>
 #include <utility>
 
 #include <httplib.h>
@@ -133,6 +136,7 @@ struct HttpClient::Impl {
   ServerUrl url;
   HttpClientOptions options;
   httplib::Client client;
+  std::atomic<bool> canceled{false};  // cancel(): no further retry
 
   Status transport_error(httplib::Error error, const std::string& what) const;
   Status http_error(int status, const std::string& body, const std::string& what);
@@ -181,11 +185,25 @@ Status HttpClient::Impl::http_error(int status, const std::string& body, const s
 
 Status HttpClient::Impl::get(const std::string& path, const std::string& what, std::string& body,
                              int& status) {
-  auto result = client.Get(path);
-  if (!result) return transport_error(result.error(), what);
-  status = result->status;
-  body = std::move(result->body);
-  return Status::ok();
+  for (int attempt = 0;; ++attempt) {
+    auto result = client.Get(path);
+    if (!result) return transport_error(result.error(), what);
+    status = result->status;
+    body = std::move(result->body);
+    if ((status != 503 && status != 429) || attempt >= options.retries) return Status::ok();
+    // Busy (503) or rate-limited (429): wait as the server asks, in slices that cancel() ends.
+    int seconds = 1;
+    const std::string after = result->get_header_value("Retry-After");
+    int asked = -1;
+    const auto [end, ec] = std::from_chars(after.data(), after.data() + after.size(), asked);
+    if (ec == std::errc() && end == after.data() + after.size() && asked >= 0 && asked <= 10)
+      seconds = asked;
+    for (int slice = 0; slice < seconds * 10; ++slice) {
+      if (canceled) return transport_error(httplib::Error::Canceled, what);
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+    if (canceled) return transport_error(httplib::Error::Canceled, what);
+  }
 }
 
 Status HttpClient::Impl::not_found(std::uint64_t step) {
@@ -228,6 +246,7 @@ std::string HttpClient::base_url() const {
 }
 
 void HttpClient::cancel() {
+  impl_->canceled = true;
   impl_->client.stop();
 }
 

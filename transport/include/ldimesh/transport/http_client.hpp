@@ -49,6 +49,12 @@ struct HttpClientOptions {
   // A larger GLB is refused while it downloads (a hostile or broken server cannot make the
   // client allocate without bound).
   std::size_t max_glb_bytes = std::size_t{4} << 30;
+  // A request the server answers with 503 or 429 and a Retry-After of 0 to 10 s (too many long
+  // polls open; too many requests without the token: docs/api.md) is asked again after those
+  // seconds (1 when the header is missing or says more), up to this many times; then the call
+  // fails with the server's message. (List, metadata and long polls; not a GLB download, which
+  // the server never refuses that way.)
+  int retries = 5;
 };
 
 // Talks to one server. One call at a time (not thread-safe), except cancel(). The calls write
