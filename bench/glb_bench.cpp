@@ -1,4 +1,5 @@
-// Mesh delivery: the Draco GLB the job publishes against the binary PLY the CLI writes, on
+// Mesh delivery: the Draco GLB (GlbOptions' defaults: 10 normal bits; published steps take 8,
+// StepGlbSettings — pass --normal-bits 8 for those) against the binary PLY the CLI writes, on
 // every built-in analytic surface at each --res: three axis views, r = 0.5, triangles. Reports
 // triangles, GLB bytes (and per triangle), PLY bytes (and per triangle), the position bits
 // chosen (automatic: step ≤ a tenth of the LDI pixel) with glb_position_error_bound in pixels,

@@ -12,13 +12,15 @@
 # Usage: bench/glb_bits_picture.sh [SIZE=192] [SUBSTEPS=60] [STEPS=20] [RESOLUTION=256] [OUT]
 # Settings: $SETTINGS, default "16/16 10/10 8/10 8/8" (normal bits / scalar bits).
 set -euo pipefail
+out=$(realpath -m "${5:-/tmp/glb_bits_picture}")
+bin=$(realpath -m "${LDIMESH_BIN:-$(dirname "$0")/../build/bin}")
 cd "$(dirname "$0")/.."
 size=${1:-192}
 substeps=${2:-60}
 steps=${3:-20}
 resolution=${4:-256}
-out=${5:-/tmp/glb_bits_picture}
-bin=${LDIMESH_BIN:-build/bin}
+pid=
+trap '[ -n "$pid" ] && kill "$pid" 2>/dev/null; true' EXIT
 settings=${SETTINGS:-16/16 10/10 8/10 8/8}
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 mkdir -p "$out"
@@ -48,6 +50,7 @@ for s in $settings; do
   COLOUR=plain node scripts/screenshot_viewer.mjs "$url" "$dir/plain.png" 1200x800 >&2
   kill "$pid"
   wait "$pid" 2>/dev/null || true
+  pid=
 done
 /usr/bin/python3 - "$out" "$last" $settings <<'PY'
 import json, os, struct, sys, zlib
@@ -75,22 +78,24 @@ def read_png(path):
         up = img[y - 1] if y else np.zeros(w * n, np.int32)
         if f == 0:
             img[y] = row
+        elif f == 1:  # Sub: a running sum per channel
+            img[y] = (np.cumsum(row.reshape(w, n), axis=0) & 255).reshape(-1)
         elif f == 2:
             img[y] = (row + up) & 255
-        else:
+        elif f in (3, 4):
             out = np.zeros(w * n, np.int32)
             for x in range(w * n):
                 left = out[x - n] if x >= n else 0
                 ul = up[x - n] if x >= n else 0
-                if f == 1:
-                    pred = left
-                elif f == 3:
+                if f == 3:
                     pred = (left + up[x]) // 2
                 else:
                     pa, pb, pc = abs(up[x] - ul), abs(left - ul), abs(left + up[x] - 2 * ul)
                     pred = left if pa <= pb and pa <= pc else (up[x] if pb <= pc else ul)
                 out[x] = (row[x] + pred) & 255
             img[y] = out
+        else:
+            raise ValueError(f"{path}: unknown PNG filter {f}")
     return img.reshape(h, w, n)[..., :3].astype(float)
 out, last, settings = sys.argv[1], sys.argv[2], sys.argv[3:]
 def folder(s):
@@ -102,13 +107,14 @@ print(f"Gray–Scott, step {last[5:].lstrip('0')}, coloured by U; pictures 1200 
 print("| normal / scalar bits | triangles | bytes / triangle | colouring | pixels that differ "
       "| mean difference (levels) | 99th percentile | largest |")
 print("|---|---|---|---|---|---|---|---|")
+# The surface's part of a picture: right of the side panel (whose timings and sizes differ from
+# run to run) and above the legend.
+reference = {c: read_png(os.path.join(ref, c + ".png"))[:700, 310:] for c in ("field", "plain")}
 for s in settings:
     d = folder(s)
     meta = json.load(open(os.path.join(d, "steps", last + ".json")))
     for colouring in ("field", "plain"):
-        # The surface's part of the picture: right of the side panel (whose timings and sizes
-        # differ from run to run) and above the legend.
-        a = read_png(os.path.join(ref, colouring + ".png"))[:700, 310:]
+        a = reference[colouring]
         b = read_png(os.path.join(d, colouring + ".png"))[:700, 310:]
         diff = np.abs(a - b)
         per_pixel = diff.max(axis=2)

@@ -2,7 +2,7 @@
 // and its mesh re-encoded with Draco's ExpertEncoder, one attribute set or prediction scheme at
 // a time, as GltfEncoder encodes it (the same speed, quantization and attribute types); printed
 // in bytes per triangle (docs/benchmarks.md, "The colour field as a generic attribute").
-//   ldimesh_bench_glb_bytes [--position-bits 11] [--normal-bits 10] [--scalar-bits 10]
+//   ldimesh_bench_glb_bytes [--position-bits 11] [--normal-bits 8] [--scalar-bits 8]
 //                           [--level 7] STEP.glb...
 // The position bits are not in the file: give those it was written with (the published steps':
 // a tenth of a pixel over the mesh's box, GlbInfo::position_bits; the log of `ldimesh mesh`).
@@ -36,7 +36,9 @@ struct Setting {
 };
 
 struct Bits {
-  int position = 11, normal = 10, scalar = 10, level = 7;
+  // The published steps' settings (StepGlbSettings) but for the position bits, not in the file.
+  int position = 11, normal = StepGlbSettings{}.normal_bits, scalar = StepGlbSettings{}.scalar_bits,
+      level = StepGlbSettings{}.compression_level;
 };
 
 // The Draco bytes of `m` encoded with setting `s`.

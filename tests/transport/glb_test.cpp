@@ -14,6 +14,7 @@
 #include <random>
 #include <sstream>
 #include <string>
+#include <string_view>
 #include <unordered_map>
 #include <vector>
 
@@ -22,6 +23,7 @@
 #include <nlohmann/json.hpp>
 
 #include <draco/compression/draco_compression_options.h>
+#include <draco/core/draco_version.h>
 #include <draco/core/encoder_buffer.h>
 #include <draco/io/gltf_encoder.h>
 #include <draco/mesh/mesh.h>
@@ -614,7 +616,12 @@ TEST(Glb, AnIsolatedDecodeGivesWhatDecodeGlbGives) {
   EXPECT_EQ(b.quad_view, a.quad_view);
   EXPECT_EQ(b.triangle_view, a.triangle_view);
   EXPECT_EQ(b.view_dirs, a.view_dirs);
-  EXPECT_EQ(std::memcmp(&ia, &ib, sizeof ia), 0);
+  EXPECT_EQ(ib.triangles, ia.triangles);
+  EXPECT_EQ(ib.vertices, ia.vertices);
+  EXPECT_EQ(ib.has_scalar, ia.has_scalar);
+  EXPECT_TRUE(ib.has_scalar);
+  EXPECT_EQ(ib.scalar_min, ia.scalar_min);
+  EXPECT_EQ(ib.scalar_max, ia.scalar_max);
   // An error comes back as decode_glb's, and `out` stays as it was.
   const Bytes cut(glb.begin(), glb.begin() + std::ptrdiff_t(glb.size() / 2));
   const Status direct = decode_glb(cut, a);
@@ -633,6 +640,10 @@ TEST(Glb, AnIsolatedDecodeGivesWhatDecodeGlbGives) {
 // of the BIN chunk, 114) set to 2^31 − 1: the decoder decodes that many orientation bits from
 // the stream's few bytes (docs/reliability.md). decode_glb_isolated stops it at its CPU limit.
 TEST(Glb, AnIsolatedDecodeStopsDracoAtItsCpuLimit) {
+  // The stream aims at Draco 1.5's unchecked count (Debian 12's libdraco 1.5.5); a Draco that
+  // checks it refuses the file at once, which says nothing about the limit.
+  if (!std::string_view(draco::kDracoVersion).starts_with("1.5."))
+    GTEST_SKIP() << "Draco " << draco::kDracoVersion << ", not 1.5";
   std::ifstream in(LDIMESH_TRANSPORT_TEST_DATA "/slow_texcoord_predictor.glb", std::ios::binary);
   const Bytes glb((std::istreambuf_iterator<char>(in)), {});
   ASSERT_EQ(glb.size(), 2064u);

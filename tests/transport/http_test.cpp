@@ -737,10 +737,11 @@ TEST_F(Http, TooManyStreamsGet503) {
   server_.reset();
   start();
   // Another client keeps the one stream open, poll after poll (however slowly its thread
-  // starts, e.g. under ThreadSanitizer); a second long poll meets it within a few tries.
+  // starts, e.g. under ThreadSanitizer); a second long poll meets it within a few tries. (That
+  // client does not wait out the 503s it gets in turn: it asks again at once.)
   std::atomic<bool> done{false};
   std::thread poll([&] {
-    HttpClient c = client();
+    HttpClient c(base(), server_->token(), {.retries = 0});
     while (!done) {
       std::optional<RemoteStep> got;
       c.wait_for_newer(3, 1s, got);
@@ -764,7 +765,7 @@ TEST_F(Http, ClientRetriesWhatTheServerRefusesForNow) {
   std::atomic<int> asked{0};
   fake.Get("/api/v1/latest", [&](const httplib::Request&, httplib::Response& res) {
     const int n = ++asked;
-    if (n <= 2) {  // busy twice, rate-limited once (Retry-After 0), then a step
+    if (n <= 2) {  // busy twice, rate-limited once (Retry-After 0: waits 1 s), then a step
       res.status = 503;
       res.set_header("Retry-After", "1");
       res.set_content(R"({"error": "too many long polls and event streams open"})",
@@ -775,6 +776,11 @@ TEST_F(Http, ClientRetriesWhatTheServerRefusesForNow) {
     } else {
       res.set_content(R"({"step": 4, "time": 0.5, "bytes": 100})", "application/json");
     }
+  });
+  fake.Get("/api/v1/steps", [&](const httplib::Request&, httplib::Response& res) {
+    ++asked;
+    res.status = 503;
+    res.set_content(R"({"error": "the server is stopping"})", "application/json");
   });
   const int port = fake.bind_to_any_port("127.0.0.1");
   std::thread serving([&] { fake.listen_after_bind(); });
@@ -808,6 +814,13 @@ TEST_F(Http, ClientRetriesWhatTheServerRefusesForNow) {
   s = cancelled.wait_for_newer(3, 1s, got);
   canceller.join();
   EXPECT_NE(s.message().find("interrupted"), std::string::npos) << s.message();
+  EXPECT_EQ(asked, 1);
+  // A 503 without Retry-After (a server that is stopping) stands.
+  asked = 0;
+  std::vector<RemoteStep> steps;
+  s = patient.list_steps(steps);
+  EXPECT_NE(s.message().find("HTTP 503 (the server is stopping)"), std::string::npos)
+      << s.message();
   EXPECT_EQ(asked, 1);
   fake.stop();
   serving.join();

@@ -185,19 +185,22 @@ Status HttpClient::Impl::http_error(int status, const std::string& body, const s
 
 Status HttpClient::Impl::get(const std::string& path, const std::string& what, std::string& body,
                              int& status) {
+  canceled = false;  // a cancel() before this call ended the one before
   for (int attempt = 0;; ++attempt) {
     auto result = client.Get(path);
     if (!result) return transport_error(result.error(), what);
     status = result->status;
     body = std::move(result->body);
     if ((status != 503 && status != 429) || attempt >= options.retries) return Status::ok();
-    // Busy (503) or rate-limited (429): wait as the server asks, in slices that cancel() ends.
-    int seconds = 1;
+    // Busy (503) or rate-limited (429) with a Retry-After in seconds: wait as the server asks
+    // (1 to 10 s), in slices that cancel() ends. Without one (a server that is stopping) the
+    // answer stands.
     const std::string after = result->get_header_value("Retry-After");
-    int asked = -1;
-    const auto [end, ec] = std::from_chars(after.data(), after.data() + after.size(), asked);
-    if (ec == std::errc() && end == after.data() + after.size() && asked >= 0 && asked <= 10)
-      seconds = asked;
+    int seconds = -1;
+    const auto [end, ec] = std::from_chars(after.data(), after.data() + after.size(), seconds);
+    if (after.empty() || ec != std::errc() || end != after.data() + after.size() || seconds < 0)
+      return Status::ok();
+    seconds = std::clamp(seconds, 1, 10);
     for (int slice = 0; slice < seconds * 10; ++slice) {
       if (canceled) return transport_error(httplib::Error::Canceled, what);
       std::this_thread::sleep_for(std::chrono::milliseconds(100));

@@ -167,9 +167,9 @@ Status decode_glb_isolated(std::span<const std::uint8_t> glb, Mesh& out, GlbInfo
                            double cpu_seconds = 0.0);
 
 // The automatic CPU limit of decode_glb_isolated, in whole seconds: 2 s + 5 s per MiB of GLB
-// (rounded down). Draco decodes about 1.6 MiB of a published step's GLB per second on one core
-// here (docs/benchmarks.md: 3.9 M triangles, 2.6 MB in 1.6 s), so a real file has more than 8×
-// its time.
+// (rounded down). Draco decodes the benchmark meshes' GLBs at 1.3–1.6 MiB per second on one
+// core here (docs/benchmarks.md: 3.9 M triangles, 2.6 MB in 1.6 s; 1.3 M, 0.73 MB in 0.54 s), so
+// a real file has 6× its time or more.
 double glb_decode_cpu_limit(std::size_t glb_bytes);
 
 }  // namespace ldimesh

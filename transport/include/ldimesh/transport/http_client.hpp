@@ -49,11 +49,11 @@ struct HttpClientOptions {
   // A larger GLB is refused while it downloads (a hostile or broken server cannot make the
   // client allocate without bound).
   std::size_t max_glb_bytes = std::size_t{4} << 30;
-  // A request the server answers with 503 or 429 and a Retry-After of 0 to 10 s (too many long
+  // A request the server answers with 503 or 429 and a Retry-After in seconds (too many long
   // polls open; too many requests without the token: docs/api.md) is asked again after those
-  // seconds (1 when the header is missing or says more), up to this many times; then the call
-  // fails with the server's message. (List, metadata and long polls; not a GLB download, which
-  // the server never refuses that way.)
+  // seconds (at least 1, at most 10), up to this many times; then the call fails with the
+  // server's message. A 503 without Retry-After (the server is stopping) fails at once. (List,
+  // metadata and long polls; not a GLB download, which the server never refuses that way.)
   int retries = 5;
 };
 
