@@ -194,7 +194,6 @@ Status check_options(const GlbOptions& o) {
   return Status::ok();
 }
 
-// What the encoder needs beyond check_mesh: glTF's 31-bit index counts.
 // Draco quantizes positions over their range in float: a box wider than half of float's largest
 // value overflows there, and Draco's encoder then crashes (found by fuzzing: finite coordinates
 // of ±1.7e38 decoded from a GLB and encoded again). Such meshes are refused on both ways.
@@ -205,6 +204,7 @@ bool extent_fits_float(const std::vector<glm::vec3>& positions) {
   return b.empty || (e.x <= limit && e.y <= limit && e.z <= limit);
 }
 
+// What the encoder needs beyond check_mesh: glTF's 31-bit index counts, a box Draco can quantize.
 Status check_encodable(const Mesh& m) {
   const std::size_t n = m.vertex_count();
   if (n > kMaxIndex) return Status::invalid_argument("glb: more than 2^31 - 1 vertices");
