@@ -18,7 +18,9 @@
 #include <emmintrin.h>
 #endif
 
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/partitioner.h>
 #include <tbb/task_arena.h>
 
 namespace ldimesh {
@@ -434,32 +436,81 @@ class GridBinding final : public GeometryBinding {
   UserGeometry geometry_;  // last: its callbacks read the members above
 };
 
-// Folds points i0 … i1 (at least two) of row (j, k) into the running minimum, maximum and sum.
-// Two points per step into separate accumulators: a single chain of additions would bound the
-// loop by their latency.
+// Folds points i0 … i1 (at least two) of row (j, k) into the running minimum and maximum
+// (NaNs left out; ±Inf in) and clears `finite` where one of them is NaN or ±Inf (v − v is 0
+// exactly for the finite ones). A row in memory order goes two doubles or four floats per
+// instruction with SSE2 (every x86-64): 2.3 times faster than the scalar loop over the Gray–Scott
+// block's bricks (6.5 → 2.8 ms for 194 × 194 × 98 doubles, needed_bricks' pass). The scalar loop
+// keeps two points per step in separate accumulators, so that no chain of dependent operations
+// bounds it.
 template <class T>
 void scan_row(const GridView<T>& g, std::int64_t i0, std::int64_t i1, std::int64_t j,
-              std::int64_t k, double& lo, double& hi, double& sum) {
-  double lo1 = lo, hi1 = hi, sum0 = 0.0, sum1 = 0.0;
+              std::int64_t k, double& lo, double& hi, bool& finite) {
+#if defined(__SSE2__)
+  if (g.strides[0] == 1) {
+    const T* p = g.values + (i0 + j * g.strides[1] + k * g.strides[2]);
+    const std::int64_t n = i1 - i0 + 1;
+    std::int64_t i = 0;
+    if constexpr (std::is_same_v<T, float>) {
+      __m128 l = _mm_set1_ps(INFINITY), h = _mm_set1_ps(-INFINITY), z = _mm_setzero_ps();
+      const auto fold = [&](__m128 x) {  // min/max keep their second operand for a NaN
+        l = _mm_min_ps(x, l);
+        h = _mm_max_ps(x, h);
+        z = _mm_add_ps(z, _mm_sub_ps(x, x));
+      };
+      for (; i + 4 <= n; i += 4)
+        fold(_mm_loadu_ps(p + i));
+      for (; i < n; ++i)
+        fold(_mm_set1_ps(p[i]));
+      l = _mm_min_ps(l, _mm_movehl_ps(l, l));
+      h = _mm_max_ps(h, _mm_movehl_ps(h, h));
+      z = _mm_add_ps(z, _mm_movehl_ps(z, z));
+      l = _mm_min_ss(l, _mm_shuffle_ps(l, l, 1));
+      h = _mm_max_ss(h, _mm_shuffle_ps(h, h, 1));
+      z = _mm_add_ss(z, _mm_shuffle_ps(z, z, 1));
+      lo = std::min(lo, double(_mm_cvtss_f32(l)));
+      hi = std::max(hi, double(_mm_cvtss_f32(h)));
+      finite = finite && _mm_cvtss_f32(z) == 0.0f;
+    } else {
+      __m128d l = _mm_set1_pd(INFINITY), h = _mm_set1_pd(-INFINITY), z = _mm_setzero_pd();
+      const auto fold = [&](__m128d x) {
+        l = _mm_min_pd(x, l);
+        h = _mm_max_pd(x, h);
+        z = _mm_add_pd(z, _mm_sub_pd(x, x));
+      };
+      for (; i + 2 <= n; i += 2)
+        fold(_mm_loadu_pd(p + i));
+      if (i < n) fold(_mm_set1_pd(p[i]));
+      l = _mm_min_sd(l, _mm_unpackhi_pd(l, l));
+      h = _mm_max_sd(h, _mm_unpackhi_pd(h, h));
+      z = _mm_add_sd(z, _mm_unpackhi_pd(z, z));
+      lo = std::min(lo, _mm_cvtsd_f64(l));
+      hi = std::max(hi, _mm_cvtsd_f64(h));
+      finite = finite && _mm_cvtsd_f64(z) == 0.0;
+    }
+    return;
+  }
+#endif
+  double lo1 = lo, hi1 = hi, z0 = 0.0, z1 = 0.0;
   std::int64_t i = i0;
   for (; i < i1; i += 2) {
     const double v0 = g.value(i, j, k), v1 = g.value(i + 1, j, k);
     lo = std::min(lo, v0);
     hi = std::max(hi, v0);
-    sum0 += v0;
+    z0 += v0 - v0;
     lo1 = std::min(lo1, v1);
     hi1 = std::max(hi1, v1);
-    sum1 += v1;
+    z1 += v1 - v1;
   }
   if (i == i1) {
     const double v = g.value(i, j, k);
     lo = std::min(lo, v);
     hi = std::max(hi, v);
-    sum0 += v;
+    z0 += v - v;
   }
   lo = std::min(lo, lo1);
   hi = std::max(hi, hi1);
-  sum += sum0 + sum1;
+  finite = finite && z0 + z1 == 0.0;
 }
 
 // The bricks of a block, which of them may hold the isosurface, and the non-finite count.
@@ -493,14 +544,14 @@ BrickCulling cull_bricks(const GridView<T>& grid, double iso,
       b.box_hi[a] = grid.coord(a, b.hi[a] + 1);
     }
     if (grid.held && !grid.held[n]) return;
-    // Range of the trilinear interpolant over the brick = range of its points. The sum of the
-    // values is finite unless one of them is NaN or ±Inf (or the sum overflows): a closer look
-    // only then.
-    double lo = INFINITY, hi = -INFINITY, sum = 0.0;
+    // Range of the trilinear interpolant over the brick = range of its points. A closer look
+    // only where one of them is NaN or ±Inf.
+    double lo = INFINITY, hi = -INFINITY;
+    bool finite = true;
     for (std::int64_t k = b.lo[2]; k <= b.hi[2] + 1; ++k)
       for (std::int64_t j = b.lo[1]; j <= b.hi[1] + 1; ++j)
-        scan_row(grid, b.lo[0], b.hi[0] + 1, j, k, lo, hi, sum);
-    if (!std::isfinite(sum)) [[unlikely]] {
+        scan_row(grid, b.lo[0], b.hi[0] + 1, j, k, lo, hi, finite);
+    if (!finite) [[unlikely]] {
       // Non-finite points are left out of the range (their cells produce no hits, the others
       // keep theirs) and counted by the one brick that owns them: a brick owns the points below
       // its upper layer of points along each axis, which the next brick reads as its lower
@@ -1645,36 +1696,58 @@ GridView<T> make_view(const GridBlock& block, const T* values,
 
 }  // namespace
 
+// Calls f(begin, end) over layers 0 … n − 1 of `layer_points` points each: on the calling thread
+// where they hold fewer than 8 Mi points, else in tasks of about that many. The snapshot's scan
+// and copies (needed_bricks, for_each_needed_run) run on the solver's thread; where ranks share
+// cores (the Gray–Scott bench: 2 ranks on 2 cores), waiting there for TBB's workers, which
+// another rank's threads can hold off a core, cost more than they saved: the scan of a
+// 194 × 194 × 98 block took 2.1–8 ms (median 4.3) in tasks, 3.8–4.0 ms on the solver's thread.
+template <class F>
+void for_layers(std::int64_t n, std::int64_t layer_points, F&& f) {
+  const std::int64_t grain =
+      std::max<std::int64_t>(1, (std::int64_t(8) << 20) / std::max<std::int64_t>(1, layer_points));
+  if (n <= grain) {
+    f(std::int64_t(0), n);
+    return;
+  }
+  tbb::parallel_for(
+      tbb::blocked_range<std::int64_t>(0, n, std::size_t(grain)),
+      [&](const tbb::blocked_range<std::int64_t>& r) { f(r.begin(), r.end()); },
+      tbb::simple_partitioner());
+}
+
 std::vector<std::uint8_t> GridSource::needed_bricks(std::span<const double> isovalues) const {
   // The bricks' ranges from the rows of points in memory order (a brick at a time would jump
-  // between rows and pages: three times slower on the Gray–Scott block), one layer of bricks
-  // along z per task. A brick whose values' sum is not finite (a NaN or ±Inf, or an overflow of
-  // huge values) is needed whatever its range: a superset of the bricks a bind keeps or finds
-  // non-finite values in, which is all the snapshot needs.
+  // between rows and pages: three times slower on the Gray–Scott block), layers of bricks along
+  // z (for_layers). A brick with a NaN or ±Inf is needed whatever its range: a superset of the
+  // bricks a bind keeps or finds non-finite values in, which is all the snapshot needs.
   const std::size_t count = brick_count();
   std::vector<double> lo(count, INFINITY), hi(count, -INFINITY);
   std::vector<std::uint8_t> bad(count, 0);
   const auto scan = [&](const auto* values) {
     const auto g = make_view(block_, values, held_);
-    tbb::parallel_for(std::int64_t(0), bricks_[2], [&](std::int64_t bz) {
-      const std::int64_t z0 = first_cell_[2] + bz * brick_cells_,
-                         z1 = std::min(last_cell_[2], z0 + brick_cells_ - 1) + 1;
-      for (std::int64_t k = z0; k <= z1; ++k)
-        for (std::int64_t by = 0; by < bricks_[1]; ++by) {
-          const std::int64_t y0 = first_cell_[1] + by * brick_cells_,
-                             y1 = std::min(last_cell_[1], y0 + brick_cells_ - 1) + 1;
-          const std::size_t row = std::size_t(bricks_[0] * (by + bricks_[1] * bz));
-          for (std::int64_t j = y0; j <= y1; ++j)
-            for (std::int64_t bx = 0; bx < bricks_[0]; ++bx) {
-              const std::size_t n = row + std::size_t(bx);
-              if (g.held && !g.held[n]) continue;
-              const std::int64_t x0 = first_cell_[0] + bx * brick_cells_,
-                                 x1 = std::min(last_cell_[0], x0 + brick_cells_ - 1) + 1;
-              double sum = 0.0;
-              scan_row(g, x0, x1, j, k, lo[n], hi[n], sum);
-              if (!std::isfinite(sum)) bad[n] = 1;
-            }
-        }
+    const std::int64_t layer = block_.dims[0] * block_.dims[1] * (brick_cells_ + 1);
+    for_layers(bricks_[2], layer, [&](std::int64_t begin, std::int64_t end) {
+      for (std::int64_t bz = begin; bz < end; ++bz) {
+        const std::int64_t z0 = first_cell_[2] + bz * brick_cells_,
+                           z1 = std::min(last_cell_[2], z0 + brick_cells_ - 1) + 1;
+        for (std::int64_t k = z0; k <= z1; ++k)
+          for (std::int64_t by = 0; by < bricks_[1]; ++by) {
+            const std::int64_t y0 = first_cell_[1] + by * brick_cells_,
+                               y1 = std::min(last_cell_[1], y0 + brick_cells_ - 1) + 1;
+            const std::size_t row = std::size_t(bricks_[0] * (by + bricks_[1] * bz));
+            for (std::int64_t j = y0; j <= y1; ++j)
+              for (std::int64_t bx = 0; bx < bricks_[0]; ++bx) {
+                const std::size_t n = row + std::size_t(bx);
+                if (g.held && !g.held[n]) continue;
+                const std::int64_t x0 = first_cell_[0] + bx * brick_cells_,
+                                   x1 = std::min(last_cell_[0], x0 + brick_cells_ - 1) + 1;
+                bool finite = true;
+                scan_row(g, x0, x1, j, k, lo[n], hi[n], finite);
+                if (!finite) bad[n] = 1;
+              }
+          }
+      }
     });
   };
   if (block_.type == ScalarType::float32)
@@ -1714,37 +1787,40 @@ void GridSource::for_each_needed_run(
       }
     }
   }
-  tbb::parallel_for(std::int64_t(0), block_.dims[2], [&](std::int64_t k) {
-    const auto [z0, z1] = near[2][std::size_t(k)];
-    if (z1 < z0) return;
-    std::vector<std::uint8_t> row(static_cast<std::size_t>(bricks_[0]));
-    for (std::int64_t j = 0; j < block_.dims[1]; ++j) {
-      const auto [y0, y1] = near[1][std::size_t(j)];
-      if (y1 < y0) continue;
-      std::fill(row.begin(), row.end(), 0);
-      for (std::int64_t bz = z0; bz <= z1; ++bz)
-        for (std::int64_t by = y0; by <= y1; ++by) {
-          const std::uint8_t* h = &held[std::size_t(bricks_[0] * (by + bricks_[1] * bz))];
-          for (std::size_t bx = 0; bx < row.size(); ++bx)
-            row[bx] |= h[bx];
+  for_layers(
+      block_.dims[2], block_.dims[0] * block_.dims[1], [&](std::int64_t begin, std::int64_t end) {
+        std::vector<std::uint8_t> row(static_cast<std::size_t>(bricks_[0]));
+        for (std::int64_t k = begin; k < end; ++k) {
+          const auto [z0, z1] = near[2][std::size_t(k)];
+          if (z1 < z0) continue;
+          for (std::int64_t j = 0; j < block_.dims[1]; ++j) {
+            const auto [y0, y1] = near[1][std::size_t(j)];
+            if (y1 < y0) continue;
+            std::fill(row.begin(), row.end(), 0);
+            for (std::int64_t bz = z0; bz <= z1; ++bz)
+              for (std::int64_t by = y0; by <= y1; ++by) {
+                const std::uint8_t* h = &held[std::size_t(bricks_[0] * (by + bricks_[1] * bz))];
+                for (std::size_t bx = 0; bx < row.size(); ++bx)
+                  row[bx] |= h[bx];
+              }
+            // The held bricks' points along x with their margins, joined where they touch.
+            std::int64_t run_lo = 0, run_hi = -2;
+            for (std::int64_t bx = 0; bx < bricks_[0]; ++bx) {
+              if (!row[std::size_t(bx)]) continue;
+              const std::int64_t lo = first_cell_[0] + bx * brick_cells_,
+                                 hi = std::min(last_cell_[0], lo + brick_cells_ - 1);
+              const std::int64_t i0 = std::max<std::int64_t>(0, lo - 1),
+                                 i1 = std::min(block_.dims[0] - 1, hi + 2);
+              if (i0 > run_hi + 1) {
+                if (run_hi >= run_lo) f(j, k, run_lo, run_hi);
+                run_lo = i0;
+              }
+              run_hi = i1;
+            }
+            if (run_hi >= run_lo) f(j, k, run_lo, run_hi);
+          }
         }
-      // The held bricks' points along x with their margins, joined where they touch.
-      std::int64_t run_lo = 0, run_hi = -2;
-      for (std::int64_t bx = 0; bx < bricks_[0]; ++bx) {
-        if (!row[std::size_t(bx)]) continue;
-        const std::int64_t lo = first_cell_[0] + bx * brick_cells_,
-                           hi = std::min(last_cell_[0], lo + brick_cells_ - 1);
-        const std::int64_t i0 = std::max<std::int64_t>(0, lo - 1),
-                           i1 = std::min(block_.dims[0] - 1, hi + 2);
-        if (i0 > run_hi + 1) {
-          if (run_hi >= run_lo) f(j, k, run_lo, run_hi);
-          run_lo = i0;
-        }
-        run_hi = i1;
-      }
-      if (run_hi >= run_lo) f(j, k, run_lo, run_hi);
-    }
-  });
+      });
 }
 
 std::unique_ptr<AxisBinding> GridSource::bind_axis(double isovalue) const {

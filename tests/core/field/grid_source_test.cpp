@@ -715,6 +715,95 @@ TEST(GridSource, RayCasterSumsNonFiniteCountsOverBlocks) {
   EXPECT_EQ(RayCaster(one, 0.5).nonfinite_values(), 4u);
 }
 
+TEST(GridSource, NeededBricksAreThoseABruteForceScanFinds) {
+  // needed_bricks against its definition, brick by brick: the brick's points (its cells' corner
+  // points) hold an isovalue between their finite minimum and maximum, or a NaN or ±Inf. A smooth
+  // field with noise (bricks in and out of range), non-finite points at random places (every
+  // lane of a vector and the rows' tails), float and double, rows in memory order (the
+  // vectorized scan) and z fastest (the scalar one), several brick sizes, ghost layers.
+  const int n = 23;
+  const std::vector<double> isovalues{0.45, 1.7};
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> noise(-0.04, 0.04);
+  std::uniform_int_distribution<int> point(0, n - 1);
+  std::vector<double> values = sample<double>(n, -1.1, 1.1, sphere_field);
+  for (double& v : values)
+    v += noise(rng);
+  const double bad[] = {kNaN, kInf, -kInf};
+  for (int m = 0; m < 12; ++m)
+    values[(std::size_t(point(rng)) * n + point(rng)) * n + point(rng)] = bad[m % 3];
+  // Huge finite values, whose sum overflows: neither needed nor skipped for that.
+  values[(std::size_t(20) * n + 2) * n + 2] = 1.5e308;
+  values[(std::size_t(20) * n + 2) * n + 3] = 1.5e308;
+  std::size_t needed_any = 0, skipped_any = 0;
+  for (const ScalarType type : {ScalarType::float64, ScalarType::float32})
+    for (const bool z_fastest : {false, true})
+      for (const int brick_cells : {1, 3, 4, 8}) {
+        SCOPED_TRACE(std::string(type == ScalarType::float32 ? "float" : "double") +
+                     (z_fastest ? ", z fastest" : "") + ", bricks of " +
+                     std::to_string(brick_cells));
+        const auto index = [&](int i, int j, int k) {
+          return z_fastest ? (std::size_t(i) * n + j) * n + k : (std::size_t(k) * n + j) * n + i;
+        };
+        std::vector<double> doubles(values.size());
+        for (int k = 0; k < n; ++k)
+          for (int j = 0; j < n; ++j)
+            for (int i = 0; i < n; ++i)
+              doubles[index(i, j, k)] = values[(std::size_t(k) * n + j) * n + i];
+        // Float: 1.5e308 becomes +Inf, so the brick holding it is needed there.
+        const std::vector<float> floats(doubles.begin(), doubles.end());
+        GridBlock block = uniform_block(
+            type == ScalarType::float64 ? (const void*)doubles.data() : (const void*)floats.data(),
+            type, n, -1.1, 1.1);
+        if (z_fastest) block.strides = {std::int64_t(n) * n, n, 1};
+        block.ghost_lo = {1, 0, 2};
+        block.ghost_hi = {2, 1, 0};
+        const GridSource grid(block, brick_cells);
+        const std::vector<std::uint8_t> needed = grid.needed_bricks(isovalues);
+        // The bricks as GridSource documents them: cells first … last per axis, brick_cells
+        // each, x fastest; a brick reads its cells' points lo … hi + 1.
+        std::array<int, 3> first{}, last{}, count{};
+        for (int a = 0; a < 3; ++a) {
+          first[a] = int(block.ghost_lo[a]);
+          last[a] = std::min(n - 1 - int(block.ghost_hi[a]), n - 2);
+          count[a] = (last[a] - first[a] + brick_cells) / brick_cells;
+        }
+        ASSERT_EQ(needed.size(), std::size_t(count[0]) * count[1] * count[2]);
+        for (int bz = 0; bz < count[2]; ++bz)
+          for (int by = 0; by < count[1]; ++by)
+            for (int bx = 0; bx < count[0]; ++bx) {
+              const std::array<int, 3> b{bx, by, bz};
+              std::array<int, 3> lo{}, hi{};
+              for (int a = 0; a < 3; ++a) {
+                lo[a] = first[a] + b[a] * brick_cells;
+                hi[a] = std::min(last[a], lo[a] + brick_cells - 1) + 1;
+              }
+              double min = kInf, max = -kInf;
+              bool nonfinite = false;
+              for (int k = lo[2]; k <= hi[2]; ++k)
+                for (int j = lo[1]; j <= hi[1]; ++j)
+                  for (int i = lo[0]; i <= hi[0]; ++i) {
+                    const double v = type == ScalarType::float64 ? doubles[index(i, j, k)]
+                                                                 : double(floats[index(i, j, k)]);
+                    if (!std::isfinite(v)) {
+                      nonfinite = true;
+                    } else {
+                      min = std::min(min, v);
+                      max = std::max(max, v);
+                    }
+                  }
+              bool expected = nonfinite;
+              for (const double iso : isovalues)
+                expected = expected || (min <= iso && iso <= max);
+              EXPECT_EQ(needed[std::size_t(bx + count[0] * (by + count[1] * bz))] != 0, expected)
+                  << "brick " << bx << " " << by << " " << bz;
+              (expected ? needed_any : skipped_any) += 1;
+            }
+      }
+  EXPECT_GT(needed_any, 200u);
+  EXPECT_GT(skipped_any, 200u);
+}
+
 TEST(GridSource, ACopyOfTheNeededBricksCastsWhatTheWholeBlockCasts) {
   // What the adaptor's snapshot does: copy the points of the bricks that needed_bricks names
   // (for_each_needed_run) into a buffer whose other points hold anything, and cast that with
