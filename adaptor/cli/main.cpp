@@ -158,7 +158,7 @@ void load_input(const MeshArgs& args, int rank, int ranks, Input& input) {
 #ifdef LDIMESH_WITH_VTU
     ldimesh::quiet_vtk_logging();  // the error comes back as one line
     const ldimesh::Status status =
-        ldimesh::read_vtu(args.vtu, args.field, input.elements, args.colour_by);
+        ldimesh::read_vtu_isolated(args.vtu, args.field, input.elements, args.colour_by);
     if (!status) throw std::runtime_error(status.message());
     input.name = args.vtu;
     // Every rank holds every element (the file's); it casts only its block of the domain.

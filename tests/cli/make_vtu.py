@@ -11,7 +11,14 @@
   make_vtu.py badpoint OUT.vtu two order-2 Lagrange hexahedra, the second naming point 1000 of 54
                                (VTK writes and reads such a file without a word)
   make_vtu.py pieces OUT.pvtu  the sphere's cells as a .pvtu record over two .vtu pieces
+  make_vtu.py zeroblock OUT.vtu the sphere, zlib-compressed (base64 appended data, 32-bit
+                               headers), with the block size in the compression header of its
+                               array "r" set to 0: VTK 9.1's reader divides by it (SIGFPE on
+                               x86-64)
 """
+import base64
+import re
+import struct
 import sys
 
 from vtkmodules.vtkCommonCore import vtkDoubleArray, vtkIdList, vtkPoints
@@ -41,7 +48,7 @@ def main():
     values = vtkDoubleArray()
     values.SetName("r")
     r2 = lambda x: x[0] ** 2 + x[1] ** 2 + x[2] ** 2
-    if kind in ("sphere", "pieces"):
+    if kind in ("sphere", "pieces", "zeroblock"):
         n = 4
         for k in range(n):
             for j in range(n):
@@ -100,10 +107,36 @@ def main():
         writer.SetEndPiece(1)
     else:
         writer = vtkXMLUnstructuredGridWriter()
+    if kind == "zeroblock":
+        writer.SetCompressorTypeToZLib()
+        writer.SetDataModeToAppended()
+        writer.EncodeAppendedDataOn()
+        writer.SetHeaderTypeToUInt32()
     writer.SetFileName(out)
     writer.SetInputData(grid)
     if not writer.Write():
         sys.exit("make_vtu.py: VTK could not write " + out)
+    if kind == "zeroblock":
+        zero_block_size(out, b"r")
+
+
+def zero_block_size(path, name):
+    """Sets the uncompressed block size in the compression header of array `name` to 0.
+
+    Appended base64 data: after '_', each array at its offset, the header (UInt32: blocks, block
+    size, last block's size, the blocks' compressed sizes) base64-encoded on its own."""
+    data = open(path, "rb").read()
+    start = data.index(b"_", data.index(b"<AppendedData")) + 1
+    tag = re.search(rb'<DataArray[^>]*Name="' + name + rb'"[^>]*offset="(\d+)"', data)
+    at = start + int(tag.group(1))
+    blocks = struct.unpack("<I", base64.b64decode(data[at:at + 8])[:4])[0]
+    size = (3 + blocks) * 4
+    length = 4 * ((size + 2) // 3)
+    header = list(struct.unpack(f"<{3 + blocks}I", base64.b64decode(data[at:at + length])[:size]))
+    header[1] = 0
+    encoded = base64.b64encode(struct.pack(f"<{3 + blocks}I", *header))
+    assert len(encoded) == length
+    open(path, "wb").write(data[:at] + encoded + data[at + length:])
 
 
 main()

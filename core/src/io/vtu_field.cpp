@@ -1,4 +1,4 @@
-// read_vtu_field: the cells read_vtu returns as sources and a lookup over them. A file of its own,
+// read_vtu_field: the cells read_vtu_isolated returns as sources and a lookup over them. A file of its own,
 // apart from the reader, so that the reader builds without the rest of the core (the fuzz
 // target, scripts/fuzz.sh vtu).
 #include <memory>
@@ -11,7 +11,7 @@ namespace ldimesh {
 
 Status read_vtu_field(const std::string& path, const std::string& field, VtuField& out) {
   out = {};
-  if (Status st = read_vtu(path, field, out.elements); !st) return st;
+  if (Status st = read_vtu_isolated(path, field, out.elements); !st) return st;
   try {
     std::vector<const HexElementSource*> list;
     for (const VtuElements::Group& g : out.elements.groups) {

@@ -152,10 +152,10 @@ std::array<std::uint8_t, 3> view_colour(std::size_t k, const glm::dvec3& dir);
 // from extras. On error `out` is left unchanged.
 Status decode_glb(std::span<const std::uint8_t> glb, Mesh& out, GlbInfo* info = nullptr);
 
-// decode_glb in a child process (fork) whose CPU time is limited to `cpu_seconds` (rounded up to
-// whole seconds; 0: glb_decode_cpu_limit(glb.size())), for tools that read GLBs from elsewhere
-// (ldimesh-fetch, `ldimesh distance`): Debian's Draco 1.5.5 spends up to ≈ 15 s on a hostile
-// stream of a few KB (an unchecked count in its texture-coordinate predictor;
+// decode_glb in a child process (run_isolated, core/base/isolated.hpp) whose CPU time is limited to
+// `cpu_seconds` (rounded up to whole seconds; 0: glb_decode_cpu_limit(glb.size())), for tools that
+// read GLBs from elsewhere (ldimesh-fetch, `ldimesh distance`): Debian's Draco 1.5.5 spends up to ≈
+// 15 s on a hostile stream of a few KB (an unchecked count in its texture-coordinate predictor;
 // docs/reliability.md), which the limit turns into an error. The same mesh and info as
 // decode_glb, or its error; beyond that a corrupt_input Status when the limit stops the decoder
 // ("took more than N s of CPU") or the decoder dies of a signal, out_of_memory, io when no
