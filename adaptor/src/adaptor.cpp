@@ -55,17 +55,19 @@ struct Job {
   bool merge = false;  // §5 merging (the same on every rank: the ranks serve its samples)
 };
 
-// Puts the calling thread (the caster's, the root's worker) in Linux's SCHED_BATCH class: the
-// same share of the cores as before, but waking it does not take the core from the thread that
-// wakes it. The solver's thread, handing a step to its caster thread at the end of execute(),
-// otherwise lost its core to it for up to 4.6 ms there (Gray–Scott, 2 ranks on 2 cores; median
-// blocked time 12.9 → 9.0 ms per step). Threads it starts (TBB's workers, where it is the first
-// to use them) inherit the class. Nothing where the system refuses it.
-void run_as_batch_thread() {
+// Puts the calling thread in Linux's SCHED_BATCH class while it waits for work (`waiting`), back
+// in the normal class while it works. The caster's and the root's worker threads wait so: waking
+// a batch thread does not take the core from the thread that wakes it. The solver's thread,
+// handing a step to its caster thread at the end of execute(), otherwise lost its core to it for
+// up to 4.6 ms there (Gray–Scott, 2 ranks on 2 cores; median blocked time 12.9 → 9.0 ms per
+// step). Working in the normal class, neither leaves the batch class to threads they start
+// (TBB's workers, which the solver's own TBB work may share). Nothing where the system refuses
+// it.
+void wait_as_batch_thread([[maybe_unused]] bool waiting) {
 #ifdef SCHED_BATCH
   sched_param param{};
   param.sched_priority = 0;
-  pthread_setschedparam(pthread_self(), SCHED_BATCH, &param);
+  pthread_setschedparam(pthread_self(), waiting ? SCHED_BATCH : SCHED_OTHER, &param);
 #endif
 }
 
@@ -374,10 +376,7 @@ class AdaptorImpl final : public Adaptor {
       std::filesystem::create_directories(options_.output_dir, ec);
       if (ec) return Status::io("options: 'output_dir' cannot be created: " + ec.message());
     }
-    worker_ = std::thread([this] {
-      run_as_batch_thread();
-      work();
-    });
+    worker_ = std::thread([this] { work(); });
     return Status::ok();
   }
 
@@ -408,10 +407,7 @@ class AdaptorImpl final : public Adaptor {
     }
     MPI_Comm_dup(comm_, &background_comm_);
     background_ = true;
-    caster_ = std::thread([this] {
-      run_as_batch_thread();
-      cast_in_background();
-    });
+    caster_ = std::thread([this] { cast_in_background(); });
   }
 
   Status set_domain(const Box& global) override {
@@ -888,6 +884,7 @@ class AdaptorImpl final : public Adaptor {
   void cast_in_background() {
     while (true) {
       CasterJob cj;
+      wait_as_batch_thread(true);
       {
         std::unique_lock lock(mutex_);
         caster_wake_.wait(lock, [&] { return caster_stopping_ || caster_job_.has_value(); });
@@ -896,6 +893,7 @@ class AdaptorImpl final : public Adaptor {
         caster_job_.reset();
         casting_ = true;
       }
+      wait_as_batch_thread(false);
       const std::uint64_t step = cj.job.step;
       const Status failed = guard("", [&] {
         StepCasters casters;
@@ -990,6 +988,7 @@ class AdaptorImpl final : public Adaptor {
   void work() {
     while (true) {
       Job job;
+      wait_as_batch_thread(true);
       {
         std::unique_lock lock(mutex_);
         wake_.wait(lock, [&] { return stopping_ || pending_.has_value(); });
@@ -998,6 +997,7 @@ class AdaptorImpl final : public Adaptor {
         pending_.reset();
         working_ = true;
       }
+      wait_as_batch_thread(false);
       const Status failed = guard("", [&] { return publish(job); });
       std::lock_guard lock(mutex_);
       working_ = false;

@@ -56,7 +56,7 @@ Status decode_glb_isolated(std::span<const std::uint8_t> glb, Mesh& out, GlbInfo
       !r.get_vector(mesh.triangle_view) || !r.get_vector(mesh.view_dirs) || !r.get(triangles) ||
       !r.get(vertices) || !r.get(has_scalar) || !r.get(decoded.scalar_min) ||
       !r.get(decoded.scalar_max) || !r.done())
-    return Status::internal("glb: the decoder process's output is truncated");
+    return Status::internal("glb: the output of the decoder process is truncated");
   decoded.triangles = std::size_t(triangles);
   decoded.vertices = std::size_t(vertices);
   decoded.has_scalar = has_scalar != 0;

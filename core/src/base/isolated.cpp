@@ -38,7 +38,8 @@ constexpr int kNoPipe = 5;     // the parent stopped reading
 constexpr int kNoSignals = 6;  // the signal set-up failed
 
 // The child: signals as a fresh process has them, no descriptor but the pipe's, the CPU limit
-// (never above a hard limit it inherited), no core dump; the work, its output sent as the total
+// (never above a hard limit it inherited), no core dump, first in line for the out-of-memory
+// killer; the work, its output sent as the total
 // length of the rest (8 bytes), the Status (code, message) and what the work wrote; then _exit.
 [[noreturn]] void run_in_child(int fd, double cpu_seconds,
                                const std::function<Status(std::vector<std::uint8_t>&)>& work) {
@@ -68,21 +69,25 @@ constexpr int kNoSignals = 6;  // the signal set-up failed
   const rlimit no_core{0, 0};
   if (::setrlimit(RLIMIT_CPU, &cpu) != 0 || ::setrlimit(RLIMIT_CORE, &no_core) != 0)
     ::_exit(kNoLimit);
-  std::vector<std::uint8_t> out;
+  // The child, not the parent, is what the system's out-of-memory killer takes first.
+  if (const int oom = ::open("/proc/self/oom_score_adj", O_WRONLY | O_CLOEXEC); oom >= 0) {
+    [[maybe_unused]] const ssize_t written = ::write(oom, "1000", 4);
+    ::close(oom);
+  }
+  std::vector<std::uint8_t> header, result;
   try {
-    ByteWriter w(out);
-    w.put(std::uint64_t(0));  // the length, below
-    std::vector<std::uint8_t> result;
     const Status s = work(result);
+    if (!s) result.clear();
+    ByteWriter w(header);
+    w.put(std::uint64_t(0));  // the length, below
     w.put(std::int32_t(s.code()));
     w.put_vector(std::vector<char>(s.message().begin(), s.message().end()));
-    if (s) out.insert(out.end(), result.begin(), result.end());
-    const std::uint64_t length = out.size() - sizeof(std::uint64_t);
-    std::memcpy(out.data(), &length, sizeof length);
+    const std::uint64_t length = header.size() - sizeof(std::uint64_t) + result.size();
+    std::memcpy(header.data(), &length, sizeof length);
   } catch (...) {
     ::_exit(kNoMemory);
   }
-  ::_exit(write_all(fd, out) ? 0 : kNoPipe);
+  ::_exit(write_all(fd, header) && write_all(fd, result) ? 0 : kNoPipe);
 }
 
 // Reads the child's output from `fd` into `bytes` until EOF or `deadline`. Returns 0, an errno,
@@ -200,8 +205,10 @@ Status run_isolated(const IsolatedTask& task,
                              ? StatusCode(code)
                              : StatusCode::internal,
                          std::string(message.begin(), message.end()));
+  // The payload in place (no second copy of what may be gigabytes).
   const std::size_t at = sizeof length + sizeof code + sizeof(std::uint64_t) + message.size();
-  out.assign(bytes.begin() + std::ptrdiff_t(at), bytes.end());
+  bytes.erase(bytes.begin(), bytes.begin() + std::ptrdiff_t(at));
+  out = std::move(bytes);
   return Status::ok();
 }
 

@@ -20,7 +20,6 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
-#include <tbb/partitioner.h>
 #include <tbb/task_arena.h>
 
 namespace ldimesh {
@@ -1697,23 +1696,21 @@ GridView<T> make_view(const GridBlock& block, const T* values,
 }  // namespace
 
 // Calls f(begin, end) over layers 0 … n − 1 of `layer_points` points each: on the calling thread
-// where they hold fewer than 8 Mi points, else in tasks of about that many. The snapshot's scan
-// and copies (needed_bricks, for_each_needed_run) run on the solver's thread; where ranks share
-// cores (the Gray–Scott bench: 2 ranks on 2 cores), waiting there for TBB's workers, which
-// another rank's threads can hold off a core, cost more than they saved: the scan of a
-// 194 × 194 × 98 block took 2.1–8 ms (median 4.3) in tasks, 3.8–4.0 ms on the solver's thread.
+// where they hold at most 8 Mi points, else in tasks of a layer or more on all cores. The
+// snapshot's scan and copies (needed_bricks, for_each_needed_run) run on the solver's thread;
+// where ranks share cores (the Gray–Scott bench: 2 ranks on 2 cores), waiting there for TBB's
+// workers, which another rank's threads can hold off a core, cost more than they saved: the scan
+// of a 194 × 194 × 98 block (3.7 M points) took 2.1–8 ms (median 4.3) in tasks, 3.8–4.0 ms on
+// the solver's thread. A larger block (a rank with many cores to itself) is still spread.
 template <class F>
 void for_layers(std::int64_t n, std::int64_t layer_points, F&& f) {
-  const std::int64_t grain =
-      std::max<std::int64_t>(1, (std::int64_t(8) << 20) / std::max<std::int64_t>(1, layer_points));
-  if (n <= grain) {
+  if (n <= 0) return;
+  if (layer_points <= (std::int64_t(8) << 20) / n) {
     f(std::int64_t(0), n);
     return;
   }
-  tbb::parallel_for(
-      tbb::blocked_range<std::int64_t>(0, n, std::size_t(grain)),
-      [&](const tbb::blocked_range<std::int64_t>& r) { f(r.begin(), r.end()); },
-      tbb::simple_partitioner());
+  tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, n),
+                    [&](const tbb::blocked_range<std::int64_t>& r) { f(r.begin(), r.end()); });
 }
 
 std::vector<std::uint8_t> GridSource::needed_bricks(std::span<const double> isovalues) const {

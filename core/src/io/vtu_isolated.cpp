@@ -1,8 +1,9 @@
 // read_vtu_isolated: read_vtu in a child process (vtu.hpp).
+#include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
-#include <regex>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -14,21 +15,35 @@ namespace ldimesh {
 namespace {
 
 // The bytes VTK reads for `path`: the file, and for a .pvtu record the pieces it names (its
-// Source attributes, relative to the record's folder) that exist.
+// Source attributes, relative to the record's folder) that exist. A plain scan, in the parent:
+// std::regex recurses once per character matched, and a long attribute would overflow the stack.
 double input_bytes(const std::string& path) {
   namespace fs = std::filesystem;
   std::error_code ec;
   double bytes = double(fs::file_size(path, ec));
   if (ec) return 0.0;
-  if (fs::path(path).extension() != ".pvtu") return bytes;
+  // (A record of more than 64 MiB, no real one, gives a generous limit by itself.)
+  if (fs::path(path).extension() != ".pvtu" || bytes > double(64 << 20)) return bytes;
   std::ifstream in(path, std::ios::binary);
   std::ostringstream text;
   text << in.rdbuf();
   const std::string record = text.str();
-  static const std::regex source("Source\\s*=\\s*\"([^\"]*)\"");
-  for (auto it = std::sregex_iterator(record.begin(), record.end(), source);
-       it != std::sregex_iterator(); ++it) {
-    const std::uintmax_t size = fs::file_size(fs::path(path).parent_path() / (*it)[1].str(), ec);
+  for (std::size_t at = record.find("Source"); at != std::string::npos;
+       at = record.find("Source", at + 1)) {
+    std::size_t p = at + 6;
+    const auto skip_space = [&] {
+      while (p < record.size() && std::isspace(static_cast<unsigned char>(record[p])))
+        ++p;
+    };
+    skip_space();
+    if (p >= record.size() || record[p] != '=') continue;
+    ++p;
+    skip_space();
+    if (p >= record.size() || (record[p] != '"' && record[p] != '\'')) continue;
+    const std::size_t end = record.find(record[p], p + 1);
+    if (end == std::string::npos) break;
+    const std::uintmax_t size =
+        fs::file_size(fs::path(path).parent_path() / record.substr(p + 1, end - p - 1), ec);
     if (!ec) bytes += double(size);
   }
   return bytes;
@@ -79,26 +94,29 @@ Status read_vtu_isolated(const std::string& path, const std::string& field, VtuE
   ByteReader r(bytes);
   VtuElements read;
   std::uint64_t groups = 0, cells = 0;
-  if (!r.get(groups) || groups > bytes.size()) return truncated;
+  // What read_vtu promises, checked again on this side of the pipe: one to eight groups of
+  // increasing orders 1–8, (p + 1)³ values, points and colours per cell, cells that add up.
+  if (!r.get(groups) || groups < 1 || groups > 8) return truncated;
   read.groups.resize(std::size_t(groups));
+  std::size_t total = 0;
+  int previous = 0;
   for (VtuElements::Group& g : read.groups) {
     std::int32_t order = 0;
     std::uint64_t count = 0;
-    if (!r.get(order) || !r.get(count) || !r.get_vector(g.geometry) || !r.get_vector(g.values) ||
-        !r.get_vector(g.colour))
+    if (!r.get(order) || order <= previous || order > 8 || !r.get(count) ||
+        !r.get_vector(g.geometry) || !r.get_vector(g.values) || !r.get_vector(g.colour))
       return truncated;
-    g.order = order;
-    g.cells = std::size_t(count);
-    // What read_vtu promises of a group, checked again on this side of the pipe.
-    const std::size_t nodes =
-        std::size_t(order + 1) * std::size_t(order + 1) * std::size_t(order + 1);
-    if (order < 1 || order > 8 || g.values.size() != g.cells * nodes ||
-        g.geometry.size() != 3 * g.values.size() ||
+    previous = g.order = order;
+    const std::size_t nodes = std::size_t(order + 1) * (order + 1) * (order + 1);
+    if (g.values.size() % nodes != 0 || count != g.values.size() / nodes ||
+        g.geometry.size() % 3 != 0 || g.geometry.size() / 3 != g.values.size() ||
         (!g.colour.empty() && g.colour.size() != g.values.size()))
       return truncated;
+    g.cells = std::size_t(count);
+    total += g.cells;
   }
-  if (!r.get(cells) || !r.get(read.bounds) || !r.get(read.min_value) || !r.get(read.max_value) ||
-      !r.done())
+  if (!r.get(cells) || cells != total || !r.get(read.bounds) || !r.get(read.min_value) ||
+      !r.get(read.max_value) || !r.done())
     return truncated;
   read.cells = std::size_t(cells);
   out = std::move(read);

@@ -715,11 +715,69 @@ TEST(GridSource, RayCasterSumsNonFiniteCountsOverBlocks) {
   EXPECT_EQ(RayCaster(one, 0.5).nonfinite_values(), 4u);
 }
 
+// needed_bricks' definition, brick by brick: the bricks as GridSource documents them (cells
+// first … last per axis, brick_cells each, x fastest; a brick reads its cells' points lo … hi + 1)
+// whose points hold an isovalue between their finite minimum and maximum, or a NaN or ±Inf.
+// at(i, j, k): the value of point (i, j, k).
+template <class At>
+std::vector<std::uint8_t> needed_by_definition(const GridBlock& block, int brick_cells,
+                                               const std::vector<double>& isovalues, At at) {
+  std::array<std::int64_t, 3> first{}, last{}, count{};
+  for (int a = 0; a < 3; ++a) {
+    first[a] = block.ghost_lo[a];
+    last[a] = std::min(block.dims[a] - 1 - block.ghost_hi[a], block.dims[a] - 2);
+    count[a] = (last[a] - first[a] + brick_cells) / brick_cells;
+  }
+  std::vector<std::uint8_t> needed(std::size_t(count[0] * count[1] * count[2]), 0);
+  for (std::int64_t bz = 0; bz < count[2]; ++bz)
+    for (std::int64_t by = 0; by < count[1]; ++by)
+      for (std::int64_t bx = 0; bx < count[0]; ++bx) {
+        const std::array<std::int64_t, 3> b{bx, by, bz};
+        std::array<std::int64_t, 3> lo{}, hi{};
+        for (int a = 0; a < 3; ++a) {
+          lo[a] = first[a] + b[a] * brick_cells;
+          hi[a] = std::min(last[a], lo[a] + brick_cells - 1) + 1;
+        }
+        double min = kInf, max = -kInf;
+        bool nonfinite = false;
+        for (std::int64_t k = lo[2]; k <= hi[2]; ++k)
+          for (std::int64_t j = lo[1]; j <= hi[1]; ++j)
+            for (std::int64_t i = lo[0]; i <= hi[0]; ++i) {
+              const double v = at(i, j, k);
+              if (!std::isfinite(v)) {
+                nonfinite = true;
+              } else {
+                min = std::min(min, v);
+                max = std::max(max, v);
+              }
+            }
+        bool expected = nonfinite;
+        for (const double iso : isovalues)
+          expected = expected || (min <= iso && iso <= max);
+        needed[std::size_t(bx + count[0] * (by + count[1] * bz))] = expected;
+      }
+  return needed;
+}
+
+// The bricks where `got` and `expected` differ, at most ten, for a failure message.
+std::string differing_bricks(const std::vector<std::uint8_t>& got,
+                             const std::vector<std::uint8_t>& expected) {
+  std::string out;
+  int shown = 0;
+  for (std::size_t n = 0; n < std::min(got.size(), expected.size()) && shown < 10; ++n)
+    if ((got[n] != 0) != (expected[n] != 0)) {
+      out += ' ';
+      out += std::to_string(n);
+      out += expected[n] ? " (missed)" : " (extra)";
+      ++shown;
+    }
+  return out;
+}
+
 TEST(GridSource, NeededBricksAreThoseABruteForceScanFinds) {
-  // needed_bricks against its definition, brick by brick: the brick's points (its cells' corner
-  // points) hold an isovalue between their finite minimum and maximum, or a NaN or ±Inf. A smooth
-  // field with noise (bricks in and out of range), non-finite points at random places (every
-  // lane of a vector and the rows' tails), float and double, rows in memory order (the
+  // needed_bricks against its definition: a smooth field with noise (bricks in and out of
+  // range), non-finite points at random places and at every offset within a brick's row (every
+  // lane of a vector, and the rows' tails), float and double, rows in memory order (the
   // vectorized scan) and z fastest (the scalar one), several brick sizes, ghost layers.
   const int n = 23;
   const std::vector<double> isovalues{0.45, 1.7};
@@ -732,6 +790,13 @@ TEST(GridSource, NeededBricksAreThoseABruteForceScanFinds) {
   const double bad[] = {kNaN, kInf, -kInf};
   for (int m = 0; m < 12; ++m)
     values[(std::size_t(point(rng)) * n + point(rng)) * n + point(rng)] = bad[m % 3];
+  // Row (j, k) = (3, 4): point 1 + 9b + b of brick b of 8 cells (cells from x = 1), offsets 0 …
+  // 8 within its row: each lane, and the last point, which no full vector holds.
+  for (int b = 0; b < 2; ++b)
+    for (int offset = 0; offset <= 8; ++offset) {
+      const int i = 1 + 8 * b + offset, j = 3 + 9 * b + offset % 3, k = 4 + 2 * (offset / 3);
+      if (i < n && j < n && k < n) values[(std::size_t(k) * n + j) * n + i] = bad[offset % 3];
+    }
   // Huge finite values, whose sum overflows: neither needed nor skipped for that.
   values[(std::size_t(20) * n + 2) * n + 2] = 1.5e308;
   values[(std::size_t(20) * n + 2) * n + 3] = 1.5e308;
@@ -742,7 +807,7 @@ TEST(GridSource, NeededBricksAreThoseABruteForceScanFinds) {
         SCOPED_TRACE(std::string(type == ScalarType::float32 ? "float" : "double") +
                      (z_fastest ? ", z fastest" : "") + ", bricks of " +
                      std::to_string(brick_cells));
-        const auto index = [&](int i, int j, int k) {
+        const auto index = [&](std::int64_t i, std::int64_t j, std::int64_t k) {
           return z_fastest ? (std::size_t(i) * n + j) * n + k : (std::size_t(k) * n + j) * n + i;
         };
         std::vector<double> doubles(values.size());
@@ -758,50 +823,46 @@ TEST(GridSource, NeededBricksAreThoseABruteForceScanFinds) {
         if (z_fastest) block.strides = {std::int64_t(n) * n, n, 1};
         block.ghost_lo = {1, 0, 2};
         block.ghost_hi = {2, 1, 0};
-        const GridSource grid(block, brick_cells);
-        const std::vector<std::uint8_t> needed = grid.needed_bricks(isovalues);
-        // The bricks as GridSource documents them: cells first … last per axis, brick_cells
-        // each, x fastest; a brick reads its cells' points lo … hi + 1.
-        std::array<int, 3> first{}, last{}, count{};
-        for (int a = 0; a < 3; ++a) {
-          first[a] = int(block.ghost_lo[a]);
-          last[a] = std::min(n - 1 - int(block.ghost_hi[a]), n - 2);
-          count[a] = (last[a] - first[a] + brick_cells) / brick_cells;
-        }
-        ASSERT_EQ(needed.size(), std::size_t(count[0]) * count[1] * count[2]);
-        for (int bz = 0; bz < count[2]; ++bz)
-          for (int by = 0; by < count[1]; ++by)
-            for (int bx = 0; bx < count[0]; ++bx) {
-              const std::array<int, 3> b{bx, by, bz};
-              std::array<int, 3> lo{}, hi{};
-              for (int a = 0; a < 3; ++a) {
-                lo[a] = first[a] + b[a] * brick_cells;
-                hi[a] = std::min(last[a], lo[a] + brick_cells - 1) + 1;
-              }
-              double min = kInf, max = -kInf;
-              bool nonfinite = false;
-              for (int k = lo[2]; k <= hi[2]; ++k)
-                for (int j = lo[1]; j <= hi[1]; ++j)
-                  for (int i = lo[0]; i <= hi[0]; ++i) {
-                    const double v = type == ScalarType::float64 ? doubles[index(i, j, k)]
-                                                                 : double(floats[index(i, j, k)]);
-                    if (!std::isfinite(v)) {
-                      nonfinite = true;
-                    } else {
-                      min = std::min(min, v);
-                      max = std::max(max, v);
-                    }
-                  }
-              bool expected = nonfinite;
-              for (const double iso : isovalues)
-                expected = expected || (min <= iso && iso <= max);
-              EXPECT_EQ(needed[std::size_t(bx + count[0] * (by + count[1] * bz))] != 0, expected)
-                  << "brick " << bx << " " << by << " " << bz;
-              (expected ? needed_any : skipped_any) += 1;
-            }
+        const std::vector<std::uint8_t> needed =
+            GridSource(block, brick_cells).needed_bricks(isovalues);
+        const std::vector<std::uint8_t> expected = needed_by_definition(
+            block, brick_cells, isovalues, [&](std::int64_t i, std::int64_t j, std::int64_t k) {
+              return type == ScalarType::float64 ? doubles[index(i, j, k)]
+                                                 : double(floats[index(i, j, k)]);
+            });
+        ASSERT_EQ(needed.size(), expected.size());
+        EXPECT_EQ(needed, expected) << "bricks:" << differing_bricks(needed, expected);
+        for (const std::uint8_t e : expected)
+          (e ? needed_any : skipped_any) += 1;
       }
   EXPECT_GT(needed_any, 200u);
   EXPECT_GT(skipped_any, 200u);
+}
+
+TEST(GridSource, NeededBricksOfABlockOfMoreThanEightMiPointsAreThoseABruteForceScanFinds) {
+  // Above 8 Mi points needed_bricks runs in tasks on all cores (below, on the calling thread):
+  // 208³ float points, rows in memory order, a few non-finite points.
+  const int n = 208;
+  const std::vector<double> isovalues{0.5};
+  std::vector<float> values = sample<float>(n, -1.0, 1.0, wavy_field);
+  std::mt19937 rng(5);
+  std::uniform_int_distribution<int> point(0, n - 1);
+  const float bad[] = {std::numeric_limits<float>::quiet_NaN(),
+                       std::numeric_limits<float>::infinity()};
+  for (int m = 0; m < 20; ++m)
+    values[(std::size_t(point(rng)) * n + point(rng)) * n + point(rng)] = bad[m % 2];
+  GridBlock block = uniform_block(values.data(), ScalarType::float32, n, -1.0, 1.0);
+  block.ghost_lo = {1, 1, 1};
+  const std::vector<std::uint8_t> needed = GridSource(block, 8).needed_bricks(isovalues);
+  const std::vector<std::uint8_t> expected = needed_by_definition(
+      block, 8, isovalues, [&](std::int64_t i, std::int64_t j, std::int64_t k) {
+        return double(values[(std::size_t(k) * n + std::size_t(j)) * n + std::size_t(i)]);
+      });
+  ASSERT_EQ(needed.size(), expected.size());
+  EXPECT_EQ(needed, expected) << "bricks:" << differing_bricks(needed, expected);
+  const auto count = std::count(expected.begin(), expected.end(), 1);
+  EXPECT_GT(count, std::ptrdiff_t(expected.size() / 10));
+  EXPECT_LT(count, std::ptrdiff_t(expected.size() * 9 / 10));
 }
 
 TEST(GridSource, ACopyOfTheNeededBricksCastsWhatTheWholeBlockCasts) {

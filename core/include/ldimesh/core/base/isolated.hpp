@@ -30,7 +30,8 @@ struct IsolatedTask {
 
 // Runs `work` in a forked child and gives what it wrote into `out` (replaced), or its error
 // Status (code and message as the child returned them). The child resets its signals, keeps no
-// descriptor but its pipe, ends with its parent, writes no core dump, has the CPU limit (never
+// descriptor but its pipe, ends with its parent, writes no core dump, is the first the system's
+// out-of-memory killer takes (oom_score_adj 1000), has the CPU limit (never
 // above a hard limit it inherited), runs `work` only and leaves with _exit (no exit handlers, no
 // destructors). The calling thread alone goes on in the child: meant for a multithreaded caller
 // too, where no other thread holds a lock `work` needs at the fork (glibc's fork resets its

@@ -54,16 +54,17 @@ class GridSource final : public FieldSource {
   std::size_t brick_count() const;
   int brick_cells() const { return brick_cells_; }
   // Per brick (x fastest): whether the range of its points holds one of `isovalues` or one of
-  // them is NaN or ±Inf (or their sum overflows): a superset of the bricks that bind() and
+  // them is NaN or ±Inf: a superset of the bricks that bind() and
   // bind_axis() for these isovalues read, with the points around them that the hits' normals
-  // read. Reads the values in place, on all cores.
+  // read. Reads the values in place, on the calling thread up to 8 Mi points, else on all cores.
   std::vector<std::uint8_t> needed_bricks(std::span<const double> isovalues) const;
   // Calls f(j, k, i0, i1) for each stretch of points i0 … i1 of point row (j, k) (indices of the
   // block's points, ghosts included) that a source holding the bricks `held` marks reads: for a
   // brick of cells lo … hi along an axis, points lo − 1 … hi + 2 where the block has them (its
   // cells' points and one layer more on each side: the normals' central differences, and the
-  // colour probe in the cells beside its faces). The stretches do not overlap; f runs
-  // concurrently for different k (rows of one k in order, on one thread). Throws
+  // colour probe in the cells beside its faces). The stretches do not overlap; f may run
+  // concurrently for different k (rows of one k in order, on one thread; all on the calling
+  // thread for a block of up to 8 Mi points). Throws
   // std::invalid_argument for a mask of the wrong size.
   void for_each_needed_run(
       std::span<const std::uint8_t> held,
