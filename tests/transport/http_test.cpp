@@ -710,6 +710,42 @@ TEST_F(Http, HugeRequestsAreRefused) {
   EXPECT_EQ(status_of(raw_get(port_, "/")), 200);
 }
 
+TEST_F(Http, ClientCancelEndsALongPollInFlight) {
+  // cancel() from another thread stops the request on the wire (httplib's stop()): a long poll
+  // that would wait 30 s returns at once, "interrupted"; the client then works again. The first
+  // cancel() at different moments, then one every 20 ms until the call returns (a cancel()
+  // before the call began belongs to the call before, and is reset), for ThreadSanitizer's sake
+  // too. The long polls stay open on the server until stop() (docs/api.md).
+  HttpClient c = client();
+  for (const auto first : {0ms, 1ms, 50ms, 300ms}) {
+    SCOPED_TRACE("first cancel after " + std::to_string(first.count()) + " ms");
+    std::optional<RemoteStep> got;
+    std::atomic<bool> returned{false};
+    const auto start = Clock::now();
+    std::thread canceller([&] {
+      std::this_thread::sleep_for(first);
+      while (!returned) {
+        c.cancel();
+        std::this_thread::sleep_for(20ms);
+      }
+    });
+    const Status s = c.wait_for_newer(3, 30s, got);
+    returned = true;
+    canceller.join();
+    EXPECT_FALSE(s);
+    EXPECT_NE(s.message().find("interrupted"), std::string::npos) << s.message();
+    EXPECT_LT(seconds_since(start), 10.0);
+    EXPECT_FALSE(got.has_value());
+  }
+  // A step newer than `after` is answered at once, though the cancelled polls that reached the
+  // server hold its long-poll places (four) until their 30 s end.
+  std::optional<RemoteStep> got;
+  const Status s = c.wait_for_newer(2, 5s, got);
+  ASSERT_TRUE(s) << s.message();
+  ASSERT_TRUE(got.has_value());
+  EXPECT_EQ(got->metadata.step, 3u);
+}
+
 TEST_F(Http, StopIsPromptWithOpenStreamsAndLongPolls) {
   options_.event_keep_alive = 15s;
   server_.reset();

@@ -139,6 +139,17 @@ struct HttpClient::Impl {
   std::atomic<bool> canceled{false};    // cancel(): no further retry
   std::atomic<bool> requesting{false};  // a request in flight, which cancel() stops
 
+  // Marks a request in flight; false where cancel() came first. cancel() sets `canceled`, then
+  // reads `requesting`; this sets `requesting`, then reads `canceled` (sequentially consistent):
+  // one of the two sees the other, so a cancel() that lands just before the request starts
+  // is not lost.
+  bool begin_request() {
+    requesting = true;
+    if (!canceled) return true;
+    requesting = false;
+    return false;
+  }
+
   Status transport_error(httplib::Error error, const std::string& what) const;
   Status http_error(int status, const std::string& body, const std::string& what);
   Status get(const std::string& path, const std::string& what, std::string& body, int& status);
@@ -188,10 +199,11 @@ Status HttpClient::Impl::get(const std::string& path, const std::string& what, s
                              int& status) {
   canceled = false;  // a cancel() before this call ended the one before
   for (int attempt = 0;; ++attempt) {
-    requesting = true;
+    if (!begin_request()) return transport_error(httplib::Error::Canceled, what);
     auto result = client.Get(path);
     requesting = false;
-    if (!result) return transport_error(result.error(), what);
+    // A request cancel() stopped fails as a read or write on the closed socket: "interrupted".
+    if (!result) return transport_error(canceled ? httplib::Error::Canceled : result.error(), what);
     status = result->status;
     body = std::move(result->body);
     if ((status != 503 && status != 429) || attempt >= options.retries) return Status::ok();
@@ -309,7 +321,9 @@ Status HttpClient::mesh(std::uint64_t step, std::vector<std::uint8_t>& out,
   bool too_large = false;
   std::vector<std::uint8_t> glb;
   std::string error_body;
-  impl_->requesting = true;
+  impl_->canceled = false;  // a cancel() before this call ended the one before
+  if (!impl_->begin_request())
+    return impl_->transport_error(httplib::Error::Canceled, "the mesh of " + what);
   auto result = impl_->client.Get(
       "/api/v1/steps/" + std::to_string(step) + "/mesh.glb",
       [&](const httplib::Response& response) {
@@ -342,7 +356,9 @@ Status HttpClient::mesh(std::uint64_t step, std::vector<std::uint8_t>& out,
     return Status::corrupt_input(what + ": corrupt download: larger than the limit of " +
                                  std::to_string(limit) + " bytes");
   }
-  if (!result) return impl_->transport_error(result.error(), "the mesh of " + what);
+  if (!result)
+    return impl_->transport_error(impl_->canceled ? httplib::Error::Canceled : result.error(),
+                                  "the mesh of " + what);
   if (status == 404) return impl_->not_found(step);
   if (status != 200) return impl_->http_error(status, error_body, "the mesh of " + what);
   if (content_length && *content_length != glb.size()) {

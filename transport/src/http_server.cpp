@@ -343,17 +343,19 @@ void HttpServer::Impl::latest(const Request& req, Response& res) {
     wait = *w;
   }
 
-  std::shared_ptr<const Snapshot> snapshot;
-  if (wait > 0) {
+  // A step newer than `after` (any step without it) is the answer at once, wait or not.
+  std::shared_ptr<const Snapshot> snapshot = store.latest();
+  if (snapshot && after && snapshot->step <= *after) snapshot = nullptr;
+  if (!snapshot && wait > 0) {
+    // Waiting takes one of max_streams until the answer, even where the client has gone in
+    // between (httplib 0.11 shows a handler nothing of its connection): a client that cancels a
+    // long poll leaves its place taken for the rest of the wait.
     if (!acquire_stream()) {
       res.set_header("Retry-After", "1");
       return set_error(res, 503, "too many long polls and event streams open");
     }
     snapshot = store.wait_for_newer(after, std::chrono::seconds(wait), stop_source.get_token());
     release_stream();
-  } else {
-    snapshot = store.latest();
-    if (snapshot && after && snapshot->step <= *after) snapshot = nullptr;
   }
 
   if (snapshot) return res.set_content(snapshot->metadata_json, "application/json");
