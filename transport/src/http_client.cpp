@@ -265,10 +265,9 @@ std::string HttpClient::base_url() const {
 
 void HttpClient::cancel() {
   impl_->canceled = true;
-  // Only a request in flight needs stopping (a retry's wait ends on the flag). Stopping an idle
-  // httplib client has nothing to do, and ThreadSanitizer reports its mutex as unlocked there:
-  // the lock is taken inside libcpp-httplib.so, whose calls tsan.supp ignores
-  // (called_from_lib), the unlock inlined from httplib.h into this function.
+  // Only a request in flight needs stopping (a retry's wait ends on the flag; begin_request sees
+  // one that comes before the request). httplib's stop() locks inside libcpp-httplib.so and
+  // unlocks inline here, which ThreadSanitizer reports (tsan.supp says why that is suppressed).
   if (impl_->requesting) impl_->client.stop();
 }
 

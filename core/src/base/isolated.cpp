@@ -206,8 +206,7 @@ Status run_isolated(const IsolatedTask& task,
                              : StatusCode::internal,
                          std::string(message.begin(), message.end()));
   // The payload in place (no second copy of what may be gigabytes).
-  const std::size_t at = sizeof length + sizeof code + sizeof(std::uint64_t) + message.size();
-  bytes.erase(bytes.begin(), bytes.begin() + std::ptrdiff_t(at));
+  bytes.erase(bytes.begin(), bytes.begin() + std::ptrdiff_t(r.position()));
   out = std::move(bytes);
   return Status::ok();
 }

@@ -1,5 +1,5 @@
-// read_vtu_field: the cells read_vtu_isolated returns as sources and a lookup over them. A file of its own,
-// apart from the reader, so that the reader builds without the rest of the core (the fuzz
+// read_vtu_field: the cells read_vtu_isolated returns as sources and a lookup over them. A file of
+// its own, apart from the reader, so that the reader builds without the rest of the core (the fuzz
 // target, scripts/fuzz.sh vtu).
 #include <memory>
 #include <stdexcept>

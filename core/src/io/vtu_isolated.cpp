@@ -49,11 +49,12 @@ double input_bytes(const std::string& path) {
   return bytes;
 }
 
-}  // namespace
-
-double vtu_read_cpu_limit(double input_bytes) {
+// The CPU limit for `input_bytes` bytes of files: 60 s + 10 s per MiB, whole seconds.
+double cpu_limit(double input_bytes) {
   return std::min(1e6, 60.0 + std::floor(10.0 * input_bytes / double(1 << 20)));
 }
+
+}  // namespace
 
 Status read_vtu_isolated(const std::string& path, const std::string& field, VtuElements& out,
                          const std::string& colour_field) {
@@ -65,7 +66,7 @@ Status read_vtu_isolated(const std::string& path, const std::string& field, VtuE
   task.died =
       "a damaged file (VTK 9.1's XML reader does not check the sizes inside compressed data; "
       "docs/reliability.md)";
-  task.cpu_seconds = vtu_read_cpu_limit(input_bytes(path));
+  task.cpu_seconds = cpu_limit(input_bytes(path));
   // The child sends the groups (order, cells, geometry, values, colour), then the totals.
   std::vector<std::uint8_t> bytes;
   LDIMESH_RETURN_IF_ERROR(run_isolated(

@@ -160,12 +160,9 @@ Status decode_glb(std::span<const std::uint8_t> glb, Mesh& out, GlbInfo* info = 
 // decode_glb, or its error; beyond that a corrupt_input Status when the limit stops the decoder
 // ("took more than N s of CPU") or the decoder dies of a signal, out_of_memory, io when no
 // process can be started or its CPU cannot be limited, internal when it makes no progress for 4×
-// the limit in wall time (it is then killed). `out` changes only on success. The calling thread
-// alone goes on in the child (fork), which resets its signals, keeps no descriptor but its pipe,
-// dies with its parent, calls decode_glb only and leaves with _exit: meant for a multithreaded
-// caller too, where no other thread holds a lock decode_glb needs at the fork (glibc's fork
-// resets its allocator's); the wall-time limit ends a child that would wait on one.
-// cpu_seconds outside [1, 10⁶] is invalid_argument.
+// the limit in wall time (it is then killed). `out` changes only on success. The child and what
+// a multithreaded caller may expect of it: run_isolated. cpu_seconds outside [1, 10⁶] is
+// invalid_argument.
 Status decode_glb_isolated(std::span<const std::uint8_t> glb, Mesh& out, GlbInfo* info = nullptr,
                            double cpu_seconds = 0.0);
 

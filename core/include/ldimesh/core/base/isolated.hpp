@@ -86,6 +86,7 @@ class ByteReader {
     return get_bytes(v.data(), std::size_t(n) * sizeof(T));
   }
   bool done() const { return at_ == in_.size(); }
+  std::size_t position() const { return at_; }  // the bytes read so far
 
  private:
   bool get_bytes(void* data, std::size_t n) {

@@ -53,14 +53,11 @@ Status read_vtu(const std::string& path, const std::string& field, VtuElements& 
 // trusts the sizes inside compressed data, so that a damaged file can crash it (a block size of
 // 0: SIGFPE) or write through an allocation it does not check (docs/reliability.md). Here that
 // is a corrupt_input error naming the file ("VTK's reader process died of signal 8 …"), as is a
-// read that takes more than vtu_read_cpu_limit seconds of CPU; the rest as read_vtu, whose
+// read that takes more than 60 s + 10 s per MiB of the file (and a .pvtu's pieces) of CPU; the
+// rest as read_vtu, whose
 // elements come back through a pipe, every count checked. `out` changes only on success.
 Status read_vtu_isolated(const std::string& path, const std::string& field, VtuElements& out,
                          const std::string& colour_field = "");
-
-// read_vtu_isolated's CPU limit for `input_bytes` bytes of files (a .pvtu record and its pieces):
-// 60 s + 10 s per MiB, whole seconds.
-double vtu_read_cpu_limit(double input_bytes);
 
 // A file's field at world points: its cells, their sources and the lookup over them (for
 // distances to, and projections onto, the cells' exact isosurface).
