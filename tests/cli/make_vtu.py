@@ -6,6 +6,7 @@
                                VTK_HEXAHEDRON cells beyond x = 1 (r > 1 there: no surface), as
                                mixed-order files have them; a second point array "vec" with 3
                                components, and "h" = x + 2y (exact on every cell: to colour by).
+  make_vtu.py ascii OUT.vtu    the sphere, uncompressed ASCII
   make_vtu.py tetra OUT.vtu    one VTK_TETRA beside one Lagrange hexahedron
   make_vtu.py degrees OUT.vtu  one order-2 Lagrange hexahedron whose HigherOrderDegrees say 2, 2, 3
   make_vtu.py badpoint OUT.vtu two order-2 Lagrange hexahedra, the second naming point 1000 of 54
@@ -48,7 +49,7 @@ def main():
     values = vtkDoubleArray()
     values.SetName("r")
     r2 = lambda x: x[0] ** 2 + x[1] ** 2 + x[2] ** 2
-    if kind in ("sphere", "pieces", "zeroblock"):
+    if kind in ("sphere", "ascii", "pieces", "zeroblock"):
         n = 4
         for k in range(n):
             for j in range(n):
@@ -107,6 +108,9 @@ def main():
         writer.SetEndPiece(1)
     else:
         writer = vtkXMLUnstructuredGridWriter()
+    if kind == "ascii":
+        writer.SetCompressorTypeToNone()
+        writer.SetDataModeToAscii()
     if kind == "zeroblock":
         writer.SetCompressorTypeToZLib()
         writer.SetDataModeToAppended()

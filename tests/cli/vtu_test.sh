@@ -4,16 +4,17 @@
 # sphere of radius 0.7 (`ldimesh distance` to the sphere, and the same figures to the file's own
 # isosurface with `distance --vtu`), also from a .pvtu over two pieces; one-line errors naming the field or
 # the cell for a missing field, a vector field, an unsupported cell type, orders that differ
-# along the axes, a cell naming a point the file does not have, more points declared than the
-# file can hold, a missing piece, a compression header that crashes VTK's reader (read in a
-# child process: one line, exit 1).
+# along the axes, a cell naming a point the file does not have, more points or values declared
+# than the file can hold, a component count that is not one, two arrays of one name, a missing
+# piece, a compression header that crashes VTK's reader (read in a child process: one line,
+# exit 1).
 #   vtu_test.sh LDIMESH SOURCE_DIR
 set -u
 ldimesh=$1
 src=$2
 . "$(dirname "$0")/../lib.sh"
 test_setup
-for kind in sphere tetra degrees badpoint zeroblock; do
+for kind in sphere ascii tetra degrees badpoint zeroblock; do
   /usr/bin/python3 "$src/tests/cli/make_vtu.py" $kind "$tmp/$kind.vtu" || fail "make_vtu.py $kind"
 done
 /usr/bin/python3 "$src/tests/cli/make_vtu.py" pieces "$tmp/pieces.pvtu" || fail "make_vtu.py pieces"
@@ -118,6 +119,36 @@ assert b'NumberOfPoints="' in data
 open(sys.argv[2], "wb").write(data.replace(b'NumberOfPoints="', b'NumberOfPoints="90000000000', 1))
 PY
 expect_error "declares 900000000001744 points and 66 cells, more than its" --vtu "$tmp/huge.vtu" --field r
+# Damaged XML, each refused before VTK reads the data (write_damaged FROM TO OLD NEW [COUNT]:
+# the first COUNT occurrences of OLD replaced by NEW, which must be there).
+write_damaged() {
+  /usr/bin/python3 - "$@" <<'PY' || fail "cannot write $2"
+import sys
+data = open(sys.argv[1], "rb").read()
+old, new = sys.argv[3].encode(), sys.argv[4].encode()
+count = int(sys.argv[5]) if len(sys.argv) > 5 else 1
+assert data.count(old) >= count, (old, data.count(old))
+open(sys.argv[2], "wb").write(data.replace(old, new, count))
+PY
+}
+# A component count of 43 digits makes VTK 9.1's CreateArray loop over 2³¹ component names.
+write_damaged "$tmp/sphere.vtu" "$tmp/components.vtu" 'NumberOfComponents="3"' \
+  'NumberOfComponents="3333333333333333333333333333333333333333333"'
+expect_error "array 'vec' has NumberOfComponents \"333333333333333333333333…\", not a count" \
+  --vtu "$tmp/components.vtu" --field r
+# Uncompressed, a value takes at least a byte: 100 000 components of 66 cells cannot be in a file
+# of some 100 KB (compressed, they could: 10 000 : 1).
+cells66=$(printf ' 1%.0s' $(seq 66))
+write_damaged "$tmp/ascii.vtu" "$tmp/wide.vtu" '<CellData>' \
+  "<CellData><DataArray type=\"Float64\" Name=\"q\" NumberOfComponents=\"100000\" format=\"ascii\">$cells66</DataArray>"
+expect_error "array 'q' declares 6600000 values, more than its" --vtu "$tmp/wide.vtu" --field r
+# Two cell data arrays of one name: VTK 9.1's reader crashes on it (a segmentation fault), even
+# where both are whole; refused first. Two point data arrays of one name too.
+q="<DataArray type=\"Float64\" Name=\"q\" format=\"ascii\">$cells66</DataArray>"
+write_damaged "$tmp/sphere.vtu" "$tmp/twice.vtu" '<CellData>' "<CellData>$q$q"
+expect_error "two cell data arrays named 'q'" --vtu "$tmp/twice.vtu" --field r
+write_damaged "$tmp/sphere.vtu" "$tmp/twice-points.vtu" 'Name="h"' 'Name="vec"'
+expect_error "two point data arrays named 'vec'" --vtu "$tmp/twice-points.vtu" --field r
 # A compression header whose block size is 0: VTK 9.1's reader divides by it (SIGFPE on x86-64);
 # it runs in a child process, so the tool prints one line and exits 1 instead of crashing (a
 # crash in the tool itself prints no such line). A VTK that checks the size, or a machine whose

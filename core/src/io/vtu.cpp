@@ -5,11 +5,14 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <limits>
 #include <map>
 #include <new>
+#include <sstream>
 #include <stdexcept>
+#include <string_view>
 
 #include <vtkCellData.h>
 #include <vtkCellType.h>
@@ -22,6 +25,8 @@
 #include <vtkPoints.h>
 #include <vtkSmartPointer.h>
 #include <vtkUnstructuredGrid.h>
+#include <vtkXMLDataElement.h>
+#include <vtkXMLDataParser.h>
 #include <vtkXMLPUnstructuredGridReader.h>
 #include <vtkXMLUnstructuredDataReader.h>
 #include <vtkXMLUnstructuredGridReader.h>
@@ -125,18 +130,174 @@ Status scalar_point_array(vtkUnstructuredGrid* grid, const std::string& path,
   return Status::ok();
 }
 
-// A point takes at least 3 coordinates of 4 bytes (Float32), a cell at least its type (1
-// byte), one offset and one connectivity entry (1 byte each in Int8 arrays), and no compressor
-// VTK writes (zlib, LZ4, LZMA) shrinks data by more than 10 000 : 1 (zlib at most 1 032 : 1;
-// LZMA reaches ≈ 7 000 : 1 on zeros). Counts above that cannot be the file's.
-Status check_declared_counts(const std::string& path, std::uintmax_t bytes, vtkIdType points,
-                             vtkIdType cells) {
-  constexpr double kMaxCompression = 10000.0;
-  const double room = double(bytes) * kMaxCompression;
-  if (points < 0 || cells < 0 || 12.0 * double(points) > room || 3.0 * double(cells) > room)
-    return Status::corrupt_input("'" + path + "': it declares " + std::to_string(points) +
-                                 " points and " + std::to_string(cells) + " cells, more than its " +
-                                 std::to_string(bytes) + " bytes can hold (a damaged file?)");
+// One DataArray's declared size, for check_declared_sizes.
+struct DeclaredArray {
+  std::string name;
+  double values = 0;  // components × tuples
+  double bytes_per_value = 1;
+};
+
+// An integer attribute as VTK reads it (std::istringstream into an integer: leading white
+// space, trailing text ignored), or `fallback` where there is none. False where it is there but
+// is not a whole number VTK can read (damaged digits, or more than 64 bits of them).
+bool count_attribute(vtkXMLDataElement* e, const char* name, long long fallback, long long& out) {
+  const char* text = e->GetAttribute(name);
+  if (!text) {
+    out = fallback;
+    return true;
+  }
+  std::istringstream in(text);
+  return static_cast<bool>(in >> out);
+}
+
+// An attribute's text for a one-line message: quoted, its first 24 characters, anything but
+// printable ASCII as '?'.
+std::string quoted(const char* text) {
+  std::string q = "\"";
+  for (const char* c = text; *c && q.size() <= 24; ++c)
+    q += std::isprint(static_cast<unsigned char>(*c)) ? *c : '?';
+  return q + (std::strlen(text) > 24 ? "…\"" : "\"");
+}
+
+// VTK allocates (and fills) every array at the size the file's XML declares before it reads a
+// value: the points, a cell's offset and type, every point, cell and field data array at its
+// NumberOfComponents times the points, cells or NumberOfTuples. A value takes at
+// least a byte in any of VTK's formats (an ASCII digit, a base64 character, a raw Int8; a Bit
+// array packs 8 in a byte), and a compressed file (a `compressor` attribute) shrinks by no more
+// than 10 000 : 1 with any compressor VTK writes (zlib at most 1 032 : 1; LZMA ≈ 7 000 : 1 on
+// zeros). Declared sizes above what the file's bytes can hold cannot be the file's: refused
+// before VTK allocates them. A component count VTK cannot parse makes VTK 9.1's CreateArray loop
+// over 2³¹ component names (found by fuzzing): refused too.
+Status check_declared_sizes(const std::string& path, std::uintmax_t bytes, vtkXMLDataElement* root,
+                            vtkIdType points, vtkIdType cells) {
+  const char* compressor = root ? root->GetAttribute("compressor") : nullptr;
+  const double room = double(bytes) * (compressor && *compressor ? 10000.0 : 1.0);
+  const std::string file = "'" + path + "': ";
+  const std::string more =
+      ", more than its " + std::to_string(bytes) + " bytes can hold (a damaged file?)";
+  if (points < 0 || cells < 0 || 3.0 * double(points) + 2.0 * double(cells) > room)
+    return Status::corrupt_input(file + "it declares " + std::to_string(points) + " points and " +
+                                 std::to_string(cells) + " cells" + more);
+  vtkXMLDataElement* grid = root ? root->FindNestedElementWithName("UnstructuredGrid") : nullptr;
+  if (!grid) return Status::ok();  // VTK's information pass has refused such a file already
+  std::vector<DeclaredArray> arrays;
+  // The arrays of `section`, each with `tuples` (FieldData: its own NumberOfTuples; Cells: the
+  // offsets and types one per cell, the connectivity's size is not declared).
+  const auto add_arrays = [&](vtkXMLDataElement* section, double tuples) -> Status {
+    const std::string_view kind = section->GetName() ? section->GetName() : "";
+    for (int a = 0; a < section->GetNumberOfNestedElements(); ++a) {
+      vtkXMLDataElement* da = section->GetNestedElement(a);
+      if (!da || std::string_view(da->GetName() ? da->GetName() : "") != "DataArray") continue;
+      const char* name = da->GetAttribute("Name");
+      DeclaredArray d{name ? name : "(unnamed)"};
+      long long components = 0, own_tuples = 0;
+      if (!count_attribute(da, "NumberOfComponents", 1, components) || components < 1)
+        return Status::corrupt_input(file + "array '" + d.name + "' has NumberOfComponents " +
+                                     quoted(da->GetAttribute("NumberOfComponents")) +
+                                     ", not a count (a damaged file?)");
+      double n = tuples;
+      if (kind == "FieldData") {
+        if (!count_attribute(da, "NumberOfTuples", 0, own_tuples) || own_tuples < 0)
+          return Status::corrupt_input(file + "array '" + d.name + "' has NumberOfTuples " +
+                                       quoted(da->GetAttribute("NumberOfTuples")) +
+                                       ", not a count (a damaged file?)");
+        n = double(own_tuples);
+      } else if (kind == "Cells" && d.name != "offsets" && d.name != "types") {
+        n = 0;
+      }
+      const char* type = da->GetAttribute("type");
+      if (type && std::string_view(type) == "Bit") d.bytes_per_value = 0.125;
+      d.values = double(components) * n;
+      arrays.push_back(std::move(d));
+    }
+    return Status::ok();
+  };
+  for (int e = 0; e < grid->GetNumberOfNestedElements(); ++e) {
+    vtkXMLDataElement* child = grid->GetNestedElement(e);
+    const std::string_view kind = child && child->GetName() ? child->GetName() : "";
+    if (kind == "FieldData") {
+      if (Status st = add_arrays(child, 0); !st) return st;
+    } else if (kind == "Piece") {
+      long long piece_points = 0, piece_cells = 0;
+      // VTK's information pass has read (and checked) both counts already.
+      count_attribute(child, "NumberOfPoints", 0, piece_points);
+      count_attribute(child, "NumberOfCells", 0, piece_cells);
+      for (int k = 0; k < child->GetNumberOfNestedElements(); ++k) {
+        vtkXMLDataElement* section = child->GetNestedElement(k);
+        const std::string_view name = section && section->GetName() ? section->GetName() : "";
+        if (name == "PointData" || name == "Points" || name == "CellData" || name == "Cells")
+          if (Status st = add_arrays(
+                  section,
+                  double(name == "PointData" || name == "Points" ? piece_points : piece_cells));
+              !st)
+            return st;
+      }
+    }
+  }
+  double total = 0;
+  for (const DeclaredArray& d : arrays) {
+    const double need = d.values * d.bytes_per_value;
+    if (need > room) {
+      char values[32];
+      std::snprintf(values, sizeof values, "%.17g", d.values);
+      return Status::corrupt_input(file + "array '" + d.name + "' declares " + values + " values" +
+                                   more);
+    }
+    total += need;
+  }
+  if (total > room) {
+    char need[32];
+    std::snprintf(need, sizeof need, "%.17g", total);
+    return Status::corrupt_input(file + "its arrays take at least " + need + " bytes uncompressed" +
+                                 more);
+  }
+  return Status::ok();
+}
+
+// What read_vtu needs of every piece, checked in the XML before VTK reads any data: the point
+// arrays `field` and `colour_field`, and no two point or cell data arrays of one name. VTK 9.1's
+// reader crashes (a segmentation fault in vtkXMLDataReader::ReadPieceData) on a file with two
+// cell data arrays of one name, and on one without point data whose cell data array is short
+// (both found by fuzzing, on files otherwise valid).
+Status check_piece_arrays(const std::string& path, vtkXMLDataElement* root,
+                          const std::string& field, const std::string& colour_field) {
+  vtkXMLDataElement* grid = root ? root->FindNestedElementWithName("UnstructuredGrid") : nullptr;
+  if (!grid) return Status::ok();
+  const auto names_of = [](vtkXMLDataElement* section) {
+    std::vector<std::string> names;
+    for (int a = 0; section && a < section->GetNumberOfNestedElements(); ++a) {
+      vtkXMLDataElement* da = section->GetNestedElement(a);
+      if (da && da->GetName() && std::string_view(da->GetName()) == "DataArray")
+        names.push_back(da->GetAttribute("Name") ? da->GetAttribute("Name") : "");
+    }
+    return names;
+  };
+  for (int e = 0; e < grid->GetNumberOfNestedElements(); ++e) {
+    vtkXMLDataElement* piece = grid->GetNestedElement(e);
+    if (!piece || !piece->GetName() || std::string_view(piece->GetName()) != "Piece") continue;
+    const std::vector<std::string> point_names =
+        names_of(piece->FindNestedElementWithName("PointData"));
+    for (const auto& [section, names] :
+         {std::pair{"point", point_names},
+          std::pair{"cell", names_of(piece->FindNestedElementWithName("CellData"))}}) {
+      std::vector<std::string> sorted = names;
+      std::sort(sorted.begin(), sorted.end());
+      const auto twice = std::adjacent_find(sorted.begin(), sorted.end());
+      if (twice != sorted.end())
+        return Status::corrupt_input("'" + path + "': two " + section + " data arrays named '" +
+                                     *twice + "' (a damaged file?)");
+    }
+    for (const std::string& name : {field, colour_field}) {
+      if (name.empty() ||
+          std::find(point_names.begin(), point_names.end(), name) != point_names.end())
+        continue;
+      std::string list;
+      for (const std::string& n : point_names)
+        list += (list.empty() ? "" : ", ") + (n.empty() ? std::string("(unnamed)") : n);
+      return Status::invalid_argument("'" + path + "': no point array '" + name +
+                                      "' (point arrays: " + (list.empty() ? "none" : list) + ")");
+    }
+  }
   return Status::ok();
 }
 
@@ -157,7 +318,7 @@ Status read_vtu_unguarded(const std::string& path, const std::string& field, Vtu
   reader->SetFileName(path.c_str());
   // VTK allocates (and fills) its arrays at the sizes the file declares before it reads them: a
   // damaged or hostile file of a few KB can ask for gigabytes (found by fuzzing). The XML
-  // structure first, then the declared counts against what the file's bytes can hold at all.
+  // structure first, then the declared sizes against what the file's bytes can hold at all.
   if (auto* data = vtkXMLUnstructuredDataReader::SafeDownCast(reader)) {
     data->UpdateInformation();
     data->SetupUpdateExtent(0, 1, 0);  // the whole file, as Update reads it
@@ -165,10 +326,13 @@ Status read_vtu_unguarded(const std::string& path, const std::string& field, Vtu
       return Status::corrupt_input("'" + path +
                                    "': VTK cannot read it: " + first_line(errors->message));
     const std::uintmax_t bytes = std::filesystem::file_size(path, ec);
-    if (Status st = check_declared_counts(path, ec ? 0 : bytes, data->GetNumberOfPoints(),
-                                          data->GetNumberOfCells());
+    vtkXMLDataElement* root =
+        data->GetXMLParser() ? data->GetXMLParser()->GetRootElement() : nullptr;
+    if (Status st = check_declared_sizes(path, ec ? 0 : bytes, root, data->GetNumberOfPoints(),
+                                         data->GetNumberOfCells());
         !st)
       return st;
+    if (Status st = check_piece_arrays(path, root, field, colour_field); !st) return st;
   }
   reader->Update();
   vtkUnstructuredGrid* grid = vtkUnstructuredGrid::SafeDownCast(reader->GetOutputDataObject(0));

@@ -64,7 +64,7 @@ Status read_vtu_isolated(const std::string& path, const std::string& field, VtuE
   task.doing = "reading";
   task.over_cpu = "a damaged or hostile file";
   task.died =
-      "a damaged file (VTK 9.1's XML reader does not check the sizes inside compressed data; "
+      "a damaged file (VTK 9.1's XML reader trusts sizes and structure it does not check; "
       "docs/reliability.md)";
   task.cpu_seconds = cpu_limit(input_bytes(path));
   // The child sends the groups (order, cells, geometry, values, colour), then the totals.

@@ -43,7 +43,9 @@ struct VtuElements {
 // along the three axes), else from its point count ((p + 1)³). Errors (one line, naming the
 // file, and the cell or the field): a file VTK cannot read, a cell type other than the two
 // above, an order outside 1–8 or different along the axes or not matching the point count, a
-// missing or multi-component field, non-finite points. With `colour_field`, that point array too,
+// missing or multi-component field, non-finite points; for a .vtu, before VTK reads its data,
+// sizes the file's bytes cannot hold, a component count that is not one, and two point or cell
+// data arrays of one name (VTK 9.1 crashes on it). With `colour_field`, that point array too,
 // as each group's colour (HexBlock::colour: the isosurface coloured by it); the same errors.
 Status read_vtu(const std::string& path, const std::string& field, VtuElements& out,
                 const std::string& colour_field = "");
@@ -51,7 +53,8 @@ Status read_vtu(const std::string& path, const std::string& field, VtuElements& 
 // read_vtu in a child process (run_isolated, core/base/isolated.hpp), for the tools that read
 // files from anywhere (`ldimesh mesh --vtu`, `ldimesh distance --vtu`): VTK 9.1's XML reader
 // trusts the sizes inside compressed data, so that a damaged file can crash it (a block size of
-// 0: SIGFPE) or write through an allocation it does not check (docs/reliability.md). Here that
+// 0: SIGFPE) or write through an allocation it does not check, and crashes on some damaged
+// structures read_vtu does not foresee (docs/reliability.md). Here that
 // is a corrupt_input error naming the file ("VTK's reader process died of signal 8 …"), as is a
 // read that takes more than 60 s + 10 s per MiB of the file (and a .pvtu's pieces) of CPU; the
 // rest as read_vtu, whose
