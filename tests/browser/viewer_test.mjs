@@ -18,6 +18,8 @@
 //   one, the canvas shows the colour map's colours (viridis' purple, not cool–warm's red, and
 //   the other way round after switching maps), the legend names the field and shows the step's
 //   range; a fixed range above every value paints the whole surface in the map's lowest colour;
+// - a mesh whose decode runs past its limit (set to 0 s for the test) is stopped and reported,
+//   and the next step shows;
 // - no request is answered with an error (favicon included), no three.js interleaved-attribute
 //   warning in the console.
 // Screenshots are kept.
@@ -403,6 +405,25 @@ try {
     `the next step (${stillHidden[0]}) keeps both surfaces hidden: ${stillHidden[1]} mesh pixels`);
   await page.click('#surface-0');
   await page.click('#surface-1');
+
+  // A decode that runs past its limit is stopped and reported, and the page goes on: with the
+  // limit at 0 s (window.ldimeshViewer, as ?decode_timeout=0 sets it) the next step's decode is
+  // over it; back at the default, the step after shows (a fresh Draco loader, its workers new).
+  await page.evaluate(() => { window.ldimeshViewer.decodeTimeout = 0; });
+  const overLimit = await publishNext();
+  await page.waitForFunction((step) => (document.body.dataset.status || '').includes(
+    `mesh of step ${step}: decoding took more than 0 s and was stopped`), overLimit.step, { timeout: 30000 })
+    .catch(() => {});
+  const overStatus = [await page.evaluate(() => document.body.dataset.status), await loadedStep()];
+  check(overStatus[0].includes(`mesh of step ${overLimit.step}: decoding took more than 0 s`) &&
+    overStatus[1] !== Number(overLimit.step),
+    `a decode over its limit is stopped and reported: "${overStatus[0]}", step ${overStatus[1]} still shown`);
+  await page.evaluate(() => { window.ldimeshViewer.decodeTimeout = null; });
+  const afterStop = await publishNext();
+  await waitForStep(afterStop.step, 30000).catch(() => {});
+  const recovered = [await loadedStep(), Number(await page.evaluate(() => document.body.dataset.triangles))];
+  check(recovered[0] === Number(afterStop.step) && recovered[1] === afterStop.triangles,
+    `then the next step shows: step ${recovered[0]}, ${recovered[1]} of ${afterStop.triangles} triangles`);
 
   const interleaved = consoleMessages.filter((m) => m.includes('InterleavedBufferAttribute'));
   check(interleaved.length === 0, `no InterleavedBufferAttribute warning in the console (${interleaved.length})`);

@@ -113,10 +113,51 @@ async function json(path) {
 // ---------------------------------------------------------------------------------------------
 // Meshes
 
-const draco = new DRACOLoader();
-draco.setDecoderPath('/vendor/three/examples/jsm/libs/draco/');
+// Draco decodes in a worker (three.js's DRACOLoader, WebAssembly). A decode that runs past its
+// limit (a damaged or hostile mesh: Draco's decoders have loops bounded only by counts in the
+// stream, docs/reliability.md) is stopped: its workers are terminated and a fresh loader takes
+// over, so one bad step is an error line and never freezes the page. The limit: 10 s + 5 s per
+// MiB of GLB (Draco decodes about a MiB a second on one core; three times that and more on a
+// busy machine), or ?decode_timeout=SECONDS in the URL (also window.ldimeshViewer.decodeTimeout).
 const loader = new GLTFLoader();
-loader.setDRACOLoader(draco);
+let draco = null;
+function newDracoLoader() {
+  draco = new DRACOLoader();
+  draco.setDecoderPath('/vendor/three/examples/jsm/libs/draco/');
+  loader.setDRACOLoader(draco);
+}
+newDracoLoader();
+const viewerSettings = { decodeTimeout: null };
+{
+  const given = new URLSearchParams(window.location.search).get('decode_timeout');
+  if (given !== null && Number.isFinite(Number(given)) && Number(given) >= 0) {
+    viewerSettings.decodeTimeout = Number(given);
+  }
+}
+window.ldimeshViewer = viewerSettings;
+
+async function parseGlb(buffer, step) {
+  const limit = viewerSettings.decodeTimeout ?? 10 + 5 * buffer.byteLength / (1 << 20);
+  let timer = null, expired = false;
+  const stop = new Promise((resolve, reject) => {
+    timer = setTimeout(() => {
+      expired = true;
+      reject(new Error(`mesh of step ${step}: decoding took more than ${Number(limit.toFixed(1))} s ` +
+        'and was stopped (a damaged mesh?)'));
+    }, limit * 1000);
+  });
+  try {
+    const parsing = loader.parseAsync(buffer, '');
+    parsing.catch(() => {});  // once stopped, whatever it ends with is not shown
+    return await Promise.race([parsing, stop]);
+  } finally {
+    clearTimeout(timer);
+    if (expired) {
+      draco.dispose();  // terminates its workers, the one decoding included
+      newDracoLoader();
+    }
+  }
+}
 
 // Colour maps, sampled at equal steps and interpolated linearly: viridis (perceptually uniform,
 // sequential; van der Walt and Smith's colour map for matplotlib) and cool–warm (diverging, for
@@ -329,7 +370,7 @@ async function loadStep(step) {
     json(`/api/v1/steps/${step}`), api(`/api/v1/steps/${step}/mesh.glb`)]);
   if (!response.ok) throw new Error(`mesh of step ${step}: HTTP ${response.status}`);
   const buffer = await response.arrayBuffer();
-  const gltf = await loader.parseAsync(buffer, '');
+  const gltf = await parseGlb(buffer, step);
   if (state.mesh) {
     scene.remove(state.mesh);
     state.mesh.traverse((o) => o.isMesh && o.geometry.dispose());
