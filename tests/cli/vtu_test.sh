@@ -143,12 +143,12 @@ write_damaged "$tmp/ascii.vtu" "$tmp/wide.vtu" '<CellData>' \
   "<CellData><DataArray type=\"Float64\" Name=\"q\" NumberOfComponents=\"100000\" format=\"ascii\">$cells66</DataArray>"
 expect_error "array 'q' declares 6600000 values, more than its" --vtu "$tmp/wide.vtu" --field r
 # Two cell data arrays of one name: VTK 9.1's reader crashes on it (a segmentation fault), even
-# where both are whole; refused first. Two point data arrays of one name too.
+# where both are whole; refused first. Two point data arrays named as the field: ambiguous.
 q="<DataArray type=\"Float64\" Name=\"q\" format=\"ascii\">$cells66</DataArray>"
 write_damaged "$tmp/sphere.vtu" "$tmp/twice.vtu" '<CellData>' "<CellData>$q$q"
 expect_error "two cell data arrays named 'q'" --vtu "$tmp/twice.vtu" --field r
-write_damaged "$tmp/sphere.vtu" "$tmp/twice-points.vtu" 'Name="h"' 'Name="vec"'
-expect_error "two point data arrays named 'vec'" --vtu "$tmp/twice-points.vtu" --field r
+write_damaged "$tmp/sphere.vtu" "$tmp/twice-points.vtu" 'Name="h"' 'Name="r"'
+expect_error "two point data arrays named 'r'" --vtu "$tmp/twice-points.vtu" --field r
 # A compression header whose block size is 0: VTK 9.1's reader divides by it (SIGFPE on x86-64);
 # it runs in a child process, so the tool prints one line and exits 1 instead of crashing (a
 # crash in the tool itself prints no such line). A VTK that checks the size, or a machine whose

@@ -255,10 +255,12 @@ Status check_declared_sizes(const std::string& path, std::uintmax_t bytes, vtkXM
 }
 
 // What read_vtu needs of every piece, checked in the XML before VTK reads any data: the point
-// arrays `field` and `colour_field`, and no two point or cell data arrays of one name. VTK 9.1's
-// reader crashes (a segmentation fault in vtkXMLDataReader::ReadPieceData) on a file with two
-// cell data arrays of one name, and on one without point data whose cell data array is short
-// (both found by fuzzing, on files otherwise valid).
+// arrays `field` and `colour_field`, each once, and no two cell data arrays of one name. VTK
+// 9.1's reader crashes (a segmentation fault in vtkXMLDataReader::ReadPieceData) on a file with
+// two cell data arrays of one name, and on one without point data whose cell data array is short
+// (both found by fuzzing, on files otherwise valid). Two point data arrays of one name VTK reads
+// (the first wins); refused only where that name is the field or the colour field, which would
+// be ambiguous. Unnamed arrays are not compared.
 Status check_piece_arrays(const std::string& path, vtkXMLDataElement* root,
                           const std::string& field, const std::string& colour_field) {
   vtkXMLDataElement* grid = root ? root->FindNestedElementWithName("UnstructuredGrid") : nullptr;
@@ -267,8 +269,9 @@ Status check_piece_arrays(const std::string& path, vtkXMLDataElement* root,
     std::vector<std::string> names;
     for (int a = 0; section && a < section->GetNumberOfNestedElements(); ++a) {
       vtkXMLDataElement* da = section->GetNestedElement(a);
-      if (da && da->GetName() && std::string_view(da->GetName()) == "DataArray")
-        names.push_back(da->GetAttribute("Name") ? da->GetAttribute("Name") : "");
+      if (da && da->GetName() && std::string_view(da->GetName()) == "DataArray" &&
+          da->GetAttribute("Name"))
+        names.push_back(da->GetAttribute("Name"));
     }
     return names;
   };
@@ -277,20 +280,19 @@ Status check_piece_arrays(const std::string& path, vtkXMLDataElement* root,
     if (!piece || !piece->GetName() || std::string_view(piece->GetName()) != "Piece") continue;
     const std::vector<std::string> point_names =
         names_of(piece->FindNestedElementWithName("PointData"));
-    for (const auto& [section, names] :
-         {std::pair{"point", point_names},
-          std::pair{"cell", names_of(piece->FindNestedElementWithName("CellData"))}}) {
-      std::vector<std::string> sorted = names;
-      std::sort(sorted.begin(), sorted.end());
-      const auto twice = std::adjacent_find(sorted.begin(), sorted.end());
-      if (twice != sorted.end())
-        return Status::corrupt_input("'" + path + "': two " + section + " data arrays named '" +
-                                     *twice + "' (a damaged file?)");
-    }
+    std::vector<std::string> cell_names = names_of(piece->FindNestedElementWithName("CellData"));
+    std::sort(cell_names.begin(), cell_names.end());
+    if (const auto twice = std::adjacent_find(cell_names.begin(), cell_names.end());
+        twice != cell_names.end())
+      return Status::corrupt_input("'" + path + "': two cell data arrays named '" + *twice +
+                                   "' (a damaged file?)");
     for (const std::string& name : {field, colour_field}) {
-      if (name.empty() ||
-          std::find(point_names.begin(), point_names.end(), name) != point_names.end())
-        continue;
+      if (name.empty()) continue;
+      const auto count = std::count(point_names.begin(), point_names.end(), name);
+      if (count > 1)
+        return Status::corrupt_input("'" + path + "': two point data arrays named '" + name +
+                                     "' (a damaged file?)");
+      if (count == 1) continue;
       std::string list;
       for (const std::string& n : point_names)
         list += (list.empty() ? "" : ", ") + (n.empty() ? std::string("(unnamed)") : n);

@@ -44,9 +44,10 @@ struct VtuElements {
 // file, and the cell or the field): a file VTK cannot read, a cell type other than the two
 // above, an order outside 1–8 or different along the axes or not matching the point count, a
 // missing or multi-component field, non-finite points; for a .vtu, before VTK reads its data,
-// sizes the file's bytes cannot hold, a component count that is not one, and two point or cell
-// data arrays of one name (VTK 9.1 crashes on it). With `colour_field`, that point array too,
-// as each group's colour (HexBlock::colour: the isosurface coloured by it); the same errors.
+// sizes the file's bytes cannot hold, a component or tuple count that is not a number, two cell
+// data arrays of one name (VTK 9.1 crashes on it) and two point arrays named as the field. With
+// `colour_field`, that point array too, as each group's colour (HexBlock::colour: the
+// isosurface coloured by it); the same errors.
 Status read_vtu(const std::string& path, const std::string& field, VtuElements& out,
                 const std::string& colour_field = "");
 
