@@ -7,6 +7,11 @@
                                mixed-order files have them; a second point array "vec" with 3
                                components, and "h" = x + 2y (exact on every cell: to colour by).
   make_vtu.py ascii OUT.vtu    the sphere, uncompressed ASCII
+  make_vtu.py raw OUT.vtu      the sphere, uncompressed raw appended data, in two pieces (a
+                               .vtu's pieces: VTK allocates the first's arrays for all)
+  make_vtu.py timesteps OUT.vtu the sphere at two time steps (raw appended, uncompressed): r at
+                               step 0, 1.5 r at step 1, and a cell array "q" at both, each array
+                               written once per step under its name (VTK reads step 0)
   make_vtu.py tetra OUT.vtu    one VTK_TETRA beside one Lagrange hexahedron
   make_vtu.py degrees OUT.vtu  one order-2 Lagrange hexahedron whose HigherOrderDegrees say 2, 2, 3
   make_vtu.py badpoint OUT.vtu two order-2 Lagrange hexahedra, the second naming point 1000 of 54
@@ -49,7 +54,7 @@ def main():
     values = vtkDoubleArray()
     values.SetName("r")
     r2 = lambda x: x[0] ** 2 + x[1] ** 2 + x[2] ** 2
-    if kind in ("sphere", "ascii", "pieces", "zeroblock"):
+    if kind in ("sphere", "ascii", "raw", "timesteps", "pieces", "zeroblock"):
         n = 4
         for k in range(n):
             for j in range(n):
@@ -111,6 +116,31 @@ def main():
     if kind == "ascii":
         writer.SetCompressorTypeToNone()
         writer.SetDataModeToAscii()
+    if kind in ("raw", "timesteps"):
+        writer.SetCompressorTypeToNone()
+        writer.SetDataModeToAppended()
+        writer.EncodeAppendedDataOff()
+    if kind == "raw":
+        writer.SetNumberOfPieces(2)
+    if kind == "timesteps":
+        q = vtkDoubleArray()
+        q.SetName("q")
+        q.SetNumberOfTuples(grid.GetNumberOfCells())
+        q.Fill(1.0)
+        grid.GetCellData().AddArray(q)
+        writer.SetFileName(out)
+        writer.SetInputData(grid)
+        writer.SetNumberOfTimeSteps(2)
+        writer.Start()
+        writer.WriteNextTime(0.0)
+        for p in range(values.GetNumberOfTuples()):
+            values.SetValue(p, 1.5 * values.GetValue(p))
+        values.Modified()
+        q.Fill(2.0)
+        q.Modified()
+        writer.WriteNextTime(1.0)
+        writer.Stop()
+        return
     if kind == "zeroblock":
         writer.SetCompressorTypeToZLib()
         writer.SetDataModeToAppended()

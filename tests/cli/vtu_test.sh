@@ -14,7 +14,7 @@ ldimesh=$1
 src=$2
 . "$(dirname "$0")/../lib.sh"
 test_setup
-for kind in sphere ascii tetra degrees badpoint zeroblock; do
+for kind in sphere ascii raw timesteps tetra degrees badpoint zeroblock; do
   /usr/bin/python3 "$src/tests/cli/make_vtu.py" $kind "$tmp/$kind.vtu" || fail "make_vtu.py $kind"
 done
 /usr/bin/python3 "$src/tests/cli/make_vtu.py" pieces "$tmp/pieces.pvtu" || fail "make_vtu.py pieces"
@@ -91,6 +91,14 @@ expect_distance_error "requires --vtu" "$tmp/sphere.ply" --surface sphere --fiel
 "$ldimesh" mesh --vtu "$tmp/pieces.pvtu" --field r --iso 0.49 --res 128 --out "$tmp/pieces.ply" \
   >/dev/null 2>"$tmp/pieces.err" || { cat "$tmp/pieces.err"; fail "--vtu pieces.pvtu"; }
 cmp -s "$tmp/sphere.ply" "$tmp/pieces.ply" || fail "the .pvtu's mesh differs from the .vtu's"
+# The same cells uncompressed, as VTK writes them: ASCII, raw appended data in two pieces, and
+# two time steps (each array once per step under its name; step 0 is read): the same mesh. The
+# checks before VTK reads the data (a byte a value, one array per name and step) pass them.
+for kind in ascii raw timesteps; do
+  "$ldimesh" mesh --vtu "$tmp/$kind.vtu" --field r --iso 0.49 --res 128 --out "$tmp/$kind.ply" \
+    >/dev/null 2>"$tmp/$kind.err" || { cat "$tmp/$kind.err"; fail "--vtu $kind.vtu"; }
+  cmp -s "$tmp/sphere.ply" "$tmp/$kind.ply" || fail "the mesh of $kind.vtu differs from sphere.vtu's"
+done
 
 # Errors: one line on stderr, naming what is wrong, and a non-zero exit.
 expect_error() {  # expect_error PATTERN ARGS...
@@ -134,8 +142,14 @@ PY
 # A component count of 43 digits makes VTK 9.1's CreateArray loop over 2³¹ component names.
 write_damaged "$tmp/sphere.vtu" "$tmp/components.vtu" 'NumberOfComponents="3"' \
   'NumberOfComponents="3333333333333333333333333333333333333333333"'
-expect_error "array 'vec' has NumberOfComponents \"333333333333333333333333…\", not a count" \
+expect_error "array 'vec' has NumberOfComponents \"3333333333333333333333333333333333333333333\", not a count of 1 to 1048576" \
   --vtu "$tmp/components.vtu" --field r
+# One VTK reads into an int but still loops over: on the connectivity, whose size is not
+# declared.
+write_damaged "$tmp/ascii.vtu" "$tmp/components2.vtu" 'Name="connectivity"' \
+  'Name="connectivity" NumberOfComponents="2147483647"'
+expect_error "array 'connectivity' has NumberOfComponents \"2147483647\", not a count of 1 to" \
+  --vtu "$tmp/components2.vtu" --field r
 # Uncompressed, a value takes at least a byte: 100 000 components of 66 cells cannot be in a file
 # of some 100 KB (compressed, they could: 10 000 : 1).
 cells66=$(printf ' 1%.0s' $(seq 66))
@@ -147,6 +161,9 @@ expect_error "array 'q' declares 6600000 values, more than its" --vtu "$tmp/wide
 q="<DataArray type=\"Float64\" Name=\"q\" format=\"ascii\">$cells66</DataArray>"
 write_damaged "$tmp/sphere.vtu" "$tmp/twice.vtu" '<CellData>' "<CellData>$q$q"
 expect_error "two cell data arrays named 'q'" --vtu "$tmp/twice.vtu" --field r
+write_damaged "$tmp/sphere.vtu" "$tmp/twice-array.vtu" '<CellData>' \
+  "<CellData>$q<Array type=\"String\" Name=\"q\" format=\"ascii\">$cells66</Array>"
+expect_error "two cell data arrays named 'q'" --vtu "$tmp/twice-array.vtu" --field r
 write_damaged "$tmp/sphere.vtu" "$tmp/twice-points.vtu" 'Name="h"' 'Name="r"'
 expect_error "two point data arrays named 'r'" --vtu "$tmp/twice-points.vtu" --field r
 # A compression header whose block size is 0: VTK 9.1's reader divides by it (SIGFPE on x86-64);

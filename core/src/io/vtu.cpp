@@ -109,6 +109,16 @@ HexBlock VtuElements::Group::block() const {
 
 namespace {
 
+// A name or attribute from the file, for a one-line message: its first 48 characters,
+// anything but printable ASCII as '?'.
+std::string shown(const char* text) {
+  std::string q;
+  const std::size_t n = std::strlen(text);
+  for (std::size_t i = 0; i < n && i < 48; ++i)
+    q += std::isprint(static_cast<unsigned char>(text[i])) ? text[i] : '?';
+  return n > 48 ? q + "…" : q;
+}
+
 // The one-component point array `name` of `grid`; an error naming the file's point arrays where
 // there is none of that name.
 Status scalar_point_array(vtkUnstructuredGrid* grid, const std::string& path,
@@ -116,31 +126,27 @@ Status scalar_point_array(vtkUnstructuredGrid* grid, const std::string& path,
   out = grid->GetPointData()->GetArray(name.c_str());
   if (!out) {
     std::string names;
-    for (int a = 0; a < grid->GetPointData()->GetNumberOfArrays(); ++a) {
+    const int arrays = grid->GetPointData()->GetNumberOfArrays();
+    for (int a = 0; a < arrays && a < 12; ++a) {
       const char* n = grid->GetPointData()->GetArrayName(a);
-      names += std::string(names.empty() ? "" : ", ") + (n ? n : "(unnamed)");
+      names += std::string(names.empty() ? "" : ", ") + (n ? shown(n) : "(unnamed)");
     }
-    return Status::invalid_argument("'" + path + "': no point array '" + name +
+    if (arrays > 12) names += ", …";
+    return Status::invalid_argument("'" + path + "': no point array '" + shown(name.c_str()) +
                                     "' (point arrays: " + (names.empty() ? "none" : names) + ")");
   }
   if (out->GetNumberOfComponents() != 1)
-    return Status::invalid_argument("'" + path + "': point array '" + name + "' has " +
-                                    std::to_string(out->GetNumberOfComponents()) +
+    return Status::invalid_argument("'" + path + "': point array '" + shown(name.c_str()) +
+                                    "' has " + std::to_string(out->GetNumberOfComponents()) +
                                     " components; give a scalar one");
   return Status::ok();
 }
 
-// One DataArray's declared size, for check_declared_sizes.
-struct DeclaredArray {
-  std::string name;
-  double values = 0;  // components × tuples
-  double bytes_per_value = 1;
-};
-
-// An integer attribute as VTK reads it (std::istringstream into an integer: leading white
-// space, trailing text ignored), or `fallback` where there is none. False where it is there but
-// is not a whole number VTK can read (damaged digits, or more than 64 bits of them).
-bool count_attribute(vtkXMLDataElement* e, const char* name, long long fallback, long long& out) {
+// An integer attribute as VTK reads it (std::istringstream into T: leading white space and
+// trailing text ignored), or `fallback` where there is none. False where it is there but is not
+// a number VTK can read into T (damaged digits, or out of T's range).
+template <typename T>
+bool count_attribute(vtkXMLDataElement* e, const char* name, T fallback, T& out) {
   const char* text = e->GetAttribute(name);
   if (!text) {
     out = fallback;
@@ -150,26 +156,45 @@ bool count_attribute(vtkXMLDataElement* e, const char* name, long long fallback,
   return static_cast<bool>(in >> out);
 }
 
-// An attribute's text for a one-line message: quoted, its first 24 characters, anything but
-// printable ASCII as '?'.
-std::string quoted(const char* text) {
-  std::string q = "\"";
-  for (const char* c = text; *c && q.size() <= 24; ++c)
-    q += std::isprint(static_cast<unsigned char>(*c)) ? *c : '?';
-  return q + (std::strlen(text) > 24 ? "…\"" : "\"");
+// The child elements of `e` (each of any name: VTK reads `DataArray` and `Array` elements).
+std::vector<vtkXMLDataElement*> children(vtkXMLDataElement* e) {
+  std::vector<vtkXMLDataElement*> out;
+  for (int i = 0; e && i < e->GetNumberOfNestedElements(); ++i)
+    if (vtkXMLDataElement* c = e->GetNestedElement(i)) out.push_back(c);
+  return out;
 }
 
-// VTK allocates (and fills) every array at the size the file's XML declares before it reads a
-// value: the points, a cell's offset and type, every point, cell and field data array at its
-// NumberOfComponents times the points, cells or NumberOfTuples. A value takes at
-// least a byte in any of VTK's formats (an ASCII digit, a base64 character, a raw Int8; a Bit
-// array packs 8 in a byte), and a compressed file (a `compressor` attribute) shrinks by no more
-// than 10 000 : 1 with any compressor VTK writes (zlib at most 1 032 : 1; LZMA ≈ 7 000 : 1 on
-// zeros). Declared sizes above what the file's bytes can hold cannot be the file's: refused
-// before VTK allocates them. A component count VTK cannot parse makes VTK 9.1's CreateArray loop
-// over 2³¹ component names (found by fuzzing): refused too.
-Status check_declared_sizes(const std::string& path, std::uintmax_t bytes, vtkXMLDataElement* root,
-                            vtkIdType points, vtkIdType cells) {
+std::string_view tag(vtkXMLDataElement* e) {
+  return e && e->GetName() ? e->GetName() : "";
+}
+
+// VTK builds a name string per component before it reads a value; no format we know has tuples
+// of more components than this.
+constexpr int kMaxComponents = 1 << 20;
+
+// The XML's declared sizes and arrays, checked before VTK reads a value (for a .vtu; a .pvtu's
+// pieces are read by VTK's parallel reader without these checks):
+// - VTK allocates (and fills) every array at the size the XML declares: the first piece's
+//   point data, cell data and points at NumberOfComponents times the points or cells of all
+//   pieces, the cells' offsets and types, field data at its NumberOfTuples. A value takes at
+//   least a byte in any of VTK's formats (an ASCII digit, a base64 character, a raw Int8; a Bit
+//   array packs 8 in a byte), and a compressed file (a `compressor` attribute) shrinks by no
+//   more than 10 000 : 1 with any compressor VTK writes (zlib at most 1 032 : 1; LZMA ≈ 7 000 : 1
+//   on zeros). Sizes above what the file's bytes can hold cannot be the file's. An array of one
+//   name is allocated once (time steps of it, or a repeated point data array, share it).
+// - VTK 9.1's CreateArray reads NumberOfComponents into an int and builds a name per component
+//   (found by fuzzing: a 45-digit count looped for minutes): every element's count must be a
+//   whole number of 1 to kMaxComponents.
+// - VTK 9.1's reader crashes (a segmentation fault in vtkXMLDataReader::ReadPieceData) on two
+//   cell data arrays of one name (and time step), and on a piece without point data whose cell
+//   data array is short (both found by fuzzing, on files otherwise valid): the first is refused,
+//   and so is a piece without the field or the colour field among its point arrays (the second
+//   then cannot reach VTK's data pass). Two point data arrays of one name VTK reads (the first
+//   wins); refused only where that name is the field or the colour field, which would be
+//   ambiguous.
+Status check_xml(const std::string& path, std::uintmax_t bytes, vtkXMLDataElement* root,
+                 vtkIdType points, vtkIdType cells, const std::string& field,
+                 const std::string& colour_field) {
   const char* compressor = root ? root->GetAttribute("compressor") : nullptr;
   const double room = double(bytes) * (compressor && *compressor ? 10000.0 : 1.0);
   const std::string file = "'" + path + "': ";
@@ -180,125 +205,105 @@ Status check_declared_sizes(const std::string& path, std::uintmax_t bytes, vtkXM
                                  std::to_string(cells) + " cells" + more);
   vtkXMLDataElement* grid = root ? root->FindNestedElementWithName("UnstructuredGrid") : nullptr;
   if (!grid) return Status::ok();  // VTK's information pass has refused such a file already
-  std::vector<DeclaredArray> arrays;
-  // The arrays of `section`, each with `tuples` (FieldData: its own NumberOfTuples; Cells: the
-  // offsets and types one per cell, the connectivity's size is not declared).
-  const auto add_arrays = [&](vtkXMLDataElement* section, double tuples) -> Status {
-    const std::string_view kind = section->GetName() ? section->GetName() : "";
-    for (int a = 0; a < section->GetNumberOfNestedElements(); ++a) {
-      vtkXMLDataElement* da = section->GetNestedElement(a);
-      if (!da || std::string_view(da->GetName() ? da->GetName() : "") != "DataArray") continue;
-      const char* name = da->GetAttribute("Name");
-      DeclaredArray d{name ? name : "(unnamed)"};
-      long long components = 0, own_tuples = 0;
-      if (!count_attribute(da, "NumberOfComponents", 1, components) || components < 1)
-        return Status::corrupt_input(file + "array '" + d.name + "' has NumberOfComponents " +
-                                     quoted(da->GetAttribute("NumberOfComponents")) +
-                                     ", not a count (a damaged file?)");
-      double n = tuples;
-      if (kind == "FieldData") {
-        if (!count_attribute(da, "NumberOfTuples", 0, own_tuples) || own_tuples < 0)
-          return Status::corrupt_input(file + "array '" + d.name + "' has NumberOfTuples " +
-                                       quoted(da->GetAttribute("NumberOfTuples")) +
-                                       ", not a count (a damaged file?)");
-        n = double(own_tuples);
-      } else if (kind == "Cells" && d.name != "offsets" && d.name != "types") {
-        n = 0;
-      }
-      const char* type = da->GetAttribute("type");
-      if (type && std::string_view(type) == "Bit") d.bytes_per_value = 0.125;
-      d.values = double(components) * n;
-      arrays.push_back(std::move(d));
+
+  // The values VTK allocates per array, by section and name (the largest where one repeats).
+  std::map<std::pair<std::string, std::string>, double> allocated;
+  const auto check_array = [&](vtkXMLDataElement* a, std::string_view section, double tuples,
+                               bool allocates) -> Status {
+    const char* name = a->GetAttribute("Name");
+    const std::string label = "array '" + shown(name ? name : "(unnamed)") + "'";
+    int components = 1;
+    if (!count_attribute(a, "NumberOfComponents", 1, components) || components < 1 ||
+        components > kMaxComponents)
+      return Status::corrupt_input(file + label + " has NumberOfComponents \"" +
+                                   shown(a->GetAttribute("NumberOfComponents")) +
+                                   "\", not a count of 1 to " + std::to_string(kMaxComponents) +
+                                   " (a damaged file?)");
+    if (section == "FieldData") {
+      long long own = 0;
+      if (!count_attribute(a, "NumberOfTuples", 0LL, own) || own < 0)
+        return Status::corrupt_input(file + label + " has NumberOfTuples \"" +
+                                     shown(a->GetAttribute("NumberOfTuples")) +
+                                     "\", not a count (a damaged file?)");
+      tuples = double(own);
     }
+    // Unnamed point and cell data arrays are not read; the points and cells' arrays are.
+    if (!allocates || (!name && (section == "PointData" || section == "CellData")))
+      return Status::ok();
+    const char* type = a->GetAttribute("type");
+    const double values = double(components) * tuples;
+    const double need = values * (type && std::string_view(type) == "Bit" ? 0.125 : 1.0);
+    if (need > room) {
+      char text[32];
+      std::snprintf(text, sizeof text, "%.17g", values);
+      return Status::corrupt_input(file + label + " declares " + text + " values" + more);
+    }
+    double& slot = allocated[{std::string(section), name ? name : ""}];
+    slot = std::max(slot, need);
     return Status::ok();
   };
-  for (int e = 0; e < grid->GetNumberOfNestedElements(); ++e) {
-    vtkXMLDataElement* child = grid->GetNestedElement(e);
-    const std::string_view kind = child && child->GetName() ? child->GetName() : "";
-    if (kind == "FieldData") {
-      if (Status st = add_arrays(child, 0); !st) return st;
-    } else if (kind == "Piece") {
-      long long piece_points = 0, piece_cells = 0;
-      // VTK's information pass has read (and checked) both counts already.
-      count_attribute(child, "NumberOfPoints", 0, piece_points);
-      count_attribute(child, "NumberOfCells", 0, piece_cells);
-      for (int k = 0; k < child->GetNumberOfNestedElements(); ++k) {
-        vtkXMLDataElement* section = child->GetNestedElement(k);
-        const std::string_view name = section && section->GetName() ? section->GetName() : "";
-        if (name == "PointData" || name == "Points" || name == "CellData" || name == "Cells")
-          if (Status st = add_arrays(
-                  section,
-                  double(name == "PointData" || name == "Points" ? piece_points : piece_cells));
-              !st)
-            return st;
+
+  bool first_piece = true;
+  for (vtkXMLDataElement* child : children(grid)) {
+    if (tag(child) == "FieldData") {
+      for (vtkXMLDataElement* a : children(child))
+        if (Status st = check_array(a, "FieldData", 0, true); !st) return st;
+      continue;
+    }
+    if (tag(child) != "Piece") continue;
+    for (vtkXMLDataElement* section : children(child)) {
+      const std::string_view kind = tag(section);
+      if (kind != "PointData" && kind != "CellData" && kind != "Points" && kind != "Cells")
+        continue;
+      // VTK allocates the first piece's arrays at the counts of all pieces.
+      const double all = double(kind == "PointData" || kind == "Points" ? points : cells);
+      std::map<std::pair<std::string, std::string>, int> seen;  // (name, time step)
+      for (vtkXMLDataElement* a : children(section)) {
+        const char* name = a->GetAttribute("Name");
+        const bool sized =
+            kind != "Cells" ||
+            (name && (std::string_view(name) == "offsets" || std::string_view(name) == "types"));
+        if (Status st = check_array(a, kind, sized ? all : 0, first_piece); !st) return st;
+        if (!name || (kind != "PointData" && kind != "CellData")) continue;
+        const char* step = a->GetAttribute("TimeStep");
+        const int n = ++seen[{name, step ? step : ""}];
+        if (n == 2 && (kind == "CellData" || name == field || name == colour_field))
+          return Status::corrupt_input(file + "two " + (kind == "CellData" ? "cell" : "point") +
+                                       " data arrays named '" + shown(name) +
+                                       "' (a damaged file?)");
+      }
+      if (kind != "PointData") continue;
+      for (const std::string& wanted : {field, colour_field}) {
+        if (wanted.empty() || std::any_of(seen.begin(), seen.end(),
+                                          [&](const auto& s) { return s.first.first == wanted; }))
+          continue;
+        std::vector<std::string> names;  // seen is in order of (name, time step)
+        for (const auto& [key, count] : seen)
+          if (names.empty() || names.back() != key.first) names.push_back(key.first);
+        std::string list;
+        for (std::size_t i = 0; i < names.size() && i < 12; ++i)
+          list += (i ? ", " : "") + shown(names[i].c_str());
+        if (names.size() > 12) list += ", …";
+        return Status::invalid_argument(file + "no point array '" + shown(wanted.c_str()) +
+                                        "' (point arrays: " + (list.empty() ? "none" : list) + ")");
       }
     }
+    // A piece without a PointData element has none of the point arrays.
+    if (!child->FindNestedElementWithName("PointData"))
+      for (const std::string& wanted : {field, colour_field})
+        if (!wanted.empty())
+          return Status::invalid_argument(file + "no point array '" + shown(wanted.c_str()) +
+                                          "' (point arrays: none)");
+    first_piece = false;
   }
   double total = 0;
-  for (const DeclaredArray& d : arrays) {
-    const double need = d.values * d.bytes_per_value;
-    if (need > room) {
-      char values[32];
-      std::snprintf(values, sizeof values, "%.17g", d.values);
-      return Status::corrupt_input(file + "array '" + d.name + "' declares " + values + " values" +
-                                   more);
-    }
+  for (const auto& [key, need] : allocated)
     total += need;
-  }
   if (total > room) {
-    char need[32];
-    std::snprintf(need, sizeof need, "%.17g", total);
-    return Status::corrupt_input(file + "its arrays take at least " + need + " bytes uncompressed" +
+    char text[32];
+    std::snprintf(text, sizeof text, "%.17g", total);
+    return Status::corrupt_input(file + "its arrays take at least " + text + " bytes uncompressed" +
                                  more);
-  }
-  return Status::ok();
-}
-
-// What read_vtu needs of every piece, checked in the XML before VTK reads any data: the point
-// arrays `field` and `colour_field`, each once, and no two cell data arrays of one name. VTK
-// 9.1's reader crashes (a segmentation fault in vtkXMLDataReader::ReadPieceData) on a file with
-// two cell data arrays of one name, and on one without point data whose cell data array is short
-// (both found by fuzzing, on files otherwise valid). Two point data arrays of one name VTK reads
-// (the first wins); refused only where that name is the field or the colour field, which would
-// be ambiguous. Unnamed arrays are not compared.
-Status check_piece_arrays(const std::string& path, vtkXMLDataElement* root,
-                          const std::string& field, const std::string& colour_field) {
-  vtkXMLDataElement* grid = root ? root->FindNestedElementWithName("UnstructuredGrid") : nullptr;
-  if (!grid) return Status::ok();
-  const auto names_of = [](vtkXMLDataElement* section) {
-    std::vector<std::string> names;
-    for (int a = 0; section && a < section->GetNumberOfNestedElements(); ++a) {
-      vtkXMLDataElement* da = section->GetNestedElement(a);
-      if (da && da->GetName() && std::string_view(da->GetName()) == "DataArray" &&
-          da->GetAttribute("Name"))
-        names.push_back(da->GetAttribute("Name"));
-    }
-    return names;
-  };
-  for (int e = 0; e < grid->GetNumberOfNestedElements(); ++e) {
-    vtkXMLDataElement* piece = grid->GetNestedElement(e);
-    if (!piece || !piece->GetName() || std::string_view(piece->GetName()) != "Piece") continue;
-    const std::vector<std::string> point_names =
-        names_of(piece->FindNestedElementWithName("PointData"));
-    std::vector<std::string> cell_names = names_of(piece->FindNestedElementWithName("CellData"));
-    std::sort(cell_names.begin(), cell_names.end());
-    if (const auto twice = std::adjacent_find(cell_names.begin(), cell_names.end());
-        twice != cell_names.end())
-      return Status::corrupt_input("'" + path + "': two cell data arrays named '" + *twice +
-                                   "' (a damaged file?)");
-    for (const std::string& name : {field, colour_field}) {
-      if (name.empty()) continue;
-      const auto count = std::count(point_names.begin(), point_names.end(), name);
-      if (count > 1)
-        return Status::corrupt_input("'" + path + "': two point data arrays named '" + name +
-                                     "' (a damaged file?)");
-      if (count == 1) continue;
-      std::string list;
-      for (const std::string& n : point_names)
-        list += (list.empty() ? "" : ", ") + (n.empty() ? std::string("(unnamed)") : n);
-      return Status::invalid_argument("'" + path + "': no point array '" + name +
-                                      "' (point arrays: " + (list.empty() ? "none" : list) + ")");
-    }
   }
   return Status::ok();
 }
@@ -330,11 +335,10 @@ Status read_vtu_unguarded(const std::string& path, const std::string& field, Vtu
     const std::uintmax_t bytes = std::filesystem::file_size(path, ec);
     vtkXMLDataElement* root =
         data->GetXMLParser() ? data->GetXMLParser()->GetRootElement() : nullptr;
-    if (Status st = check_declared_sizes(path, ec ? 0 : bytes, root, data->GetNumberOfPoints(),
-                                         data->GetNumberOfCells());
+    if (Status st = check_xml(path, ec ? 0 : bytes, root, data->GetNumberOfPoints(),
+                              data->GetNumberOfCells(), field, colour_field);
         !st)
       return st;
-    if (Status st = check_piece_arrays(path, root, field, colour_field); !st) return st;
   }
   reader->Update();
   vtkUnstructuredGrid* grid = vtkUnstructuredGrid::SafeDownCast(reader->GetOutputDataObject(0));
