@@ -74,17 +74,21 @@ case $target in
     # not triaged: they may be VTK's or ours). It goes on past crashes too: VTK 9.1 crashes on
     # some damaged files read_vtu cannot check from outside (the connectivity's size from the
     # offsets' last value: a failed allocation it then frees wrongly), which our tools survive
-    # by reading in a child process (read_vtu_isolated). Each crash input is run again alone
-    # and triaged by its stack below: one inside VTK is counted and kept as vtk-crash-*; one
-    # whose first frame of VTK's or ours is ours, one that does not happen again alone, a leak
-    # (VTK's are suppressed) or a failed check is a finding.
+    # by reading in a child process (read_vtu_isolated). Each crash input is run again alone,
+    # with the same limits, and triaged by its report below: VTK's own crash is a memory error
+    # or a deadly signal whose stack is in VTK called from one of read_vtu's two VTK passes
+    # (vtk_information_pass, vtk_data_pass in core/src/io/vtu.cpp); it is counted and kept as
+    # vtk-crash-*. Anything else is a finding: a crash in our code or in VTK called from
+    # anywhere else, one that does not happen again alone, a memory or time limit on the rerun,
+    # a leak (VTK's are suppressed) or a failed check.
     # -detect_leaks=0 turns off libFuzzer's leak check after each input whose mallocs exceed
     # its frees (every input here, in VTK's reader: two thirds of the run's time); LeakSanitizer
     # still checks each job at its exit, and a leak there fails the run.
     # FUZZ_JOBS: fork jobs at once (default 1).
+    jobs=${FUZZ_JOBS:-1}
+    [[ $jobs =~ ^[1-9][0-9]*$ ]] || { echo "fuzz: FUZZ_JOBS must be a positive whole number, not '$jobs'" >&2; exit 2; }
     export ASAN_OPTIONS="allocator_may_return_null=1${ASAN_OPTIONS:+:$ASAN_OPTIONS}"
-    flags=(-malloc_limit_mb=100000000 -fork="${FUZZ_JOBS:-1}" -ignore_ooms=1 -ignore_crashes=1
-           -detect_leaks=0)
+    flags=(-malloc_limit_mb=100000000 -fork="$jobs" -ignore_ooms=1 -ignore_crashes=1 -detect_leaks=0)
     triage_vtk=1 ;;
   options)
     name=options_fuzz
@@ -156,28 +160,54 @@ if [[ " ${flags[*]-} " == *" -fork="* ]]; then
   # VTK's own crash, run again alone.
   vtk_crashes=0
   findings=0
+  rerun=$(mktemp -d)
   while IFS= read -r input; do
-    name=${input##*/}
-    if [ "${triage_vtk:-0}" = 1 ] && [[ $name == crash-* ]]; then
-      report=$("$bin" "$input" 2>&1) && { echo "fuzz: $name does not crash when run alone" >&2; findings=1; continue; }
-      # The first frame that is VTK's or in our sources (sanitizer, libc and libstdc++ frames
-      # are neither).
-      frame=$(grep -E '^ +#[0-9]+ ' <<<"$report" |
-        grep -E -m 1 "libvtk|$PWD/(core|transport|adaptor|tests)/[^ ]*:[0-9]+" || true)
-      if [[ $frame == *libvtk* ]]; then
-        mv "$input" "$out/artifacts/vtk-$name"
+    file=${input##*/}
+    if [ "${triage_vtk:-0}" = 1 ] && [[ $file == crash-* ]]; then
+      if report=$("$bin" -malloc_limit_mb=100000000 -timeout="${timeout:-10}" \
+          -artifact_prefix="$rerun/" "$input" 2>&1); then
+        echo "fuzz: $file does not crash when run alone" >&2
+        findings=1
+        continue
+      fi
+      # The crash's stack: VTK's frames, then the first of ours (a source file of this
+      # repository), which must be one of read_vtu's VTK passes.
+      verdict=ours
+      if grep -q -E 'ERROR: AddressSanitizer|deadly signal' <<<"$report" &&
+         ! grep -q -E 'out-of-memory|LeakSanitizer|ERROR: libFuzzer: timeout' <<<"$report"; then
+        in_vtk=0
+        while IFS= read -r frame; do
+          [[ $frame =~ ^\ +#[0-9]+\  ]] || continue
+          if [[ $frame == *libvtk* ]]; then in_vtk=1; continue; fi
+          if [[ $frame == *" $PWD/"* ]]; then
+            if [ "$in_vtk" = 1 ] && [[ $frame == *vtk_information_pass* || $frame == *vtk_data_pass* ]]; then
+              verdict=vtk
+            fi
+            break
+          fi
+        done <<<"$report"
+      fi
+      if [ "$verdict" = vtk ]; then
+        mv "$input" "$out/artifacts/vtk-$file"
         vtk_crashes=$((vtk_crashes + 1))
         continue
       fi
-      grep -E -m 3 'ERROR|runtime error|^ +#[0-9]+ ' <<<"$report" >&2 || true
+      grep -E -m 6 'ERROR|runtime error|^ +#[0-9]+ ' <<<"$report" >&2 || true
     fi
     echo "fuzz: finding: $input" >&2
     findings=1
   done < <(find "$out/artifacts" -newer "$marker" \( -name 'crash-*' -o -name 'leak-*' \))
+  rm -rf "$rerun"
+  # A job's leak found at its exit is reported in the log (with -ignore_crashes, maybe nowhere
+  # else).
+  if grep -q 'ERROR: LeakSanitizer' "$out/fuzz.log"; then
+    echo "fuzz: LeakSanitizer reported a leak (in $out/fuzz.log)" >&2
+    findings=1
+  fi
   if [ "$findings" = 1 ]; then
     status=1
-  elif [ "$status" -ne 0 ] && [ "$vtk_crashes" -gt 0 ]; then
-    status=0  # the last job's status was one of VTK's crashes
+  elif [ "$status" -ne 0 ] && [ "$vtk_crashes" -gt 0 ] && [ "${crashes:-0}" -le "$vtk_crashes" ]; then
+    status=0  # the last job's status was one of VTK's crashes, each triaged above
   fi
   [ "$vtk_crashes" = 0 ] ||
     limits="${limits:+$limits, }$vtk_crashes crashing inside VTK (kept as $out/artifacts/vtk-crash-*)"
