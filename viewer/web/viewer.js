@@ -130,14 +130,16 @@ newDracoLoader();
 const viewerSettings = { decodeTimeout: null };
 {
   const given = new URLSearchParams(window.location.search).get('decode_timeout');
-  if (given !== null && Number.isFinite(Number(given)) && Number(given) >= 0) {
+  if (given !== null && given.trim() !== '' && Number(given) >= 0) {
     viewerSettings.decodeTimeout = Number(given);
   }
 }
 window.ldimeshViewer = viewerSettings;
 
 async function parseGlb(buffer, step) {
-  const limit = viewerSettings.decodeTimeout ?? 10 + 5 * buffer.byteLength / (1 << 20);
+  // setTimeout's delay is a 32-bit count of milliseconds: a longer limit is 24.8 days.
+  const limit = Math.min(viewerSettings.decodeTimeout ?? 10 + 5 * buffer.byteLength / (1 << 20),
+    (2 ** 31 - 1) / 1000);
   let timer = null, expired = false;
   const stop = new Promise((resolve, reject) => {
     timer = setTimeout(() => {
@@ -153,7 +155,11 @@ async function parseGlb(buffer, step) {
   } finally {
     clearTimeout(timer);
     if (expired) {
-      draco.dispose();  // terminates its workers, the one decoding included
+      // Terminates its workers, the one decoding included; a worker it is still starting (the
+      // decoder's download and compilation) is terminated once started.
+      const stopped = draco;
+      stopped.dispose();
+      stopped.decoderPending?.then(() => stopped.dispose(), () => {});
       newDracoLoader();
     }
   }
