@@ -153,6 +153,7 @@ class SparseCopy {
   }
   // What it holds: the pages of the last step's copy.
   std::size_t bytes() const { return held_.bytes(); }
+  const PageSet& held() const { return held_; }
   // No copy: gives the memory back.
   void clear() { unmap(); }
   unsigned char* data() { return data_; }
@@ -255,27 +256,54 @@ void begin_copy(CopyPlan& plan, BlockCopy& copy) {
 }
 
 // Of a grid block's array of `type` at `values` (its points, ghosts included), the points a
-// source holding the bricks `held` reads into `dst`, at their places (copy_index).
+// source holding the bricks `held` reads into `dst`, at their places (copy_index). `pages` are
+// the pages of `dst` they lie in (plan_grid): the copy holds those pages whole, so where the
+// solver's rows are contiguous (x fastest) it fills them whole, a row's part at a time: a
+// copy per needed stretch (a brick's 9 or 10 points of a row at 8 cells a brick) made several
+// times as many calls for the same bytes (docs/benchmarks.md).
 void copy_points(const GridBlock& block, const GridSource& source,
                  const std::vector<std::uint8_t>& held, const void* values, ScalarType type,
-                 unsigned char* dst) {
+                 const PageSet& pages, unsigned char* dst) {
   const std::size_t size = scalar_bytes(type);
   std::array<std::int64_t, 3> stride = block.strides;
   if (stride == std::array<std::int64_t, 3>{0, 0, 0})
     stride = {1, block.dims[0], block.dims[0] * block.dims[1]};
   const auto* src = static_cast<const unsigned char*>(values);
-  source.for_each_needed_run(held, [&](std::int64_t j, std::int64_t k, std::int64_t i0,
-                                       std::int64_t i1) {
-    unsigned char* to = dst + copy_index(block, i0, j, k) * size;
-    const unsigned char* from =
-        src + (i0 * stride[0] + j * stride[1] + k * stride[2]) * std::int64_t(size);
-    if (stride[0] == 1) {
-      std::memcpy(to, from, std::size_t(i1 - i0 + 1) * size);
-    } else {
-      for (std::int64_t i = 0; i <= i1 - i0; ++i)
-        std::memcpy(to + std::size_t(i) * size, from + i * stride[0] * std::int64_t(size), size);
+  if (stride[0] == 1) {
+    // Page sizes are multiples of 8 bytes: no point straddles two pages.
+    const std::size_t page = PageSet::page(),
+                      points = std::size_t(block.dims[0] * block.dims[1] * block.dims[2]),
+                      nx = std::size_t(block.dims[0]), ny = std::size_t(block.dims[1]);
+    for (std::size_t p = 0; p < pages.pages();) {
+      if (!pages.marked(p)) {
+        ++p;
+        continue;
+      }
+      const std::size_t first = p;
+      while (p < pages.pages() && pages.marked(p))
+        ++p;
+      const std::size_t end = std::min(p * page / size, points);
+      for (std::size_t at = first * page / size; at < end;) {
+        const std::size_t i = at % nx, j = at / nx % ny, k = at / nx / ny,
+                          n = std::min(end - at, nx - i);
+        std::memcpy(
+            dst + at * size,
+            src + (std::int64_t(i) + std::int64_t(j) * stride[1] + std::int64_t(k) * stride[2]) *
+                      std::int64_t(size),
+            n * size);
+        at += n;
+      }
     }
-  });
+    return;
+  }
+  source.for_each_needed_run(
+      held, [&](std::int64_t j, std::int64_t k, std::int64_t i0, std::int64_t i1) {
+        unsigned char* to = dst + copy_index(block, i0, j, k) * size;
+        const unsigned char* from =
+            src + (i0 * stride[0] + j * stride[1] + k * stride[2]) * std::int64_t(size);
+        for (std::int64_t i = 0; i <= i1 - i0; ++i)
+          std::memcpy(to + std::size_t(i) * size, from + i * stride[0] * std::int64_t(size), size);
+      });
 }
 
 // Of the grid block that `source` is over, the points a source holding the bricks `held` reads,
@@ -284,10 +312,12 @@ void copy_points(const GridBlock& block, const GridSource& source,
 GridBlock copy_grid(const GridBlock& block, const GridSource& source,
                     const std::vector<std::uint8_t>& held, BlockCopy& copy) {
   GridBlock out = block;
-  copy_points(block, source, held, block.values, block.type, copy.values.data());
+  copy_points(block, source, held, block.values, block.type, copy.values.held(),
+              copy.values.data());
   out.values = copy.values.data();
   if (block.colour) {
-    copy_points(block, source, held, block.colour, block.colour_type, copy.colour.data());
+    copy_points(block, source, held, block.colour, block.colour_type, copy.colour.held(),
+                copy.colour.data());
     out.colour = copy.colour.data();
   }
   out.strides = {0, 0, 0};

@@ -10,6 +10,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <set>
 #include <thread>
 #include <vector>
@@ -780,6 +781,89 @@ TEST(Adaptor, GridBlocksAreColouredByANamedFieldOnBothPaths) {
       } else {
         EXPECT_TRUE(published_glb(dir, 1) == synchronous) << "the two paths differ";
       }
+    }
+  }
+}
+
+// The slab's values and a colour field in a solver's own layout instead of x fastest without
+// gaps: rows and layers padded (a halo, as Gray–Scott's), or z fastest. The padding holds NaN:
+// a copy that took it for points would change the mesh.
+enum class Layout { padded, z_fastest };
+struct LaidOutSlab {
+  std::vector<float> values, colour;  // the block's first point at `offset`
+  std::int64_t offset = 0;
+  GridBlock block;
+  LaidOutSlab(const GridSlab& slab, const std::vector<float>& dense_colour, Layout layout)
+      : block(slab.block) {
+    const auto& d = slab.block.dims;
+    std::array<std::int64_t, 3> s;
+    std::size_t count = 0;
+    if (layout == Layout::padded) {
+      s = {1, d[0] + 3, (d[0] + 3) * (d[1] + 2) + 5};
+      offset = 2 * s[1] + 1 + s[2];
+      count = std::size_t(offset + s[2] * (d[2] + 1));
+    } else {
+      s = {d[1] * d[2], d[2], 1};
+      count = std::size_t(d[0] * d[1] * d[2]);
+    }
+    values.assign(count, std::numeric_limits<float>::quiet_NaN());
+    colour.assign(count, std::numeric_limits<float>::quiet_NaN());
+    for (std::int64_t k = 0; k < d[2]; ++k)
+      for (std::int64_t j = 0; j < d[1]; ++j)
+        for (std::int64_t i = 0; i < d[0]; ++i) {
+          const std::size_t from = std::size_t((k * d[1] + j) * d[0] + i),
+                            to = std::size_t(offset + i * s[0] + j * s[1] + k * s[2]);
+          values[to] = slab.values[from];
+          colour[to] = dense_colour[from];
+        }
+    block.values = values.data() + offset;
+    block.strides = s;
+  }
+};
+
+// The snapshot copies a block in the solver's layout (whole rows where x is fastest, point by
+// point otherwise): the same bytes as the synchronous path on the block without gaps, coloured
+// and merged (the merge's samples come from the snapshot), although the solver overwrites
+// everything right after execute().
+TEST(Adaptor, TheSnapshotOfABlockInTheSolversLayoutPublishesTheSynchronousMesh) {
+  const auto options = [](const std::string& dir, bool background) {
+    return R"({"colour_by": "C", "merging": true, )" + grid_options(dir, background).substr(1);
+  };
+  const GridSlab dense(kSlabPoints, 0.0);
+  const std::vector<float> dense_colour = slab_colour(dense);
+  std::vector<std::uint8_t> synchronous;
+  {
+    GridSlab slab(kSlabPoints, 0.0);
+    std::vector<float> colour = dense_colour;
+    const std::string dir = temp_dir("layout_sync");
+    auto a = make_grid_adaptor(options(dir, false), slab);
+    if (!a) return;
+    EXPECT_TRUE(a->add_field("C", colour.data(), ScalarType::float32));
+    EXPECT_TRUE(a->execute(1, 0.0)) << a->last_error();
+    EXPECT_TRUE(a->finalize()) << a->last_error();
+    if (rank_of() == 0) synchronous = published_glb(dir, 1);
+  }
+  for (const Layout layout : {Layout::padded, Layout::z_fastest}) {
+    SCOPED_TRACE(layout == Layout::padded ? "padded rows and layers" : "z fastest");
+    LaidOutSlab slab(dense, dense_colour, layout);
+    const std::string dir = temp_dir(layout == Layout::padded ? "layout_padded" : "layout_z");
+    std::unique_ptr<Adaptor> a;
+    ASSERT_TRUE(Adaptor::create(MPI_COMM_WORLD, options(dir, true), a));
+    EXPECT_TRUE(a->set_domain({glm::dvec3(-1.0), glm::dvec3(1.0)}));
+    EXPECT_TRUE(a->add_grid_block(slab.block)) << a->last_error();
+    EXPECT_TRUE(a->add_field("C", slab.colour.data() + slab.offset, ScalarType::float32));
+    EXPECT_TRUE(a->execute(1, 0.0)) << a->last_error();
+    EXPECT_EQ(a->last_report().background, thread_multiple());
+    if (thread_multiple()) {  // the pages of the copies (laid out without gaps)
+      EXPECT_EQ(a->last_report().snapshot_bytes,
+                2 * snapshot_pages(dense.block, {0.36}, sizeof(float)));
+    }
+    std::fill(slab.values.begin(), slab.values.end(), 100.0f);
+    std::fill(slab.colour.begin(), slab.colour.end(), 1e6f);
+    EXPECT_TRUE(a->finalize()) << a->last_error();
+    if (rank_of() == 0) {
+      EXPECT_GT(synchronous.size(), 1000u);
+      EXPECT_TRUE(published_glb(dir, 1) == synchronous) << "differs from the synchronous step";
     }
   }
 }
