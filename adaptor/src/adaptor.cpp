@@ -258,9 +258,9 @@ void begin_copy(CopyPlan& plan, BlockCopy& copy) {
 // Of a grid block's array of `type` at `values` (its points, ghosts included), the points a
 // source holding the bricks `held` reads into `dst`, at their places (copy_index). `pages` are
 // the pages of `dst` they lie in (plan_grid): the copy holds those pages whole, so where the
-// solver's rows are contiguous (x fastest) it fills them whole, a row's part at a time: a
-// copy per needed stretch (a brick's 9 or 10 points of a row at 8 cells a brick) made several
-// times as many calls for the same bytes (docs/benchmarks.md).
+// solver's rows are contiguous (x fastest) it fills them whole, a row's part at a time. A copy
+// per needed stretch (a brick's 9 or 10 points of a row at 8 cells a brick) took twice as long
+// on Gray–Scott: 4.3 against 2.2 ms per rank and step, medians (docs/benchmarks.md).
 void copy_points(const GridBlock& block, const GridSource& source,
                  const std::vector<std::uint8_t>& held, const void* values, ScalarType type,
                  const PageSet& pages, unsigned char* dst) {
