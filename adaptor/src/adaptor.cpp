@@ -23,6 +23,9 @@
 #include <sys/mman.h>
 #include <unistd.h>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include "ldimesh/core/base/timing.hpp"
 #include "ldimesh/core/field/grid_source.hpp"
 #include "ldimesh/core/field/hex_source.hpp"
@@ -91,6 +94,20 @@ class PageSet {
   }
   bool marked(std::size_t p) const { return marked_[p] != 0; }
   std::size_t pages() const { return marked_.size(); }
+  // f(first, end) for each run of touched pages first … end − 1 among pages from … to − 1.
+  template <class F>
+  void for_each_run(std::size_t from, std::size_t to, F&& f) const {
+    for (std::size_t p = from; p < to;) {
+      if (!marked_[p]) {
+        ++p;
+        continue;
+      }
+      const std::size_t first = p;
+      while (p < to && marked_[p])
+        ++p;
+      f(first, p);
+    }
+  }
   // The bytes of the touched pages (the last one as far as the array goes).
   std::size_t bytes() const {
     std::size_t total = 0;
@@ -258,9 +275,13 @@ void begin_copy(CopyPlan& plan, BlockCopy& copy) {
 // Of a grid block's array of `type` at `values` (its points, ghosts included), the points a
 // source holding the bricks `held` reads into `dst`, at their places (copy_index). `pages` are
 // the pages of `dst` they lie in (plan_grid): the copy holds those pages whole, so where the
-// solver's rows are contiguous (x fastest) it fills them whole, a row's part at a time. A copy
-// per needed stretch (a brick's 9 or 10 points of a row at 8 cells a brick) took twice as long
-// on Gray–Scott: 4.3 against 2.2 ms per rank and step, medians (docs/benchmarks.md).
+// solver's rows are contiguous (x fastest) it fills them whole, a row's part at a time, from the
+// solver's strides. A copy per needed stretch (11 points of a row for a lone brick of 8 cells)
+// took twice as long on Gray–Scott: 4.3 against 2.2 ms per rank and step, medians
+// (docs/benchmarks.md). Where the surface is sparse a page holds few needed points, but the
+// page is held (and zeroed by the system at its first write) anyway. As the pass that chose the
+// bricks (GridSource::needed_bricks): on the calling thread up to 8 Mi points, else in tasks
+// on all cores.
 void copy_points(const GridBlock& block, const GridSource& source,
                  const std::vector<std::uint8_t>& held, const void* values, ScalarType type,
                  const PageSet& pages, unsigned char* dst) {
@@ -274,26 +295,27 @@ void copy_points(const GridBlock& block, const GridSource& source,
     const std::size_t page = PageSet::page(),
                       points = std::size_t(block.dims[0] * block.dims[1] * block.dims[2]),
                       nx = std::size_t(block.dims[0]), ny = std::size_t(block.dims[1]);
-    for (std::size_t p = 0; p < pages.pages();) {
-      if (!pages.marked(p)) {
-        ++p;
-        continue;
-      }
-      const std::size_t first = p;
-      while (p < pages.pages() && pages.marked(p))
-        ++p;
-      const std::size_t end = std::min(p * page / size, points);
-      for (std::size_t at = first * page / size; at < end;) {
-        const std::size_t i = at % nx, j = at / nx % ny, k = at / nx / ny,
-                          n = std::min(end - at, nx - i);
-        std::memcpy(
-            dst + at * size,
-            src + (std::int64_t(i) + std::int64_t(j) * stride[1] + std::int64_t(k) * stride[2]) *
-                      std::int64_t(size),
-            n * size);
-        at += n;
-      }
-    }
+    const auto copy_runs = [&](std::size_t from, std::size_t to) {
+      pages.for_each_run(from, to, [&](std::size_t first, std::size_t end) {
+        const std::size_t last = std::min(end * page / size, points);
+        for (std::size_t at = first * page / size; at < last;) {
+          const std::size_t i = at % nx, j = at / nx % ny, k = at / nx / ny,
+                            n = std::min(last - at, nx - i);
+          std::memcpy(
+              dst + at * size,
+              src + (std::int64_t(i) + std::int64_t(j) * stride[1] + std::int64_t(k) * stride[2]) *
+                        std::int64_t(size),
+              n * size);
+          at += n;
+        }
+      });
+    };
+    if (points <= (std::size_t(8) << 20))
+      copy_runs(0, pages.pages());
+    else
+      tbb::parallel_for(
+          tbb::blocked_range<std::size_t>(0, pages.pages()),
+          [&](const tbb::blocked_range<std::size_t>& r) { copy_runs(r.begin(), r.end()); });
     return;
   }
   source.for_each_needed_run(

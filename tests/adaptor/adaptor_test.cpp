@@ -439,14 +439,17 @@ void expect_on_the_slab_sphere(const Mesh& mesh, double iso) {
   testing::expect_on_grid_sphere(mesh, iso, 2.0 / (kSlabPoints - 1), 40);
 }
 
-std::unique_ptr<Adaptor> make_grid_adaptor(const std::string& options, GridSlab& slab) {
+std::unique_ptr<Adaptor> make_grid_adaptor(const std::string& options, const GridBlock& block) {
   std::unique_ptr<Adaptor> a;
   const Status s = Adaptor::create(MPI_COMM_WORLD, options, a);
   EXPECT_TRUE(s) << s.message();
   if (!a) return a;
   EXPECT_TRUE(a->set_domain({glm::dvec3(-1.0), glm::dvec3(1.0)}));
-  EXPECT_TRUE(a->add_grid_block(slab.block));
+  EXPECT_TRUE(a->add_grid_block(block));
   return a;
+}
+std::unique_ptr<Adaptor> make_grid_adaptor(const std::string& options, GridSlab& slab) {
+  return make_grid_adaptor(options, slab.block);
 }
 
 std::string grid_options(const std::string& dir, bool background) {
@@ -785,12 +788,13 @@ TEST(Adaptor, GridBlocksAreColouredByANamedFieldOnBothPaths) {
   }
 }
 
-// The slab's values and a colour field in a solver's own layout instead of x fastest without
-// gaps: rows and layers padded (a halo, as Gray–Scott's), or z fastest. The padding holds NaN:
-// a copy that took it for points would change the mesh.
+// The slab's values, and a colour field in double, in a solver's own layout instead of x fastest
+// without gaps: rows and layers padded (a halo, as Gray–Scott's), or z fastest. The padding
+// holds NaN: a copy that took it for points would change the mesh.
 enum class Layout { padded, z_fastest };
 struct LaidOutSlab {
-  std::vector<float> values, colour;  // the block's first point at `offset`
+  std::vector<float> values;  // the block's first point at `offset`, as the colour's
+  std::vector<double> colour;
   std::int64_t offset = 0;
   GridBlock block;
   LaidOutSlab(const GridSlab& slab, const std::vector<float>& dense_colour, Layout layout)
@@ -807,7 +811,7 @@ struct LaidOutSlab {
       count = std::size_t(d[0] * d[1] * d[2]);
     }
     values.assign(count, std::numeric_limits<float>::quiet_NaN());
-    colour.assign(count, std::numeric_limits<float>::quiet_NaN());
+    colour.assign(count, std::numeric_limits<double>::quiet_NaN());
     for (std::int64_t k = 0; k < d[2]; ++k)
       for (std::int64_t j = 0; j < d[1]; ++j)
         for (std::int64_t i = 0; i < d[0]; ++i) {
@@ -821,49 +825,53 @@ struct LaidOutSlab {
   }
 };
 
-// The snapshot copies a block in the solver's layout (whole rows where x is fastest, point by
-// point otherwise): the same bytes as the synchronous path on the block without gaps, coloured
-// and merged (the merge's samples come from the snapshot), although the solver overwrites
-// everything right after execute().
+// The snapshot copies a block in the solver's layout (whole pages, row by row, where x is
+// fastest; point by point otherwise): the same bytes as the synchronous path on the block
+// without gaps, coloured (a double field on float values) and merged (the merge's samples come
+// from the snapshot), although the solver overwrites everything right after execute(). The
+// sphere of radius 0.6 fills most of the copy's pages from its first; the one of radius 0.15
+// leaves the first pages out and starts its runs of pages in the middle of rows.
 TEST(Adaptor, TheSnapshotOfABlockInTheSolversLayoutPublishesTheSynchronousMesh) {
   const auto options = [](const std::string& dir, bool background) {
     return R"({"colour_by": "C", "merging": true, )" + grid_options(dir, background).substr(1);
   };
-  const GridSlab dense(kSlabPoints, 0.0);
-  const std::vector<float> dense_colour = slab_colour(dense);
-  std::vector<std::uint8_t> synchronous;
-  {
-    GridSlab slab(kSlabPoints, 0.0);
-    std::vector<float> colour = dense_colour;
-    const std::string dir = temp_dir("layout_sync");
-    auto a = make_grid_adaptor(options(dir, false), slab);
-    if (!a) return;
-    EXPECT_TRUE(a->add_field("C", colour.data(), ScalarType::float32));
-    EXPECT_TRUE(a->execute(1, 0.0)) << a->last_error();
-    EXPECT_TRUE(a->finalize()) << a->last_error();
-    if (rank_of() == 0) synchronous = published_glb(dir, 1);
-  }
-  for (const Layout layout : {Layout::padded, Layout::z_fastest}) {
-    SCOPED_TRACE(layout == Layout::padded ? "padded rows and layers" : "z fastest");
-    LaidOutSlab slab(dense, dense_colour, layout);
-    const std::string dir = temp_dir(layout == Layout::padded ? "layout_padded" : "layout_z");
-    std::unique_ptr<Adaptor> a;
-    ASSERT_TRUE(Adaptor::create(MPI_COMM_WORLD, options(dir, true), a));
-    EXPECT_TRUE(a->set_domain({glm::dvec3(-1.0), glm::dvec3(1.0)}));
-    EXPECT_TRUE(a->add_grid_block(slab.block)) << a->last_error();
-    EXPECT_TRUE(a->add_field("C", slab.colour.data() + slab.offset, ScalarType::float32));
-    EXPECT_TRUE(a->execute(1, 0.0)) << a->last_error();
-    EXPECT_EQ(a->last_report().background, thread_multiple());
-    if (thread_multiple()) {  // the pages of the copies (laid out without gaps)
-      EXPECT_EQ(a->last_report().snapshot_bytes,
-                2 * snapshot_pages(dense.block, {0.36}, sizeof(float)));
+  for (const double shift : {0.0, 0.36 - 0.0225}) {
+    SCOPED_TRACE(shift == 0.0 ? "a sphere of radius 0.6" : "a sphere of radius 0.15");
+    const GridSlab dense(kSlabPoints, shift);
+    const std::vector<float> dense_colour = slab_colour(dense);
+    std::vector<std::uint8_t> synchronous;
+    {
+      GridSlab slab(kSlabPoints, shift);
+      const std::vector<double> colour(dense_colour.begin(), dense_colour.end());
+      const std::string dir = temp_dir("layout_sync");
+      auto a = make_grid_adaptor(options(dir, false), slab.block);
+      if (!a) return;
+      EXPECT_TRUE(a->add_field("C", colour.data(), ScalarType::float64));
+      EXPECT_TRUE(a->execute(1, 0.0)) << a->last_error();
+      EXPECT_TRUE(a->finalize()) << a->last_error();
+      if (rank_of() == 0) synchronous = published_glb(dir, 1);
     }
-    std::fill(slab.values.begin(), slab.values.end(), 100.0f);
-    std::fill(slab.colour.begin(), slab.colour.end(), 1e6f);
-    EXPECT_TRUE(a->finalize()) << a->last_error();
-    if (rank_of() == 0) {
-      EXPECT_GT(synchronous.size(), 1000u);
-      EXPECT_TRUE(published_glb(dir, 1) == synchronous) << "differs from the synchronous step";
+    for (const Layout layout : {Layout::padded, Layout::z_fastest}) {
+      SCOPED_TRACE(layout == Layout::padded ? "padded rows and layers" : "z fastest");
+      LaidOutSlab slab(dense, dense_colour, layout);
+      const std::string dir = temp_dir(layout == Layout::padded ? "layout_padded" : "layout_z");
+      auto a = make_grid_adaptor(options(dir, true), slab.block);
+      if (!a) return;
+      EXPECT_TRUE(a->add_field("C", slab.colour.data() + slab.offset, ScalarType::float64));
+      EXPECT_TRUE(a->execute(1, 0.0)) << a->last_error();
+      EXPECT_EQ(a->last_report().background, thread_multiple());
+      if (thread_multiple()) {  // the pages of the copies (laid out without gaps)
+        EXPECT_EQ(a->last_report().snapshot_bytes,
+                  snapshot_pages(dense.block, {0.36}, sizeof(float)) +
+                      snapshot_pages(dense.block, {0.36}, sizeof(double)));
+      }
+      std::fill(slab.values.begin(), slab.values.end(), 100.0f);
+      std::fill(slab.colour.begin(), slab.colour.end(), 1e6);
+      EXPECT_TRUE(a->finalize()) << a->last_error();
+      if (rank_of() == 0) {
+        EXPECT_GT(synchronous.size(), 1000u);
+        EXPECT_TRUE(published_glb(dir, 1) == synchronous) << "differs from the synchronous step";
+      }
     }
   }
 }
