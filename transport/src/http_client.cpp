@@ -1,6 +1,8 @@
 #include "ldimesh/transport/http_client.hpp"
 
 #include <netdb.h>
+#include <pthread.h>
+#include <signal.h>
 #include <sys/socket.h>
 
 #include <algorithm>
@@ -122,6 +124,37 @@ Status parse_server_url(std::string_view url, ServerUrl& out) {
   return Status::ok();
 }
 
+// While a request runs, SIGPIPE is blocked in the calling thread, and one its writes raised is
+// taken off before the thread's mask is restored. Debian's libcpp-httplib sends without
+// MSG_NOSIGNAL, so a write to a socket the server closed, or that cancel() shut down (it stops
+// the request from another thread), raised SIGPIPE and killed a process that does not ignore it
+// (seen in the test of cancel(): Http.ClientCancelEndsALongPollInFlight died of SIGPIPE). A
+// SIGPIPE raised by a write is directed at the writing thread.
+class SigpipeBlocked {
+ public:
+  SigpipeBlocked() {
+    sigemptyset(&pipe_);
+    sigaddset(&pipe_, SIGPIPE);
+    pthread_sigmask(SIG_BLOCK, &pipe_, &old_);
+    sigset_t pending;
+    was_pending_ = sigpending(&pending) == 0 && sigismember(&pending, SIGPIPE) == 1;
+  }
+  ~SigpipeBlocked() {
+    sigset_t pending;
+    if (!was_pending_ && sigpending(&pending) == 0 && sigismember(&pending, SIGPIPE) == 1) {
+      const timespec now{0, 0};
+      sigtimedwait(&pipe_, nullptr, &now);
+    }
+    pthread_sigmask(SIG_SETMASK, &old_, nullptr);
+  }
+  SigpipeBlocked(const SigpipeBlocked&) = delete;
+  SigpipeBlocked& operator=(const SigpipeBlocked&) = delete;
+
+ private:
+  sigset_t pipe_, old_;
+  bool was_pending_ = false;
+};
+
 struct HttpClient::Impl {
   Impl(ServerUrl u, HttpClientOptions o)
       : url(std::move(u)), options(o), client(url.host, url.port) {
@@ -200,6 +233,7 @@ Status HttpClient::Impl::get(const std::string& path, const std::string& what, s
   canceled = false;  // a cancel() before this call ended the one before
   for (int attempt = 0;; ++attempt) {
     if (!begin_request()) return transport_error(httplib::Error::Canceled, what);
+    const SigpipeBlocked no_sigpipe;
     auto result = client.Get(path);
     requesting = false;
     // A request cancel() stopped fails as a read or write on the closed socket: "interrupted".
@@ -323,6 +357,7 @@ Status HttpClient::mesh(std::uint64_t step, std::vector<std::uint8_t>& out,
   impl_->canceled = false;  // a cancel() before this call ended the one before
   if (!impl_->begin_request())
     return impl_->transport_error(httplib::Error::Canceled, "the mesh of " + what);
+  const SigpipeBlocked no_sigpipe;
   auto result = impl_->client.Get(
       "/api/v1/steps/" + std::to_string(step) + "/mesh.glb",
       [&](const httplib::Response& response) {

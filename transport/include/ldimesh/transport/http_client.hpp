@@ -58,7 +58,8 @@ struct HttpClientOptions {
 };
 
 // Talks to one server. One call at a time (not thread-safe), except cancel(). The calls write
-// to sockets: a process that must survive a server closing mid-request ignores SIGPIPE.
+// to sockets with SIGPIPE blocked in the calling thread (one they raise is discarded): a server
+// closing mid-request, or cancel(), gives an error, never the signal.
 // Error messages: "cannot connect to http://…: connection refused (…)", "the server refused
 // the token …", "step 42 is not on the server (it keeps steps 10 to 25)", "step 42: corrupt
 // download: …".
