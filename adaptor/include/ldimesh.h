@@ -146,7 +146,8 @@ int ldimesh_add_hex_block(ldimesh_adaptor* a, const ldimesh_hex_block* block);
  * its values and in their layout (a grid: the same dims and strides; elements: the same nodes and
  * element_stride), of `type` LDIMESH_FLOAT32 or LDIMESH_FLOAT64; value_count as for the block.
  * With option "colour_by": "NAME" the isosurfaces are coloured by the field of that name, which
- * every block must then have. Adding a name again replaces that field. */
+ * every block must then have ("colour_by": [a name or null per isovalue]: each isosurface by its
+ * own field, or by none). Adding a name again replaces that field. */
 int ldimesh_add_field(ldimesh_adaptor* a, const char* name, const void* values, int64_t value_count,
                       int type);
 /* Forgets this rank's blocks (to describe them anew). */

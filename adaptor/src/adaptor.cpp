@@ -1,8 +1,10 @@
 #include "ldimesh/adaptor.hpp"
 
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <condition_variable>
 #include <cstdio>
 #include <cstring>
@@ -192,25 +194,40 @@ class SparseCopy {
   PageSet held_;
 };
 
+// A colour field of a block as add_field gave it (values null: the block lacks it).
+struct FieldArray {
+  const void* values = nullptr;
+  ScalarType type = ScalarType::float32;
+};
+
 // A block's arrays as copied at a due step (background path).
 struct BlockCopy {
   SparseCopy values;
-  SparseCopy colour;  // the colour field's, when the block has one
+  std::vector<SparseCopy> colours;  // per colour field (option "colour_by"), where the block has it
   std::array<std::vector<double>, 3> coords;
   std::size_t bytes() const {
-    return values.bytes() + colour.bytes() +
-           (coords[0].size() + coords[1].size() + coords[2].size()) * sizeof(double);
+    std::size_t total = values.bytes();
+    for (const SparseCopy& c : colours)
+      total += c.bytes();
+    return total + (coords[0].size() + coords[1].size() + coords[2].size()) * sizeof(double);
   }
 };
 
 // What a due step copies of one block: the bricks or elements a cast reads (`held`), and the
-// pages of its arrays they lie in (no colour field: none).
+// pages of its arrays they lie in (per colour field; a field the block lacks: none).
 struct CopyPlan {
   std::vector<std::uint8_t> held;
-  std::size_t values_size = 0, colour_size = 0;  // the arrays' bytes
-  PageSet values, colour;
+  std::size_t values_size = 0;  // the arrays' bytes
+  PageSet values;
+  std::vector<std::size_t> colour_sizes;
+  std::vector<PageSet> colours;
   std::size_t coords_bytes = 0;
-  std::size_t bytes() const { return values.bytes() + colour.bytes() + coords_bytes; }
+  std::size_t bytes() const {
+    std::size_t total = values.bytes() + coords_bytes;
+    for (const PageSet& c : colours)
+      total += c.bytes();
+    return total;
+  }
 };
 
 // Where point (i, j, k) of a grid block lies in its copy (x fastest, no gaps), in values.
@@ -219,23 +236,28 @@ std::size_t copy_index(const GridBlock& block, std::int64_t i, std::int64_t j, s
 }
 
 // The bricks of the grid block that `source` is over that a cast for `isovalues` reads, and the
-// pages of their points (those a source holding them reads: for_each_needed_run) in its copies.
+// pages of their points (those a source holding them reads: for_each_needed_run) in its copies,
+// the values' and each colour field's in `colours`.
 CopyPlan plan_grid(const GridBlock& block, const GridSource& source,
-                   std::span<const double> isovalues) {
+                   std::span<const double> isovalues, std::span<const FieldArray> colours) {
   CopyPlan plan;
   plan.held = source.needed_bricks(isovalues);
   const std::size_t points = std::size_t(block.dims[0] * block.dims[1] * block.dims[2]);
-  const std::size_t size = scalar_bytes(block.type),
-                    colour = block.colour ? scalar_bytes(block.colour_type) : 0;
+  const std::size_t size = scalar_bytes(block.type);
   plan.values_size = points * size;
-  plan.colour_size = points * colour;
   plan.values = PageSet(plan.values_size);
-  plan.colour = PageSet(plan.colour_size);
+  std::vector<std::size_t> colour_size;
+  for (const FieldArray& c : colours) {
+    colour_size.push_back(c.values ? scalar_bytes(c.type) : 0);
+    plan.colour_sizes.push_back(points * colour_size.back());
+    plan.colours.emplace_back(plan.colour_sizes.back());
+  }
   source.for_each_needed_run(
       plan.held, [&](std::int64_t j, std::int64_t k, std::int64_t i0, std::int64_t i1) {
         const std::size_t at = copy_index(block, i0, j, k), n = std::size_t(i1 - i0 + 1);
         plan.values.mark(at * size, n * size);
-        plan.colour.mark(at * colour, n * colour);
+        for (std::size_t f = 0; f < colour_size.size(); ++f)
+          plan.colours[f].mark(at * colour_size[f], n * colour_size[f]);
       });
   for (int a = 0; a < 3; ++a)
     if (block.coords[a]) plan.coords_bytes += std::size_t(block.dims[a]) * sizeof(double);
@@ -243,22 +265,24 @@ CopyPlan plan_grid(const GridBlock& block, const GridSource& source,
 }
 
 // The elements of the high-order block that `source` is over that a cast for `isovalues` keeps,
-// the pages of their nodal values in the copy (element after element, no gaps), and all of the
-// colour field's (a hit on a face a kept element shares with another may be coloured from that
-// one).
+// the pages of their nodal values in the copy (element after element, no gaps), and all of each
+// colour field's in `colours` (a hit on a face a kept element shares with another may be
+// coloured from that one).
 CopyPlan plan_hex(const HexBlock& block, const HexElementSource& source,
-                  std::span<const double> isovalues) {
+                  std::span<const double> isovalues, std::span<const FieldArray> colours) {
   CopyPlan plan;
   plan.held = source.needed_elements(isovalues);
   const std::size_t n = std::size_t(block.order + 1) * (block.order + 1) * (block.order + 1);
   const std::size_t size = scalar_bytes(block.type);
   plan.values_size = block.element_count * n * size;
-  plan.colour_size = block.colour ? block.element_count * n * scalar_bytes(block.colour_type) : 0;
   plan.values = PageSet(plan.values_size);
   for (std::size_t e = 0; e < block.element_count; ++e)
     if (plan.held[e]) plan.values.mark(e * n * size, n * size);
-  plan.colour = PageSet(plan.colour_size);
-  plan.colour.mark(0, plan.colour_size);
+  for (const FieldArray& c : colours) {
+    plan.colour_sizes.push_back(c.values ? block.element_count * n * scalar_bytes(c.type) : 0);
+    plan.colours.emplace_back(plan.colour_sizes.back());
+    plan.colours.back().mark(0, plan.colour_sizes.back());
+  }
   return plan;
 }
 
@@ -266,10 +290,12 @@ CopyPlan plan_hex(const HexBlock& block, const HexElementSource& source,
 // block no longer has) before any is written.
 void begin_copy(CopyPlan& plan, BlockCopy& copy) {
   copy.values.begin(plan.values_size, std::move(plan.values));
-  if (plan.colour_size > 0)
-    copy.colour.begin(plan.colour_size, std::move(plan.colour));
-  else
-    copy.colour.clear();
+  copy.colours.resize(std::max(copy.colours.size(), plan.colours.size()));
+  for (std::size_t f = 0; f < copy.colours.size(); ++f)
+    if (f < plan.colours.size() && plan.colour_sizes[f] > 0)
+      copy.colours[f].begin(plan.colour_sizes[f], std::move(plan.colours[f]));
+    else
+      copy.colours[f].clear();
 }
 
 // Of a grid block's array of `type` at `values` (its points, ghosts included), the points a
@@ -328,20 +354,16 @@ void copy_points(const GridBlock& block, const GridSource& source,
       });
 }
 
-// Of the grid block that `source` is over, the points a source holding the bricks `held` reads,
-// and its colour field's there, into the copies begun for them (begin_copy); and its
-// coordinates.
+// Of the grid block that `source` is over, the points a source holding the bricks `held` reads
+// into the copy begun for them (begin_copy), and its coordinates. Not the colour fields
+// (copy_points each).
 GridBlock copy_grid(const GridBlock& block, const GridSource& source,
                     const std::vector<std::uint8_t>& held, BlockCopy& copy) {
   GridBlock out = block;
   copy_points(block, source, held, block.values, block.type, copy.values.held(),
               copy.values.data());
   out.values = copy.values.data();
-  if (block.colour) {
-    copy_points(block, source, held, block.colour, block.colour_type, copy.colour.held(),
-                copy.colour.data());
-    out.colour = copy.colour.data();
-  }
+  out.colour = nullptr;
   out.strides = {0, 0, 0};
   for (int a = 0; a < 3; ++a) {
     if (!block.coords[a]) {
@@ -370,9 +392,9 @@ void copy_nodal(const HexBlock& block, const void* values, ScalarType type,
     if (held.empty() || held[e]) std::memcpy(dst + e * n * size, src + e * stride * size, n * size);
 }
 
-// Of the high-order block, the nodal values of the elements `held` marks (plan_hex) and the
-// whole colour field, into the copies begun for them (begin_copy). Not the geometry: the source
-// over the copy shares the one prepared when the block was added.
+// Of the high-order block, the nodal values of the elements `held` marks (plan_hex) into the
+// copy begun for them (begin_copy). Not the geometry: the source over the copy shares the one
+// prepared when the block was added. Not the colour fields (copy_nodal each, whole).
 HexBlock copy_hex(const HexBlock& block, const std::vector<std::uint8_t>& held, BlockCopy& copy) {
   copy.coords = {};  // the block k of an earlier step may have been a grid
   copy_nodal(block, block.values, block.type, held, copy.values.data());
@@ -380,10 +402,7 @@ HexBlock copy_hex(const HexBlock& block, const std::vector<std::uint8_t>& held, 
   out.corners = nullptr;
   out.geometry = nullptr;
   out.values = copy.values.data();
-  if (block.colour) {
-    copy_nodal(block, block.colour, block.colour_type, {}, copy.colour.data());
-    out.colour = copy.colour.data();
-  }
+  out.colour = nullptr;
   out.element_stride = 0;
   return out;
 }
@@ -477,7 +496,7 @@ class AdaptorImpl final : public Adaptor {
   Status add_source(std::shared_ptr<const FieldSource> source, const Box& owned) override {
     last_add_failed_ = !source;
     if (!source) return fail(Status::invalid_argument("add_source: no source"));
-    blocks_.push_back({std::move(source), owned, std::nullopt, std::nullopt});
+    blocks_.push_back({std::move(source), owned, std::nullopt, std::nullopt, {}});
     return Status::ok();
   }
   Status add_field(std::string_view name, const void* values, ScalarType type) override {
@@ -495,20 +514,15 @@ class AdaptorImpl final : public Adaptor {
         return Status::invalid_argument("field '" + std::string(name) + "': null values");
       if (type != ScalarType::float32 && type != ScalarType::float64)
         return Status::invalid_argument("field '" + std::string(name) + "': unknown scalar type");
-      // Only the field "colour_by" names is read; the others are accepted and left alone.
-      if (name != options_.colour_by) return Status::ok();
+      // Only the fields "colour_by" names are read; the others are accepted and left alone.
+      const auto& fields = options_.colour_fields;
+      const std::size_t f =
+          std::size_t(std::find(fields.begin(), fields.end(), name) - fields.begin());
+      if (f == fields.size()) return Status::ok();
       Block& b = blocks_.back();
-      // The colour field: a source that reads it (an element block's geometry as prepared).
-      if (b.grid) {
-        b.grid->colour = values;
-        b.grid->colour_type = type;
-        b.source = std::make_shared<GridSource>(*b.grid);
-      } else {
-        b.hex->colour = values;
-        b.hex->colour_type = type;
-        b.source = std::make_shared<HexElementSource>(
-            static_cast<const HexElementSource&>(*b.source), *b.hex);
-      }
+      // The colour field: a source that reads it beside the block's values (an element block's
+      // geometry as prepared).
+      b.colours[f] = {{values, type}, coloured_source(b, {values, type})};
       return Status::ok();
     }));
   }
@@ -645,14 +659,40 @@ class AdaptorImpl final : public Adaptor {
   }
 
  private:
+  // A colour field of a block and the source that reads it beside the block's values.
+  struct Colour {
+    FieldArray array;
+    std::shared_ptr<const FieldSource> source;  // null: the block lacks the field
+  };
   struct Block {
-    std::shared_ptr<const FieldSource> source;
+    std::shared_ptr<const FieldSource> source;  // no colour (a FieldSource: its own bind_scalar)
     Box owned;
     // What the block reads, for the background path's copy (neither: a FieldSource, which
-    // cannot be copied).
+    // cannot be copied); their colour pointers are null.
     std::optional<GridBlock> grid;
     std::optional<HexBlock> hex;
+    std::vector<Colour> colours;  // grid and element blocks: per AdaptorOptions::colour_fields
   };
+
+  // A source over the grid or element block `b` that reads `colour` as its colour field; over the
+  // block's copy holding only the bricks or elements `held` where given.
+  static std::shared_ptr<const FieldSource> coloured_source(
+      const Block& b, FieldArray colour, std::optional<std::vector<std::uint8_t>> held = {}) {
+    if (b.grid) {
+      GridBlock g = *b.grid;
+      g.colour = colour.values;
+      g.colour_type = colour.type;
+      const auto& base = static_cast<const GridSource&>(*b.source);
+      return held ? std::make_shared<GridSource>(g, base.brick_cells(), std::move(*held))
+                  : std::make_shared<GridSource>(g, base.brick_cells());
+    }
+    HexBlock h = *b.hex;
+    h.colour = colour.values;
+    h.colour_type = colour.type;
+    const auto& prepared = static_cast<const HexElementSource&>(*b.source);
+    return held ? std::make_shared<HexElementSource>(prepared, h, std::move(*held))
+                : std::make_shared<HexElementSource>(prepared, h);
+  }
   // A snapshotted step for this rank's caster thread.
   struct CasterJob {
     Job job;
@@ -705,21 +745,36 @@ class AdaptorImpl final : public Adaptor {
         for (const View& v : casters.views)
           casters.tolerance = std::max(casters.tolerance,
                                        merge_tolerance(options_.encoding, v, domain->diagonal()));
-        // Hits carry a colour only with "colour_by", and then every block's.
-        RayCasterOptions caster_options;
-        caster_options.scalars = !options_.colour_by.empty();
-        for (std::size_t i = 0; i < options_.isovalues.size(); ++i)
+        // The hits of an isovalue carry a colour where "colour_by" names a field for it, and
+        // then every block's.
+        for (std::size_t i = 0; i < options_.isovalues.size(); ++i) {
+          const int f = options_.surface_field.empty() ? -1 : options_.surface_field[i];
+          RayCasterOptions caster_options;
+          caster_options.scalars = f >= 0;
           for (std::size_t k = 0; k < blocks.size(); ++k) {
             const Block& b = blocks[k];
+            const std::string which =
+                "colour_by: block " + std::to_string(k) + " of rank " + std::to_string(rank_);
+            const FieldSource* source = b.source.get();
+            if (f >= 0 && (b.grid || b.hex)) {
+              source = b.colours[std::size_t(f)].source.get();
+              if (!source)
+                return Status::invalid_argument(which + " has no field named '" +
+                                                options_.colour_fields[std::size_t(f)] +
+                                                "' (add_field)");
+            } else if (f >= 0 && options_.colour_fields.size() > 1) {
+              return Status::invalid_argument(
+                  which + " is a FieldSource, which has one colour field (bind_scalar), and " +
+                  std::to_string(options_.colour_fields.size()) + " fields are named");
+            }
             casters.owned.push_back(
-                std::make_unique<RayCaster>(*b.source, options_.isovalues[i], caster_options));
+                std::make_unique<RayCaster>(*source, options_.isovalues[i], caster_options));
             if (caster_options.scalars && !casters.owned.back()->carries_scalars())
               return Status::invalid_argument(
-                  "colour_by: block " + std::to_string(k) + " of rank " + std::to_string(rank_) +
-                  (b.grid || b.hex ? " has no field named '" + options_.colour_by + "' (add_field)"
-                                   : " is a FieldSource without a colour field (bind_scalar)"));
+                  which + " is a FieldSource without a colour field (bind_scalar)");
             casters.blocks[i].push_back({casters.owned.back().get(), {b.owned, *domain}});
           }
+        }
         return Status::ok();
       });
     if (!local) {
@@ -866,10 +921,13 @@ class AdaptorImpl final : public Adaptor {
       plans.resize(blocks_.size());
       for (std::size_t k = 0; k < blocks_.size(); ++k) {
         const Block& b = blocks_[k];
+        std::vector<FieldArray> colours;
+        for (const Colour& c : b.colours)
+          colours.push_back(c.array);
         plans[k] = b.grid ? plan_grid(*b.grid, static_cast<const GridSource&>(*b.source),
-                                      options_.isovalues)
+                                      options_.isovalues, colours)
                           : plan_hex(*b.hex, static_cast<const HexElementSource&>(*b.source),
-                                     options_.isovalues);
+                                     options_.isovalues, colours);
         planned += plans[k].bytes();
       }
       return Status::ok();
@@ -897,16 +955,30 @@ class AdaptorImpl final : public Adaptor {
           const Block& b = blocks_[k];
           Block copy;
           copy.owned = b.owned;
+          const std::vector<std::uint8_t>& held = plans[k].held;
           if (b.grid) {  // the bricks the step's isovalues need, with the points around them
             const auto& live = static_cast<const GridSource&>(*b.source);
-            copy.grid = copy_grid(*b.grid, live, plans[k].held, snapshot_[k]);
-            copy.source = std::make_shared<GridSource>(*copy.grid, live.brick_cells(),
-                                                       std::move(plans[k].held));
+            copy.grid = copy_grid(*b.grid, live, held, snapshot_[k]);
+            copy.source = std::make_shared<GridSource>(*copy.grid, live.brick_cells(), held);
           } else {  // the geometry as the block's source prepared it (converted and checked once)
-            copy.hex = copy_hex(*b.hex, plans[k].held, snapshot_[k]);
-            copy.source =
-                std::make_shared<HexElementSource>(static_cast<const HexElementSource&>(*b.source),
-                                                   *copy.hex, std::move(plans[k].held));
+            copy.hex = copy_hex(*b.hex, held, snapshot_[k]);
+            copy.source = std::make_shared<HexElementSource>(
+                static_cast<const HexElementSource&>(*b.source), *copy.hex, held);
+          }
+          // Each colour field where the copy's values are (a grid block's needed points, an
+          // element block's whole field), and a source over both.
+          copy.colours.resize(b.colours.size());
+          for (std::size_t f = 0; f < b.colours.size(); ++f) {
+            const FieldArray live = b.colours[f].array;
+            if (!live.values) continue;
+            SparseCopy& into = snapshot_[k].colours[f];
+            if (b.grid)
+              copy_points(*b.grid, static_cast<const GridSource&>(*b.source), held, live.values,
+                          live.type, into.held(), into.data());
+            else
+              copy_nodal(*b.hex, live.values, live.type, {}, into.data());
+            const FieldArray copied{into.data(), live.type};
+            copy.colours[f] = {copied, coloured_source(copy, copied, held)};
           }
           bytes += snapshot_[k].bytes();
           snapshot_blocks_.push_back(std::move(copy));
@@ -998,7 +1070,8 @@ class AdaptorImpl final : public Adaptor {
     return fail_if(guard(std::string(what) + ": ", [&] {
       auto source = std::make_shared<Source>(block);
       const Box owned = source->bounds();
-      Block b{std::move(source), owned, std::nullopt, std::nullopt};
+      Block b{std::move(source), owned, std::nullopt, std::nullopt, {}};
+      b.colours.resize(options_.colour_fields.size());
       if constexpr (std::is_same_v<Description, GridBlock>)
         b.grid = block;
       else
@@ -1100,15 +1173,24 @@ class AdaptorImpl final : public Adaptor {
       quads += r.quads;
       surfaces.push_back(std::uint32_t(mesh.positions.size()));
       append(mesh, r.mesh);
+      // An isosurface without a colour field beside coloured ones: values the GLB leaves out.
+      if (!options_.colour_fields.empty()) mesh.scalars.resize(mesh.positions.size(), 0.0f);
     }
     const double decode_s = job.cast.seconds.decode, mesh_s = job.cast.seconds.mesh;
     const auto t = Clock::now();
+    // Each isosurface's colour field (option "colour_by"); the GLB gives each field its own
+    // range where the surfaces are not all coloured by one.
+    std::vector<int> groups = options_.surface_field;
+    const bool mixed = options_.colour_fields.size() > 1 ||
+                       std::find(groups.begin(), groups.end(), -1) != groups.end();
+    if (!mixed) groups.assign(surfaces.size(), options_.colour_fields.empty() ? -1 : 0);
     // Vertices where the colour field has no finite value (NaN/Inf in the solver's array)
-    // take the lowest colour, and the log says how many.
-    const std::size_t uncoloured = replace_nonfinite_scalars(mesh);
+    // take the field's lowest colour, and the log says how many.
+    const std::size_t uncoloured = replace_nonfinite_colours(mesh, surfaces, groups);
     GlbOptions glb_options = step_glb_options(job.views.front(), options_.glb);
     // Several isovalues: a mesh each, which the viewer shows or hides.
     if (surfaces.size() > 1) glb_options.surfaces = std::move(surfaces);
+    if (mixed) glb_options.scalar_groups = groups;
     std::vector<std::uint8_t> glb;
     GlbInfo info;
     LDIMESH_RETURN_IF_ERROR(encode_glb(mesh, glb_options, glb, &info));
@@ -1122,8 +1204,18 @@ class AdaptorImpl final : public Adaptor {
     meta.seconds["glb"] = glb_s;
     meta.skipped_steps = job.skipped_steps;
     meta.nonfinite_values = job.nonfinite_values;
-    if (info.has_scalar)
-      meta.scalar = ScalarRange{options_.colour_by, info.scalar_min, info.scalar_max};
+    if (info.has_scalar && options_.colour_fields.size() == 1)
+      meta.scalar = ScalarRange{options_.colour_fields[0], info.scalar_min, info.scalar_max};
+    if (mixed)
+      for (std::size_t i = 0; i < groups.size(); ++i) {
+        std::optional<ScalarRange> range;
+        if (groups[i] >= 0 && i < info.surface_scalar_ranges.size() &&
+            info.surface_scalar_ranges[i])
+          range =
+              ScalarRange{options_.colour_fields[std::size_t(groups[i])],
+                          (*info.surface_scalar_ranges[i])[0], (*info.surface_scalar_ranges[i])[1]};
+        meta.surface_scalars.push_back(std::move(range));
+      }
     const std::size_t bytes = glb.size();
     Snapshot snapshot = make_snapshot(std::move(meta), std::move(glb));
     if (!options_.output_dir.empty()) write_step(snapshot);
@@ -1158,6 +1250,38 @@ class AdaptorImpl final : public Adaptor {
                " vertices without a finite colour value (NaN/Inf in the colour field), shown at "
                "the lowest colour";
     return notes;
+  }
+
+  // Of the surfaces starting at vertices `surfaces` (none: one surface) each coloured by field
+  // `groups[s]` (−1: none), the vertices without a finite colour take the lowest finite value of
+  // their field on the step's surfaces (0 where there is none); returns how many did.
+  static std::size_t replace_nonfinite_colours(Mesh& mesh,
+                                               const std::vector<std::uint32_t>& surfaces,
+                                               const std::vector<int>& groups) {
+    if (mesh.scalars.empty()) return 0;
+    const std::size_t count = std::max<std::size_t>(1, surfaces.size());
+    const auto range = [&](std::size_t s) {
+      const std::size_t first = surfaces.empty() ? 0 : surfaces[s];
+      const std::size_t last = s + 1 < surfaces.size() ? surfaces[s + 1] : mesh.scalars.size();
+      return std::span<float>(mesh.scalars.data() + first, last - first);
+    };
+    std::size_t replaced = 0;
+    for (int g = 0; g <= *std::max_element(groups.begin(), groups.end()); ++g) {
+      float lowest = INFINITY;
+      for (std::size_t s = 0; s < count; ++s)
+        if (groups[s] == g)
+          for (float v : range(s))
+            if (std::isfinite(v)) lowest = std::min(lowest, v);
+      if (!std::isfinite(lowest)) lowest = 0.0f;
+      for (std::size_t s = 0; s < count; ++s)
+        if (groups[s] == g)
+          for (float& v : range(s))
+            if (!std::isfinite(v)) {
+              v = lowest;
+              ++replaced;
+            }
+    }
+    return replaced;
   }
 
   // Appends `b` to `a` (the meshes of several isovalues in one GLB).

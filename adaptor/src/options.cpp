@@ -1,5 +1,6 @@
 #include "options.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <initializer_list>
@@ -10,6 +11,43 @@
 
 namespace ldimesh {
 namespace {
+
+// "colour_by" (`v`), after "isovalues": one field's name for every isosurface, or an array of
+// a name or null per isovalue (null: that isosurface is not coloured), or null (none is).
+Status parse_colour_by(const nlohmann::json& v, AdaptorOptions& o) {
+  const auto bad = [](const std::string& why) {
+    return Status::invalid_options("options: 'colour_by' " + why);
+  };
+  std::vector<std::string> names;
+  if (v.is_null()) {  // nothing coloured
+    names.assign(o.isovalues.size(), std::string());
+  } else if (v.is_string()) {
+    names.assign(o.isovalues.size(), v.get<std::string>());
+    if (names.front().empty()) return bad("must name a field (add_field), or be left out");
+  } else if (v.is_array()) {
+    if (v.size() != o.isovalues.size())
+      return bad("must have one entry per isovalue (" + std::to_string(o.isovalues.size()) +
+                 "), a field's name or null; it has " + std::to_string(v.size()));
+    for (const auto& x : v) {
+      if (!x.is_null() && !(x.is_string() && !x.get<std::string>().empty()))
+        return bad("entries must be a field's name (add_field) or null");
+      names.push_back(x.is_null() ? std::string() : x.get<std::string>());
+    }
+  } else {
+    return bad(
+        "must be a field's name (a string), an array of a name or null per isovalue, or null");
+  }
+  o.colour_fields.clear();
+  o.surface_field.assign(names.size(), -1);
+  for (std::size_t i = 0; i < names.size(); ++i) {
+    if (names[i].empty()) continue;
+    const auto at = std::find(o.colour_fields.begin(), o.colour_fields.end(), names[i]);
+    o.surface_field[i] = int(at - o.colour_fields.begin());
+    if (at == o.colour_fields.end()) o.colour_fields.push_back(names[i]);
+  }
+  if (o.colour_fields.empty()) o.surface_field.clear();
+  return Status::ok();
+}
 
 // Reads `j` into `o`, naming the first unknown key or bad value.
 Status parse_object(const nlohmann::json& j, AdaptorOptions& o) {
@@ -62,10 +100,7 @@ Status parse_object(const nlohmann::json& j, AdaptorOptions& o) {
       if (o.isovalues.size() > 8) return bad("isovalues", "may hold at most 8 values");
     }
     if (j.contains("colour_by")) {
-      if (!j["colour_by"].is_string()) return bad("colour_by", "must be a field's name (a string)");
-      o.colour_by = j["colour_by"].get<std::string>();
-      if (o.colour_by.empty())
-        return bad("colour_by", "must name a field (add_field), or be left out");
+      if (Status s = parse_colour_by(j["colour_by"], o); !s) return s;
     }
     if (j.contains("views")) {
       o.views = j["views"].get<std::string>();

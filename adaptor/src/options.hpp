@@ -17,7 +17,11 @@ namespace ldimesh {
 
 struct AdaptorOptions {
   std::vector<double> isovalues{0.5};
-  std::string colour_by;  // a field every block has (add_field); "" colours by nothing
+  // "colour_by": the fields the isosurfaces are coloured by (add_field), each named once, in
+  // the order the option names them (empty: nothing is coloured), and each isovalue's field as
+  // an index into them (−1: that isosurface is not coloured; empty when colour_fields is).
+  std::vector<std::string> colour_fields;
+  std::vector<int> surface_field;
   std::string views = "xyz";
   int resolution = 256;
   double r = 0.5;

@@ -87,11 +87,30 @@ TEST(Adaptor, InvalidOptionsAreReportedOnEveryRankWithTheKey) {
               std::string::npos)
         << s.message();
   }
-  for (const char* doc : {R"({"colour_by": ""})", R"({"colour_by": 3})"}) {
+  for (const char* doc : {R"({"colour_by": ""})", R"({"colour_by": 3})", R"({"colour_by": {}})",
+                          R"({"isovalues": [0.3, 0.5], "colour_by": ["U"]})",
+                          R"({"isovalues": [0.3, 0.5], "colour_by": ["U", 3]})",
+                          R"({"isovalues": [0.3, 0.5], "colour_by": ["U", ""]})"}) {
     s = Adaptor::create(MPI_COMM_WORLD, doc, a);
     EXPECT_EQ(s.code(), StatusCode::invalid_options) << doc;
-    EXPECT_NE(s.message().find("colour_by"), std::string::npos) << s.message();
+    EXPECT_NE(s.message().find("'colour_by'"), std::string::npos) << s.message();
   }
+  // null, or null for every isovalue: nothing coloured.
+  for (const char* doc : {R"({"colour_by": null, "server": {"enabled": false}, "log": false})",
+                          R"({"isovalues": [0.3, 0.5], "colour_by": [null, null],
+                              "server": {"enabled": false}, "log": false})"}) {
+    s = Adaptor::create(MPI_COMM_WORLD, doc, a);
+    EXPECT_TRUE(s) << doc << ": " << s.message();
+    if (a) {
+      EXPECT_TRUE(a->finalize());
+    }
+    a.reset();
+  }
+  s = Adaptor::create(MPI_COMM_WORLD, R"({"isovalues": [0.3, 0.5], "colour_by": ["U"]})", a);
+  EXPECT_NE(s.message().find("must have one entry per isovalue (2), a field's name or null; it "
+                             "has 1"),
+            std::string::npos)
+      << s.message();
   // Integers out of their type's range or not integral: named errors, not undefined behaviour
   // in the conversion (UBSan reported it in the options fuzz target for 1e20).
   for (const char* doc :
@@ -452,9 +471,10 @@ std::unique_ptr<Adaptor> make_grid_adaptor(const std::string& options, GridSlab&
   return make_grid_adaptor(options, slab.block);
 }
 
-std::string grid_options(const std::string& dir, bool background) {
-  return R"({"server": {"enabled": false}, "resolution": 40, "log": false, "isovalues": [0.36],
-             "busy": "coalesce", "background": )" +
+std::string grid_options(const std::string& dir, bool background,
+                         const std::string& isovalues = "[0.36]") {
+  return R"({"server": {"enabled": false}, "resolution": 40, "log": false, "isovalues": )" +
+         isovalues + R"(, "busy": "coalesce", "background": )" +
          std::string(background ? "true" : "false") + R"(, "output_dir": ")" + dir + R"("})";
 }
 
@@ -788,6 +808,94 @@ TEST(Adaptor, GridBlocksAreColouredByANamedFieldOnBothPaths) {
   }
 }
 
+// Two nested spheres of the slab's |x|², r = 0.4 and 0.8, each isovalue with its own entry of
+// "colour_by": the inner one coloured by C (float, x + 2y − z), the outer one by nothing or by D
+// (double, 10 + 100z: other units). On both paths (the snapshot copies each field the step
+// reads) and merged or not, the same GLB; its metadata gives each surface's field and range.
+TEST(Adaptor, EachIsovalueIsColouredByItsOwnFieldOrByNone) {
+  for (const bool merging : {false, true})
+    for (const bool outer_by_d : {false, true}) {
+      std::vector<std::uint8_t> synchronous;
+      for (const bool background : {false, true}) {
+        SCOPED_TRACE(std::string(merging ? "merged" : "views") +
+                     (outer_by_d ? ", [C, D]" : ", [C, null]") +
+                     (background ? ", background" : ", synchronous"));
+        GridSlab slab(kSlabPoints, 0.0);
+        std::vector<float> c = slab_colour(slab);
+        std::vector<double> d(slab.values.size());
+        for (std::size_t p = 0; p < d.size(); ++p) {
+          const auto& n = slab.block.dims;
+          const std::int64_t k = std::int64_t(p) / (n[0] * n[1]);
+          d[p] = 10.0 + 100.0 * (slab.block.origin.z + double(k) * slab.block.spacing.z);
+        }
+        const std::string dir = temp_dir(std::string("colours_") + (merging ? "m" : "v") +
+                                         (outer_by_d ? "d" : "n") + (background ? "b" : "s"));
+        const std::string options = std::string(R"({"colour_by": ["C", )") +
+                                    (outer_by_d ? R"("D")" : "null") + R"(], "merging": )" +
+                                    (merging ? "true" : "false") + ", " +
+                                    grid_options(dir, background, "[0.16, 0.64]").substr(1);
+        auto a = make_grid_adaptor(options, slab);
+        if (!a) return;
+        EXPECT_TRUE(a->add_field("D", d.data(), ScalarType::float64));
+        EXPECT_TRUE(a->add_field("C", c.data(), ScalarType::float32));
+        EXPECT_TRUE(a->execute(1, 0.0)) << a->last_error();
+        if (background && thread_multiple()) {  // the values, C, and D where it colours
+          const std::size_t floats = snapshot_pages(slab.block, {0.16, 0.64}, sizeof(float));
+          EXPECT_EQ(
+              a->last_report().snapshot_bytes,
+              2 * floats +
+                  (outer_by_d ? snapshot_pages(slab.block, {0.16, 0.64}, sizeof(double)) : 0));
+        }
+        // The solver overwrites its arrays at once: the published step is that of the call.
+        std::fill(c.begin(), c.end(), 1e6f);
+        std::fill(d.begin(), d.end(), -1e6);
+        std::fill(slab.values.begin(), slab.values.end(), 100.0f);
+        EXPECT_TRUE(a->finalize()) << a->last_error();
+        if (rank_of() != 0) continue;
+        // Checks that stop at a failed assertion (the other ranks go on to the next step).
+        [&] {
+          const Mesh mesh = testing::published_mesh(dir, 1);
+          const StepMetadata meta = testing::published_step(dir, 1);
+          ASSERT_EQ(mesh.scalars.size(), mesh.vertex_count());
+          ASSERT_EQ(meta.surface_scalars.size(), 2u);
+          ASSERT_TRUE(meta.surface_scalars[0].has_value());
+          EXPECT_EQ(meta.surface_scalars[0]->name, "C");
+          // One field: "scalar" names it too; two: none does.
+          EXPECT_EQ(meta.scalar.has_value(), !outer_by_d);
+          if (meta.scalar) {
+            EXPECT_EQ(meta.scalar->name, "C");
+          }
+          const auto inner = [](glm::dvec3 x) { return glm::length(x) < 0.6; };
+          const auto outer = [](glm::dvec3 x) { return glm::length(x) >= 0.6; };
+          testing::expect_part_coloured_by(
+              mesh, *meta.surface_scalars[0], inner,
+              [](glm::dvec3 x) { return x.x + 2.0 * x.y - x.z; }, 2.0, 2.0 / 40);
+          if (outer_by_d) {
+            ASSERT_TRUE(meta.surface_scalars[1].has_value());
+            EXPECT_EQ(meta.surface_scalars[1]->name, "D");
+            EXPECT_GT(meta.surface_scalars[1]->max, 80.0);  // D's range, not C's
+            testing::expect_part_coloured_by(
+                mesh, *meta.surface_scalars[1], outer,
+                [](glm::dvec3 x) { return 10.0 + 100.0 * x.z; }, 100.0, 2.0 / 40);
+          } else {
+            EXPECT_FALSE(meta.surface_scalars[1].has_value());
+            std::size_t plain = 0, coloured = 0;
+            for (std::size_t v = 0; v < mesh.vertex_count(); ++v)
+              if (outer(glm::dvec3(mesh.positions[v])))
+                ++(std::isnan(mesh.scalars[v]) ? plain : coloured);
+            EXPECT_GT(plain, 300u);
+            EXPECT_EQ(coloured, 0u) << "the outer sphere has no colour";
+          }
+        }();
+        if (!background) {
+          synchronous = published_glb(dir, 1);
+        } else {
+          EXPECT_TRUE(published_glb(dir, 1) == synchronous) << "the two paths differ";
+        }
+      }
+    }
+}
+
 // The slab's values, and a colour field in double, in a solver's own layout instead of x fastest
 // without gaps: rows and layers padded (a halo, as Gray–Scott's), or z fastest. The padding
 // holds NaN: a copy that took it for points would change the mesh.
@@ -935,6 +1043,18 @@ TEST(Adaptor, ColourByAFieldABlockLacksFailsTheStepNamingIt) {
     EXPECT_NE(s.message().find("no field named 'T'"), std::string::npos) << s.message();
     EXPECT_TRUE(a->finalize());
   }
+  // A FieldSource has one colour field (bind_scalar): two named fail the step, naming it.
+  auto two = make(R"({"server": {"enabled": false}, "log": false, "resolution": 32,
+                     "isovalues": [0.3, 0.5], "colour_by": ["T", "U"], "background": false})");
+  if (two) {
+    const Status step = two->execute(0, 0.0);
+    EXPECT_FALSE(step);
+    EXPECT_NE(step.message().find("is a FieldSource, which has one colour field (bind_scalar), and "
+                                  "2 fields are named"),
+              std::string::npos)
+        << step.message();
+    EXPECT_TRUE(two->finalize());
+  }
   // A FieldSource without a colour field of its own: the step fails, naming it.
   auto c = make(R"({"server": {"enabled": false}, "log": false, "resolution": 32, "colour_by": "T",
                    "background": false})");
@@ -968,7 +1088,8 @@ TEST(Adaptor, ColourByAFieldABlockLacksFailsTheStepNamingIt) {
 }
 
 // Curved elements coloured by z: a field of order p = q on geometry of order q represents z
-// exactly, so a vertex's colour is its own z.
+// exactly, so a vertex's colour is its own z. And each isovalue by its own field: the sphere of
+// radius 0.35 by z, the one of radius 0.2 inside it by x (each exact, each over its own range).
 // Both paths publish the same bytes, merged (the snapshot answers the merge's samples), though
 // the snapshot copies only the values of the elements that may hold the sphere (4³ elements, the
 // sphere misses the corner ones) and the solver overwrites its arrays as soon as execute()
@@ -976,49 +1097,76 @@ TEST(Adaptor, ColourByAFieldABlockLacksFailsTheStepNamingIt) {
 TEST(Adaptor, CurvedElementBlocksAreColouredByTheirNodalField) {
   const int q = 2;
   BentCube cube = bent_cube(q, 4, 2);
-  std::vector<double> values, z;
+  std::vector<double> values, x, z;
   const std::size_t count = cube.count;
   for (const glm::dvec3& p : cube.nodes) {
     values.push_back(glm::length(p - glm::dvec3(0.5)));
+    x.push_back(p.x);
     z.push_back(p.z);
   }
-  std::vector<std::uint8_t> synchronous;
-  for (const bool background : {false, true}) {
-    std::vector<double> solver_values = values, solver_z = z;
-    const std::string dir = temp_dir(background ? "curved_colour_b" : "curved_colour_s");
-    std::unique_ptr<Adaptor> a;
-    EXPECT_TRUE(Adaptor::create(
-        MPI_COMM_WORLD,
-        R"({"server": {"enabled": false}, "resolution": 64, "log": false, "isovalues": [0.35],
-            "colour_by": "z", "merging": true, "background": )" +
-            std::string(background ? "true" : "false") + R"(, "output_dir": ")" + dir + R"("})",
-        a));
-    if (!a) return;
-    EXPECT_TRUE(a->set_domain({glm::dvec3(0.0), glm::dvec3(1.0)}));
-    HexBlock block;
-    block.order = q;
-    block.element_count = count;
-    block.geometry_order = q;
-    block.geometry = cube.geometry.data();
-    block.values = solver_values.data();
-    if (count > 0) {
-      EXPECT_TRUE(a->add_hex_block(block));
-      EXPECT_TRUE(a->add_field("z", solver_z.data(), ScalarType::float64));
-    }
-    EXPECT_TRUE(a->execute(0, 0.0)) << a->last_error();
-    EXPECT_EQ(a->last_report().background, background && thread_multiple());
-    std::fill(solver_values.begin(), solver_values.end(), 0.35);
-    std::fill(solver_z.begin(), solver_z.end(), 1e6);
-    EXPECT_TRUE(a->finalize()) << a->last_error();
-    if (rank_of() != 0) continue;
-    SCOPED_TRACE(background ? "background" : "synchronous");
-    testing::expect_coloured_by(
-        testing::published_mesh(dir, 0), testing::published_step(dir, 0), "z",
-        [](glm::dvec3 p) { return p.z; }, 1.0, 1.0 / 64);
-    if (!background) {
-      synchronous = published_glb(dir, 0);
-    } else {
-      EXPECT_TRUE(published_glb(dir, 0) == synchronous) << "the two paths differ";
+  for (const bool per_isovalue : {false, true}) {
+    std::vector<std::uint8_t> synchronous;
+    for (const bool background : {false, true}) {
+      std::vector<double> solver_values = values, solver_x = x, solver_z = z;
+      const std::string dir = temp_dir(std::string("curved_colour_") + (per_isovalue ? "i" : "o") +
+                                       (background ? "b" : "s"));
+      std::unique_ptr<Adaptor> a;
+      EXPECT_TRUE(Adaptor::create(
+          MPI_COMM_WORLD,
+          R"({"server": {"enabled": false}, "resolution": 64, "log": false, )" +
+              std::string(per_isovalue ? R"("isovalues": [0.35, 0.2], "colour_by": ["z", "x"])"
+                                       : R"("isovalues": [0.35], "colour_by": "z")") +
+              R"(, "merging": true, "background": )" + (background ? "true" : "false") +
+              R"(, "output_dir": ")" + dir + R"("})",
+          a));
+      if (!a) return;
+      EXPECT_TRUE(a->set_domain({glm::dvec3(0.0), glm::dvec3(1.0)}));
+      HexBlock block;
+      block.order = q;
+      block.element_count = count;
+      block.geometry_order = q;
+      block.geometry = cube.geometry.data();
+      block.values = solver_values.data();
+      if (count > 0) {
+        EXPECT_TRUE(a->add_hex_block(block));
+        EXPECT_TRUE(a->add_field("z", solver_z.data(), ScalarType::float64));
+        EXPECT_TRUE(a->add_field("x", solver_x.data(), ScalarType::float64));
+      }
+      EXPECT_TRUE(a->execute(0, 0.0)) << a->last_error();
+      EXPECT_EQ(a->last_report().background, background && thread_multiple());
+      std::fill(solver_values.begin(), solver_values.end(), 0.35);
+      std::fill(solver_x.begin(), solver_x.end(), -1e6);
+      std::fill(solver_z.begin(), solver_z.end(), 1e6);
+      EXPECT_TRUE(a->finalize()) << a->last_error();
+      if (rank_of() != 0) continue;
+      SCOPED_TRACE(std::string(per_isovalue ? "[z, x]" : "z") +
+                   (background ? ", background" : ", synchronous"));
+      const Mesh mesh = testing::published_mesh(dir, 0);
+      const StepMetadata meta = testing::published_step(dir, 0);
+      if (!per_isovalue) {
+        testing::expect_coloured_by(
+            mesh, meta, "z", [](glm::dvec3 p) { return p.z; }, 1.0, 1.0 / 64);
+      } else {
+        [&] {
+          ASSERT_EQ(meta.surface_scalars.size(), 2u);
+          ASSERT_TRUE(meta.surface_scalars[0] && meta.surface_scalars[1]);
+          EXPECT_EQ(meta.surface_scalars[0]->name, "z");
+          EXPECT_EQ(meta.surface_scalars[1]->name, "x");
+          EXPECT_FALSE(meta.scalar.has_value());
+          const auto from_centre = [](glm::dvec3 p) { return glm::length(p - glm::dvec3(0.5)); };
+          testing::expect_part_coloured_by(
+              mesh, *meta.surface_scalars[0], [&](glm::dvec3 p) { return from_centre(p) > 0.275; },
+              [](glm::dvec3 p) { return p.z; }, 1.0, 1.0 / 64);
+          testing::expect_part_coloured_by(
+              mesh, *meta.surface_scalars[1], [&](glm::dvec3 p) { return from_centre(p) <= 0.275; },
+              [](glm::dvec3 p) { return p.x; }, 1.0, 1.0 / 64);
+        }();
+      }
+      if (!background) {
+        synchronous = published_glb(dir, 0);
+      } else {
+        EXPECT_TRUE(published_glb(dir, 0) == synchronous) << "the two paths differ";
+      }
     }
   }
 }

@@ -62,6 +62,31 @@ inline void expect_on_grid_sphere(const Mesh& mesh, double iso, double h, int re
   EXPECT_LE(hi, r + quantization) << "a published vertex is outside the sphere |x| = " << r;
 }
 
+// The colour of every vertex of `mesh` that `on(position)` selects is `colour(position)` within
+// the bound of expect_coloured_by, its _SCALAR u standing for range.min + u·(range.max −
+// range.min).
+template <class On, class Colour>
+inline void expect_part_coloured_by(const Mesh& mesh, const ScalarRange& range, On on,
+                                    Colour colour, double slope, double pixel,
+                                    int glb_scalar_bits = StepGlbSettings{}.scalar_bits) {
+  ASSERT_EQ(mesh.scalars.size(), mesh.vertex_count());
+  const double span = range.max - range.min;
+  const double bound = 3.0 * slope * 0.1 * pixel + span / (2.0 * 4094.0) +
+                       span / (2.0 * double((1 << glb_scalar_bits) - 1)) + 1e-5;
+  double worst = 0.0;
+  std::size_t selected = 0;
+  for (std::size_t v = 0; v < mesh.vertex_count(); ++v) {
+    const glm::dvec3 x(mesh.positions[v]);
+    if (!on(x)) continue;
+    ++selected;
+    const double value = range.min + double(mesh.scalars[v]) * span;
+    const double err = std::abs(value - colour(x));
+    if (!(err <= worst)) worst = err;  // NaN too
+  }
+  EXPECT_GT(selected, 300u);
+  EXPECT_LT(worst, bound) << "colour of a published vertex vs the field there";
+}
+
 // Every vertex's colour is `colour(vertex)` within what the wire and the GLB allow, computed
 // here from their bit budgets: positions within a tenth of a pixel (`pixel`) per axis, times the
 // field's largest slope `slope` per axis; the value within half a step of 12 bits (the fragments'
@@ -79,16 +104,8 @@ inline void expect_coloured_by(const Mesh& mesh, const StepMetadata& meta, const
   const auto [lo, hi] = std::minmax_element(mesh.scalars.begin(), mesh.scalars.end());
   EXPECT_NEAR(*lo, 0.0f, 1e-6f);
   EXPECT_NEAR(*hi, 1.0f, 1e-6f);
-  const double range = meta.scalar->max - meta.scalar->min;
-  const double bound = 3.0 * slope * 0.1 * pixel + range / (2.0 * 4094.0) +
-                       range / (2.0 * double((1 << glb_scalar_bits) - 1)) + 1e-5;
-  double worst = 0.0;
-  for (std::size_t v = 0; v < mesh.vertex_count(); ++v) {
-    const double value = meta.scalar->min + double(mesh.scalars[v]) * range;
-    const double err = std::abs(value - colour(glm::dvec3(mesh.positions[v])));
-    if (!(err <= worst)) worst = err;  // NaN too
-  }
-  EXPECT_LT(worst, bound) << "colour of a published vertex vs the field there";
+  expect_part_coloured_by(
+      mesh, *meta.scalar, [](glm::dvec3) { return true; }, colour, slope, pixel, glb_scalar_bits);
 }
 
 }  // namespace ldimesh::testing

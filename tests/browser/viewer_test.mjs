@@ -85,7 +85,7 @@ function instrument() {
   // not produce.
   window.testColourCounts = () => {
     const d = window.testCanvasPixels().data;
-    let mesh = 0, purple = 0, red = 0, green = 0;
+    let mesh = 0, purple = 0, red = 0, green = 0, blue = 0, grey = 0;
     for (let i = 0; i < d.length; i += 4) {
       const [r, g, b] = [d[i], d[i + 1], d[i + 2]];
       if (Math.abs(r - 0x1d) + Math.abs(g - 0x20) + Math.abs(b - 0x26) <= 24) continue;
@@ -95,14 +95,18 @@ function instrument() {
       // viridis passes from 288 down through blue and green to yellow (55), never red;
       // cool–warm's hues stay near 232 and 348–20 (its middle is grey), never green.
       const max = Math.max(r, g, b), min = Math.min(r, g, b);
+      // Grey: the plain colour (sRGB b8c4d6), lit; viridis and cool–warm are saturated but for
+      // cool–warm's middle.
+      if (max >= 48 && max - min < 0.25 * max) grey++;
       if (max < 16 || max - min < 0.25 * max) continue;
       let hue = max === r ? (g - b) / (max - min) : max === g ? 2 + (b - r) / (max - min) : 4 + (r - g) / (max - min);
       hue = (60 * hue + 360) % 360;
       if (hue >= 260 && hue <= 320) purple++;
       if (hue >= 330 || hue <= 15) red++;
       if (hue >= 70 && hue <= 180) green++;
+      if (hue >= 190 && hue <= 250) blue++;
     }
-    return { mesh, purple, red, green };
+    return { mesh, purple, red, green, blue, grey };
   };
 }
 
@@ -405,6 +409,42 @@ try {
     `the next step (${stillHidden[0]}) keeps both surfaces hidden: ${stillHidden[1]} mesh pixels`);
   await page.click('#surface-0');
   await page.click('#surface-1');
+
+  // Each surface its own colour field (the adaptor's "colour_by" per isovalue): the outer sphere
+  // without one shows plain while colouring by field, the inner one (by T = 300 + 100·x) takes the
+  // colour map over its own range; two fields give the legend a row each.
+  await page.selectOption('#colour', 'scalar');
+  const legendRows = () => page.evaluate(() => {
+    const rows = [[document.getElementById('legend-name'), document.getElementById('legend-min'),
+      document.getElementById('legend-max')]];
+    for (const row of document.getElementById('legend-more').children)
+      rows.push([row.querySelector('.legend-name'), row.querySelector('.legend-min'), row.querySelector('.legend-max')]);
+    return document.getElementById('legend').hidden ? [] : rows.map((r) => r.map((e) => e.textContent));
+  });
+  const rowOf = (f) => [f.name, Number(f.min).toPrecision(4), Number(f.max).toPrecision(4)];
+  for (const [command, outerField] of [['nested-colours', null], ['nested-fields', 'x']]) {
+    publisher.stdin.write(`${command}\n`);
+    const coloured = published(await nextLine());
+    await waitForStep(coloured.step, 30000).catch(() => {});
+    const fields = await page.evaluate(() => window.ldimesh.loaded.surface_scalars);
+    const rows = await legendRows();
+    const expected = [fields[0], fields[1]].filter(Boolean).map(rowOf);
+    check(await loadedStep() === Number(coloured.step) && Array.isArray(fields) &&
+      (fields[0] ? fields[0].name : null) === outerField && fields[1].name === 'T' && fields[1].min > 200 &&
+      JSON.stringify(rows) === JSON.stringify(expected),
+      `${command}: surface fields ${JSON.stringify(fields)}, legend rows ${JSON.stringify(rows)}`);
+    const both = await colours();
+    if (!outerField)
+      check(both.grey > 0.8 * both.mesh && both.green + both.purple < 0.02 * both.mesh,
+        `${command}: the outer sphere, without a field, shows plain (${both.grey} grey, ${both.green} green, ${both.purple} purple of ${both.mesh} mesh pixels)`);
+    await page.click('#surface-0');  // the inner sphere alone, over its own range
+    const inner = await colours();
+    // (Over another range, x's, every T would be past its top: all yellow.)
+    check(inner.green > 0.2 * inner.mesh && inner.blue > 0.05 * inner.mesh && inner.grey < 0.05 * inner.mesh,
+      `${command}: the inner sphere in viridis over T's range (${inner.green} green, ${inner.blue} blue, ${inner.grey} grey of ${inner.mesh} mesh pixels)`);
+    await page.screenshot({ path: `${artifacts}/viewer_${command}.png` });
+    await page.click('#surface-0');
+  }
 
   // A decode that runs past its limit is stopped and reported, and the page goes on: with the
   // limit at 0 s (window.ldimeshViewer, as ?decode_timeout=0 sets it) the next step's decode is

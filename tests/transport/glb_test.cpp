@@ -719,6 +719,126 @@ TEST(Glb, AGivenScalarRangeIsUsedAndClampsToIt) {
 
 // ---- Bounds ---------------------------------------------------------------------------------
 
+// Surfaces coloured by different fields, or not at all (the adaptor's "colour_by" per
+// isovalue, GlbOptions::scalar_groups): each group's surfaces are normalized to the group's own
+// range, a surface of group −1 has no _SCALAR (NaN once decoded), and the extras and GlbInfo give
+// each surface's range.
+TEST(Glb, SurfacesColouredByDifferentFieldsKeepARangeEach) {
+  Mesh parts[3] = {with_scalar(barth_triangles()),
+                   with_scalar(surface_mesh("torus", 40, FaceType::triangles)),
+                   with_scalar(surface_mesh("torus", 24, FaceType::triangles))};
+  for (float& x : parts[2].scalars)  // another field, in other units
+    x = 1000.0f - 50.0f * x;
+  Mesh all;
+  std::vector<std::uint32_t> starts;
+  for (const Mesh& m : parts) {
+    const std::uint32_t base = std::uint32_t(all.vertex_count());
+    starts.push_back(base);
+    all.positions.insert(all.positions.end(), m.positions.begin(), m.positions.end());
+    all.normals.insert(all.normals.end(), m.normals.begin(), m.normals.end());
+    all.scalars.insert(all.scalars.end(), m.scalars.begin(), m.scalars.end());
+    for (const std::uint32_t v : m.triangles)
+      all.triangles.push_back(base + v);
+    all.triangle_view.insert(all.triangle_view.end(), m.triangle_view.begin(),
+                             m.triangle_view.end());
+  }
+  all.view_dirs = parts[0].view_dirs;
+  std::array<float, 2> range[3];
+  for (int k = 0; k < 3; ++k) {
+    const auto [lo, hi] = std::minmax_element(parts[k].scalars.begin(), parts[k].scalars.end());
+    range[k] = {*lo, *hi};
+  }
+  GlbOptions options;
+  options.compression_level = 0;  // keeps each surface's vertex order: compare by index
+  options.surfaces = starts;
+
+  for (const std::vector<int>& groups : {std::vector<int>{0, -1, 1}, std::vector<int>{0, -1, 0}}) {
+    SCOPED_TRACE(groups[2]);
+    options.scalar_groups = groups;
+    // Surfaces 0 and 2 in one group share the range over both.
+    const std::array<float, 2> range2 =
+        groups[2] == 1 ? range[2]
+                       : std::array<float, 2>{std::min(range[0][0], range[2][0]),
+                                              std::max(range[0][1], range[2][1])};
+    const std::array<float, 2> range0 = groups[2] == 1 ? range[0] : range2;
+    GlbInfo info;
+    const Bytes glb = encode(all, options, &info);
+    const Json j = json_chunk(glb);
+    ASSERT_EQ(j["meshes"].size(), 3u);
+    for (std::size_t k = 0; k < 3; ++k)
+      EXPECT_EQ(j["meshes"][k]["primitives"][0]["attributes"].contains("_SCALAR"), k != 1) << k;
+    const Json& extras = j["meshes"][0]["extras"]["ldimesh"];
+    EXPECT_EQ(extras["surface_scalar_ranges"],
+              Json::array({Json::array({range0[0], range0[1]}), Json(),
+                           Json::array({range2[0], range2[1]})}));
+    EXPECT_TRUE(info.has_scalar);
+    ASSERT_EQ(info.surface_scalar_ranges.size(), 3u);
+    EXPECT_EQ(info.surface_scalar_ranges[0], range0);
+    EXPECT_FALSE(info.surface_scalar_ranges[1].has_value());
+    EXPECT_EQ(info.surface_scalar_ranges[2], range2);
+    if (groups[2] == 1) {  // two ranges: no one scalar_range
+      EXPECT_FALSE(extras.contains("scalar_range"));
+      EXPECT_EQ(info.scalar_min, 0.0f);
+      EXPECT_EQ(info.scalar_max, 0.0f);
+    } else {
+      EXPECT_EQ(extras["scalar_range"], Json::array({range0[0], range0[1]}));
+      EXPECT_EQ(info.scalar_min, range0[0]);
+      EXPECT_EQ(info.scalar_max, range0[1]);
+    }
+
+    Mesh back;
+    GlbInfo back_info;
+    ASSERT_TRUE(decode_glb(glb, back, &back_info));
+    EXPECT_TRUE(back_info.has_scalar);
+    EXPECT_EQ(back_info.surface_scalar_ranges, info.surface_scalar_ranges);
+    // The isolated decoder gives the same, NaN included (bit for bit).
+    Mesh isolated;
+    GlbInfo isolated_info;
+    ASSERT_TRUE(decode_glb_isolated(glb, isolated, &isolated_info));
+    EXPECT_EQ(isolated_info.surface_scalar_ranges, back_info.surface_scalar_ranges);
+    ASSERT_EQ(isolated.scalars.size(), back.scalars.size());
+    EXPECT_EQ(std::memcmp(isolated.scalars.data(), back.scalars.data(),
+                          back.scalars.size() * sizeof(float)),
+              0);
+    ASSERT_EQ(back.vertex_count(), all.vertex_count());
+    ASSERT_EQ(back.scalars.size(), all.vertex_count());
+    for (std::size_t k = 0; k < 3; ++k) {
+      const std::size_t first = starts[k], last = k + 1 < 3 ? starts[k + 1] : all.vertex_count();
+      const std::array<float, 2> r = k == 0 ? range0 : range2;
+      double worst = 0.0;
+      for (std::size_t v = first; v < last; ++v) {
+        if (k == 1) {
+          ASSERT_TRUE(std::isnan(back.scalars[v])) << v;
+          continue;
+        }
+        const double u = (double(all.scalars[v]) - r[0]) / (double(r[1]) - r[0]);
+        const double err = std::abs(double(back.scalars[v]) - u);
+        if (!(err <= worst)) worst = err;
+      }
+      EXPECT_LE(worst, glb_scalar_error_bound(options)) << "surface " << k;
+    }
+  }
+
+  // One entry per surface, each −1 or a group below the surfaces' count, and scalars where a
+  // surface is coloured.
+  for (const std::vector<int>& bad :
+       {std::vector<int>{0, -1}, std::vector<int>{0, -2, 0}, std::vector<int>{0, 3, 0}}) {
+    options.scalar_groups = bad;
+    Bytes out;
+    EXPECT_EQ(encode_glb(all, options, out).code(), StatusCode::invalid_argument);
+  }
+  Mesh plain = all;
+  plain.scalars.clear();
+  options.scalar_groups = {0, -1, 0};
+  Bytes out;
+  EXPECT_EQ(encode_glb(plain, options, out).code(), StatusCode::invalid_argument);
+  options.scalar_groups = {-1, -1, -1};
+  ASSERT_TRUE(encode_glb(plain, options, out));
+  Mesh back;
+  ASSERT_TRUE(decode_glb(out, back));
+  EXPECT_TRUE(back.scalars.empty());
+}
+
 TEST(Glb, AutomaticPositionBitsKeepTheStepBelowATenthOfAPixel) {
   const Mesh& mesh = barth_triangles();
   const SurfaceInfo* s = find_surface("barth");

@@ -283,8 +283,31 @@ TEST(SnapshotStore, MetadataJsonIsTheDocumentedObjectAndRoundTrips) {
   m.scalar.reset();
   EXPECT_EQ(metadata_to_json(m).find("scalar"), std::string::npos);
 
-  for (const char* bad : {"", "[]", "{\"time\": 1}", "{\"step\": -1}", "{\"step\": \"1\"}",
-                          "{\"step\": 1, \"views\": [[1, 0]]}", "{\"step\": 1, \"seconds\": 3}"}) {
+  // Surfaces coloured by different fields, or not at all: a field and range per isovalue, after
+  // "scalar" (here absent).
+  m.isovalues = {0.3, 0.5, 0.7};
+  m.surface_scalars = {ScalarRange{"U", 0.25, 0.75}, std::nullopt, ScalarRange{"T", 300.0, 350.5}};
+  const std::string mixed = metadata_to_json(m);
+  EXPECT_NE(mixed.find(R"("r":0.5,"surface_scalars":[{"name":"U","min":0.25,"max":0.75},null,)"
+                       R"({"name":"T","min":300.0,"max":350.5}],"seconds":)"),
+            std::string::npos)
+      << mixed;
+  StepMetadata again;
+  ASSERT_TRUE(metadata_from_json(mixed, again));
+  EXPECT_FALSE(again.scalar);
+  ASSERT_EQ(again.surface_scalars.size(), 3u);
+  ASSERT_TRUE(again.surface_scalars[0] && again.surface_scalars[2]);
+  EXPECT_FALSE(again.surface_scalars[1]);
+  EXPECT_EQ(again.surface_scalars[0]->name, "U");
+  EXPECT_EQ(again.surface_scalars[0]->min, 0.25);
+  EXPECT_EQ(again.surface_scalars[2]->name, "T");
+  EXPECT_EQ(again.surface_scalars[2]->max, 350.5);
+
+  for (const char* bad :
+       {"", "[]", "{\"time\": 1}", "{\"step\": -1}", "{\"step\": \"1\"}",
+        "{\"step\": 1, \"views\": [[1, 0]]}", "{\"step\": 1, \"seconds\": 3}",
+        "{\"step\": 1, \"surface_scalars\": {}}", "{\"step\": 1, \"surface_scalars\": [3]}",
+        "{\"step\": 1, \"surface_scalars\": [{\"name\": 1, \"min\": 0, \"max\": 1}]}"}) {
     StepMetadata untouched;
     untouched.step = 7;
     const Status s = metadata_from_json(bad, untouched);

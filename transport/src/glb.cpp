@@ -488,6 +488,9 @@ Status encode_primitive(draco::Mesh& dm, Json& json, std::vector<std::uint8_t>& 
 // vertex two parts share is written by both, each copy within the bound).
 struct Surface {
   std::size_t index = 0;  // in GlbOptions::surfaces
+  // Its scalars as _SCALAR over [scalar_lo, scalar_hi], where its mesh has scalars (the mesh's
+  // own, or `owned`'s, which holds none where the surface has no colour field).
+  float scalar_lo = 0.0f, scalar_hi = 0.0f;
   // Its faces: the mesh's own, or `owned`'s (a surface extracted from the mesh).
   const Mesh* mesh = nullptr;
   const std::vector<std::uint32_t>* tris = nullptr;
@@ -505,8 +508,8 @@ struct Surface {
 };
 
 // Part `k` of `s` as a GLB of one Draco primitive (in s.jsons[k], s.bins[k]).
-Status encode_part(Surface& s, std::size_t k, const GlbOptions& options, int position_bits,
-                   float scalar_lo, float scalar_hi) {
+Status encode_part(Surface& s, std::size_t k, const GlbOptions& options, int position_bits) {
+  const float scalar_lo = s.scalar_lo, scalar_hi = s.scalar_hi;
   draco::Mesh dm;
   if (s.parts == 1) {
     LDIMESH_RETURN_IF_ERROR(build_draco_mesh(*s.mesh, *s.tris, *s.tri_view, options, position_bits,
@@ -532,8 +535,7 @@ Status encode_part(Surface& s, std::size_t k, const GlbOptions& options, int pos
 // Encodes every part of every surface, concurrently: Draco's encoder runs on one thread, and a
 // root that encodes a million triangles on one core falls behind its job. Threads of its own
 // (this library needs no TBB), each taking the next part; the result does not depend on them.
-Status encode_parts(std::deque<Surface>& surfaces, const GlbOptions& options, int position_bits,
-                    float scalar_lo, float scalar_hi) {
+Status encode_parts(std::deque<Surface>& surfaces, const GlbOptions& options, int position_bits) {
   std::vector<std::pair<Surface*, std::size_t>> jobs;
   for (Surface& s : surfaces) {
     s.jsons.resize(s.parts);
@@ -547,9 +549,8 @@ Status encode_parts(std::deque<Surface>& surfaces, const GlbOptions& options, in
     for (std::size_t j = next++; j < jobs.size(); j = next++) {
       Surface* s = jobs[j].first;
       const std::size_t k = jobs[j].second;
-      s->status[k] = guard("glb: part " + std::to_string(k) + ": ", [&] {
-        return encode_part(*s, k, options, position_bits, scalar_lo, scalar_hi);
-      });
+      s->status[k] = guard("glb: part " + std::to_string(k) + ": ",
+                           [&] { return encode_part(*s, k, options, position_bits); });
     }
   };
   const std::size_t threads =
@@ -606,6 +607,15 @@ Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
         options.surfaces[k] > mesh.vertex_count())
       return Status::invalid_argument(
           "glb: surfaces must start at vertex 0 and increase within the vertices");
+  const std::size_t surface_count = std::max<std::size_t>(1, options.surfaces.size());
+  if (!options.scalar_groups.empty() && options.scalar_groups.size() != surface_count)
+    return Status::invalid_argument("glb: scalar_groups must have one entry per surface (" +
+                                    std::to_string(surface_count) + ")");
+  for (int g : options.scalar_groups)
+    if (g < -1 || g >= int(surface_count) || (g >= 0 && mesh.scalars.empty()))
+      return Status::invalid_argument(
+          "glb: a scalar group must be −1 or below the number of surfaces, and the mesh must "
+          "have scalars where one is not −1");
   GlbInfo result;
   result.position_bits = glb_position_bits(mesh, options);
   result.position_error_bound = glb_position_error_bound(mesh, options);
@@ -619,20 +629,46 @@ Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
     return Status::ok();
   }
 
-  float scalar_lo = 0.0f, scalar_hi = 0.0f;
-  if (!mesh.scalars.empty()) {
-    if (options.scalar_range) {
-      scalar_lo = (*options.scalar_range)[0];
-      scalar_hi = (*options.scalar_range)[1];
-    } else {
-      const auto [lo, hi] = std::minmax_element(mesh.scalars.begin(), mesh.scalars.end());
-      scalar_lo = *lo;
-      scalar_hi = *hi;
-    }
-    result.has_scalar = true;
-    result.scalar_min = scalar_lo;
-    result.scalar_max = scalar_hi;
+  // Each surface's vertices [starts[s], starts[s + 1]) and scalar group (−1: no _SCALAR), and
+  // each group's range: fixed, or its surfaces' min and max (none where they have no vertex).
+  std::vector<std::uint32_t> starts(options.surfaces.begin(), options.surfaces.end());
+  if (starts.empty()) starts.push_back(0);
+  starts.push_back(std::uint32_t(mesh.vertex_count()));
+  std::vector<int> groups = options.scalar_groups;
+  if (groups.empty()) groups.assign(starts.size() - 1, mesh.scalars.empty() ? -1 : 0);
+  std::vector<std::optional<std::array<float, 2>>> group_range(
+      std::size_t(std::max(0, *std::max_element(groups.begin(), groups.end()) + 1)));
+  for (std::size_t s = 0; s < groups.size(); ++s) {
+    if (groups[s] < 0 || starts[s] == starts[s + 1]) continue;
+    const auto [lo, hi] =
+        std::minmax_element(mesh.scalars.begin() + starts[s], mesh.scalars.begin() + starts[s + 1]);
+    auto& range = group_range[std::size_t(groups[s])];
+    range = range ? std::array<float, 2>{std::min((*range)[0], *lo), std::max((*range)[1], *hi)}
+                  : std::array<float, 2>{*lo, *hi};
   }
+  std::size_t ranged = 0;
+  for (auto& range : group_range) {
+    if (!range) continue;
+    if (options.scalar_range) range = *options.scalar_range;
+    result.has_scalar = true;
+    result.scalar_min = ++ranged == 1 ? (*range)[0] : 0.0f;
+    result.scalar_max = ranged == 1 ? (*range)[1] : 0.0f;
+  }
+  if (!options.scalar_groups.empty())
+    for (int g : groups)
+      result.surface_scalar_ranges.push_back(g >= 0 ? group_range[std::size_t(g)] : std::nullopt);
+  const auto set_scalars = [&](Surface& s) {
+    const int g = groups[s.index];
+    if (g >= 0 && group_range[std::size_t(g)]) {
+      s.scalar_lo = (*group_range[std::size_t(g)])[0];
+      s.scalar_hi = (*group_range[std::size_t(g)])[1];
+    }
+    if (g < 0 && !s.mesh->scalars.empty()) {  // a copy without them
+      if (s.mesh != &s.owned) s.owned = *s.mesh;
+      s.owned.scalars.clear();
+      s.mesh = &s.owned;
+    }
+  };
 
   // The surfaces: the whole mesh, or each of GlbOptions::surfaces (its vertices as they are, in
   // their order) as a mesh on a node of its own; large ones in slabs.
@@ -642,9 +678,8 @@ Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
     s.mesh = &mesh;
     s.tris = &tris;
     s.tri_view = &tri_view;
+    set_scalars(s);
   } else {
-    std::vector<std::uint32_t> starts(options.surfaces.begin(), options.surfaces.end());
-    starts.push_back(std::uint32_t(mesh.vertex_count()));
     for (std::size_t k = 0; k + 1 < starts.size(); ++k) {
       Surface& s = surfaces.emplace_back();
       s.index = k;
@@ -657,6 +692,7 @@ Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
       s.mesh = &s.owned;
       s.tris = &s.owned_tris;
       s.tri_view = &s.owned_view;
+      set_scalars(s);
     }
   }
   for (Surface& s : surfaces) {
@@ -666,8 +702,7 @@ Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
       s.box = bounding_box(s.mesh->positions);
     }
   }
-  LDIMESH_RETURN_IF_ERROR(
-      encode_parts(surfaces, options, result.position_bits, scalar_lo, scalar_hi));
+  LDIMESH_RETURN_IF_ERROR(encode_parts(surfaces, options, result.position_bits));
 
   // Joined: each surface's parts as primitives of its mesh, the surfaces as meshes and nodes.
   Json json;
@@ -700,7 +735,13 @@ Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
   extras["view_dirs"] = Json::array();
   for (const glm::dvec3& d : mesh.view_dirs)
     extras["view_dirs"].push_back({d.x, d.y, d.z});
-  if (result.has_scalar) extras["scalar_range"] = {result.scalar_min, result.scalar_max};
+  if (result.has_scalar && ranged == 1)
+    extras["scalar_range"] = {result.scalar_min, result.scalar_max};
+  if (!options.scalar_groups.empty()) {
+    extras["surface_scalar_ranges"] = Json::array();
+    for (const auto& range : result.surface_scalar_ranges)
+      extras["surface_scalar_ranges"].push_back(range ? Json{(*range)[0], (*range)[1]} : Json());
+  }
   json["meshes"][0]["extras"]["ldimesh"] = std::move(extras);
   primitive_counts(json, result);
   const std::string text = json.dump();
@@ -796,11 +837,12 @@ Status decode_primitive(const Json& json, const Json& primitive, std::span<const
                                          ? attribute(kScalarAttribute, 1)
                                          : attribute("TEXCOORD_0", 2);
   if (!pos || !nrm) return Status::corrupt_input("glb: a Draco primitive lacks POSITION or NORMAL");
-  if (!out.positions.empty() && !out.scalars.empty() != (tex != nullptr))
-    return Status::corrupt_input("glb: primitives disagree on the scalar (_SCALAR)");
   const std::size_t base = out.positions.size();
   if (base + n > kMaxIndex || out.triangle_count() + t > kMaxIndex)
     return Status::corrupt_input("glb: more than 2^31 - 1 vertices or triangles");
+  // Primitives with and without a scalar (surfaces of which some are not coloured): NaN at the
+  // vertices of those without.
+  if (tex || !out.scalars.empty()) out.scalars.resize(base, NAN);
 
   // Values of point i; a point mapped outside its attribute, or a value Draco cannot convert,
   // is an error rather than a read out of bounds.
@@ -816,7 +858,7 @@ Status decode_primitive(const Json& json, const Json& primitive, std::span<const
   std::vector<std::uint8_t> vertex_view(n, 0);
   out.positions.resize(base + n);
   out.normals.resize(base + n);
-  if (tex) out.scalars.resize(base + n);
+  if (tex || !out.scalars.empty()) out.scalars.resize(base + n, NAN);
   for (std::size_t i = 0; i < n; ++i) {
     float p[3], q[3];
     if (!value(pos, i, p) || !value(nrm, i, q))
@@ -862,7 +904,7 @@ Status decode_primitive(const Json& json, const Json& primitive, std::span<const
     out.triangle_view.push_back(vertex_view[face[0].value()]);
   }
 
-  info.has_scalar = tex != nullptr;
+  info.has_scalar = info.has_scalar || tex != nullptr;
   return Status::ok();
 }
 
@@ -903,6 +945,18 @@ Status decode_glb_unguarded(std::span<const std::uint8_t> glb, Mesh& out, GlbInf
         result.scalar_min = (*range)[0].get<float>();
         result.scalar_max = (*range)[1].get<float>();
       }
+      // Per surface: [min, max] or null (read where every entry is one of them).
+      if (const Json* ranges = array_member(ours, "surface_scalar_ranges");
+          ranges && ranges->size() <= 256 &&
+          std::all_of(ranges->begin(), ranges->end(), [](const Json& r) {
+            return r.is_null() ||
+                   (r.is_array() && r.size() == 2 && r[0].is_number() && r[1].is_number());
+          }))
+        for (const Json& r : *ranges)
+          result.surface_scalar_ranges.push_back(
+              r.is_null()
+                  ? std::nullopt
+                  : std::optional(std::array<float, 2>{r[0].get<float>(), r[1].get<float>()}));
     }
   }
   std::vector<std::array<std::uint8_t, 3>> view_colours;

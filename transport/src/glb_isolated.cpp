@@ -1,5 +1,7 @@
 // decode_glb_isolated: decode_glb in a child process whose CPU time is limited (glb.hpp).
+#include <array>
 #include <cmath>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -43,6 +45,14 @@ Status decode_glb_isolated(std::span<const std::uint8_t> glb, Mesh& out, GlbInfo
         w.put(std::uint8_t(decoded.has_scalar));
         w.put(decoded.scalar_min);
         w.put(decoded.scalar_max);
+        std::vector<std::uint8_t> present;
+        std::vector<std::array<float, 2>> ranges;
+        for (const auto& range : decoded.surface_scalar_ranges) {
+          present.push_back(range ? 1 : 0);
+          ranges.push_back(range.value_or(std::array<float, 2>{}));
+        }
+        w.put_vector(present);
+        w.put_vector(ranges);
         return Status::ok();
       },
       bytes));
@@ -51,15 +61,20 @@ Status decode_glb_isolated(std::span<const std::uint8_t> glb, Mesh& out, GlbInfo
   std::uint64_t triangles = 0, vertices = 0;
   std::uint8_t has_scalar = 0;
   GlbInfo decoded;
+  std::vector<std::uint8_t> present;
+  std::vector<std::array<float, 2>> ranges;
   if (!r.get_vector(mesh.positions) || !r.get_vector(mesh.normals) || !r.get_vector(mesh.scalars) ||
       !r.get_vector(mesh.quads) || !r.get_vector(mesh.triangles) || !r.get_vector(mesh.quad_view) ||
       !r.get_vector(mesh.triangle_view) || !r.get_vector(mesh.view_dirs) || !r.get(triangles) ||
       !r.get(vertices) || !r.get(has_scalar) || !r.get(decoded.scalar_min) ||
-      !r.get(decoded.scalar_max) || !r.done())
+      !r.get(decoded.scalar_max) || !r.get_vector(present) || !r.get_vector(ranges) ||
+      present.size() != ranges.size() || !r.done())
     return Status::internal("glb: the output of the decoder process is truncated");
   decoded.triangles = std::size_t(triangles);
   decoded.vertices = std::size_t(vertices);
   decoded.has_scalar = has_scalar != 0;
+  for (std::size_t s = 0; s < present.size(); ++s)
+    decoded.surface_scalar_ranges.push_back(present[s] ? std::optional(ranges[s]) : std::nullopt);
   out = std::move(mesh);
   if (info) *info = decoded;
   return Status::ok();

@@ -98,17 +98,33 @@ Status parse_metadata(const json& j, StepMetadata& m) {
       m.views.push_back(d);
     }
   }
-  if (const auto it = j.find("scalar"); it != j.end() && !it->is_null()) {
-    ScalarRange s;
-    if (!it->is_object()) return Status::corrupt_input("metadata: \"scalar\" is not an object");
-    if (const auto name = it->find("name"); name != it->end()) {
+  // A field and its range ("scalar", or an entry of "surface_scalars", named `what`).
+  const auto read_range = [&](const json& v, const std::string& what, ScalarRange& s) {
+    if (!v.is_object()) return Status::corrupt_input("metadata: \"" + what + "\" is not an object");
+    if (const auto name = v.find("name"); name != v.end()) {
       if (!name->is_string())
-        return Status::corrupt_input("metadata: \"scalar.name\" is not a string");
+        return Status::corrupt_input("metadata: \"" + what + ".name\" is not a string");
       s.name = name->get<std::string>();
     }
-    if (!read_double(*it, "min", s.min, error) || !read_double(*it, "max", s.max, error))
-      return Status::corrupt_input("metadata: scalar: " + error);
+    if (!read_double(v, "min", s.min, error) || !read_double(v, "max", s.max, error))
+      return Status::corrupt_input("metadata: " + what + ": " + error);
+    return Status::ok();
+  };
+  if (const auto it = j.find("scalar"); it != j.end() && !it->is_null()) {
+    ScalarRange s;
+    LDIMESH_RETURN_IF_ERROR(read_range(*it, "scalar", s));
     m.scalar = std::move(s);
+  }
+  if (const auto it = j.find("surface_scalars"); it != j.end()) {
+    if (!it->is_array())
+      return Status::corrupt_input("metadata: \"surface_scalars\" is not an array");
+    for (const json& v : *it) {
+      std::optional<ScalarRange> range;
+      if (!v.is_null()) {
+        LDIMESH_RETURN_IF_ERROR(read_range(v, "surface_scalars", range.emplace()));
+      }
+      m.surface_scalars.push_back(std::move(range));
+    }
   }
   if (const auto it = j.find("seconds"); it != j.end()) {
     if (!it->is_object()) return Status::corrupt_input("metadata: \"seconds\" is not an object");
@@ -222,8 +238,14 @@ std::string metadata_to_json(const StepMetadata& m) {
     j["views"].push_back({v[0], v[1], v[2]});
   j["resolution"] = m.resolution;
   j["r"] = m.r;
-  if (m.scalar) {
-    j["scalar"] = {{"name", m.scalar->name}, {"min", m.scalar->min}, {"max", m.scalar->max}};
+  const auto range = [](const ScalarRange& s) {
+    return ordered_json{{"name", s.name}, {"min", s.min}, {"max", s.max}};
+  };
+  if (m.scalar) j["scalar"] = range(*m.scalar);
+  if (!m.surface_scalars.empty()) {
+    j["surface_scalars"] = ordered_json::array();
+    for (const auto& s : m.surface_scalars)
+      j["surface_scalars"].push_back(s ? range(*s) : ordered_json());
   }
   // The pipeline's stages in the order they run (docs/api.md), then any others by name.
   j["seconds"] = ordered_json::object();

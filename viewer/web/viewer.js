@@ -33,6 +33,10 @@ scene.add(camera);
 const material = new THREE.MeshStandardMaterial({
   vertexColors: true, roughness: 0.55, metalness: 0.05, side: THREE.DoubleSide,
 });
+// Plain: the colouring "plain", and a surface without a field while colouring by field.
+const plainMaterial = new THREE.MeshStandardMaterial({
+  color: 0xb8c4d6, roughness: 0.55, metalness: 0.05, side: THREE.DoubleSide,
+});
 
 // Rendering on demand: a frame is drawn only when the picture changes (a step shown, the camera
 // moved, a resize, another colouring), never in a loop: with software rendering a big mesh
@@ -192,20 +196,42 @@ function linear(c) {
   return c <= 0.04045 ? c / 12.92 : Math.pow((c + 0.055) / 1.055, 2.4);
 }
 
-// The field's values map to the colour map over this range: the step's own (its metadata's
-// scalar.min and max) or the person's fixed one.
-function colourRange(meta) {
-  if ($('range-auto').checked || !meta || !meta.scalar) {
-    return meta && meta.scalar ? [meta.scalar.min, meta.scalar.max] : [0, 1];
-  }
+// The field surface s of the step is coloured by ({name, min, max}, or null): its entry of the
+// metadata's surface_scalars where the step's surfaces differ (each isovalue coloured by a field
+// of its own, or by none), else the step's one scalar. undefined s: a step of one surface.
+function surfaceField(meta, s) {
+  if (!meta) return null;
+  if (Array.isArray(meta.surface_scalars)) return meta.surface_scalars[s || 0] || null;
+  return meta.scalar || null;
+}
+
+// The step's fields, each once (by name), in the order of its surfaces.
+function stepFields(meta) {
+  if (!meta) return [];
+  if (!Array.isArray(meta.surface_scalars)) return meta.scalar ? [meta.scalar] : [];
+  const fields = [];
+  for (const f of meta.surface_scalars)
+    if (f && !fields.some((g) => g.name === f.name)) fields.push(f);
+  return fields;
+}
+
+// A field's values map to the colour map over this range: the step's own (the field's min and
+// max in its metadata) or, for the step's first field, the person's fixed one.
+function colourRange(meta, field) {
+  const first = stepFields(meta)[0];
+  if (!field) field = first;
+  if (!field) return [0, 1];
+  if ($('range-auto').checked || !first || field.name !== first.name) return [field.min, field.max];
   return [Number($('range-min').value), Number($('range-max').value)];
 }
 
 // The controls and the legend for the step shown: colouring by the field is offered when the
-// step carries one, and chosen by itself until the person picks a colouring.
+// step carries one, and chosen by itself until the person picks a colouring. The fixed range
+// applies to the step's first field; the legend has a row per field (the first: the #legend-*
+// elements, the others made here).
 const colouring = { chosenByPerson: false };
 function updateFieldControls(meta) {
-  const field = meta && meta.scalar;
+  const fields = stepFields(meta), field = fields[0];
   $('colour').querySelector('option[value=scalar]').disabled = !field;
   if (field && !colouring.chosenByPerson) $('colour').value = 'scalar';
   if (!field && $('colour').value === 'scalar') $('colour').value = 'view';
@@ -216,34 +242,71 @@ function updateFieldControls(meta) {
   }
   const legend = $('legend');
   legend.hidden = !(field && $('colour').value === 'scalar');
+  const more = $('legend-more');
+  more.replaceChildren();
   if (legend.hidden) return;
-  const [lo, hi] = colourRange(meta);
+  const drawBar = (bar) => {
+    const ctx = bar.getContext('2d');
+    for (let x = 0; x < bar.width; ++x) {
+      const [r, g, b] = colourmap($('colourmap').value, x / (bar.width - 1));
+      ctx.fillStyle = `rgb(${Math.round(255 * r)}, ${Math.round(255 * g)}, ${Math.round(255 * b)})`;
+      ctx.fillRect(x, 0, 1, bar.height);
+    }
+  };
+  const [lo, hi] = colourRange(meta, field);
   $('legend-name').textContent = field.name || 'field';
   $('legend-min').textContent = Number(lo).toPrecision(4);
   $('legend-max').textContent = Number(hi).toPrecision(4);
-  const bar = $('legend-bar'), ctx = bar.getContext('2d');
-  for (let x = 0; x < bar.width; ++x) {
-    const [r, g, b] = colourmap($('colourmap').value, x / (bar.width - 1));
-    ctx.fillStyle = `rgb(${Math.round(255 * r)}, ${Math.round(255 * g)}, ${Math.round(255 * b)})`;
-    ctx.fillRect(x, 0, 1, bar.height);
+  drawBar($('legend-bar'));
+  for (const f of fields.slice(1)) {
+    const row = document.createElement('div');
+    row.className = 'legend-row';
+    row.innerHTML = '<div class="legend-name"></div><canvas class="legend-bar" width="256" height="14"></canvas>' +
+      '<div class="legend-range"><span class="legend-min"></span><span class="legend-max"></span></div>';
+    const [flo, fhi] = colourRange(meta, f);
+    row.querySelector('.legend-name').textContent = f.name || 'field';
+    row.querySelector('.legend-min').textContent = Number(flo).toPrecision(4);
+    row.querySelector('.legend-max').textContent = Number(fhi).toPrecision(4);
+    drawBar(row.querySelector('canvas'));
+    more.append(row);
   }
 }
 
-// Colours by view (the GLB's COLOR_0), by the field (_SCALAR, the value's place in the step's
-// range, through the colour map over colourRange; TEXCOORD_0.u in GLBs written before) or plain. The colour attributes are
-// swapped, never modified, so the GLB's own (which the Draco loader may hand over interleaved:
-// cloning it would de-interleave it, with a warning) is kept as it is.
+// The legend's rows as shown: name, bar (a canvas), min and max.
+function legendRows() {
+  const rows = [{ name: $('legend-name').textContent, bar: $('legend-bar'),
+    min: $('legend-min').textContent, max: $('legend-max').textContent }];
+  for (const row of $('legend-more').children)
+    rows.push({ name: row.querySelector('.legend-name').textContent, bar: row.querySelector('canvas'),
+      min: row.querySelector('.legend-min').textContent, max: row.querySelector('.legend-max').textContent });
+  return rows;
+}
+
+// The surface a mesh object of the GLB belongs to: the extras {"ldimesh_surface": s} of its
+// node (three.js: userData of the object or, for a mesh of several primitives, of its group).
+function surfaceOf(object) {
+  for (let o = object; o; o = o.parent)
+    if (o.userData && Number.isInteger(o.userData.ldimesh_surface)) return o.userData.ldimesh_surface;
+  return undefined;
+}
+
+// Colours by view (the GLB's COLOR_0), by the field (_SCALAR, the value's place in its
+// surface's field's range, through the colour map over colourRange; TEXCOORD_0.u in GLBs written
+// before; a surface without a field plain) or plain. The colour attributes are swapped, never
+// modified, so the GLB's own (which the Draco loader may hand over interleaved: cloning it would
+// de-interleave it, with a warning) is kept as it is.
 function applyColouring(root, meta) {
   const mode = $('colour').value;
-  const field = meta && meta.scalar;
-  const [lo, hi] = colourRange(meta);
-  const key = `${$('colourmap').value} ${lo} ${hi}`;
   root.traverse((object) => {
     if (!object.isMesh) return;
     const g = object.geometry;
+    const field = surfaceField(meta, surfaceOf(object));
+    const [lo, hi] = colourRange(meta, field);
+    const key = `${$('colourmap').value} ${lo} ${hi}`;
     if (!g.userData.viewColours && g.attributes.color) g.userData.viewColours = g.attributes.color;
     const scalar = g.attributes._scalar || g.attributes.uv;
-    if (mode === 'scalar' && field && scalar) {
+    const byField = mode === 'scalar' && field && scalar;
+    if (byField) {
       if (g.userData.scalarKey !== key) {
         const colours = new Float32Array(scalar.count * 3);
         const span = field.max - field.min, width = hi - lo;
@@ -256,13 +319,11 @@ function applyColouring(root, meta) {
         g.userData.scalarKey = key;
       }
       g.setAttribute('color', g.userData.scalarColours);
-    } else if (mode !== 'plain' && g.userData.viewColours) {
+    } else if (mode === 'view' && g.userData.viewColours) {
       g.setAttribute('color', g.userData.viewColours);
     }
-    object.material = material;
-    material.vertexColors = mode !== 'plain' && !!g.attributes.color;
-    material.color.set(material.vertexColors ? 0xffffff : 0xb8c4d6);
-    material.needsUpdate = true;
+    const coloured = byField || (mode === 'view' && !!g.attributes.color);
+    object.material = coloured ? material : plainMaterial;
   });
 }
 
@@ -509,16 +570,19 @@ $('screenshot').addEventListener('click', () => {
   const ctx = out.getContext('2d');
   ctx.drawImage(canvas, 0, 0);
   if (!$('legend').hidden) {
-    const bar = $('legend-bar'), x = out.width - bar.width - 20, y = out.height - 50;
-    ctx.fillStyle = 'rgba(20, 22, 27, 0.85)';
-    ctx.fillRect(x - 10, y - 26, bar.width + 20, 70);
-    ctx.fillStyle = '#e8e8e8';
-    ctx.font = '13px system-ui, sans-serif';
-    ctx.fillText($('legend-name').textContent, x, y - 8);
-    ctx.drawImage(bar, x, y);
-    ctx.fillText($('legend-min').textContent, x, y + bar.height + 16);
-    const max = $('legend-max').textContent;
-    ctx.fillText(max, x + bar.width - ctx.measureText(max).width, y + bar.height + 16);
+    // A row per field, top to bottom as the page shows them.
+    const rows = legendRows();
+    rows.forEach((row, k) => {
+      const bar = row.bar, x = out.width - bar.width - 20, y = out.height - 50 - 70 * (rows.length - 1 - k);
+      ctx.fillStyle = 'rgba(20, 22, 27, 0.85)';
+      ctx.fillRect(x - 10, y - 26, bar.width + 20, 70);
+      ctx.fillStyle = '#e8e8e8';
+      ctx.font = '13px system-ui, sans-serif';
+      ctx.fillText(row.name, x, y - 8);
+      ctx.drawImage(bar, x, y);
+      ctx.fillText(row.min, x, y + bar.height + 16);
+      ctx.fillText(row.max, x + bar.width - ctx.measureText(row.max).width, y + bar.height + 16);
+    });
   }
   out.toBlob((blob) => {
     const link = document.createElement('a');

@@ -92,9 +92,10 @@ class Adaptor {
   // like its values and in their layout: a grid block's points with the same dims and strides,
   // an element block's nodal values with the same nodes, order and element_stride; `type` may
   // differ from the block's. With option "colour_by": NAME every isosurface is coloured by the
-  // field of that name, which every grid and element block must then have, and every
-  // FieldSource must have a colour field of its own (bind_scalar): a step without fails, naming
-  // the block. A GridBlock's or HexBlock's own `colour` member is not read: fields come by name.
+  // field of that name ("colour_by": [NAME or null per isovalue]: each isosurface by its own
+  // field, or by none), which every grid and element block must then have, and every
+  // FieldSource must have a colour field of its own (bind_scalar; it has one, so two names
+  // fail): a step without fails, naming the block. A GridBlock's or HexBlock's own `colour` member is not read: fields come by name.
   // Adding a name again replaces that field. Errors: no block added yet, the last add_*_block
   // refused (the field would belong to the block before), a FieldSource block, an empty name,
   // null values.

@@ -13,7 +13,10 @@
 //               (scalar − min) / (max − min) clamped to [0, 1]; only when the mesh has scalars;
 //               quantized to `scalar_bits`.
 // and meshes[0].extras.ldimesh = {"view_dirs": [[x,y,z], …], "scalar_range": [min, max]}
-// (scalar_range only with scalars), so that a client can recover views and scalar units.
+// (scalar_range only with scalars, and where GlbOptions::scalar_groups are given only when one
+// group has a range), so that a client can recover views and scalar units; with scalar_groups
+// also "surface_scalar_ranges": [[min, max] or null per surface] (null: the surface has no
+// _SCALAR).
 //
 // Threads: encode_glb and decode_glb are reentrant (each call has its own Draco objects) and
 // deterministic (the same mesh and options give the same bytes).
@@ -61,6 +64,12 @@ struct GlbOptions {
   // sits on a node of the scene whose extras are {"ldimesh_surface": s} (three.js:
   // node.userData.ldimesh_surface); an empty surface has none. Empty or one entry: one mesh.
   std::vector<std::uint32_t> surfaces;
+  // The surfaces' colour fields where they differ (a step's isovalues coloured by different
+  // fields, or some not at all): scalar_groups[s] is surface s's group (one entry per surface:
+  // as many as `surfaces` has, or one), −1 where surface s carries no _SCALAR (its scalars, which
+  // the mesh must still have, are ignored). The surfaces of one group share a range: the group's
+  // min and max, or scalar_range. Empty: every surface in one group where the mesh has scalars.
+  std::vector<int> scalar_groups;
 };
 
 // What a GLB holds, as encode_glb wrote it or decode_glb read it.
@@ -74,6 +83,11 @@ struct GlbInfo {
   // 0 and 0 when a GLB from elsewhere lacks it).
   float scalar_min = 0.0f;
   float scalar_max = 0.0f;
+  // Per surface, the range behind its _SCALAR (absent: it has none): encode_glb with
+  // GlbOptions::scalar_groups, decode_glb from extras.ldimesh.surface_scalar_ranges; else empty.
+  // scalar_min and scalar_max are then those of the one group that has a range (0 and 0 when
+  // several have).
+  std::vector<std::optional<std::array<float, 2>>> surface_scalar_ranges;
 };
 
 // What a published step's GLB trades between bytes and precision (the adaptor's "glb" options,
@@ -138,7 +152,8 @@ double glb_scalar_error_bound(const GlbOptions& options);
 std::array<std::uint8_t, 3> view_colour(std::size_t k, const glm::dvec3& dir);
 
 // Decodes a GLB into `out` (replaced): positions, unit normals, triangles, per-vertex scalars
-// = _SCALAR (normalized, in [0, 1]; TEXCOORD_0.u in GLBs written before it) when present, view_dirs
+// = _SCALAR (normalized, in [0, 1]; TEXCOORD_0.u in GLBs written before it) when some primitive
+// has it (NaN at the vertices of a primitive that has none), view_dirs
 // from extras.ldimesh when present, and per triangle the view whose view_colour matches the colour
 // of its first vertex (view 0 when none does). Vertices come in Draco's decoding order, which for
 // Edgebreaker (compression level ≥ 1) differs from the encoder's input order.

@@ -55,7 +55,12 @@ struct StepMetadata {
   std::vector<std::array<double, 3>> views;
   std::uint32_t resolution = 0;
   double r = 0.0;
-  std::optional<ScalarRange> scalar;      // absent when the mesh carries no scalar
+  // The field the mesh is coloured by: absent when it carries no scalar, or when its surfaces
+  // are coloured by different fields (option "colour_by" per isovalue).
+  std::optional<ScalarRange> scalar;
+  // Where the surfaces' colour fields differ (some coloured by another field or not at all):
+  // one entry per isovalue, its field and range (absent: that surface carries no scalar).
+  std::vector<std::optional<ScalarRange>> surface_scalars;
   std::map<std::string, double> seconds;  // per stage: cast, encode, reduce, decode, mesh, glb…
   // In situ: due steps not published since the previous published step because the root was
   // still busy (skipped or replaced while waiting), and NaN/±Inf values met in the field.
@@ -63,8 +68,8 @@ struct StepMetadata {
   std::uint64_t nonfinite_values = 0;
 };
 
-// The metadata as one line of JSON with the keys in the order of docs/api.md; `scalar` only
-// when present. Non-finite numbers are written as null (JSON has no NaN).
+// The metadata as one line of JSON with the keys in the order of docs/api.md; `scalar` and
+// `surface_scalars` only when present. Non-finite numbers are written as null (JSON has no NaN).
 std::string metadata_to_json(const StepMetadata& metadata);
 
 // Parses metadata JSON (one step's object, as served or written by metadata_to_json) into
