@@ -2,13 +2,15 @@
 # Every kind of GLB ldimesh writes passes Khronos' glTF validator (npm gltf-validator) with no
 # error and no warning: a small mesh (one Draco primitive), a mesh of more than 200 000
 # triangles (encoded in slabs: several primitives of one mesh), a mesh coloured by a second
-# field (_SCALAR), small and large, and an in situ step of two isovalues (a mesh and node
-# each, the node's extras naming the surface).
-#   gltf_validator_test.sh LDIMESH SOURCE_DIR LDIMESH_ANALYTIC
+# field (_SCALAR), small and large, an in situ step of two isovalues (a mesh and node each, the
+# node's extras naming the surface), and one whose first isovalue is coloured and the second not
+# ("colour_by": ["U", null]: primitives with and without _SCALAR).
+#   gltf_validator_test.sh LDIMESH SOURCE_DIR LDIMESH_ANALYTIC LDIMESH_GRAYSCOTT
 set -u
 ldimesh=$1
 src=$2
 analytic=$3
+grayscott=$4
 . "$(dirname "$0")/../lib.sh"
 test_setup
 "$ldimesh" mesh --surface torus --res 64 --out "$tmp/small.glb" >/dev/null || fail "small mesh"
@@ -45,9 +47,24 @@ doc = json.loads(data[20:20 + length])
 surfaces = sorted(n["extras"]["ldimesh_surface"] for n in doc["nodes"])
 assert surfaces == [0, 1] and len(doc["meshes"]) == 2, (surfaces, len(doc["meshes"]))
 PY
+# Gray–Scott's V at two isovalues, the first coloured by U, the second not (one process).
+printf '{"isovalues": [0.25, 0.1], "colour_by": ["U", null], "server": {"enabled": false}, "output_dir": "%s", "resolution": 64, "log": false}\n' \
+  "$tmp/mixed" >"$tmp/mixed.json"
+OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 \
+  "$grayscott" --size 32 --steps 1 --substeps 40 --options "$tmp/mixed.json" \
+  >/dev/null || fail "Gray–Scott coloured per isovalue"
+python3 - "$tmp/mixed/step_000001.glb" <<'PY' || fail "the mixed step lacks a surface with or without _SCALAR"
+import json, struct, sys
+data = open(sys.argv[1], "rb").read()
+length = struct.unpack_from("<I", data, 12)[0]
+doc = json.loads(data[20:20 + length])
+scalar = [any("_SCALAR" in p["attributes"] for p in m["primitives"]) for m in doc["meshes"]]
+assert scalar == [True, False], scalar
+assert doc["meshes"][0]["extras"]["ldimesh"]["surface_scalar_ranges"][1] is None
+PY
 cd "$src" || fail "no source folder"
 node tests/cli/validate_glb.mjs --primitives 2 "$tmp/large.glb" "$tmp/small.glb" "$tmp/coloured64.glb" \
-  "$tmp/steps/step_000001.glb" ||
+  "$tmp/steps/step_000001.glb" "$tmp/mixed/step_000001.glb" ||
   fail "a GLB is not valid glTF"
 node tests/cli/validate_glb.mjs --primitives 2 "$tmp/coloured512.glb" ||
   fail "the large coloured GLB is not valid glTF"
