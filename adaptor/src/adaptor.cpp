@@ -1168,13 +1168,15 @@ class AdaptorImpl final : public Adaptor {
     Mesh mesh;
     std::size_t samples = 0, quads = 0;
     std::vector<std::uint32_t> surfaces;  // where each isovalue's vertices start
-    for (const MeshingResult& r : results) {
+    for (std::size_t i = 0; i < results.size(); ++i) {
+      const MeshingResult& r = results[i];
       samples += r.samples;
       quads += r.quads;
       surfaces.push_back(std::uint32_t(mesh.positions.size()));
       append(mesh, r.mesh);
       // An isosurface without a colour field beside coloured ones: values the GLB leaves out.
-      if (!options_.colour_fields.empty()) mesh.scalars.resize(mesh.positions.size(), 0.0f);
+      if (!options_.colour_fields.empty() && options_.surface_field[i] < 0)
+        mesh.scalars.resize(mesh.positions.size(), 0.0f);
     }
     const double decode_s = job.cast.seconds.decode, mesh_s = job.cast.seconds.mesh;
     const auto t = Clock::now();

@@ -896,6 +896,42 @@ TEST(Adaptor, EachIsovalueIsColouredByItsOwnFieldOrByNone) {
     }
 }
 
+// One field for every isovalue, as a name or as the same name in every entry: the same GLB, one
+// "scalar" in the metadata and no per-surface ranges (the form before per-isovalue colours).
+TEST(Adaptor, TheSameFieldInEveryEntryIsTheSingleNameForm) {
+  std::vector<std::vector<std::uint8_t>> glbs;
+  std::vector<StepMetadata> metas;
+  for (const std::string form : {R"("C")", R"(["C", "C"])"}) {
+    SCOPED_TRACE(form);
+    GridSlab slab(kSlabPoints, 0.0);
+    const std::vector<float> colour = slab_colour(slab);
+    const std::string dir = temp_dir(form.size() == 3 ? "one_field_name" : "one_field_list");
+    auto a = make_grid_adaptor(
+        R"({"colour_by": )" + form + ", " + grid_options(dir, false, "[0.16, 0.64]").substr(1),
+        slab);
+    if (!a) return;
+    EXPECT_TRUE(a->add_field("C", colour.data(), ScalarType::float32));
+    EXPECT_TRUE(a->execute(1, 0.0)) << a->last_error();
+    EXPECT_TRUE(a->finalize()) << a->last_error();
+    if (rank_of() != 0) continue;
+    glbs.push_back(published_glb(dir, 1));
+    metas.push_back(testing::published_step(dir, 1));
+  }
+  if (rank_of() != 0 || glbs.size() != 2) return;
+  EXPECT_GT(glbs[0].size(), 1000u);
+  EXPECT_TRUE(glbs[0] == glbs[1]) << glbs[0].size() << " vs " << glbs[1].size() << " bytes";
+  const std::string text(glbs[1].begin(), glbs[1].end());
+  EXPECT_NE(text.find("\"scalar_range\""), std::string::npos);
+  EXPECT_EQ(text.find("surface_scalar_ranges"), std::string::npos);
+  for (const StepMetadata& m : metas) {
+    ASSERT_TRUE(m.scalar.has_value());
+    EXPECT_EQ(m.scalar->name, "C");
+    EXPECT_EQ(m.scalar->min, metas[0].scalar->min);
+    EXPECT_EQ(m.scalar->max, metas[0].scalar->max);
+    EXPECT_TRUE(m.surface_scalars.empty());
+  }
+}
+
 // The slab's values, and a colour field in double, in a solver's own layout instead of x fastest
 // without gaps: rows and layers padded (a halo, as Gray–Scott's), or z fastest. The padding
 // holds NaN: a copy that took it for points would change the mesh.

@@ -2,11 +2,12 @@
 # ldimesh-serve and ldimesh-fetch as a user meets them: a folder of step files is served,
 # fetched (latest, by number, as PLY, following new steps), and every error is one
 # "ldimesh-fetch: error: …" line with a non-zero exit. The server is always killed at the end.
-#   fetch_test.sh LDIMESH_FETCH LDIMESH_SERVE LDIMESH_MAKE_STEPS
+#   fetch_test.sh LDIMESH_FETCH LDIMESH_SERVE LDIMESH_MAKE_STEPS LDIMESH_GRAYSCOTT
 set -u
 fetch=$1
 serve=$2
 make_steps=$3
+grayscott=$4
 tmp=$(mktemp -d)
 server_pid=
 follower_pid=
@@ -134,6 +135,26 @@ for _ in $(seq 50); do  # until the server lists it (without --ply the GLB is on
 done
 cmp -s "$tmp/run/step_000007.glb" "$tmp/s0/step_000007.glb" || fail "the slow GLB was not served"
 expect_error "a GLB Draco decodes slowly" "took more than 2 s of CPU" --url "$url" --step 7 --ply -o "$tmp/s"
+
+# A step whose isovalues are coloured one by U, one by nothing ("colour_by": ["U", null]): the PLY
+# has no "value" column (it would mix a field with NaN), the GLB and its metadata come as served.
+printf '{"isovalues": [0.25, 0.1], "colour_by": ["U", null], "server": {"enabled": false}, "output_dir": "%s", "resolution": 48, "log": false}\n' \
+  "$tmp/mixed" >"$tmp/mixed.json"
+OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 \
+  "$grayscott" --size 32 --steps 1 --substeps 40 --options "$tmp/mixed.json" >/dev/null ||
+  fail "Gray–Scott coloured per isovalue"
+cp "$tmp/mixed/step_000001.glb" "$tmp/run/step_000008.glb"
+sed 's/^{"step":1,/{"step":8,/' "$tmp/mixed/step_000001.json" >"$tmp/run/step_000008.json"
+grep -q '"surface_scalars":\[{"name":"U",' "$tmp/run/step_000008.json" || fail "the mixed step has no surface_scalars"
+for _ in $(seq 50); do  # until the server lists it
+  timeout 20 "$fetch" --url "$url" --step 8 --ply -o "$tmp/m" >/dev/null 2>"$tmp/m.err" && break
+  sleep 0.1
+done
+cmp -s "$tmp/run/step_000008.glb" "$tmp/m/step_000008.glb" || fail "the mixed step's GLB: $(cat "$tmp/m.err")"
+head -c 400 "$tmp/m/step_000008.ply" 2>/dev/null | grep -qa 'element vertex [1-9]' ||
+  fail "the mixed step's PLY has no vertices"
+head -c 400 "$tmp/m/step_000008.ply" 2>/dev/null | grep -qa 'property float value' &&
+  fail "the mixed step's PLY has a value column"
 
 # SIGTERM stops the server cleanly.
 kill -TERM "$server_pid"

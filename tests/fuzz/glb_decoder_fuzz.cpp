@@ -2,11 +2,14 @@
 // what ldimesh-fetch and `ldimesh distance` read may come from anywhere. Any input must be
 // decoded or refused without a crash, an out-of-bounds read or undefined behaviour; refused,
 // the output mesh is unchanged; accepted, the mesh is well formed (check_mesh with finite
-// values, one view per face) and encode_glb takes it (its contract for any well-formed mesh).
+// values, one view per face; scalars finite, or NaN at the vertices of primitives without
+// _SCALAR) and encode_glb takes it (its contract for any well-formed mesh; without the scalars
+// where some are NaN).
 //
 // With LDIMESH_FUZZ_WRITE_SEEDS=DIR set, the binary writes a seed corpus of encode_glb's output
 // into DIR and exits: with and without scalars and views, sequential and Edgebreaker
-// connectivity, and an empty mesh.
+// connectivity, two surfaces of which one has _SCALAR, and an empty mesh.
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
@@ -53,6 +56,21 @@ void ldimesh::fuzz::write_seeds(const std::string& dir) {
   write_seed(dir + "/seed-plain.glb", octahedron(false, false), {});
   write_seed(dir + "/seed-scalar-views.glb", octahedron(true, true), {});
   write_seed(dir + "/seed-sequential.glb", octahedron(true, true), sequential);
+  // Two surfaces, the first coloured, the second not ("colour_by" per isovalue).
+  ldimesh::Mesh two = octahedron(true, false);
+  const ldimesh::Mesh other = octahedron(true, false);
+  for (const glm::vec3& p : other.positions)
+    two.positions.push_back(0.5f * p);
+  two.normals.insert(two.normals.end(), other.normals.begin(), other.normals.end());
+  two.scalars.insert(two.scalars.end(), other.scalars.begin(), other.scalars.end());
+  for (const std::uint32_t v : other.triangles)
+    two.triangles.push_back(v + 6);
+  two.triangle_view.insert(two.triangle_view.end(), other.triangle_view.begin(),
+                           other.triangle_view.end());
+  ldimesh::GlbOptions mixed;
+  mixed.surfaces = {0, 6};
+  mixed.scalar_groups = {0, -1};
+  write_seed(dir + "/seed-mixed-scalar.glb", two, mixed);
   write_seed(dir + "/seed-empty.glb", ldimesh::Mesh{}, {});
 }
 
@@ -63,6 +81,13 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     if (mesh.positions.size() != 1 || mesh.positions[0].x != 7.0f) __builtin_trap();
     return 0;
   }
+  // NaN where a primitive has no _SCALAR (never ±Inf); re-encoded without the scalars then.
+  bool nan = false;
+  for (const float x : mesh.scalars) {
+    if (std::isinf(x)) __builtin_trap();
+    nan = nan || std::isnan(x);
+  }
+  if (nan) mesh.scalars.clear();
   if (!ldimesh::check_mesh(mesh, {.views_per_face = true, .finite = true})) __builtin_trap();
   std::vector<std::uint8_t> again;
   if (!ldimesh::encode_glb(mesh, {}, again)) __builtin_trap();

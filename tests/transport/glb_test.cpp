@@ -837,6 +837,23 @@ TEST(Glb, SurfacesColouredByDifferentFieldsKeepARangeEach) {
   Mesh back;
   ASSERT_TRUE(decode_glb(out, back));
   EXPECT_TRUE(back.scalars.empty());
+
+  // One surface: group −1 leaves the mesh's scalars out, group 0 is the plain encoding with the
+  // surface's range in the extras.
+  GlbOptions one;
+  one.scalar_groups = {-1};
+  GlbInfo info;
+  const Json none = json_chunk(encode(parts[0], one, &info));
+  EXPECT_FALSE(none["meshes"][0]["primitives"][0]["attributes"].contains("_SCALAR"));
+  EXPECT_FALSE(info.has_scalar);
+  EXPECT_EQ(none["meshes"][0]["extras"]["ldimesh"]["surface_scalar_ranges"], Json::array({Json()}));
+  one.scalar_groups = {0};
+  const Bytes coloured = encode(parts[0], one, &info);
+  const Json j = json_chunk(coloured);
+  EXPECT_TRUE(j["meshes"][0]["primitives"][0]["attributes"].contains("_SCALAR"));
+  EXPECT_EQ(j["meshes"][0]["extras"]["ldimesh"]["surface_scalar_ranges"],
+            Json::array({Json::array({range[0][0], range[0][1]})}));
+  EXPECT_EQ(draco_payload(coloured), draco_payload(encode(parts[0])));
 }
 
 TEST(Glb, AutomaticPositionBitsKeepTheStepBelowATenthOfAPixel) {

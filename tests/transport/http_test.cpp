@@ -307,7 +307,8 @@ TEST(SnapshotStore, MetadataJsonIsTheDocumentedObjectAndRoundTrips) {
        {"", "[]", "{\"time\": 1}", "{\"step\": -1}", "{\"step\": \"1\"}",
         "{\"step\": 1, \"views\": [[1, 0]]}", "{\"step\": 1, \"seconds\": 3}",
         "{\"step\": 1, \"surface_scalars\": {}}", "{\"step\": 1, \"surface_scalars\": [3]}",
-        "{\"step\": 1, \"surface_scalars\": [{\"name\": 1, \"min\": 0, \"max\": 1}]}"}) {
+        "{\"step\": 1, \"surface_scalars\": [{\"name\": 1, \"min\": 0, \"max\": 1}]}",
+        "{\"step\": 1, \"isovalues\": [0.5], \"surface_scalars\": [null, null]}"}) {
     StepMetadata untouched;
     untouched.step = 7;
     const Status s = metadata_from_json(bad, untouched);

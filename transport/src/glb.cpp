@@ -643,7 +643,9 @@ Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
     const auto [lo, hi] =
         std::minmax_element(mesh.scalars.begin() + starts[s], mesh.scalars.begin() + starts[s + 1]);
     auto& range = group_range[std::size_t(groups[s])];
-    range = range ? std::array<float, 2>{std::min((*range)[0], *lo), std::max((*range)[1], *hi)}
+    // The first least and the last greatest, as std::minmax_element over all of them.
+    range = range ? std::array<float, 2>{*lo < (*range)[0] ? *lo : (*range)[0],
+                                         (*range)[1] <= *hi ? *hi : (*range)[1]}
                   : std::array<float, 2>{*lo, *hi};
   }
   std::size_t ranged = 0;

@@ -125,6 +125,8 @@ Status parse_metadata(const json& j, StepMetadata& m) {
       }
       m.surface_scalars.push_back(std::move(range));
     }
+    if (j.contains("isovalues") && m.surface_scalars.size() != m.isovalues.size())
+      return Status::corrupt_input("metadata: \"surface_scalars\" needs one entry per isovalue");
   }
   if (const auto it = j.find("seconds"); it != j.end()) {
     if (!it->is_object()) return Status::corrupt_input("metadata: \"seconds\" is not an object");

@@ -7,9 +7,11 @@
 #include <signal.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -109,6 +111,12 @@ ldimesh::Status fetch_step(ldimesh::HttpClient& client, const ldimesh::RemoteSte
   if (args.ply) {
     if (ldimesh::Status s = ldimesh::decode_glb_isolated(glb, mesh); !s)
       return s.prefixed("step " + std::to_string(m.step) + ": ");
+    // Surfaces coloured by different fields, or some by none (metadata "surface_scalars";
+    // decode_glb gives NaN where a surface has no _SCALAR): the PLY's one "value" column would
+    // mix them, so it has none.
+    if (!m.surface_scalars.empty() || std::any_of(mesh.scalars.begin(), mesh.scalars.end(),
+                                                  [](float x) { return std::isnan(x); }))
+      mesh.scalars.clear();
   }
   ldimesh::Snapshot snapshot;
   snapshot.step = m.step;
