@@ -214,13 +214,15 @@ struct BlockCopy {
 };
 
 // What a due step copies of one block: the bricks or elements a cast reads (`held`), and the
-// pages of its arrays they lie in (per colour field; a field the block lacks: none).
+// pages of its arrays they lie in (per colour field, those of the bricks the isovalues it
+// colours read, `colour_held`, empty where that is `held`; a field the block lacks: none).
 struct CopyPlan {
   std::vector<std::uint8_t> held;
   std::size_t values_size = 0;  // the arrays' bytes
   PageSet values;
   std::vector<std::size_t> colour_sizes;
   std::vector<PageSet> colours;
+  std::vector<std::vector<std::uint8_t>> colour_held;
   std::size_t coords_bytes = 0;
   std::size_t bytes() const {
     std::size_t total = values.bytes() + coords_bytes;
@@ -236,28 +238,48 @@ std::size_t copy_index(const GridBlock& block, std::int64_t i, std::int64_t j, s
 }
 
 // The bricks of the grid block that `source` is over that a cast for `isovalues` reads, and the
-// pages of their points (those a source holding them reads: for_each_needed_run) in its copies,
-// the values' and each colour field's in `colours`.
+// pages of their points (those a source holding them reads: for_each_needed_run) in its copies:
+// the values' for every isovalue, each colour field's in `colours` for the isovalues whose bits
+// (1 << i, 1 << 7 from the eighth on: GridSource::needed_bricks_by_isovalue) `field_bits` has.
 CopyPlan plan_grid(const GridBlock& block, const GridSource& source,
-                   std::span<const double> isovalues, std::span<const FieldArray> colours) {
+                   std::span<const double> isovalues, std::span<const FieldArray> colours,
+                   std::span<const std::uint8_t> field_bits) {
   CopyPlan plan;
-  plan.held = source.needed_bricks(isovalues);
+  plan.held = source.needed_bricks_by_isovalue(isovalues);
+  std::uint8_t every = 0;
+  for (std::uint8_t bits : plan.held)
+    every |= bits;
   const std::size_t points = std::size_t(block.dims[0] * block.dims[1] * block.dims[2]);
   const std::size_t size = scalar_bytes(block.type);
   plan.values_size = points * size;
   plan.values = PageSet(plan.values_size);
   std::vector<std::size_t> colour_size;
-  for (const FieldArray& c : colours) {
-    colour_size.push_back(c.values ? scalar_bytes(c.type) : 0);
+  for (std::size_t f = 0; f < colours.size(); ++f) {
+    colour_size.push_back(colours[f].values ? scalar_bytes(colours[f].type) : 0);
     plan.colour_sizes.push_back(points * colour_size.back());
     plan.colours.emplace_back(plan.colour_sizes.back());
+    // A field for some isovalues only: the bricks those need.
+    std::vector<std::uint8_t>& held = plan.colour_held.emplace_back();
+    if (colour_size.back() > 0 && (every & ~field_bits[f]) != 0)
+      for (std::uint8_t bits : plan.held)
+        held.push_back((bits & field_bits[f]) != 0);
   }
+  for (std::uint8_t& bits : plan.held)
+    bits = bits != 0;
   source.for_each_needed_run(
       plan.held, [&](std::int64_t j, std::int64_t k, std::int64_t i0, std::int64_t i1) {
         const std::size_t at = copy_index(block, i0, j, k), n = std::size_t(i1 - i0 + 1);
         plan.values.mark(at * size, n * size);
         for (std::size_t f = 0; f < colour_size.size(); ++f)
-          plan.colours[f].mark(at * colour_size[f], n * colour_size[f]);
+          if (plan.colour_held[f].empty())
+            plan.colours[f].mark(at * colour_size[f], n * colour_size[f]);
+      });
+  for (std::size_t f = 0; f < colour_size.size(); ++f)
+    if (!plan.colour_held[f].empty())
+      source.for_each_needed_run(plan.colour_held[f], [&](std::int64_t j, std::int64_t k,
+                                                          std::int64_t i0, std::int64_t i1) {
+        const std::size_t at = copy_index(block, i0, j, k), n = std::size_t(i1 - i0 + 1);
+        plan.colours[f].mark(at * colour_size[f], n * colour_size[f]);
       });
   for (int a = 0; a < 3; ++a)
     if (block.coords[a]) plan.coords_bytes += std::size_t(block.dims[a]) * sizeof(double);
@@ -282,6 +304,7 @@ CopyPlan plan_hex(const HexBlock& block, const HexElementSource& source,
     plan.colour_sizes.push_back(c.values ? block.element_count * n * scalar_bytes(c.type) : 0);
     plan.colours.emplace_back(plan.colour_sizes.back());
     plan.colours.back().mark(0, plan.colour_sizes.back());
+    plan.colour_held.emplace_back();
   }
   return plan;
 }
@@ -412,6 +435,12 @@ class AdaptorImpl final : public Adaptor {
   AdaptorImpl(MPI_Comm comm, AdaptorOptions options) : comm_(comm), options_(std::move(options)) {
     MPI_Comm_rank(comm_, &rank_);
     MPI_Comm_size(comm_, &size_);
+    // Each colour field's isovalues, as GridSource::needed_bricks_by_isovalue marks them.
+    field_bits_.assign(options_.colour_fields.size(), 0);
+    for (std::size_t i = 0; i < options_.surface_field.size(); ++i)
+      if (options_.surface_field[i] >= 0)
+        field_bits_[std::size_t(options_.surface_field[i])] |=
+            std::uint8_t(1u << std::min<std::size_t>(i, 7));
   }
   ~AdaptorImpl() override { finalize(); }
 
@@ -925,7 +954,7 @@ class AdaptorImpl final : public Adaptor {
         for (const Colour& c : b.colours)
           colours.push_back(c.array);
         plans[k] = b.grid ? plan_grid(*b.grid, static_cast<const GridSource&>(*b.source),
-                                      options_.isovalues, colours)
+                                      options_.isovalues, colours, field_bits_)
                           : plan_hex(*b.hex, static_cast<const HexElementSource&>(*b.source),
                                      options_.isovalues, colours);
         planned += plans[k].bytes();
@@ -972,13 +1001,15 @@ class AdaptorImpl final : public Adaptor {
             const FieldArray live = b.colours[f].array;
             if (!live.values) continue;
             SparseCopy& into = snapshot_[k].colours[f];
+            const std::vector<std::uint8_t>& field_held =
+                plans[k].colour_held[f].empty() ? held : plans[k].colour_held[f];
             if (b.grid)
-              copy_points(*b.grid, static_cast<const GridSource&>(*b.source), held, live.values,
-                          live.type, into.held(), into.data());
+              copy_points(*b.grid, static_cast<const GridSource&>(*b.source), field_held,
+                          live.values, live.type, into.held(), into.data());
             else
               copy_nodal(*b.hex, live.values, live.type, {}, into.data());
             const FieldArray copied{into.data(), live.type};
-            copy.colours[f] = {copied, coloured_source(copy, copied, held)};
+            copy.colours[f] = {copied, coloured_source(copy, copied, field_held)};
           }
           bytes += snapshot_[k].bytes();
           snapshot_blocks_.push_back(std::move(copy));
@@ -1304,6 +1335,7 @@ class AdaptorImpl final : public Adaptor {
   MPI_Comm comm_;
   int rank_ = 0, size_ = 1;
   AdaptorOptions options_;
+  std::vector<std::uint8_t> field_bits_;  // per colour field, its isovalues' bits (plan_grid)
   Box domain_;
   bool has_domain_ = false;
   std::vector<Block> blocks_;

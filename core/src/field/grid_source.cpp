@@ -1714,6 +1714,14 @@ void for_layers(std::int64_t n, std::int64_t layer_points, F&& f) {
 }
 
 std::vector<std::uint8_t> GridSource::needed_bricks(std::span<const double> isovalues) const {
+  std::vector<std::uint8_t> needed = needed_bricks_by_isovalue(isovalues);
+  for (std::uint8_t& n : needed)
+    n = n != 0;
+  return needed;
+}
+
+std::vector<std::uint8_t> GridSource::needed_bricks_by_isovalue(
+    std::span<const double> isovalues) const {
   // The bricks' ranges from the rows of points in memory order (a brick at a time would jump
   // between rows and pages: three times slower on the Gray–Scott block), layers of bricks along
   // z (for_layers). A brick with a NaN or ±Inf is needed whatever its range: a superset of the
@@ -1751,13 +1759,17 @@ std::vector<std::uint8_t> GridSource::needed_bricks(std::span<const double> isov
     scan(static_cast<const float*>(block_.values));
   else
     scan(static_cast<const double*>(block_.values));
+  std::uint8_t every = 0;
+  for (std::size_t i = 0; i < isovalues.size(); ++i)
+    every |= std::uint8_t(1u << std::min<std::size_t>(i, 7));
   std::vector<std::uint8_t> needed(count, 0);
   for (std::size_t n = 0; n < count; ++n) {
     if (held_ && !(*held_)[n]) continue;
-    bool any = bad[n];
-    for (const double iso : isovalues)
-      any = any || (lo[n] <= iso && iso <= hi[n]);
-    needed[n] = any;
+    std::uint8_t bits = bad[n] ? every : 0;
+    for (std::size_t i = 0; i < isovalues.size(); ++i)
+      if (lo[n] <= isovalues[i] && isovalues[i] <= hi[n])
+        bits |= std::uint8_t(1u << std::min<std::size_t>(i, 7));
+    needed[n] = bits;
   }
   return needed;
 }

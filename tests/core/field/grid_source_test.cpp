@@ -825,15 +825,29 @@ TEST(GridSource, NeededBricksAreThoseABruteForceScanFinds) {
         block.ghost_hi = {2, 1, 0};
         const std::vector<std::uint8_t> needed =
             GridSource(block, brick_cells).needed_bricks(isovalues);
-        const std::vector<std::uint8_t> expected = needed_by_definition(
-            block, brick_cells, isovalues, [&](std::int64_t i, std::int64_t j, std::int64_t k) {
-              return type == ScalarType::float64 ? doubles[index(i, j, k)]
-                                                 : double(floats[index(i, j, k)]);
-            });
+        const auto value_at = [&](std::int64_t i, std::int64_t j, std::int64_t k) {
+          return type == ScalarType::float64 ? doubles[index(i, j, k)]
+                                             : double(floats[index(i, j, k)]);
+        };
+        const std::vector<std::uint8_t> expected =
+            needed_by_definition(block, brick_cells, isovalues, value_at);
         ASSERT_EQ(needed.size(), expected.size());
         EXPECT_EQ(needed, expected) << "bricks:" << differing_bricks(needed, expected);
         for (const std::uint8_t e : expected)
           (e ? needed_any : skipped_any) += 1;
+        // Per isovalue: bit i is the bricks needed for isovalue i alone.
+        const std::vector<std::uint8_t> by_isovalue =
+            GridSource(block, brick_cells).needed_bricks_by_isovalue(isovalues);
+        for (std::size_t i = 0; i < isovalues.size(); ++i) {
+          std::vector<std::uint8_t> bit(by_isovalue.size());
+          for (std::size_t b = 0; b < bit.size(); ++b)
+            bit[b] = (by_isovalue[b] >> i) & 1;
+          const std::vector<std::uint8_t> alone =
+              needed_by_definition(block, brick_cells, {isovalues[i]}, value_at);
+          EXPECT_EQ(bit, alone) << "isovalue " << isovalues[i]
+                                << ", bricks:" << differing_bricks(bit, alone);
+          EXPECT_NE(alone, expected);  // each isovalue needs fewer bricks than both
+        }
       }
   EXPECT_GT(needed_any, 200u);
   EXPECT_GT(skipped_any, 200u);

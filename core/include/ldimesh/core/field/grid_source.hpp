@@ -58,6 +58,11 @@ class GridSource final : public FieldSource {
   // bind_axis() for these isovalues read, with the points around them that the hits' normals
   // read. Reads the values in place, on the calling thread up to 8 Mi points, else on all cores.
   std::vector<std::uint8_t> needed_bricks(std::span<const double> isovalues) const;
+  // The same pass, per isovalue: bit i of a brick's byte is set where it is needed for
+  // isovalue i alone (bit 7 for the eighth isovalue and every one after it), every isovalue's
+  // bit where one of its points is NaN or ±Inf; needed_bricks is where the byte is not 0. (The
+  // adaptor's snapshot copies a colour field only where the isovalues it colours need it.)
+  std::vector<std::uint8_t> needed_bricks_by_isovalue(std::span<const double> isovalues) const;
   // Calls f(j, k, i0, i1) for each stretch of points i0 … i1 of point row (j, k) (indices of the
   // block's points, ghosts included) that a source holding the bricks `held` marks reads: for a
   // brick of cells lo … hi along an axis, points lo − 1 … hi + 2 where the block has them (its
