@@ -994,8 +994,8 @@ class AdaptorImpl final : public Adaptor {
             copy.source = std::make_shared<HexElementSource>(
                 static_cast<const HexElementSource&>(*b.source), *copy.hex, held);
           }
-          // Each colour field where the copy's values are (a grid block's needed points, an
-          // element block's whole field), and a source over both.
+          // Each colour field (a grid block's points the casts of the isovalues it colours read,
+          // an element block's whole field), and a source over it and the copy's values.
           copy.colours.resize(b.colours.size());
           for (std::size_t f = 0; f < b.colours.size(); ++f) {
             const FieldArray live = b.colours[f].array;

@@ -1072,6 +1072,19 @@ TEST(Glb, HostileJsonIsRejected) {
     edited[Json::json_pointer(pointer)] = value;
     EXPECT_FALSE(decode_glb(rebuild(edited), out)) << pointer << " = " << value.dump();
   }
+  // Ranges in the extras beyond float's (converting them would be undefined behaviour, which
+  // the UBSan build reports) or not pairs of numbers: not read, the mesh decodes.
+  for (const Json& range : {Json::array({1e300, 0.0}), Json::array({0.0, -1e39}), Json("wide"),
+                            Json::array({0.0, 1.0, 2.0})}) {
+    Json edited = j;
+    edited["meshes"][0]["extras"]["ldimesh"]["scalar_range"] = range;
+    edited["meshes"][0]["extras"]["ldimesh"]["surface_scalar_ranges"] = Json::array({range});
+    GlbInfo info;
+    ASSERT_TRUE(decode_glb(rebuild(edited), out, &info)) << range.dump();
+    EXPECT_EQ(info.scalar_min, 0.0f);
+    EXPECT_EQ(info.scalar_max, 0.0f);
+    EXPECT_TRUE(info.surface_scalar_ranges.empty()) << range.dump();
+  }
 }
 
 // Flipped bytes anywhere in the Draco data: decoding either fails with a Status or yields a

@@ -910,6 +910,19 @@ Status decode_primitive(const Json& json, const Json& primitive, std::span<const
   return Status::ok();
 }
 
+// A JSON pair of numbers [a, b] as floats, where both are within float's range (converting a
+// wider double to float is undefined behaviour).
+bool float_pair(const Json& r, std::array<float, 2>& out) {
+  if (!r.is_array() || r.size() != 2) return false;
+  for (std::size_t k = 0; k < 2; ++k) {
+    if (!r[k].is_number()) return false;
+    const double x = r[k].get<double>();
+    if (!(std::abs(x) <= double(std::numeric_limits<float>::max()))) return false;
+    out[k] = float(x);
+  }
+  return true;
+}
+
 Status decode_glb_unguarded(std::span<const std::uint8_t> glb, Mesh& out, GlbInfo* info) {
   GlbChunks chunks;
   if (Status s = parse_glb(glb, chunks); !s) return s;
@@ -942,23 +955,20 @@ Status decode_glb_unguarded(std::span<const std::uint8_t> glb, Mesh& out, GlbInf
           mesh.view_dirs.push_back(v);
         }
       }
+      std::array<float, 2> pair{};
       if (const Json* range = array_member(ours, "scalar_range");
-          range && range->size() == 2 && (*range)[0].is_number() && (*range)[1].is_number()) {
-        result.scalar_min = (*range)[0].get<float>();
-        result.scalar_max = (*range)[1].get<float>();
+          range && float_pair(*range, pair)) {
+        result.scalar_min = pair[0];
+        result.scalar_max = pair[1];
       }
       // Per surface: [min, max] or null (read where every entry is one of them).
       if (const Json* ranges = array_member(ours, "surface_scalar_ranges");
           ranges && ranges->size() <= 256 &&
-          std::all_of(ranges->begin(), ranges->end(), [](const Json& r) {
-            return r.is_null() ||
-                   (r.is_array() && r.size() == 2 && r[0].is_number() && r[1].is_number());
-          }))
+          std::all_of(ranges->begin(), ranges->end(),
+                      [&](const Json& r) { return r.is_null() || float_pair(r, pair); }))
         for (const Json& r : *ranges)
           result.surface_scalar_ranges.push_back(
-              r.is_null()
-                  ? std::nullopt
-                  : std::optional(std::array<float, 2>{r[0].get<float>(), r[1].get<float>()}));
+              r.is_null() || !float_pair(r, pair) ? std::nullopt : std::optional(pair));
     }
   }
   std::vector<std::array<std::uint8_t, 3>> view_colours;
