@@ -782,25 +782,26 @@ class AdaptorImpl final : public Adaptor {
           caster_options.scalars = f >= 0;
           for (std::size_t k = 0; k < blocks.size(); ++k) {
             const Block& b = blocks[k];
-            const std::string which =
-                "colour_by: block " + std::to_string(k) + " of rank " + std::to_string(rank_);
+            const auto which = [&] {
+              return "colour_by: block " + std::to_string(k) + " of rank " + std::to_string(rank_);
+            };
             const FieldSource* source = b.source.get();
             if (f >= 0 && (b.grid || b.hex)) {
               source = b.colours[std::size_t(f)].source.get();
               if (!source)
-                return Status::invalid_argument(which + " has no field named '" +
+                return Status::invalid_argument(which() + " has no field named '" +
                                                 options_.colour_fields[std::size_t(f)] +
                                                 "' (add_field)");
             } else if (f >= 0 && options_.colour_fields.size() > 1) {
               return Status::invalid_argument(
-                  which + " is a FieldSource, which has one colour field (bind_scalar), and " +
+                  which() + " is a FieldSource, which has one colour field (bind_scalar), and " +
                   std::to_string(options_.colour_fields.size()) + " fields are named");
             }
             casters.owned.push_back(
                 std::make_unique<RayCaster>(*source, options_.isovalues[i], caster_options));
             if (caster_options.scalars && !casters.owned.back()->carries_scalars())
               return Status::invalid_argument(
-                  which + " is a FieldSource without a colour field (bind_scalar)");
+                  which() + " is a FieldSource without a colour field (bind_scalar)");
             casters.blocks[i].push_back({casters.owned.back().get(), {b.owned, *domain}});
           }
         }
@@ -1204,7 +1205,7 @@ class AdaptorImpl final : public Adaptor {
       samples += r.samples;
       quads += r.quads;
       surfaces.push_back(std::uint32_t(mesh.positions.size()));
-      append(mesh, r.mesh);
+      append_mesh(mesh, r.mesh);
       // An isosurface without a colour field beside coloured ones: values the GLB leaves out.
       if (!options_.colour_fields.empty() && options_.surface_field[i] < 0)
         mesh.scalars.resize(mesh.positions.size(), 0.0f);
@@ -1300,36 +1301,12 @@ class AdaptorImpl final : public Adaptor {
     };
     std::size_t replaced = 0;
     for (int g = 0; g <= *std::max_element(groups.begin(), groups.end()); ++g) {
-      float lowest = INFINITY;
+      std::vector<std::span<float>> parts;
       for (std::size_t s = 0; s < count; ++s)
-        if (groups[s] == g)
-          for (float v : range(s))
-            if (std::isfinite(v)) lowest = std::min(lowest, v);
-      if (!std::isfinite(lowest)) lowest = 0.0f;
-      for (std::size_t s = 0; s < count; ++s)
-        if (groups[s] == g)
-          for (float& v : range(s))
-            if (!std::isfinite(v)) {
-              v = lowest;
-              ++replaced;
-            }
+        if (groups[s] == g) parts.push_back(range(s));
+      replaced += replace_nonfinite_scalars(parts);
     }
     return replaced;
-  }
-
-  // Appends `b` to `a` (the meshes of several isovalues in one GLB).
-  static void append(Mesh& a, const Mesh& b) {
-    const std::uint32_t base = std::uint32_t(a.positions.size());
-    if (a.view_dirs.empty()) a.view_dirs = b.view_dirs;
-    a.positions.insert(a.positions.end(), b.positions.begin(), b.positions.end());
-    a.normals.insert(a.normals.end(), b.normals.begin(), b.normals.end());
-    a.scalars.insert(a.scalars.end(), b.scalars.begin(), b.scalars.end());
-    for (std::uint32_t i : b.triangles)
-      a.triangles.push_back(base + i);
-    for (std::uint32_t i : b.quads)
-      a.quads.push_back(base + i);
-    a.triangle_view.insert(a.triangle_view.end(), b.triangle_view.begin(), b.triangle_view.end());
-    a.quad_view.insert(a.quad_view.end(), b.quad_view.begin(), b.quad_view.end());
   }
 
   MPI_Comm comm_;

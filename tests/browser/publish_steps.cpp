@@ -48,17 +48,8 @@ std::size_t publish(ldimesh::SnapshotStore& store, std::uint64_t step, const cha
     for (const ldimesh::View& v : ldimesh::make_axis_views(s->domain, res))
       ldis.push_back(caster.cast(v));
     const ldimesh::MeshingResult one = ldimesh::mesh_ldis(ldis, {});
-    // Appended: the faces' vertex indices move past the vertices before them.
-    const std::uint32_t base = std::uint32_t(result.mesh.positions.size());
-    options.surfaces.push_back(base);
-    ldimesh::Mesh& m = result.mesh;
-    m.view_dirs = one.mesh.view_dirs;
-    m.positions.insert(m.positions.end(), one.mesh.positions.begin(), one.mesh.positions.end());
-    m.normals.insert(m.normals.end(), one.mesh.normals.begin(), one.mesh.normals.end());
-    for (const std::uint32_t v : one.mesh.triangles)
-      m.triangles.push_back(base + v);
-    m.triangle_view.insert(m.triangle_view.end(), one.mesh.triangle_view.begin(),
-                           one.mesh.triangle_view.end());
+    options.surfaces.push_back(std::uint32_t(result.mesh.positions.size()));
+    ldimesh::append_mesh(result.mesh, one.mesh);
     result.samples += one.samples;
     result.quads += one.quads;
     result.seconds = one.seconds;

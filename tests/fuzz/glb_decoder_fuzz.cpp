@@ -57,16 +57,10 @@ void ldimesh::fuzz::write_seeds(const std::string& dir) {
   write_seed(dir + "/seed-scalar-views.glb", octahedron(true, true), {});
   write_seed(dir + "/seed-sequential.glb", octahedron(true, true), sequential);
   // Two surfaces, the first coloured, the second not ("colour_by" per isovalue).
-  ldimesh::Mesh two = octahedron(true, false);
-  const ldimesh::Mesh other = octahedron(true, false);
-  for (const glm::vec3& p : other.positions)
-    two.positions.push_back(0.5f * p);
-  two.normals.insert(two.normals.end(), other.normals.begin(), other.normals.end());
-  two.scalars.insert(two.scalars.end(), other.scalars.begin(), other.scalars.end());
-  for (const std::uint32_t v : other.triangles)
-    two.triangles.push_back(v + 6);
-  two.triangle_view.insert(two.triangle_view.end(), other.triangle_view.begin(),
-                           other.triangle_view.end());
+  ldimesh::Mesh two = octahedron(true, false), inner = octahedron(true, false);
+  for (glm::vec3& p : inner.positions)
+    p *= 0.5f;
+  ldimesh::append_mesh(two, inner);
   ldimesh::GlbOptions mixed;
   mixed.surfaces = {0, 6};
   mixed.scalar_groups = {0, -1};

@@ -355,12 +355,7 @@ TEST(Glb, SeveralSurfacesAreAMeshOnANodeEach) {
   const Mesh b = surface_mesh("torus", 40, FaceType::triangles);
   Mesh both = a;
   const std::uint32_t base = std::uint32_t(a.vertex_count());
-  both.positions.insert(both.positions.end(), b.positions.begin(), b.positions.end());
-  both.normals.insert(both.normals.end(), b.normals.begin(), b.normals.end());
-  for (const std::uint32_t v : b.triangles)
-    both.triangles.push_back(base + v);
-  both.triangle_view.insert(both.triangle_view.end(), b.triangle_view.begin(),
-                            b.triangle_view.end());
+  append_mesh(both, b);
   GlbOptions options;
   options.surfaces = {0, base};
   GlbInfo info;
@@ -732,17 +727,9 @@ TEST(Glb, SurfacesColouredByDifferentFieldsKeepARangeEach) {
   Mesh all;
   std::vector<std::uint32_t> starts;
   for (const Mesh& m : parts) {
-    const std::uint32_t base = std::uint32_t(all.vertex_count());
-    starts.push_back(base);
-    all.positions.insert(all.positions.end(), m.positions.begin(), m.positions.end());
-    all.normals.insert(all.normals.end(), m.normals.begin(), m.normals.end());
-    all.scalars.insert(all.scalars.end(), m.scalars.begin(), m.scalars.end());
-    for (const std::uint32_t v : m.triangles)
-      all.triangles.push_back(base + v);
-    all.triangle_view.insert(all.triangle_view.end(), m.triangle_view.begin(),
-                             m.triangle_view.end());
+    starts.push_back(std::uint32_t(all.vertex_count()));
+    append_mesh(all, m);
   }
-  all.view_dirs = parts[0].view_dirs;
   std::array<float, 2> range[3];
   for (int k = 0; k < 3; ++k) {
     const auto [lo, hi] = std::minmax_element(parts[k].scalars.begin(), parts[k].scalars.end());

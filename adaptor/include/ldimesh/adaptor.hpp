@@ -95,10 +95,10 @@ class Adaptor {
   // field of that name ("colour_by": [NAME or null per isovalue]: each isosurface by its own
   // field, or by none), which every grid and element block must then have, and every
   // FieldSource must have a colour field of its own (bind_scalar; it has one, so two names
-  // fail): a step without fails, naming the block. A GridBlock's or HexBlock's own `colour` member is not read: fields come by name.
-  // Adding a name again replaces that field. Errors: no block added yet, the last add_*_block
-  // refused (the field would belong to the block before), a FieldSource block, an empty name,
-  // null values.
+  // fail): a step without fails, naming the block. A GridBlock's or HexBlock's own `colour` member
+  // is not read: fields come by name. Adding a name again replaces that field. Errors: no block
+  // added yet, the last add_*_block refused (the field would belong to the block before), a
+  // FieldSource block, an empty name, null values.
   virtual Status add_field(std::string_view name, const void* values, ScalarType type) = 0;
   // Forgets the blocks (to describe them anew, e.g. after a re-partition).
   virtual void clear_blocks() = 0;

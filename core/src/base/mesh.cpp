@@ -52,19 +52,40 @@ Status check_mesh(const Mesh& m, const MeshChecks& checks) {
   return Status::ok();
 }
 
+void append_mesh(Mesh& a, const Mesh& b) {
+  const std::uint32_t base = std::uint32_t(a.positions.size());
+  if (a.view_dirs.empty()) a.view_dirs = b.view_dirs;
+  a.positions.insert(a.positions.end(), b.positions.begin(), b.positions.end());
+  a.normals.insert(a.normals.end(), b.normals.begin(), b.normals.end());
+  a.scalars.insert(a.scalars.end(), b.scalars.begin(), b.scalars.end());
+  for (std::uint32_t i : b.triangles)
+    a.triangles.push_back(base + i);
+  for (std::uint32_t i : b.quads)
+    a.quads.push_back(base + i);
+  a.triangle_view.insert(a.triangle_view.end(), b.triangle_view.begin(), b.triangle_view.end());
+  a.quad_view.insert(a.quad_view.end(), b.quad_view.begin(), b.quad_view.end());
+}
+
 std::size_t replace_nonfinite_scalars(Mesh& m) {
+  const std::span<float> all(m.scalars);
+  return replace_nonfinite_scalars(std::span(&all, 1));
+}
+
+std::size_t replace_nonfinite_scalars(std::span<const std::span<float>> parts) {
   float lowest = INFINITY;
   std::size_t bad = 0;
-  for (float s : m.scalars) {
-    if (std::isfinite(s))
-      lowest = std::min(lowest, s);
-    else
-      ++bad;
-  }
+  for (const std::span<float> part : parts)
+    for (float s : part) {
+      if (std::isfinite(s))
+        lowest = std::min(lowest, s);
+      else
+        ++bad;
+    }
   if (bad == 0) return 0;
   if (!std::isfinite(lowest)) lowest = 0.0f;
-  for (float& s : m.scalars)
-    if (!std::isfinite(s)) s = lowest;
+  for (const std::span<float> part : parts)
+    for (float& s : part)
+      if (!std::isfinite(s)) s = lowest;
   return bad;
 }
 

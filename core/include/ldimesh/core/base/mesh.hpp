@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include <glm/glm.hpp>
@@ -47,6 +48,15 @@ Status check_mesh(const Mesh& m, const MeshChecks& checks = {});
 // the smallest finite one (0 when there is none), so that the mesh can be encoded; returns how
 // many were replaced.
 std::size_t replace_nonfinite_scalars(Mesh& m);
+// The same over the values of `parts` together (the surfaces of one field in a mesh of several:
+// the smallest finite value of all of them).
+std::size_t replace_nonfinite_scalars(std::span<const std::span<float>> parts);
+
+// Appends `b` to `a` (several surfaces in one mesh, e.g. a step's isovalues): b's vertices after
+// a's, its faces renumbered, with their views; a takes b's view directions where it has none.
+// Scalars are appended as they are (both meshes with them or both without keeps them one per
+// vertex).
+void append_mesh(Mesh& a, const Mesh& b);
 
 // Appends the two triangles of quad v[0..3] to `triangles`: split along the shorter diagonal
 // (ties take v0–v2), which cuts the obtuse corners of a skewed quad. The one rule of the mesher's
