@@ -1651,7 +1651,7 @@ void check_scalar_types(const HexBlock& block) {
 
 }  // namespace
 
-HexElementSource::HexElementSource(const HexBlock& block) : block_(block) {
+HexElementSource::HexElementSource(const HexBlock& block, bool top_collapsed) : block_(block) {
   check_order(block.order);
   check_node_set(block.nodes);
   const std::size_t n = nodes_per_element(block.order);
@@ -1734,7 +1734,7 @@ HexElementSource::HexElementSource(const HexBlock& block) : block_(block) {
                                     " is degenerate (zero volume)");
       box = bounding_box(f);
     } else {
-      check_jacobian(e, x);
+      check_jacobian(e, x, top_collapsed);
       prepared->curved_of[e] = std::uint32_t(prepared->curved.size() / gn);
       prepared->curved.insert(prepared->curved.end(), x.begin(), x.end());
       box = {x[0], x[0]};
@@ -1865,7 +1865,8 @@ std::unique_ptr<ScalarProbe> HexElementSource::bind_scalar() const {
 // fine) at the (q + 2)³ points of a uniform lattice of its reference cube; zero or a change of
 // sign there means a folded (inverted) or degenerate element. A necessary condition, checked
 // where the solver's mesh generator would have gone wrong.
-void HexElementSource::check_jacobian(std::size_t element, const std::vector<glm::dvec3>& x) const {
+void HexElementSource::check_jacobian(std::size_t element, const std::vector<glm::dvec3>& x,
+                                      bool top_collapsed) const {
   // The Jacobian at the lattice by sum factorization over the geometry's Bernstein form: the
   // 1-D basis and its derivative at the lattice's coordinates, then one axis contracted at a
   // time (O(q⁴) per element instead of a full evaluation per point).
@@ -1920,7 +1921,7 @@ void HexElementSource::check_jacobian(std::size_t element, const std::vector<glm
       }
   // Contract ζ at each lattice point, in the order of the lattice (ξ fastest), and test.
   int sign = 0;
-  for (int c = 0; c < points; ++c)
+  for (int c = 0; c < points - (top_collapsed ? 1 : 0); ++c)
     for (int b = 0; b < points; ++b)
       for (int a = 0; a < points; ++a) {
         glm::dmat3 jac(0.0);

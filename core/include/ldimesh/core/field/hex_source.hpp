@@ -76,7 +76,11 @@ class HexElementSource final : public FieldSource {
   // here only: the source keeps what it needs of them (every element's 8 corners, 24 doubles,
   // and a curved element's geometry in Bernstein form), shared with the sources made from it.
   // The value arrays must outlive the source and may change: every bind() reads them.
-  explicit HexElementSource(const HexBlock& block);
+  explicit HexElementSource(const HexBlock& block) : HexElementSource(block, false) {}
+  // The same for elements whose top face (ζ = 1) is collapsed to one point when `top_collapsed`
+  // (pyramids, as CellElementSource gives them: cell_source.hpp): the Jacobian determinant may
+  // vanish on that face, and only there.
+  HexElementSource(const HexBlock& block, bool top_collapsed);
   // A source over `block`, whose geometry is that of `prepared`'s block, with its own values
   // (the adaptor's snapshot of a block at each due step): the geometry as `prepared` prepared
   // it (its Bernstein form, bounds and checks, for curved elements most of the constructor's
@@ -153,7 +157,8 @@ class HexElementSource final : public FieldSource {
 
  private:
   static constexpr std::uint32_t kNotCurved = ~std::uint32_t(0);
-  void check_jacobian(std::size_t element, const std::vector<glm::dvec3>& x) const;
+  void check_jacobian(std::size_t element, const std::vector<glm::dvec3>& x,
+                      bool top_collapsed) const;
 
   HexBlock block_;
   Box bounds_;

@@ -1,0 +1,233 @@
+#include "ldimesh/core/field/cell_source.hpp"
+
+#include <atomic>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <stdexcept>
+#include <string>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include "reference_cells.hpp"
+
+namespace ldimesh {
+namespace {
+
+bool known_scalar(ScalarType t) {
+  return t == ScalarType::float32 || t == ScalarType::float64;
+}
+
+double read_value(const void* values, ScalarType type, std::size_t index) {
+  return type == ScalarType::float32 ? double(static_cast<const float*>(values)[index])
+                                     : static_cast<const double*>(values)[index];
+}
+
+// rows × n matrix times the n nodal values → rows values.
+void apply(const double* matrix, std::size_t rows, std::size_t n, const double* nodal,
+           double* out) {
+  for (std::size_t r = 0; r < rows; ++r) {
+    const double* row = matrix + r * n;
+    double s = 0.0;
+    for (std::size_t i = 0; i < n; ++i)
+      s += row[i] * nodal[i];
+    out[r] = s;
+  }
+}
+
+// The sub-hexahedra's block over `geometry` (their equispaced lattice points), values to be set.
+HexBlock sub_hexahedra_block(std::size_t count, int degree, const std::vector<double>& geometry) {
+  HexBlock b;
+  b.order = degree;
+  b.nodes = NodeSet::equispaced;
+  b.ordering = NodeOrdering::lexicographic;
+  b.element_count = count;
+  b.geometry_order = degree;
+  b.geometry = geometry.data();
+  b.type = ScalarType::float64;
+  return b;
+}
+
+// A binding over a snapshot of the sub-hexahedra's values, which it keeps alive.
+class CellGeometryBinding final : public GeometryBinding {
+ public:
+  CellGeometryBinding(std::shared_ptr<const CellElementSource::Snapshot> snapshot,
+                      std::unique_ptr<GeometryBinding> inner, std::uint64_t nonfinite)
+      : snapshot_(std::move(snapshot)), inner_(std::move(inner)), nonfinite_(nonfinite) {}
+  RTCGeometry geometry() const override { return inner_->geometry(); }
+  std::size_t primitive_count() const override { return inner_->primitive_count(); }
+  std::uint64_t nonfinite_values() const override { return nonfinite_; }
+
+ private:
+  std::shared_ptr<const CellElementSource::Snapshot> snapshot_;
+  std::unique_ptr<GeometryBinding> inner_;
+  std::uint64_t nonfinite_;
+};
+
+class CellAxisBinding final : public AxisBinding {
+ public:
+  CellAxisBinding(std::shared_ptr<const CellElementSource::Snapshot> snapshot,
+                  std::unique_ptr<AxisBinding> inner, std::uint64_t nonfinite)
+      : snapshot_(std::move(snapshot)), inner_(std::move(inner)), nonfinite_(nonfinite) {}
+  void cast(const AxisRays& rays, AxisHits& hits) const override { inner_->cast(rays, hits); }
+  void prepare(int axis) const override { inner_->prepare(axis); }
+  std::size_t primitive_count() const override { return inner_->primitive_count(); }
+  bool prefers_column_tasks(const View& view) const override {
+    return inner_->prefers_column_tasks(view);
+  }
+  std::uint64_t nonfinite_values() const override { return nonfinite_; }
+
+ private:
+  std::shared_ptr<const CellElementSource::Snapshot> snapshot_;
+  std::unique_ptr<AxisBinding> inner_;
+  std::uint64_t nonfinite_;
+};
+
+class CellScalarProbe final : public ScalarProbe {
+ public:
+  CellScalarProbe(std::shared_ptr<const CellElementSource::Snapshot> snapshot,
+                  std::unique_ptr<ScalarProbe> inner)
+      : snapshot_(std::move(snapshot)), inner_(std::move(inner)) {}
+  double at(glm::dvec3 p) const override { return inner_->at(p); }
+  double near(glm::dvec3 p) const override { return inner_->near(p); }
+
+ private:
+  std::shared_ptr<const CellElementSource::Snapshot> snapshot_;
+  std::unique_ptr<ScalarProbe> inner_;
+};
+
+// The index of the element a HexElementSource message names ("… element 17 …"), or −1.
+long named_element(const std::string& message) {
+  const std::string key = "element ";
+  const std::size_t at = message.find(key);
+  if (at == std::string::npos) return -1;
+  char* end = nullptr;
+  const long e = std::strtol(message.c_str() + at + key.size(), &end, 10);
+  return end != message.c_str() + at + key.size() ? e : -1;
+}
+
+}  // namespace
+
+struct CellElementSource::Counted {
+  std::shared_ptr<const Snapshot> snapshot;
+  std::uint64_t nonfinite = 0;
+};
+
+CellElementSource::CellElementSource(const CellBlock& block) : block_(block) {
+  const cells::ReferenceCell& cell = cells::reference_cell(block.type, block.order);
+  nodes_ = cell.nodes.size();
+  sub_per_cell_ = cell.sub_hexahedra;
+  degree_ = cell.degree;
+  const std::string what = std::string("cell source: ") + cell_type_name(block.type) + "s";
+  if (block.element_count == 0) throw std::invalid_argument(what + ": no cells");
+  if (!block.points) throw std::invalid_argument(what + ": null point array");
+  if (!block.values) throw std::invalid_argument(what + ": null value array");
+  if (!known_scalar(block.value_type)) throw std::invalid_argument(what + ": unknown scalar type");
+  if (block.colour && !known_scalar(block.colour_type))
+    throw std::invalid_argument(what + ": unknown scalar type of the colour field");
+  if (block_.element_stride == 0) block_.element_stride = nodes_;
+  if (block_.element_stride < nodes_)
+    throw std::invalid_argument(what + ": element stride " +
+                                std::to_string(block_.element_stride) + " below the " +
+                                std::to_string(nodes_) + " nodes of a cell");
+
+  // The sub-hexahedra's lattice points, cell after cell.
+  const std::size_t lattice = std::size_t(degree_ + 1) * (degree_ + 1) * (degree_ + 1);
+  const std::size_t rows = lattice * sub_per_cell_;
+  const std::size_t count = block.element_count * sub_per_cell_;
+  geometry_.resize(3 * rows * block.element_count);
+  std::vector<double> nodal(nodes_), out(rows);
+  for (std::size_t e = 0; e < block.element_count; ++e) {
+    const double* p = block.points + 3 * nodes_ * e;
+    for (std::size_t i = 0; i < 3 * nodes_; ++i)
+      if (!std::isfinite(p[i]))
+        throw std::invalid_argument(what + ": cell " + std::to_string(e) +
+                                    " has a non-finite point");
+    for (int axis = 0; axis < 3; ++axis) {
+      for (std::size_t i = 0; i < nodes_; ++i)
+        nodal[i] = p[3 * i + axis];
+      apply(cell.sampling.data(), rows, nodes_, nodal.data(), out.data());
+      for (std::size_t r = 0; r < rows; ++r)
+        geometry_[3 * (e * rows + r) + axis] = out[r];
+    }
+  }
+  HexBlock hex = sub_hexahedra_block(count, degree_, geometry_);
+  hex.values = geometry_.data();  // not read by the constructor, which needs a non-null array
+  try {
+    prepared_ = std::make_unique<HexElementSource>(hex, cell.top_collapsed);
+  } catch (const std::invalid_argument& error) {
+    const long sub = named_element(error.what());
+    if (sub < 0) throw;
+    throw std::invalid_argument(what + ": cell " + std::to_string(sub / sub_per_cell_) +
+                                " is inverted or degenerate (its Jacobian determinant vanishes "
+                                "or changes sign)");
+  }
+}
+
+Box CellElementSource::bounds() const {
+  return prepared_->bounds();
+}
+
+CellElementSource::Counted CellElementSource::convert(bool colour) const {
+  const cells::ReferenceCell& cell = cells::reference_cell(block_.type, block_.order);
+  const std::size_t lattice = std::size_t(degree_ + 1) * (degree_ + 1) * (degree_ + 1);
+  const std::size_t rows = lattice * sub_per_cell_;
+  auto snapshot = std::make_shared<Snapshot>();
+  const auto fill = [&](const void* values, ScalarType type, std::vector<double>& to) {
+    to.resize(rows * block_.element_count);
+    std::atomic<std::uint64_t> bad{0};
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, block_.element_count, 256),
+        [&](const tbb::blocked_range<std::size_t>& range) {
+          std::vector<double> nodal(nodes_);
+          std::uint64_t nonfinite = 0;
+          for (std::size_t e = range.begin(); e != range.end(); ++e) {
+            for (std::size_t i = 0; i < nodes_; ++i) {
+              nodal[i] = read_value(values, type, e * block_.element_stride + i);
+              nonfinite += !std::isfinite(nodal[i]);
+            }
+            apply(cell.sampling.data(), rows, nodes_, nodal.data(), to.data() + e * rows);
+          }
+          if (nonfinite > 0) bad.fetch_add(nonfinite, std::memory_order_relaxed);
+        });
+    return bad.load();
+  };
+  Counted result;
+  result.nonfinite = fill(block_.values, block_.value_type, snapshot->values);
+  if (colour && block_.colour) fill(block_.colour, block_.colour_type, snapshot->colour);
+  HexBlock hex = sub_hexahedra_block(block_.element_count * sub_per_cell_, degree_, geometry_);
+  hex.values = snapshot->values.data();
+  if (!snapshot->colour.empty()) hex.colour = snapshot->colour.data();
+  snapshot->source = std::make_unique<HexElementSource>(*prepared_, hex);
+  result.snapshot = std::move(snapshot);
+  return result;
+}
+
+std::shared_ptr<const CellElementSource::Snapshot> CellElementSource::snapshot() const {
+  return convert(true).snapshot;
+}
+
+std::unique_ptr<GeometryBinding> CellElementSource::bind(RTCDevice device, double isovalue) const {
+  Counted c = convert(false);
+  auto inner = c.snapshot->source->bind(device, isovalue);
+  return std::make_unique<CellGeometryBinding>(std::move(c.snapshot), std::move(inner),
+                                               c.nonfinite);
+}
+
+std::unique_ptr<AxisBinding> CellElementSource::bind_axis(double isovalue) const {
+  Counted c = convert(false);
+  auto inner = c.snapshot->source->bind_axis(isovalue);
+  if (!inner) return nullptr;
+  return std::make_unique<CellAxisBinding>(std::move(c.snapshot), std::move(inner), c.nonfinite);
+}
+
+std::unique_ptr<ScalarProbe> CellElementSource::bind_scalar() const {
+  if (!block_.colour) return nullptr;
+  Counted c = convert(true);
+  auto inner = c.snapshot->source->bind_scalar();
+  if (!inner) return nullptr;
+  return std::make_unique<CellScalarProbe>(std::move(c.snapshot), std::move(inner));
+}
+
+}  // namespace ldimesh

@@ -1,0 +1,359 @@
+// Cells of every shape (tetrahedra, wedges, pyramids, serendipity and Lagrange hexahedra) as
+// ray-caster sources: exact isosurfaces, all hits, errors.
+#include <cmath>
+#include <functional>
+#include <optional>
+#include <random>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "ldimesh/core/base/view.hpp"
+#include "ldimesh/core/field/cell_source.hpp"
+#include "ldimesh/core/raycast/raycaster.hpp"
+
+#include "../test_helpers.hpp"
+
+namespace ldimesh {
+namespace {
+
+using Field = std::function<double(glm::dvec3)>;
+
+// Cells of one type and order with their points and values.
+struct Cells {
+  CellType type = CellType::tetrahedron;
+  int order = 1;
+  std::vector<double> points, values;
+  std::size_t count = 0;
+  CellBlock block() const {
+    CellBlock b;
+    b.type = type;
+    b.order = order;
+    b.element_count = count;
+    b.points = points.data();
+    b.values = values.data();
+    return b;
+  }
+};
+
+// The corners of a straight cell of `type` in VTK's vertex order: a tetrahedron's 4, a wedge's 6
+// (the triangle at t = 0, then at t = 1), a pyramid's 5 (base, apex), a hexahedron's 8.
+using Corners = std::vector<glm::dvec3>;
+
+// The world point of reference point r of the straight cell with `corners` (the linear cell's
+// own map; affine for tetrahedra and extruded wedges).
+glm::dvec3 linear_map(CellType type, const Corners& c, glm::dvec3 r) {
+  const CellType linear = type == CellType::serendipity_hexahedron ? CellType::hexahedron
+                          : type == CellType::serendipity_wedge    ? CellType::wedge
+                                                                   : type;
+  const std::vector<double> w = cell_shape_functions(linear, 1, r);
+  // The linear hexahedron's nodes are VTK's corner order; `corners` follow it.
+  glm::dvec3 x(0.0);
+  for (std::size_t i = 0; i < w.size(); ++i)
+    x += w[i] * c[i];
+  return x;
+}
+
+// Appends one cell: its nodes at the linear map of its reference nodes, optionally bent by
+// `bend` (curved cells), values of `field` at the nodes.
+void add_cell(Cells& cells, const Corners& corners, const Field& field,
+              const std::function<glm::dvec3(glm::dvec3)>& bend = {}) {
+  for (const glm::dvec3& r : cell_reference_nodes(cells.type, cells.order)) {
+    glm::dvec3 x = linear_map(cells.type, corners, r);
+    if (bend) x = bend(x);
+    cells.points.insert(cells.points.end(), {x.x, x.y, x.z});
+    cells.values.push_back(field(x));
+  }
+  ++cells.count;
+}
+
+// The 8 corners of cube (i, j, k) of an n³ grid over [lo, hi]³, VTK's hexahedron order.
+Corners cube_corners(int i, int j, int k, int n, double lo, double hi) {
+  const double h = (hi - lo) / n;
+  Corners c;
+  for (const glm::ivec3 o : {glm::ivec3(0, 0, 0), glm::ivec3(1, 0, 0), glm::ivec3(1, 1, 0),
+                             glm::ivec3(0, 1, 0), glm::ivec3(0, 0, 1), glm::ivec3(1, 0, 1),
+                             glm::ivec3(1, 1, 1), glm::ivec3(0, 1, 1)})
+    c.push_back(glm::dvec3(lo) + h * glm::dvec3(i + o.x, j + o.y, k + o.z));
+  return c;
+}
+
+// A cube (VTK corner order c) split into cells of `type`, each as its corners: 6 tetrahedra
+// around the diagonal 0–6 (Kuhn), 2 wedges (the square 0123 cut along 0–2, extruded), 6
+// pyramids (a face each, apex at the centre), or the hexahedron itself.
+std::vector<Corners> split_cube(CellType type, const Corners& c) {
+  switch (type) {
+    case CellType::tetrahedron:
+      return {{c[0], c[1], c[2], c[6]}, {c[0], c[2], c[3], c[6]}, {c[0], c[3], c[7], c[6]},
+              {c[0], c[7], c[4], c[6]}, {c[0], c[4], c[5], c[6]}, {c[0], c[5], c[1], c[6]}};
+    case CellType::wedge:
+    case CellType::serendipity_wedge:
+      return {{c[0], c[1], c[2], c[4], c[5], c[6]}, {c[0], c[2], c[3], c[4], c[6], c[7]}};
+    case CellType::pyramid: {
+      glm::dvec3 m(0.0);
+      for (const glm::dvec3& v : c)
+        m += v / 8.0;
+      // Each face's corners in a cycle, the apex at the centre.
+      return {{c[0], c[3], c[2], c[1], m}, {c[4], c[5], c[6], c[7], m},
+              {c[0], c[1], c[5], c[4], m}, {c[1], c[2], c[6], c[5], m},
+              {c[2], c[3], c[7], c[6], m}, {c[3], c[0], c[4], c[7], m}};
+    }
+    default:
+      return {c};
+  }
+}
+
+// An n³ grid of cubes over [lo, hi]³, each split into cells of `type` and order `order`.
+Cells grid_cells(CellType type, int order, int n, double lo, double hi, const Field& field,
+                 const std::function<glm::dvec3(glm::dvec3)>& bend = {}) {
+  Cells cells;
+  cells.type = type;
+  cells.order = order;
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i)
+        for (const Corners& corners : split_cube(type, cube_corners(i, j, k, n, lo, hi)))
+          add_cell(cells, corners, field, bend);
+  return cells;
+}
+
+double r2(glm::dvec3 x) {
+  return glm::dot(x, x);
+}
+
+std::string describe(CellType type, int order) {
+  return std::string(cell_type_name(type)) + " of order " + std::to_string(order);
+}
+
+TEST(CellSource, ReferenceNodesAreDistinctAndTheBasisIsNodal) {
+  for (CellType type : {CellType::hexahedron, CellType::serendipity_hexahedron,
+                        CellType::tetrahedron, CellType::wedge, CellType::serendipity_wedge,
+                        CellType::pyramid})
+    for (int order = 1; order <= max_cell_order(type); ++order) {
+      if ((type == CellType::serendipity_hexahedron || type == CellType::serendipity_wedge) &&
+          order != 2)
+        continue;
+      SCOPED_TRACE(describe(type, order));
+      const std::vector<glm::dvec3> nodes = cell_reference_nodes(type, order);
+      ASSERT_EQ(nodes.size(), cell_node_count(type, order));
+      for (std::size_t i = 0; i < nodes.size(); ++i) {
+        const std::vector<double> phi = cell_shape_functions(type, order, nodes[i]);
+        for (std::size_t j = 0; j < nodes.size(); ++j)
+          ASSERT_NEAR(phi[j], i == j ? 1.0 : 0.0, 1e-10) << "node " << i << ", function " << j;
+      }
+    }
+  EXPECT_EQ(cell_node_count(CellType::tetrahedron, 8), 165u);
+  EXPECT_EQ(cell_node_count(CellType::wedge, 8), 405u);
+  EXPECT_EQ(cell_node_count(CellType::pyramid, 2), 13u);
+  EXPECT_EQ(cell_node_count(CellType::serendipity_hexahedron, 2), 20u);
+  EXPECT_EQ(cell_node_count(CellType::serendipity_wedge, 2), 15u);
+}
+
+TEST(CellSource, SphereFromQuadraticFieldsOnStraightCellsIsExact) {
+  // |x|² lies in every space of order ≥ 2 on straight tetrahedra, extruded wedges and the
+  // serendipity cells (affine maps), so the isosurface at 1 is the unit sphere up to rounding.
+  struct Case {
+    CellType type;
+    int order;
+  };
+  for (const Case c : {Case{CellType::tetrahedron, 2}, Case{CellType::tetrahedron, 3},
+                       Case{CellType::tetrahedron, 5}, Case{CellType::tetrahedron, 8},
+                       Case{CellType::wedge, 2}, Case{CellType::wedge, 4},
+                       Case{CellType::serendipity_wedge, 2},
+                       Case{CellType::serendipity_hexahedron, 2}, Case{CellType::hexahedron, 2}}) {
+    SCOPED_TRACE(describe(c.type, c.order));
+    const int n = c.order >= 5 ? 2 : 3;
+    const Cells cells = grid_cells(c.type, c.order, n, -1.25, 1.25, r2);
+    const CellElementSource source(cells.block());
+    const RayCaster caster(source, 1.0);
+    for (const View& view : testing::axis_and_oblique_views(source.bounds(), 24)) {
+      const testing::SphereRays rays = testing::expect_sphere_hits(caster.cast(view), 1.0, 1e-6);
+      EXPECT_GT(rays.through, 60);
+      EXPECT_GT(rays.outside, 50);
+    }
+  }
+}
+
+// Hits of the plane x = c (the field x, exact in every cell: isoparametric): every hit on the
+// plane, and exactly one on each ray that crosses it inside the box away from its faces.
+void expect_plane_hits(const CellElementSource& source, double c, double lo, double hi) {
+  const RayCaster caster(source, c);
+  for (const glm::dvec3 dir : {glm::dvec3(1, 0, 0), glm::dvec3(0, 0, -1),
+                               glm::dvec3(0.3, -0.5, 0.8), glm::dvec3(-0.6, 0.2, -0.5)}) {
+    const View view = make_view(source.bounds(), dir, 40);
+    const Ldi ldi = caster.cast(view);
+    int through = 0;
+    for (int j = 0; j < view.height; ++j)
+      for (int i = 0; i < view.width; ++i) {
+        const std::size_t pixel = std::size_t(j) * view.width + i;
+        const glm::dvec3 o = view.pixel_point(i, j, 0.0);
+        if (view.dir.x == 0.0) {
+          EXPECT_EQ(ldi.count(pixel), 0u);
+          continue;
+        }
+        const double t = (c - o.x) / view.dir.x;
+        const glm::dvec3 x = o + t * view.dir;
+        bool inside = true, near = false;
+        for (int a = 0; a < 3; ++a) {
+          inside = inside && x[a] >= lo && x[a] <= hi;
+          near = near || std::abs(x[a] - lo) < 1e-6 || std::abs(x[a] - hi) < 1e-6;
+        }
+        if (near) continue;
+        ASSERT_EQ(ldi.count(pixel), inside ? 1u : 0u) << "pixel " << i << "," << j;
+        if (!inside) continue;
+        ++through;
+        EXPECT_NEAR(ldi.depth[ldi.begin(pixel)], t, 1e-6);
+      }
+    if (view.dir.x != 0.0) EXPECT_GT(through, 100);
+  }
+}
+
+TEST(CellSource, TheFieldXOnCurvedCellsCutsThePlaneExactly) {
+  // Isoparametric cells bent inside the box (the box's faces stay flat): the field x is exact in
+  // every cell, so its isosurface is the plane, whatever the bending and the shape.
+  const double lo = -1.0, hi = 1.0;
+  const auto bend = [](glm::dvec3 x) {
+    const glm::dvec3 w = (1.0 - x * x);  // zero on the box's faces
+    return x + 0.08 * glm::dvec3(w.x * std::sin(2.0 * x.y) * w.y * w.z,
+                                 w.y * std::sin(1.5 * x.z + 0.3) * w.x * w.z,
+                                 w.z * std::cos(1.7 * x.x) * w.x * w.y);
+  };
+  struct Case {
+    CellType type;
+    int order;
+  };
+  for (const Case c : {Case{CellType::tetrahedron, 1}, Case{CellType::tetrahedron, 2},
+                       Case{CellType::tetrahedron, 4}, Case{CellType::wedge, 1},
+                       Case{CellType::wedge, 3}, Case{CellType::serendipity_wedge, 2},
+                       Case{CellType::pyramid, 1}, Case{CellType::pyramid, 2},
+                       Case{CellType::serendipity_hexahedron, 2}}) {
+    SCOPED_TRACE(describe(c.type, c.order));
+    const Cells cells = grid_cells(c.type, c.order, 2, lo, hi, [](glm::dvec3 x) { return x.x; },
+                                   c.order > 1 ? bend : std::function<glm::dvec3(glm::dvec3)>());
+    const CellElementSource source(cells.block());
+    for (double plane : {-0.31, 0.0, 0.47}) {
+      SCOPED_TRACE("x = " + std::to_string(plane));
+      expect_plane_hits(source, plane, lo, hi);
+    }
+  }
+}
+
+TEST(CellSource, MixedCellsGiveTheSurfaceOfOneHexahedralMesh) {
+  // One box meshed by cubes of four kinds (hexahedra, Kuhn tetrahedra, wedges, pyramids), the
+  // same quadratic field |x|² on each: one sphere, two hits per ray through it, none twice at a
+  // boundary between kinds.
+  const int n = 4;
+  const double lo = -1.25, hi = 1.25;
+  std::vector<Cells> kinds;
+  for (CellType type :
+       {CellType::hexahedron, CellType::tetrahedron, CellType::wedge, CellType::serendipity_wedge})
+    kinds.push_back(Cells{type, 2, {}, {}, 0});
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i) {
+        Cells& cells = kinds[(i + 2 * j + 3 * k) % 4];
+        for (const Corners& corners : split_cube(cells.type, cube_corners(i, j, k, n, lo, hi)))
+          add_cell(cells, corners, r2);
+      }
+  std::vector<std::unique_ptr<CellElementSource>> sources;
+  std::vector<const FieldSource*> list;
+  for (const Cells& cells : kinds) {
+    ASSERT_GT(cells.count, 0u);
+    sources.push_back(std::make_unique<CellElementSource>(cells.block()));
+    list.push_back(sources.back().get());
+  }
+  const RayCaster caster(list, 1.0);
+  for (const View& view : testing::axis_and_oblique_views(Box{glm::dvec3(lo), glm::dvec3(hi)}, 32)) {
+    const testing::SphereRays rays = testing::expect_sphere_hits(caster.cast(view), 1.0, 1e-6);
+    EXPECT_GT(rays.through, 100);
+  }
+}
+
+TEST(CellSource, AxisAndEmbreeCastersGiveTheSameHits) {
+  const auto bend = [](glm::dvec3 x) {
+    return x + 0.05 * glm::dvec3(std::sin(2.0 * x.y), std::cos(1.3 * x.z), std::sin(x.x + 0.4)) *
+                   (1.0 - x.x * x.x) * (1.0 - x.y * x.y) * (1.0 - x.z * x.z);
+  };
+  for (CellType type : {CellType::tetrahedron, CellType::wedge, CellType::pyramid}) {
+    SCOPED_TRACE(cell_type_name(type));
+    const Cells cells = grid_cells(type, 2, 2, -1.0, 1.0,
+                                   [](glm::dvec3 x) { return r2(x) + 0.3 * x.x * x.y; }, bend);
+    const CellElementSource source(cells.block());
+    // The curved search by pieces of a cell (axis) and whole (Embree): the same roots up to
+    // rounding (curved_element.hpp).
+    const RayCaster axis(source, 0.6), reference(source, 0.6, RayCasterOptions{CastPath::embree});
+    for (const View& view : make_axis_views(source.bounds(), 32)) {
+      ASSERT_TRUE(axis.uses_axis_casters(view));
+      const Ldi a = axis.cast(view), b = reference.cast(view);
+      EXPECT_EQ(a.offsets, b.offsets);
+      ASSERT_EQ(a.depth.size(), b.depth.size());
+      EXPECT_GT(a.sample_count(), 300u);
+      for (std::size_t k = 0; k < a.depth.size(); ++k) {
+        EXPECT_NEAR(a.depth[k], b.depth[k], 1e-6);
+        EXPECT_NEAR(glm::length(a.normal[k] - b.normal[k]), 0.0, 1e-5);
+      }
+    }
+  }
+}
+
+TEST(CellSource, InvalidBlocksAreRejected) {
+  Cells cells = grid_cells(CellType::tetrahedron, 2, 1, 0.0, 1.0, r2);
+  const auto throws = [](const CellBlock& b, const std::string& text) {
+    try {
+      const CellElementSource source(b);
+      ADD_FAILURE() << "accepted; expected: " << text;
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(text), std::string::npos) << e.what();
+    }
+  };
+  CellBlock b = cells.block();
+  b.order = 9;
+  throws(b, "tetrahedron of order 9 does not exist");
+  b = cells.block();
+  b.type = CellType::pyramid;
+  b.order = 3;
+  throws(b, "pyramid of order 3 does not exist");
+  b = cells.block();
+  b.type = CellType::serendipity_wedge;
+  b.order = 1;
+  throws(b, "does not exist");
+  b = cells.block();
+  b.element_count = 0;
+  throws(b, "no cells");
+  b = cells.block();
+  b.points = nullptr;
+  throws(b, "null point array");
+  b = cells.block();
+  b.values = nullptr;
+  throws(b, "null value array");
+  b = cells.block();
+  b.element_stride = 9;
+  throws(b, "element stride 9 below the 10 nodes");
+  b = cells.block();
+  b.type = CellType(42);
+  throws(b, "unknown cell type");
+  // Cell 3: a point not finite; cell 4: flattened (its apex on its base's plane).
+  Cells bad = cells;
+  bad.points[3 * (10 * 3 + 5) + 1] = std::nan("");
+  throws(bad.block(), "cell 3 has a non-finite point");
+  bad = cells;
+  for (int i = 0; i < 10; ++i)
+    bad.points[3 * (10 * 4 + i) + 2] = 0.5;  // every node of cell 4 on one plane
+  throws(bad.block(), "cell 4 is inverted or degenerate");
+}
+
+TEST(CellSource, CellsWithNonFiniteValuesProduceNoHitsAndAreCounted) {
+  Cells cells = grid_cells(CellType::tetrahedron, 2, 2, -1.25, 1.25, r2);
+  const CellElementSource clean(cells.block());
+  const RayCaster all(clean, 1.0);
+  cells.values[7] = std::nan("");  // cell 0
+  cells.values[10 * 5 + 2] = INFINITY;  // cell 5
+  const CellElementSource source(cells.block());
+  const RayCaster caster(source, 1.0);
+  EXPECT_EQ(caster.nonfinite_values(), 2u);
+  EXPECT_LE(caster.primitive_count(), all.primitive_count());
+}
+
+}  // namespace
+}  // namespace ldimesh
