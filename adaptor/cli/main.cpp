@@ -164,7 +164,7 @@ void load_input(const MeshArgs& args, int rank, int ranks, Input& input) {
     // Every rank holds every element (the file's); it casts only its block of the domain.
     const auto start = std::chrono::steady_clock::now();
     for (const ldimesh::VtuElements::Group& g : input.elements.groups)
-      input.sources.push_back(std::make_unique<ldimesh::HexElementSource>(g.block()));
+      input.sources.push_back(ldimesh::make_vtu_source(g));
     input.prepare_seconds = seconds_since(start);
     // The sources' bounds hold the curved cells (their Bernstein hulls), not only the points.
     ldimesh::Box whole = input.sources.front()->bounds();

@@ -12,7 +12,14 @@
   make_vtu.py timesteps OUT.vtu the sphere at two time steps (raw appended, uncompressed): r at
                                step 0, 1.5 r at step 1, and a cell array "q" at both, each array
                                written once per step under its name (VTK reads step 0)
-  make_vtu.py tetra OUT.vtu    one VTK_TETRA beside one Lagrange hexahedron
+  make_vtu.py cells OUT.vtu    a cube of side 2.5 as 5³ sub-cubes, each quadratic cells of one
+                               kind in turn: a VTK_TRIQUADRATIC_HEXAHEDRON, a
+                               VTK_QUADRATIC_HEXAHEDRON, 6 VTK_QUADRATIC_TETRA, 2 VTK_QUADRATIC_WEDGE,
+                               6 VTK_QUADRATIC_PYRAMID (only where the sub-cube misses the sphere
+                               r = 0.7: the 13-node space does not hold |x|²), nodes at VTK's own
+                               parametric coordinates, r = |x|²
+  make_vtu.py triangle OUT.vtu one VTK_TRIANGLE (not a volume cell) beside one Lagrange hexahedron
+  make_vtu.py tet15 OUT.vtu    one 15-node VTK_LAGRANGE_TETRAHEDRON (VTK's bubble-enriched P2)
   make_vtu.py degrees OUT.vtu  one order-2 Lagrange hexahedron whose HigherOrderDegrees say 2, 2, 3
   make_vtu.py badpoint OUT.vtu two order-2 Lagrange hexahedra, the second naming point 1000 of 54
                                (VTK writes and reads such a file without a word)
@@ -28,8 +35,16 @@ import struct
 import sys
 
 from vtkmodules.vtkCommonCore import vtkDoubleArray, vtkIdList, vtkPoints
-from vtkmodules.vtkCommonDataModel import (VTK_HEXAHEDRON, VTK_LAGRANGE_HEXAHEDRON, VTK_TETRA,
-                                           vtkLagrangeHexahedron, vtkUnstructuredGrid)
+from vtkmodules.vtkCommonDataModel import (VTK_HEXAHEDRON, VTK_LAGRANGE_HEXAHEDRON,
+                                           VTK_LAGRANGE_TETRAHEDRON, VTK_QUADRATIC_HEXAHEDRON,
+                                           VTK_QUADRATIC_PYRAMID, VTK_QUADRATIC_TETRA,
+                                           VTK_QUADRATIC_WEDGE, VTK_TRIANGLE,
+                                           VTK_TRIQUADRATIC_HEXAHEDRON, vtkHexahedron,
+                                           vtkLagrangeHexahedron, vtkPyramid,
+                                           vtkQuadraticHexahedron, vtkQuadraticPyramid,
+                                           vtkQuadraticTetra, vtkQuadraticWedge, vtkTetra,
+                                           vtkTriQuadraticHexahedron, vtkUnstructuredGrid,
+                                           vtkWedge)
 from vtkmodules.vtkIOParallelXML import vtkXMLPUnstructuredGridWriter
 from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridWriter
 
@@ -46,6 +61,60 @@ def lagrange_cell(grid, points, values, lo, size, order, field):
                     points.InsertNextPoint(x)
                 values.InsertNextValue(field(x))
     return grid.InsertNextCell(VTK_LAGRANGE_HEXAHEDRON, len(ids), ids)
+
+
+def mixed_cells(grid, points, values, field):
+    """The sub-cubes of the 'cells' kind, each split into quadratic cells of one type."""
+    n, lo = 5, -1.25
+    h = 2.5 / n
+    linear = {VTK_TRIQUADRATIC_HEXAHEDRON: vtkHexahedron, VTK_QUADRATIC_HEXAHEDRON: vtkHexahedron,
+              VTK_QUADRATIC_TETRA: vtkTetra, VTK_QUADRATIC_WEDGE: vtkWedge,
+              VTK_QUADRATIC_PYRAMID: vtkPyramid}
+    quadratic = {VTK_TRIQUADRATIC_HEXAHEDRON: vtkTriQuadraticHexahedron,
+                 VTK_QUADRATIC_HEXAHEDRON: vtkQuadraticHexahedron,
+                 VTK_QUADRATIC_TETRA: vtkQuadraticTetra, VTK_QUADRATIC_WEDGE: vtkQuadraticWedge,
+                 VTK_QUADRATIC_PYRAMID: vtkQuadraticPyramid}
+    for k in range(n):
+        for j in range(n):
+            for i in range(n):
+                o = [lo + h * i, lo + h * j, lo + h * k]
+                c = [[o[0] + h * a, o[1] + h * b, o[2] + h * d] for a, b, d in
+                     [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1),
+                      (0, 1, 1)]]
+                centre = [x + 0.5 * h for x in o]
+                near = max(abs(x) for x in centre) - 0.5 * h  # the sub-cube's nearest |x_i|
+                misses = sum(max(0.0, abs(x) - 0.5 * h) ** 2 for x in centre) > 0.5
+                kind = (i + 2 * j + 3 * k) % 4
+                if misses and (i + j + k) % 2 == 0:
+                    kind = 4
+                if kind == 0:
+                    parts = [(VTK_TRIQUADRATIC_HEXAHEDRON, c)]
+                elif kind == 1:
+                    parts = [(VTK_QUADRATIC_HEXAHEDRON, c)]
+                elif kind == 2:
+                    parts = [(VTK_QUADRATIC_TETRA, [c[a] for a in t]) for t in
+                             [(0, 1, 2, 6), (0, 2, 3, 6), (0, 3, 7, 6), (0, 7, 4, 6), (0, 4, 5, 6),
+                              (0, 5, 1, 6)]]
+                elif kind == 3:
+                    parts = [(VTK_QUADRATIC_WEDGE, [c[a] for a in w]) for w in
+                             [(0, 1, 2, 4, 5, 6), (0, 2, 3, 4, 6, 7)]]
+                else:
+                    parts = [(VTK_QUADRATIC_PYRAMID, [c[a] for a in f] + [centre]) for f in
+                             [(0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6),
+                              (3, 0, 4, 7)]]
+                for cell_type, corners in parts:
+                    cell = quadratic[cell_type]()
+                    pc = cell.GetParametricCoords()
+                    count = cell.GetNumberOfPoints() or len(pc) // 3
+                    shape = linear[cell_type]()
+                    weights = [0.0] * shape.GetNumberOfPoints()
+                    ids = []
+                    for m in range(len(pc) // 3):
+                        shape.InterpolateFunctions(pc[3 * m:3 * m + 3], weights)
+                        x = [sum(w * v[a] for w, v in zip(weights, corners)) for a in range(3)]
+                        ids.append(points.InsertNextPoint(x))
+                        values.InsertNextValue(field(x))
+                    grid.InsertNextCell(cell_type, len(ids), ids)
 
 
 def main():
@@ -82,12 +151,19 @@ def main():
             x = points.GetPoint(p)
             h.InsertNextValue(x[0] + 2 * x[1])
         grid.GetPointData().AddArray(h)
-    elif kind == "tetra":
+    elif kind == "cells":
+        mixed_cells(grid, points, values, r2)
+    elif kind == "triangle":
         lagrange_cell(grid, points, values, [0, 0, 0], 1, 2, r2)
-        ids = [points.InsertNextPoint(x) for x in [(2, 0, 0), (3, 0, 0), (2, 1, 0), (2, 0, 1)]]
+        ids = [points.InsertNextPoint(x) for x in [(2, 0, 0), (3, 0, 0), (2, 1, 0)]]
         for _ in ids:
             values.InsertNextValue(1.0)
-        grid.InsertNextCell(VTK_TETRA, 4, ids)
+        grid.InsertNextCell(VTK_TRIANGLE, 3, ids)
+    elif kind == "tet15":
+        ids = [points.InsertNextPoint((0.1 * k, 0.01 * k * k, 0.001 * k ** 3)) for k in range(15)]
+        for _ in ids:
+            values.InsertNextValue(1.0)
+        grid.InsertNextCell(VTK_LAGRANGE_TETRAHEDRON, 15, ids)
     elif kind == "degrees":
         lagrange_cell(grid, points, values, [0, 0, 0], 1, 2, r2)
         degrees = vtkDoubleArray()

@@ -14,7 +14,7 @@ ldimesh=$1
 src=$2
 . "$(dirname "$0")/../lib.sh"
 test_setup
-for kind in sphere ascii raw timesteps tetra degrees badpoint zeroblock; do
+for kind in sphere cells ascii raw timesteps triangle tet15 degrees badpoint zeroblock; do
   /usr/bin/python3 "$src/tests/cli/make_vtu.py" $kind "$tmp/$kind.vtu" || fail "make_vtu.py $kind"
 done
 /usr/bin/python3 "$src/tests/cli/make_vtu.py" pieces "$tmp/pieces.pvtu" || fail "make_vtu.py pieces"
@@ -32,6 +32,14 @@ print(f"sphere.vtu at r² = 0.49: {triangles} triangles, mean {d['mean']:.1e}, m
 # the hits are exact (|x|² is degree 2 per axis); the rest is the triangles between them
 sys.exit(0 if d["mean"] < 3e-4 and d["max"] < 2e-3 and triangles > 10000 else 1)
 PY
+
+# Mixed quadratic cells (hexahedra of 27 and 20 nodes, tetrahedra, wedges, pyramids) written by
+# VTK, merged (§5): every vertex on the sphere to float rounding (lossless fragments; the hits are
+# exact: |x|² lies in each cell's space), one closed surface across the types' boundaries.
+"$ldimesh" mesh --vtu "$tmp/cells.vtu" --field r --iso 0.49 --res 128 --merge --lossless \
+  --out "$tmp/cells.ply" 2>"$tmp/cells.err" || { cat "$tmp/cells.err"; fail "--vtu cells.vtu"; }
+/usr/bin/python3 "$src/tests/cli/sphere_vertices.py" "$tmp/cells.ply" 2e-7 closed ||
+  fail "the merged mesh of mixed cells is not the closed sphere r = 0.7"
 
 # --colour-by: the isosurface of r coloured by the file's array h = x + 2y, which every cell
 # represents exactly: each vertex of the PLY (float value property) carries x + 2y of its
@@ -116,7 +124,9 @@ expect_error "'vec' has 3 components" --vtu "$tmp/sphere.vtu" --field vec
 expect_error "no point array 'nope'" --vtu "$tmp/sphere.vtu" --field r --colour-by nope
 expect_error "'vec' has 3 components" --vtu "$tmp/sphere.vtu" --field r --colour-by vec
 expect_error "--colour-by needs --grid or --vtu" --surface sphere --colour-by h
-expect_error "cell 1 is VTK_TETRA" --vtu "$tmp/tetra.vtu" --field r
+expect_error "cell 1 is VTK_TRIANGLE (VTK type 5): hexahedra, tetrahedra, wedges and pyramids" \
+  --vtu "$tmp/triangle.vtu" --field r
+expect_error "cell 0: VTK's 15-node tetrahedron" --vtu "$tmp/tet15.vtu" --field r
 expect_error "cell 0: orders 2, 2, 3 differ" --vtu "$tmp/degrees.vtu" --field r
 expect_error "cell 1 names point 1000 of 54" --vtu "$tmp/badpoint.vtu" --field r
 # Damaged XML, each refused before VTK reads the data (write_damaged FROM TO OLD NEW: the

@@ -115,11 +115,12 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     return 0;
   }
   std::size_t cells = 0;
-  int previous = 0;
+  std::pair<int, int> previous{-1, 0};
   for (const ldimesh::VtuElements::Group& g : elements.groups) {
-    if (g.order <= previous || g.order > ldimesh::kMaxHexOrder || g.cells == 0) __builtin_trap();
-    previous = g.order;
-    const std::size_t nodes = std::size_t(g.order + 1) * (g.order + 1) * (g.order + 1);
+    const std::pair<int, int> key{int(g.type), g.order};
+    const std::size_t nodes = ldimesh::cell_nodes(g.type, g.order);
+    if (key <= previous || nodes == 0 || g.cells == 0) __builtin_trap();
+    previous = key;
     if (g.geometry.size() != 3 * nodes * g.cells || g.values.size() != nodes * g.cells ||
         g.colour.size() != g.values.size())
       __builtin_trap();
@@ -129,7 +130,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
           x > elements.bounds.hi[int(i % 3)])
         __builtin_trap();
     }
-    const ldimesh::HexBlock block = g.block();
+    const ldimesh::CellBlock block = g.cell_block();
     if (block.element_count != g.cells || block.values != g.values.data()) __builtin_trap();
     cells += g.cells;
   }

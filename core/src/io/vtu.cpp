@@ -73,6 +73,26 @@ const char* type_name(int type) {
       return "VTK_LAGRANGE_WEDGE";
     case VTK_BEZIER_HEXAHEDRON:
       return "VTK_BEZIER_HEXAHEDRON";
+    case VTK_HEXAHEDRON:
+      return "VTK_HEXAHEDRON";
+    case VTK_LAGRANGE_HEXAHEDRON:
+      return "VTK_LAGRANGE_HEXAHEDRON";
+    case VTK_QUADRATIC_TETRA:
+      return "VTK_QUADRATIC_TETRA";
+    case VTK_QUADRATIC_WEDGE:
+      return "VTK_QUADRATIC_WEDGE";
+    case VTK_BIQUADRATIC_QUADRATIC_WEDGE:
+      return "VTK_BIQUADRATIC_QUADRATIC_WEDGE";
+    case VTK_QUADRATIC_PYRAMID:
+      return "VTK_QUADRATIC_PYRAMID";
+    case VTK_LAGRANGE_PYRAMID:
+      return "VTK_LAGRANGE_PYRAMID";
+    case VTK_TRIQUADRATIC_PYRAMID:
+      return "VTK_TRIQUADRATIC_PYRAMID";
+    case VTK_BEZIER_TETRAHEDRON:
+      return "VTK_BEZIER_TETRAHEDRON";
+    case VTK_BEZIER_WEDGE:
+      return "VTK_BEZIER_WEDGE";
     case VTK_VOXEL:
       return "VTK_VOXEL";
     case VTK_TRIANGLE:
@@ -100,6 +120,21 @@ HexBlock VtuElements::Group::block() const {
   b.type = ScalarType::float64;
   b.geometry_order = order;
   b.geometry = geometry.data();
+  if (!colour.empty()) {
+    b.colour = colour.data();
+    b.colour_type = ScalarType::float64;
+  }
+  return b;
+}
+
+CellBlock VtuElements::Group::cell_block() const {
+  CellBlock b;
+  b.type = type;
+  b.order = order;
+  b.element_count = cells;
+  b.points = geometry.data();
+  b.values = values.data();
+  b.value_type = ScalarType::float64;
   if (!colour.empty()) {
     b.colour = colour.data();
     b.colour_type = ScalarType::float64;
@@ -379,49 +414,115 @@ Status read_vtu_unguarded(const std::string& path, const std::string& field, Vtu
                                    std::to_string(array->GetNumberOfTuples()) + " values for " +
                                    std::to_string(point_count) + " points");
 
-  std::map<int, VtuElements::Group> groups;
+  // Cells flagged as duplicates of another piece's (vtkGhostType bit 1, DUPLICATECELL) are
+  // skipped: dolfinx and other parallel writers mark the cells a piece holds besides its own.
+  vtkDataArray* ghosts = grid->GetCellData()->GetArray("vtkGhostType");
+  if (ghosts && (ghosts->GetNumberOfComponents() != 1 ||
+                 ghosts->GetNumberOfTuples() < grid->GetNumberOfCells()))
+    ghosts = nullptr;
+
+  std::map<std::pair<int, int>, VtuElements::Group> groups;  // by (type, order)
   vtkNew<vtkIdList> ids;
   out.bounds = {glm::dvec3(std::numeric_limits<double>::infinity()),
                 glm::dvec3(-std::numeric_limits<double>::infinity())};
   out.min_value = std::numeric_limits<double>::infinity();
   out.max_value = -out.min_value;
   const vtkIdType n = grid->GetNumberOfCells();
+  // Any double (an array may be a float one, with NaN or 1e300): compared as doubles and printed
+  // with %g, never converted to int.
+  const auto text = [](double x) {
+    char b[32];
+    std::snprintf(b, sizeof b, "%g", x);
+    return std::string(b);
+  };
   for (vtkIdType c = 0; c < n; ++c) {
-    const int type = grid->GetCellType(c);
-    const std::string cell = "'" + path + "': cell " + std::to_string(c);
-    if (type != VTK_LAGRANGE_HEXAHEDRON && type != VTK_HEXAHEDRON)
-      return Status::corrupt_input(cell + " is " + type_name(type) + " (VTK type " +
-                                   std::to_string(type) +
-                                   "): only VTK_LAGRANGE_HEXAHEDRON and VTK_HEXAHEDRON are read");
-    grid->GetCellPoints(c, ids);
-    const vtkIdType count = ids->GetNumberOfIds();
-    int order = 1;
-    if (type == VTK_LAGRANGE_HEXAHEDRON) {
-      order = int(std::lround(std::cbrt(double(count)))) - 1;
-      if (degrees) {
-        double d[3];
-        degrees->GetTuple(c, d);
-        // Any double (the array may be a float one, with NaN or 1e300): compared as doubles and
-        // printed with %g, never converted to int.
-        const auto text = [](double x) {
-          char b[32];
-          std::snprintf(b, sizeof b, "%g", x);
-          return std::string(b);
-        };
-        if (d[0] != d[1] || d[1] != d[2])
-          return Status::corrupt_input(cell + ": orders " + text(d[0]) + ", " + text(d[1]) + ", " +
-                                       text(d[2]) + " differ along the axes (not supported)");
-        if (d[0] != double(order))
-          return Status::corrupt_input(cell + ": HigherOrderDegrees says order " + text(d[0]) +
-                                       " but it has " + std::to_string(count) + " points");
+    if (ghosts) {
+      const double flag = ghosts->GetTuple1(c);
+      if (flag >= 0.0 && flag < 256.0 && (int(flag) & 1)) {
+        ++out.ghost_cells;
+        continue;
       }
     }
-    if (order < 1 || order > kMaxHexOrder ||
-        vtkIdType(order + 1) * (order + 1) * (order + 1) != count)
-      return Status::corrupt_input(cell + " has " + std::to_string(count) +
-                                   " points: not (p + 1)³ for an order p of 1–" +
-                                   std::to_string(kMaxHexOrder));
-    VtuElements::Group& g = groups[order];
+    const int type = grid->GetCellType(c);
+    const std::string cell = "'" + path + "': cell " + std::to_string(c);
+    grid->GetCellPoints(c, ids);
+    const vtkIdType count = ids->GetNumberOfIds();
+    // The smallest order whose node count is at least `count`, of a Lagrange family (0: none).
+    const auto order_of = [&](CellType family) {
+      for (int p = 1; p <= kMaxHexOrder; ++p)
+        if (vtkIdType(cell_nodes(family, p)) >= count) return p;
+      return 0;
+    };
+    CellType kind = CellType::hexahedron;
+    int order = 1;
+    switch (type) {
+      case VTK_HEXAHEDRON:
+        break;
+      case VTK_TRIQUADRATIC_HEXAHEDRON:
+        order = 2;
+        break;
+      case VTK_LAGRANGE_HEXAHEDRON:
+        order = order_of(CellType::hexahedron);
+        break;
+      case VTK_QUADRATIC_HEXAHEDRON:
+        kind = CellType::serendipity_hexahedron, order = 2;
+        break;
+      case VTK_TETRA:
+        kind = CellType::tetrahedron;
+        break;
+      case VTK_QUADRATIC_TETRA:
+        kind = CellType::tetrahedron, order = 2;
+        break;
+      case VTK_LAGRANGE_TETRAHEDRON:
+        kind = CellType::tetrahedron, order = order_of(kind);
+        if (count == 15)
+          return Status::corrupt_input(cell + ": VTK's 15-node tetrahedron (a quadratic one with "
+                                              "face and body bubbles) is not read");
+        break;
+      case VTK_WEDGE:
+        kind = CellType::wedge;
+        break;
+      case VTK_BIQUADRATIC_QUADRATIC_WEDGE:
+        kind = CellType::wedge, order = 2;
+        break;
+      case VTK_LAGRANGE_WEDGE:
+        kind = CellType::wedge, order = order_of(kind);
+        if (count == 21)
+          return Status::corrupt_input(cell + ": VTK's 21-node wedge (a quadratic one with face "
+                                              "and body bubbles) is not read");
+        break;
+      case VTK_QUADRATIC_WEDGE:
+        kind = CellType::serendipity_wedge, order = 2;
+        break;
+      case VTK_PYRAMID:
+        kind = CellType::pyramid;
+        break;
+      case VTK_QUADRATIC_PYRAMID:
+        kind = CellType::pyramid, order = 2;
+        break;
+      default:
+        return Status::corrupt_input(
+            cell + " is " + type_name(type) + " (VTK type " + std::to_string(type) +
+            "): hexahedra, tetrahedra, wedges and pyramids (linear, quadratic, Lagrange) are read");
+    }
+    if (degrees && (type == VTK_LAGRANGE_HEXAHEDRON || type == VTK_LAGRANGE_WEDGE)) {
+      double d[3];
+      degrees->GetTuple(c, d);
+      // A wedge's first two are its triangle's order, the third its height's.
+      if (d[0] != d[1] || d[1] != d[2])
+        return Status::corrupt_input(cell + ": orders " + text(d[0]) + ", " + text(d[1]) + ", " +
+                                     text(d[2]) + " differ along the axes (not supported)");
+      if (d[0] != double(order))
+        return Status::corrupt_input(cell + ": HigherOrderDegrees says order " + text(d[0]) +
+                                     " but it has " + std::to_string(count) + " points");
+    }
+    const std::size_t nodes = cell_nodes(kind, order);
+    if (nodes == 0 || vtkIdType(nodes) != count)
+      return Status::corrupt_input(cell + " (" + type_name(type) + ") has " +
+                                   std::to_string(count) + " points: not the node count of an " +
+                                   "order of 1–" + std::to_string(kMaxHexOrder));
+    VtuElements::Group& g = groups[{int(kind), order}];
+    g.type = kind;
     g.order = order;
     ++g.cells;
     for (vtkIdType k = 0; k < count; ++k)
@@ -444,7 +545,9 @@ Status read_vtu_unguarded(const std::string& path, const std::string& field, Vtu
     }
     ++out.cells;
   }
-  for (auto& [order, g] : groups)
+  if (out.cells == 0)
+    return Status::corrupt_input("'" + path + "': every cell is a ghost (vtkGhostType)");
+  for (auto& [key, g] : groups)
     out.groups.push_back(std::move(g));
   return Status::ok();
 }

@@ -6,6 +6,7 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "ldimesh/core/base/isolated.hpp"
@@ -67,7 +68,7 @@ Status read_vtu_isolated(const std::string& path, const std::string& field, VtuE
       "a damaged file (VTK 9.1's XML reader trusts sizes and structure it does not check; "
       "docs/reliability.md)";
   task.cpu_seconds = cpu_limit(input_bytes(path));
-  // The child sends the groups (order, cells, geometry, values, colour), then the totals.
+  // The child sends the groups (type, order, cells, geometry, values, colour), then the totals.
   std::vector<std::uint8_t> bytes;
   LDIMESH_RETURN_IF_ERROR(run_isolated(
       task,
@@ -77,6 +78,7 @@ Status read_vtu_isolated(const std::string& path, const std::string& field, VtuE
         ByteWriter w(result);
         w.put(std::uint64_t(read.groups.size()));
         for (const VtuElements::Group& g : read.groups) {
+          w.put(std::int32_t(g.type));
           w.put(std::int32_t(g.order));
           w.put(std::uint64_t(g.cells));
           w.put_vector(g.geometry);
@@ -84,6 +86,7 @@ Status read_vtu_isolated(const std::string& path, const std::string& field, VtuE
           w.put_vector(g.colour);
         }
         w.put(std::uint64_t(read.cells));
+        w.put(std::uint64_t(read.ghost_cells));
         w.put(read.bounds);
         w.put(read.min_value);
         w.put(read.max_value);
@@ -95,30 +98,38 @@ Status read_vtu_isolated(const std::string& path, const std::string& field, VtuE
   ByteReader r(bytes);
   VtuElements read;
   std::uint64_t groups = 0, cells = 0;
-  // What read_vtu promises, checked again on this side of the pipe: one to eight groups of
-  // increasing orders 1–8, (p + 1)³ values, points and colours per cell, cells that add up.
-  if (!r.get(groups) || groups < 1 || groups > 8) return truncated;
+  // What read_vtu promises, checked again on this side of the pipe: groups of known types and
+  // orders, in increasing (type, order), each cell's node count of values, points and colours,
+  // cells that add up.
+  constexpr std::uint64_t kMaxGroups = 6 * 8;
+  if (!r.get(groups) || groups < 1 || groups > kMaxGroups) return truncated;
   read.groups.resize(std::size_t(groups));
   std::size_t total = 0;
-  int previous = 0;
+  std::pair<int, int> previous{-1, 0};
   for (VtuElements::Group& g : read.groups) {
-    std::int32_t order = 0;
+    std::int32_t type = 0, order = 0;
     std::uint64_t count = 0;
-    if (!r.get(order) || order <= previous || order > 8 || !r.get(count) ||
-        !r.get_vector(g.geometry) || !r.get_vector(g.values) || !r.get_vector(g.colour))
+    if (!r.get(type) || !r.get(order) || !r.get(count) || !r.get_vector(g.geometry) ||
+        !r.get_vector(g.values) || !r.get_vector(g.colour))
       return truncated;
-    previous = g.order = order;
-    const std::size_t nodes = std::size_t(order + 1) * (order + 1) * (order + 1);
-    if (g.values.size() % nodes != 0 || count != g.values.size() / nodes ||
+    if (type < 0 || type > int(CellType::pyramid) || std::pair{type, order} <= previous)
+      return truncated;
+    previous = {type, order};
+    g.type = CellType(type);
+    g.order = order;
+    const std::size_t nodes = cell_nodes(g.type, order);
+    if (nodes == 0 || g.values.size() % nodes != 0 || count != g.values.size() / nodes ||
         g.geometry.size() % 3 != 0 || g.geometry.size() / 3 != g.values.size() ||
         (!g.colour.empty() && g.colour.size() != g.values.size()))
       return truncated;
     g.cells = std::size_t(count);
     total += g.cells;
   }
-  if (!r.get(cells) || cells != total || !r.get(read.bounds) || !r.get(read.min_value) ||
-      !r.get(read.max_value) || !r.done())
+  std::uint64_t ghosts = 0;
+  if (!r.get(cells) || cells != total || !r.get(ghosts) || !r.get(read.bounds) ||
+      !r.get(read.min_value) || !r.get(read.max_value) || !r.done())
     return truncated;
+  read.ghost_cells = std::size_t(ghosts);
   read.cells = std::size_t(cells);
   out = std::move(read);
   return Status::ok();

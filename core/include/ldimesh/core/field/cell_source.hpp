@@ -52,6 +52,28 @@ enum class CellType : std::uint8_t {
   pyramid,
 };
 
+// Nodes per cell of `type` and order `order`, or 0 where the type has no such order (no
+// exception: for readers that check what they are given).
+inline std::size_t cell_nodes(CellType type, int order) {
+  const std::size_t p = std::size_t(order);
+  const bool lagrange = order >= 1 && order <= 8;
+  switch (type) {
+    case CellType::hexahedron:
+      return lagrange ? (p + 1) * (p + 1) * (p + 1) : 0;
+    case CellType::tetrahedron:
+      return lagrange ? (p + 1) * (p + 2) * (p + 3) / 6 : 0;
+    case CellType::wedge:
+      return lagrange ? (p + 1) * (p + 1) * (p + 2) / 2 : 0;
+    case CellType::serendipity_hexahedron:
+      return order == 2 ? 20 : 0;
+    case CellType::serendipity_wedge:
+      return order == 2 ? 15 : 0;
+    case CellType::pyramid:
+      return order == 1 ? 5 : order == 2 ? 13 : 0;
+  }
+  return 0;
+}
+
 // A name for messages ("tetrahedron").
 const char* cell_type_name(CellType type);
 // The highest order a type has (8 for the Lagrange families, 2 for the serendipity ones and the

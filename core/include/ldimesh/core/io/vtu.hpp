@@ -1,8 +1,8 @@
-// High-order hexahedra from VTK XML unstructured grids (.vtu, or a .pvtu record and its pieces),
+// Finite-element cells from VTK XML unstructured grids (.vtu, or a .pvtu record and its pieces),
 // read by VTK's own readers (vtkXMLUnstructuredGridReader, vtkXMLPUnstructuredGridReader):
-// VTK_LAGRANGE_HEXAHEDRON cells of order 1–8 — what deal.II's DataOut with
-// write_higher_order_cells, MFEM and ParaView write — and linear VTK_HEXAHEDRON cells. Built
-// into the library `ldimesh::vtu` where VTK 9 is installed.
+// hexahedra, tetrahedra, wedges and pyramids, linear, quadratic and Lagrange (order 1–8) — what
+// deal.II's DataOut with write_higher_order_cells, dolfinx's VTKFile, meshio (gmsh meshes), MFEM
+// and ParaView write. Built into the library `ldimesh::vtu` where VTK 9 is installed.
 #pragma once
 
 #include <cstddef>
@@ -13,36 +13,53 @@
 #include "ldimesh/core/base/geometry.hpp"
 #include "ldimesh/core/base/status.hpp"
 #include "ldimesh/core/field/blocks.hpp"
+#include "ldimesh/core/field/cell_source.hpp"
 #include "ldimesh/core/field/hex_lookup.hpp"
 #include "ldimesh/core/field/hex_source.hpp"
 
 namespace ldimesh {
 
-// A file's cells as high-order elements, one group per order (each cell may have its own): VTK
-// Lagrange cells place their (p + 1)³ nodes equispaced in the reference cube, numbered in VTK's
-// order, and the geometry has the cell's order too — the group's block says so (equispaced,
-// vtk_lagrange, geometry_order = order). A linear hexahedron is the Lagrange cell of order 1.
+// A file's cells, one group per cell type and order (each cell may have its own; a file may mix
+// types). Geometry and field share the cell's nodes (VTK's cells are isoparametric), numbered as
+// VTK numbers them (cell_source.hpp). A linear hexahedron is the Lagrange hexahedron of order 1,
+// VTK_TRIQUADRATIC_HEXAHEDRON the one of order 2.
 struct VtuElements {
   struct Group {
+    CellType type = CellType::hexahedron;
     int order = 1;
     std::size_t cells = 0;
-    std::vector<double> geometry;  // (order + 1)³ points × (x, y, z) per cell
-    std::vector<double> values;    // (order + 1)³ field values per cell
+    std::vector<double> geometry;  // the cell's nodes × (x, y, z) per cell
+    std::vector<double> values;    // a field value per node, per cell
     std::vector<double> colour;    // the same of the field to colour by, when one was read
-    // The block over this group's arrays (valid while the group lives and is not resized).
+    // Hexahedra (type hexahedron) as a block of high-order hexahedra in VTK's order, equispaced,
+    // geometry of the cells' order (valid while the group lives and is not resized).
     HexBlock block() const;
+    // Any group as a block of cells.
+    CellBlock cell_block() const;
   };
-  std::vector<Group> groups;                // increasing order
+  std::vector<Group> groups;                // by type (CellType's order), then increasing order
   std::size_t cells = 0;                    // over all groups
+  std::size_t ghost_cells = 0;              // cells flagged as duplicates and skipped
   Box bounds;                               // of every cell's points
   double min_value = 0.0, max_value = 0.0;  // of the field at the cells' points
 };
 
-// Reads the point array `field` (one component) of every cell of `path` (.vtu or .pvtu). A
-// cell's order comes from the cell data array "HigherOrderDegrees" where the file has it (equal
-// along the three axes), else from its point count ((p + 1)³). Errors (one line, naming the
-// file, and the cell or the field): a file VTK cannot read, a cell type other than the two
-// above, an order outside 1–8 or different along the axes or not matching the point count, a
+// The source of one group: a HexElementSource for hexahedra, a CellElementSource for the others.
+// Errors as the sources' constructors (std::invalid_argument naming the cell).
+std::unique_ptr<FieldSource> make_vtu_source(const VtuElements::Group& group);
+
+// Reads the point array `field` (one component) of every cell of `path` (.vtu or .pvtu): the cell
+// types VTK_HEXAHEDRON, VTK_TRIQUADRATIC_HEXAHEDRON, VTK_LAGRANGE_HEXAHEDRON (hexahedron),
+// VTK_QUADRATIC_HEXAHEDRON (serendipity_hexahedron), VTK_TETRA, VTK_QUADRATIC_TETRA,
+// VTK_LAGRANGE_TETRAHEDRON (tetrahedron), VTK_WEDGE, VTK_BIQUADRATIC_QUADRATIC_WEDGE,
+// VTK_LAGRANGE_WEDGE (wedge), VTK_QUADRATIC_WEDGE (serendipity_wedge), VTK_PYRAMID and
+// VTK_QUADRATIC_PYRAMID (pyramid), mixed in one file. A Lagrange cell's order comes from the cell
+// data array "HigherOrderDegrees" where the file has it (a hexahedron's equal along the three
+// axes, a wedge's in its triangle and along its height), else from its point count. Cells whose
+// "vtkGhostType" flags them as duplicates (bit 1, what parallel writers such as dolfinx mark) are
+// skipped. Errors (one line, naming the file, and the cell or the field): a file VTK cannot read,
+// another cell type, an order outside 1–8 or different along the axes or not matching the point
+// count (VTK's 15-node tetrahedron and 21-node wedge are refused), a
 // missing or multi-component field, non-finite points; for a .vtu, before VTK reads its data,
 // sizes the file's bytes cannot hold, a component or tuple count that is not a number, two cell
 // data arrays of one name (VTK 9.1 crashes on it) and two point arrays named as the field. With
@@ -67,7 +84,9 @@ Status read_vtu_isolated(const std::string& path, const std::string& field, VtuE
 // distances to, and projections onto, the cells' exact isosurface).
 struct VtuField {
   VtuElements elements;
-  std::vector<std::unique_ptr<HexElementSource>> sources;  // one per group
+  std::vector<std::unique_ptr<FieldSource>> sources;  // one per group
+  // What the lookup reads of the groups that are not hexahedra: their sub-hexahedra.
+  std::vector<std::shared_ptr<const CellElementSource::Snapshot>> snapshots;
   std::unique_ptr<HexFieldLookup> lookup;
 };
 
