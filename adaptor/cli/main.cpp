@@ -785,8 +785,8 @@ int main(int argc, char** argv) {
       ->delimiter(',')
       ->expected(3);
   mesh->add_option("--vtu", args.vtu,
-                   "VTK XML unstructured grid (.vtu, .pvtu) of VTK_LAGRANGE_HEXAHEDRON or "
-                   "VTK_HEXAHEDRON cells, meshed exactly (needs --field)");
+                   "VTK XML unstructured grid (.vtu, .pvtu) of hexahedra, tetrahedra, wedges "
+                   "and pyramids (linear, quadratic, Lagrange), meshed exactly (needs --field)");
   mesh->add_option("--field", args.field, "point array of --vtu to mesh");
   mesh->add_option("--colour-by", args.colour_by,
                    "colour the isosurface by a second field: a point array of --vtu, or for "
