@@ -159,10 +159,16 @@ CellElementSource::CellElementSource(const CellBlock& block) : block_(block) {
   } catch (const std::invalid_argument& error) {
     const long sub = named_element(error.what());
     if (sub < 0) throw;
-    throw std::invalid_argument(what + ": cell " + std::to_string(sub / sub_per_cell_) +
+    const std::string cell_name = what + ": cell " + std::to_string(sub / sub_per_cell_);
+    if (std::string(error.what()).find("non-finite") != std::string::npos)
+      throw std::invalid_argument(cell_name + " has points too large to sample (not finite)");
+    throw std::invalid_argument(cell_name +
                                 " is inverted or degenerate (its Jacobian determinant vanishes "
                                 "or changes sign)");
   }
+  // The prepared source keeps what it needs of the geometry; the sources made from it do not
+  // read the lattice points (hex_source.hpp).
+  geometry_ = {};
 }
 
 Box CellElementSource::bounds() const {

@@ -149,7 +149,7 @@ class CellElementSource final : public FieldSource {
   // Per sub-hexahedron: (degree + 1)³ rows × nodes: the sub-hexahedron's equispaced lattice
   // values from the cell's nodal values.
   std::shared_ptr<const std::vector<double>> sampling_;
-  std::vector<double> geometry_;               // the sub-hexahedra's lattice points
+  std::vector<double> geometry_;  // the sub-hexahedra's lattice points (constructor only)
   std::unique_ptr<HexElementSource> prepared_;  // the geometry, prepared once
 };
 
