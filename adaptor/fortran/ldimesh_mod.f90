@@ -31,6 +31,9 @@ module ldimesh_mod
   integer(c_int), parameter, public :: LDIMESH_NODES_GLL = 0, LDIMESH_NODES_GL = 1, &
                                        LDIMESH_NODES_EQUISPACED = 2
   integer(c_int), parameter, public :: LDIMESH_ORDER_LEXICOGRAPHIC = 0, LDIMESH_ORDER_VTK = 1
+  integer(c_int), parameter, public :: LDIMESH_CELL_HEXAHEDRON = 0, LDIMESH_CELL_HEXAHEDRON20 = 1, &
+                                       LDIMESH_CELL_TETRAHEDRON = 2, LDIMESH_CELL_WEDGE = 3, &
+                                       LDIMESH_CELL_WEDGE15 = 4, LDIMESH_CELL_PYRAMID = 5
 
   ! ldimesh_grid_block of ldimesh.h, field by field (x is the first index, as in Fortran).
   type, bind(C), public :: ldimesh_grid_block
@@ -61,6 +64,19 @@ module ldimesh_mod
     integer(c_int64_t) :: geometry_count = 0
     integer(c_int) :: ordering = LDIMESH_ORDER_LEXICOGRAPHIC
   end type ldimesh_hex_block
+
+  ! ldimesh_cell_block of ldimesh.h, field by field, with ldimesh_cell_block_init's defaults.
+  type, bind(C), public :: ldimesh_cell_block
+    integer(c_int) :: cell_type = LDIMESH_CELL_TETRAHEDRON
+    integer(c_int) :: order = 1
+    integer(c_int64_t) :: element_count = 0
+    type(c_ptr) :: points = c_null_ptr
+    integer(c_int64_t) :: point_count = 0
+    type(c_ptr) :: values = c_null_ptr
+    integer(c_int64_t) :: value_count = 0
+    integer(c_int) :: type = LDIMESH_FLOAT64
+    integer(c_int64_t) :: element_stride = 0
+  end type ldimesh_cell_block
 
   ! ldimesh_step_report of ldimesh.h.
   type, bind(C), public :: ldimesh_step_report
@@ -113,6 +129,12 @@ module ldimesh_mod
       type(ldimesh_hex_block), intent(in) :: block
       integer(c_int) :: c_add_hex_block
     end function c_add_hex_block
+    function c_add_cell_block(a, block) bind(C, name='ldimesh_add_cell_block')
+      import :: c_int, c_ptr, ldimesh_cell_block
+      type(c_ptr), value :: a
+      type(ldimesh_cell_block), intent(in) :: block
+      integer(c_int) :: c_add_cell_block
+    end function c_add_cell_block
     function c_add_field(a, name, values, value_count, type) bind(C, name='ldimesh_add_field')
       import :: c_int, c_ptr, c_char, c_int64_t
       type(c_ptr), value :: a
@@ -196,7 +218,8 @@ module ldimesh_mod
 
   public :: ldimesh_create, ldimesh_create_from_file, ldimesh_set_domain, &
             ldimesh_add_grid_block, ldimesh_add_uniform_grid, ldimesh_add_hex_block, &
-            ldimesh_add_hex_elements, ldimesh_add_field, ldimesh_clear_blocks, &
+            ldimesh_add_hex_elements, ldimesh_add_cell_block, ldimesh_add_cells, &
+            ldimesh_add_field, ldimesh_clear_blocks, &
             ldimesh_execute, ldimesh_finalize, ldimesh_destroy, ldimesh_last_error, &
             ldimesh_url, ldimesh_last_report, ldimesh_published_steps
 
@@ -305,6 +328,54 @@ contains
     integer, intent(out) :: ierr
     ierr = c_add_hex_block(adaptor%handle, block)
   end subroutine ldimesh_add_hex_block
+
+  ! Any cell block, described field by field.
+  subroutine ldimesh_add_cell_block(adaptor, block, ierr)
+    type(ldimesh_adaptor), intent(in) :: adaptor
+    type(ldimesh_cell_block), intent(in) :: block
+    integer, intent(out) :: ierr
+    ierr = c_add_cell_block(adaptor%handle, block)
+  end subroutine ldimesh_add_cell_block
+
+  ! Cells of type `cell_type` (LDIMESH_CELL_*) and order `order`, VTK's node order: points(:, i, e)
+  ! is node i of cell e, values(i, e) its value (the C API checks the counts against the type).
+  subroutine ldimesh_add_cells(adaptor, cell_type, order, points, values, ierr)
+    type(ldimesh_adaptor), intent(in) :: adaptor
+    integer, intent(in) :: cell_type, order
+    real(c_double), intent(in), target, contiguous :: points(:, :, :), values(:, :)
+    integer, intent(out) :: ierr
+    type(ldimesh_cell_block) :: block
+    integer :: nodes
+    select case (cell_type)
+    case (LDIMESH_CELL_HEXAHEDRON)
+      nodes = (order + 1)**3
+    case (LDIMESH_CELL_TETRAHEDRON)
+      nodes = (order + 1)*(order + 2)*(order + 3)/6
+    case (LDIMESH_CELL_WEDGE)
+      nodes = (order + 1)**2*(order + 2)/2
+    case (LDIMESH_CELL_HEXAHEDRON20)
+      nodes = 20
+    case (LDIMESH_CELL_WEDGE15)
+      nodes = 15
+    case default
+      nodes = merge(5, 13, order == 1)
+    end select
+    if (size(points, 1) /= 3 .or. size(points, 2) /= nodes .or. size(values, 1) /= nodes .or. &
+        size(points, 3) /= size(values, 2)) then
+      ierr = fail(adaptor, 'ldimesh_add_cells: points must have the shape (3, nodes, cells) '// &
+                  'and values (nodes, cells), nodes the cell type''s node count')
+      return
+    end if
+    block%cell_type = int(cell_type, c_int)
+    block%order = int(order, c_int)
+    block%element_count = size(values, 2, kind=c_int64_t)
+    block%element_stride = size(values, 1, kind=c_int64_t)
+    if (size(points) > 0) block%points = c_loc(points)
+    block%point_count = size(points, kind=c_int64_t)
+    if (size(values) > 0) block%values = c_loc(values)
+    block%value_count = size(values, kind=c_int64_t)
+    ierr = c_add_cell_block(adaptor%handle, block)
+  end subroutine ldimesh_add_cells
 
   ! Elements of order `order` (1..8) with nodes `node_set` (LDIMESH_NODES_*): values(:, e) are
   ! element e's (order+1)**3 nodal values. Their geometry is either corners(3, 8, e) — the 8

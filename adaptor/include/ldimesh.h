@@ -109,6 +109,36 @@ typedef struct ldimesh_hex_block {
   int ordering; /* LDIMESH_ORDER_*: of the values and the geometry nodes (not the corners) */
 } ldimesh_hex_block;
 
+/* Cell types of ldimesh_cell_block (ldimesh::CellType), each in VTK's node order. */
+enum {
+  LDIMESH_CELL_HEXAHEDRON = 0,    /* Lagrange Q_p: VTK_HEXAHEDRON (p=1), VTK_TRIQUADRATIC_HEXAHEDRON (2),
+                                     VTK_LAGRANGE_HEXAHEDRON */
+  LDIMESH_CELL_HEXAHEDRON20 = 1,  /* VTK_QUADRATIC_HEXAHEDRON (p=2, 20 nodes) */
+  LDIMESH_CELL_TETRAHEDRON = 2,   /* P_p: VTK_TETRA (1), VTK_QUADRATIC_TETRA (2),
+                                     VTK_LAGRANGE_TETRAHEDRON */
+  LDIMESH_CELL_WEDGE = 3,         /* P_p x P_p: VTK_WEDGE (1), VTK_BIQUADRATIC_QUADRATIC_WEDGE (2),
+                                     VTK_LAGRANGE_WEDGE */
+  LDIMESH_CELL_WEDGE15 = 4,       /* VTK_QUADRATIC_WEDGE (p=2, 15 nodes) */
+  LDIMESH_CELL_PYRAMID = 5        /* VTK_PYRAMID (p=1, 5 nodes), VTK_QUADRATIC_PYRAMID (2, 13) */
+};
+
+/* A rank-local block of cells of one type and order (ldimesh::CellBlock): a mixed mesh is one
+ * block per type and order. Geometry and field share the nodes (isoparametric). The values are
+ * read at every due step and may change between steps; the points are prepared when the block is
+ * added and must not change while it is added. */
+typedef struct ldimesh_cell_block {
+  int cell_type; /* LDIMESH_CELL_* */
+  int order;     /* 1..8 for hexahedra, tetrahedra and wedges; 2 for the 20- and 15-node cells;
+                    1 or 2 for pyramids */
+  int64_t element_count;
+  const double* points;   /* the cell's nodes × (x, y, z) per cell, VTK's node order */
+  int64_t point_count;    /* doubles the array holds: at least 3 · nodes · element_count */
+  const void* values;     /* a value per node per cell */
+  int64_t value_count;    /* values the array holds */
+  int type;               /* LDIMESH_FLOAT32 or LDIMESH_FLOAT64 */
+  int64_t element_stride; /* values between cells; 0: the node count */
+} ldimesh_cell_block;
+
 /* What the last ldimesh_execute did on this rank. */
 typedef struct ldimesh_step_report {
   uint64_t step;
@@ -136,12 +166,15 @@ int ldimesh_create_from_file_fortran(MPI_Fint comm, const char* path, ldimesh_ad
 /* Fills `block` with the defaults: everything zero, float64, spacing 1. */
 void ldimesh_grid_block_init(ldimesh_grid_block* block);
 void ldimesh_hex_block_init(ldimesh_hex_block* block);
+/* Everything zero, float64, LDIMESH_CELL_TETRAHEDRON of order 1. */
+void ldimesh_cell_block_init(ldimesh_cell_block* block);
 
 /* The global domain [lo, hi] the views cover, the same on every rank. */
 int ldimesh_set_domain(ldimesh_adaptor* a, const double lo[3], const double hi[3]);
 /* Adds one block of this rank's data; checked here (sizes, dims, strides). */
 int ldimesh_add_grid_block(ldimesh_adaptor* a, const ldimesh_grid_block* block);
 int ldimesh_add_hex_block(ldimesh_adaptor* a, const ldimesh_hex_block* block);
+int ldimesh_add_cell_block(ldimesh_adaptor* a, const ldimesh_cell_block* block);
 /* A further named field of the block added last (temperature beside density), read in place like
  * its values and in their layout (a grid: the same dims and strides; elements: the same nodes and
  * element_stride), of `type` LDIMESH_FLOAT32 or LDIMESH_FLOAT64; value_count as for the block.

@@ -30,6 +30,7 @@
 
 #include "ldimesh/core/base/timing.hpp"
 #include "ldimesh/core/field/grid_source.hpp"
+#include "ldimesh/core/field/cell_source.hpp"
 #include "ldimesh/core/field/hex_source.hpp"
 #include "ldimesh/core/pipeline.hpp"
 #include "ldimesh/core/raycast/raycaster.hpp"
@@ -401,18 +402,57 @@ GridBlock copy_grid(const GridBlock& block, const GridSource& source,
 
 // An element block's nodal array of `type` at `values` into `dst`, element after element without
 // gaps: the elements `held` marks (all where it is empty).
+void copy_nodal(std::size_t elements, std::size_t n, std::size_t element_stride,
+                const void* values, ScalarType type, const std::vector<std::uint8_t>& held,
+                unsigned char* dst) {
+  const std::size_t size = scalar_bytes(type);
+  const std::size_t stride = element_stride == 0 ? n : element_stride;
+  const auto* src = static_cast<const unsigned char*>(values);
+  if (stride == n && held.empty()) {
+    std::memcpy(dst, src, elements * n * size);
+    return;
+  }
+  for (std::size_t e = 0; e < elements; ++e)
+    if (held.empty() || held[e]) std::memcpy(dst + e * n * size, src + e * stride * size, n * size);
+}
 void copy_nodal(const HexBlock& block, const void* values, ScalarType type,
                 const std::vector<std::uint8_t>& held, unsigned char* dst) {
   const std::size_t n = std::size_t(block.order + 1) * (block.order + 1) * (block.order + 1);
-  const std::size_t size = scalar_bytes(type);
-  const std::size_t stride = block.element_stride == 0 ? n : block.element_stride;
-  const auto* src = static_cast<const unsigned char*>(values);
-  if (stride == n && held.empty()) {
-    std::memcpy(dst, src, block.element_count * n * size);
-    return;
+  copy_nodal(block.element_count, n, block.element_stride, values, type, held, dst);
+}
+void copy_nodal(const CellBlock& block, const void* values, ScalarType type, unsigned char* dst) {
+  copy_nodal(block.element_count, cell_nodes(block.type, block.order), block.element_stride, values,
+             type, {}, dst);
+}
+
+// A cell block's copy: every cell's values (cell blocks are not culled before the copy), and
+// all of each colour field's.
+CopyPlan plan_cells(const CellBlock& block, std::span<const FieldArray> colours) {
+  CopyPlan plan;
+  const std::size_t n = cell_nodes(block.type, block.order);
+  plan.values_size = block.element_count * n * scalar_bytes(block.value_type);
+  plan.values = PageSet(plan.values_size);
+  plan.values.mark(0, plan.values_size);
+  for (const FieldArray& c : colours) {
+    plan.colour_sizes.push_back(c.values ? block.element_count * n * scalar_bytes(c.type) : 0);
+    plan.colours.emplace_back(plan.colour_sizes.back());
+    plan.colours.back().mark(0, plan.colour_sizes.back());
+    plan.colour_held.emplace_back();
   }
-  for (std::size_t e = 0; e < block.element_count; ++e)
-    if (held.empty() || held[e]) std::memcpy(dst + e * n * size, src + e * stride * size, n * size);
+  return plan;
+}
+
+// Of the cell block, every cell's values into the copy begun for them (begin_copy). Not the
+// points: the source over the copy shares the sub-hexahedra prepared when the block was added.
+CellBlock copy_cells(const CellBlock& block, BlockCopy& copy) {
+  copy.coords = {};
+  copy_nodal(block, block.values, block.value_type, copy.values.data());
+  CellBlock out = block;
+  out.points = nullptr;
+  out.values = copy.values.data();
+  out.colour = nullptr;
+  out.element_stride = 0;
+  return out;
 }
 
 // Of the high-order block, the nodal values of the elements `held` marks (plan_hex) into the
@@ -522,10 +562,13 @@ class AdaptorImpl final : public Adaptor {
   Status add_hex_block(const HexBlock& block) override {
     return add_block<HexElementSource>(block, "add_hex_block");
   }
+  Status add_cell_block(const CellBlock& block) override {
+    return add_block<CellElementSource>(block, "add_cell_block");
+  }
   Status add_source(std::shared_ptr<const FieldSource> source, const Box& owned) override {
     last_add_failed_ = !source;
     if (!source) return fail(Status::invalid_argument("add_source: no source"));
-    blocks_.push_back({std::move(source), owned, std::nullopt, std::nullopt, {}});
+    blocks_.push_back({std::move(source), owned, std::nullopt, std::nullopt, std::nullopt, {}});
     return Status::ok();
   }
   Status add_field(std::string_view name, const void* values, ScalarType type) override {
@@ -533,7 +576,8 @@ class AdaptorImpl final : public Adaptor {
       if (last_add_failed_)
         return Status::invalid_argument(
             "the block added last was refused (the field would belong to the one before)");
-      if (blocks_.empty() || (!blocks_.back().grid && !blocks_.back().hex))
+      if (blocks_.empty() ||
+          (!blocks_.back().grid && !blocks_.back().hex && !blocks_.back().cells))
         return Status::invalid_argument(
             blocks_.empty() ? "no block added yet (the field belongs to the block added last)"
                             : "the block added last is a FieldSource (it colours by its own "
@@ -700,6 +744,7 @@ class AdaptorImpl final : public Adaptor {
     // cannot be copied); their colour pointers are null.
     std::optional<GridBlock> grid;
     std::optional<HexBlock> hex;
+    std::optional<CellBlock> cells;
     std::vector<Colour> colours;  // grid and element blocks: per AdaptorOptions::colour_fields
   };
 
@@ -714,6 +759,13 @@ class AdaptorImpl final : public Adaptor {
       const auto& base = static_cast<const GridSource&>(*b.source);
       return held ? std::make_shared<GridSource>(g, base.brick_cells(), std::move(*held))
                   : std::make_shared<GridSource>(g, base.brick_cells());
+    }
+    if (b.cells) {  // a cell block's values are copied whole: no `held`
+      CellBlock c = *b.cells;
+      c.colour = colour.values;
+      c.colour_type = colour.type;
+      return std::make_shared<CellElementSource>(static_cast<const CellElementSource&>(*b.source),
+                                                 c);
     }
     HexBlock h = *b.hex;
     h.colour = colour.values;
@@ -786,7 +838,7 @@ class AdaptorImpl final : public Adaptor {
               return "colour_by: block " + std::to_string(k) + " of rank " + std::to_string(rank_);
             };
             const FieldSource* source = b.source.get();
-            if (f >= 0 && (b.grid || b.hex)) {
+            if (f >= 0 && (b.grid || b.hex || b.cells)) {
               source = b.colours[std::size_t(f)].source.get();
               if (!source)
                 return Status::invalid_argument(which() + " has no field named '" +
@@ -925,7 +977,7 @@ class AdaptorImpl final : public Adaptor {
   bool snapshot_copyable() const {
     if (!has_domain_) return false;  // the synchronous path fails the step on every rank
     for (const Block& b : blocks_)
-      if (!b.grid && !b.hex) return false;
+      if (!b.grid && !b.hex && !b.cells) return false;
     return true;
   }
 
@@ -954,10 +1006,11 @@ class AdaptorImpl final : public Adaptor {
         std::vector<FieldArray> colours;
         for (const Colour& c : b.colours)
           colours.push_back(c.array);
-        plans[k] = b.grid ? plan_grid(*b.grid, static_cast<const GridSource&>(*b.source),
-                                      options_.isovalues, colours, field_bits_)
-                          : plan_hex(*b.hex, static_cast<const HexElementSource&>(*b.source),
-                                     options_.isovalues, colours);
+        plans[k] = b.grid    ? plan_grid(*b.grid, static_cast<const GridSource&>(*b.source),
+                                         options_.isovalues, colours, field_bits_)
+                   : b.cells ? plan_cells(*b.cells, colours)
+                             : plan_hex(*b.hex, static_cast<const HexElementSource&>(*b.source),
+                                        options_.isovalues, colours);
         planned += plans[k].bytes();
       }
       return Status::ok();
@@ -990,6 +1043,10 @@ class AdaptorImpl final : public Adaptor {
             const auto& live = static_cast<const GridSource&>(*b.source);
             copy.grid = copy_grid(*b.grid, live, held, snapshot_[k]);
             copy.source = std::make_shared<GridSource>(*copy.grid, live.brick_cells(), held);
+          } else if (b.cells) {  // every cell's values; the sub-hexahedra prepared once
+            copy.cells = copy_cells(*b.cells, snapshot_[k]);
+            copy.source = std::make_shared<CellElementSource>(
+                static_cast<const CellElementSource&>(*b.source), *copy.cells);
           } else {  // the geometry as the block's source prepared it (converted and checked once)
             copy.hex = copy_hex(*b.hex, held, snapshot_[k]);
             copy.source = std::make_shared<HexElementSource>(
@@ -1007,6 +1064,8 @@ class AdaptorImpl final : public Adaptor {
             if (b.grid)
               copy_points(*b.grid, static_cast<const GridSource&>(*b.source), field_held,
                           live.values, live.type, into.held(), into.data());
+            else if (b.cells)
+              copy_nodal(*b.cells, live.values, live.type, into.data());
             else
               copy_nodal(*b.hex, live.values, live.type, {}, into.data());
             const FieldArray copied{into.data(), live.type};
@@ -1102,10 +1161,12 @@ class AdaptorImpl final : public Adaptor {
     return fail_if(guard(std::string(what) + ": ", [&] {
       auto source = std::make_shared<Source>(block);
       const Box owned = source->bounds();
-      Block b{std::move(source), owned, std::nullopt, std::nullopt, {}};
+      Block b{std::move(source), owned, std::nullopt, std::nullopt, std::nullopt, {}};
       b.colours.resize(options_.colour_fields.size());
       if constexpr (std::is_same_v<Description, GridBlock>)
         b.grid = block;
+      else if constexpr (std::is_same_v<Description, CellBlock>)
+        b.cells = block;
       else
         b.hex = block;
       blocks_.push_back(std::move(b));

@@ -288,6 +288,69 @@ int ldimesh_add_hex_block(ldimesh_adaptor* a, const ldimesh_hex_block* b) {
   return code;
 }
 
+void ldimesh_cell_block_init(ldimesh_cell_block* block) {
+  if (!block) return;
+  std::memset(block, 0, sizeof *block);
+  block->cell_type = LDIMESH_CELL_TETRAHEDRON;
+  block->order = 1;
+  block->type = LDIMESH_FLOAT64;
+}
+
+int ldimesh_add_cell_block(ldimesh_adaptor* a, const ldimesh_cell_block* b) {
+  if (!a) return no_handle();
+  a->block_values = 0;  // until a block is added: a field would belong to none
+  const std::string what = "ldimesh_add_cell_block: ";
+  if (!b) return fail(a, LDIMESH_ERROR_ARGUMENT, what + "block is NULL");
+  ldimesh::CellBlock c;
+  if (!scalar_type(b->type, c.value_type))
+    return fail(a, LDIMESH_ERROR_ARGUMENT,
+                what + "type must be LDIMESH_FLOAT32 or LDIMESH_FLOAT64");
+  if (b->cell_type < LDIMESH_CELL_HEXAHEDRON || b->cell_type > LDIMESH_CELL_PYRAMID)
+    return fail(a, LDIMESH_ERROR_ARGUMENT, what + "cell_type must be LDIMESH_CELL_*");
+  static_assert(int(ldimesh::CellType::hexahedron) == LDIMESH_CELL_HEXAHEDRON &&
+                int(ldimesh::CellType::serendipity_hexahedron) == LDIMESH_CELL_HEXAHEDRON20 &&
+                int(ldimesh::CellType::tetrahedron) == LDIMESH_CELL_TETRAHEDRON &&
+                int(ldimesh::CellType::wedge) == LDIMESH_CELL_WEDGE &&
+                int(ldimesh::CellType::serendipity_wedge) == LDIMESH_CELL_WEDGE15 &&
+                int(ldimesh::CellType::pyramid) == LDIMESH_CELL_PYRAMID);
+  c.type = ldimesh::CellType(b->cell_type);
+  const std::size_t nodes = ldimesh::cell_nodes(c.type, b->order);
+  if (nodes == 0)
+    return fail(a, LDIMESH_ERROR_ARGUMENT,
+                what + "a " + ldimesh::cell_type_name(c.type) + " of order " +
+                    std::to_string(b->order) + " does not exist");
+  if (b->element_count < 1)
+    return fail(a, LDIMESH_ERROR_ARGUMENT, what + "element_count must be at least 1");
+  const std::int64_t per_element = std::int64_t(nodes);
+  const std::int64_t stride = b->element_stride == 0 ? per_element : b->element_stride;
+  if (stride < per_element)
+    return fail(a, LDIMESH_ERROR_ARGUMENT,
+                what + "element_stride is smaller than the " + std::to_string(per_element) +
+                    " nodes of a cell");
+  std::int64_t needed = 0, doubles = 0;
+  if (!mul(b->element_count - 1, stride, needed) ||
+      !mul(b->element_count, 3 * per_element, doubles))
+    return fail(a, LDIMESH_ERROR_ARGUMENT, what + "element_count overflows");
+  needed += per_element;
+  if (!b->values || b->value_count < needed)
+    return fail(a, LDIMESH_ERROR_ARGUMENT,
+                what + "the array holds " + std::to_string(b->value_count) +
+                    " values, the cells read " + std::to_string(needed));
+  if (!b->points || b->point_count < doubles)
+    return fail(a, LDIMESH_ERROR_ARGUMENT,
+                what + "the point array holds " + std::to_string(b->point_count) +
+                    " doubles, the cells read " + std::to_string(doubles));
+  c.order = b->order;
+  c.element_count = std::size_t(b->element_count);
+  c.points = b->points;
+  c.values = b->values;
+  c.element_stride = std::size_t(stride);
+  const int code =
+      guarded(a, "ldimesh_add_cell_block: ", [&] { return a->impl->add_cell_block(c); });
+  if (code == LDIMESH_OK) a->block_values = needed;
+  return code;
+}
+
 int ldimesh_add_field(ldimesh_adaptor* a, const char* name, const void* values, int64_t value_count,
                       int type) {
   if (!a) return no_handle();

@@ -236,6 +236,92 @@ TEST(CApi, AWrongSizeArrayIsRejectedAndTheAdaptorKeepsWorking) {
   ldimesh_destroy(a);
 }
 
+// ldimesh_add_cell_block: quadratic tetrahedra (VTK's node order) over this rank's share of 4³
+// cubes of [-1, 1]³, |x|² at their nodes (exact in P2): its counts checked, its type and order,
+// and the published surface the sphere of radius 0.6.
+TEST(CApi, CellBlocksAreCheckedAndPublished) {
+  const std::string dir = temp_dir("cells");
+  ldimesh_adaptor* a = create(options(dir));
+  if (!a) return;
+  // The 10 nodes of VTK_QUADRATIC_TETRA in its reference tetrahedron.
+  const double ref[10][3] = {{0, 0, 0},     {1, 0, 0},   {0, 1, 0},     {0, 0, 1},
+                             {0.5, 0, 0},   {0.5, 0.5, 0}, {0, 0.5, 0}, {0, 0, 0.5},
+                             {0.5, 0, 0.5}, {0, 0.5, 0.5}};
+  const int n = 4;
+  const double h = 2.0 / n;
+  std::vector<double> points, values;
+  std::int64_t cells = 0;
+  for (int e = 0; e < n * n * n; ++e) {
+    if (e % ranks() != rank_of()) continue;
+    const double o[3] = {-1 + h * (e % n), -1 + h * (e / n % n), -1 + h * (e / n / n)};
+    // Kuhn's 6 tetrahedra around the cube's diagonal, as cube corner offsets.
+    const int kuhn[6][4][3] = {
+        {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {1, 1, 1}}, {{0, 0, 0}, {1, 1, 0}, {0, 1, 0}, {1, 1, 1}},
+        {{0, 0, 0}, {0, 1, 0}, {0, 1, 1}, {1, 1, 1}}, {{0, 0, 0}, {0, 1, 1}, {0, 0, 1}, {1, 1, 1}},
+        {{0, 0, 0}, {0, 0, 1}, {1, 0, 1}, {1, 1, 1}}, {{0, 0, 0}, {1, 0, 1}, {1, 0, 0}, {1, 1, 1}}};
+    for (const auto& t : kuhn) {
+      for (const auto& r : ref) {
+        double x[3], r2 = 0.0;
+        for (int c = 0; c < 3; ++c) {
+          x[c] = o[c] + h * (t[0][c] + r[0] * (t[1][c] - t[0][c]) + r[1] * (t[2][c] - t[0][c]) +
+                             r[2] * (t[3][c] - t[0][c]));
+          r2 += x[c] * x[c];
+          points.push_back(x[c]);
+        }
+        values.push_back(r2);
+      }
+      ++cells;
+    }
+  }
+  ldimesh_cell_block c;
+  ldimesh_cell_block_init(&c);
+  c.cell_type = LDIMESH_CELL_TETRAHEDRON;
+  c.order = 2;
+  c.element_count = cells;
+  c.points = points.data();
+  c.point_count = std::int64_t(points.size());
+  c.values = values.data();
+  c.value_count = std::int64_t(values.size()) - 1;  // one value short
+  EXPECT_EQ(ldimesh_add_cell_block(a, &c), LDIMESH_ERROR_ARGUMENT);
+  EXPECT_NE(std::string(ldimesh_last_error(a)).find("the cells read " + std::to_string(10 * cells)),
+            std::string::npos)
+      << ldimesh_last_error(a);
+  c.value_count = std::int64_t(values.size());
+  c.point_count = std::int64_t(points.size()) - 1;  // one double short
+  EXPECT_EQ(ldimesh_add_cell_block(a, &c), LDIMESH_ERROR_ARGUMENT);
+  EXPECT_NE(std::string(ldimesh_last_error(a)).find("the point array holds"), std::string::npos)
+      << ldimesh_last_error(a);
+  c.point_count = std::int64_t(points.size());
+  c.cell_type = 9;
+  EXPECT_EQ(ldimesh_add_cell_block(a, &c), LDIMESH_ERROR_ARGUMENT);
+  EXPECT_NE(std::string(ldimesh_last_error(a)).find("cell_type must be LDIMESH_CELL_*"),
+            std::string::npos)
+      << ldimesh_last_error(a);
+  c.cell_type = LDIMESH_CELL_PYRAMID;
+  c.order = 3;
+  EXPECT_EQ(ldimesh_add_cell_block(a, &c), LDIMESH_ERROR_ARGUMENT);
+  EXPECT_NE(std::string(ldimesh_last_error(a)).find("a pyramid of order 3 does not exist"),
+            std::string::npos)
+      << ldimesh_last_error(a);
+  c.cell_type = LDIMESH_CELL_TETRAHEDRON;
+  c.order = 2;
+  c.element_stride = 9;
+  EXPECT_EQ(ldimesh_add_cell_block(a, &c), LDIMESH_ERROR_ARGUMENT);
+  c.element_stride = 0;
+  EXPECT_EQ(ldimesh_add_cell_block(a, &c), LDIMESH_OK) << ldimesh_last_error(a);
+  EXPECT_EQ(ldimesh_execute(a, 1, 0.0), LDIMESH_OK) << ldimesh_last_error(a);
+  EXPECT_EQ(ldimesh_finalize(a), LDIMESH_OK);
+  if (rank_of() == 0) {
+    const Mesh mesh = published_mesh(dir, 1);
+    ASSERT_GT(mesh.positions.size(), 1000u);
+    double worst = 0.0;
+    for (const glm::vec3& p : mesh.positions)
+      worst = std::max(worst, std::abs(double(glm::length(p)) - 0.6));
+    EXPECT_LT(worst, 4e-3);  // the GLB's positions: a tenth of a pixel (2/48)
+  }
+  ldimesh_destroy(a);
+}
+
 // ldimesh_add_field: the field of the block added last, its array checked like the block's;
 // with "colour_by" the published vertices carry its values.
 TEST(CApi, AFieldColoursTheSurfaceAndItsArrayIsChecked) {

@@ -14,6 +14,8 @@ module fortran_hex_elements
   ! The field y beside x (ldimesh_add_field), double and float.
   real(c_double), allocatable, target, save :: y(:, :)
   real(c_float), allocatable, target, save :: y4(:, :)
+  ! Wedges of the field x with the field y (fortran_add_cells).
+  real(c_double), allocatable, target, save :: wedge_points(:, :, :), wedge_x(:, :), wedge_y(:, :)
   ! A grid block of the field x with its field y (fortran_add_grid_field).
   real(c_float), allocatable, target, save :: gx(:, :, :), gy(:, :, :)
 
@@ -83,6 +85,57 @@ contains
     end if
     fortran_add_hex_elements = int(ierr, c_int)
   end function fortran_add_hex_elements
+
+  ! Adds this rank's cubes (cube e on rank mod(e, ranks)) of 2³ over [0, 1]³, each as 2 linear
+  ! wedges (VTK's node order: the triangle at z = 0, then at z = 1) through ldimesh_add_cells, the
+  ! field x with the field y; first a call whose shapes do not fit the type (refused). Returns the
+  ! module's status, or -1 where the wrong shapes were accepted.
+  integer(c_int) function fortran_add_cells(handle, rank, ranks) bind(C, name='fortran_add_cells')
+    type(c_ptr), value :: handle
+    integer(c_int), value :: rank, ranks
+    type(ldimesh_adaptor) :: insitu
+    integer :: e, w, v, count, ierr
+    integer, parameter :: tri(3, 2) = reshape([0, 1, 2, 0, 2, 3], [3, 2])
+    real(c_double) :: corner(3, 0:3), o(3)
+    character(len=:), allocatable :: message
+    insitu%handle = handle
+    count = 0
+    do e = 0, n**3 - 1
+      if (mod(e, ranks) == rank) count = count + 2
+    end do
+    if (allocated(wedge_points)) deallocate (wedge_points, wedge_x, wedge_y)
+    allocate (wedge_points(3, 6, count), wedge_x(6, count), wedge_y(6, count))
+    count = 0
+    do e = 0, n**3 - 1
+      if (mod(e, ranks) /= rank) cycle
+      o = real([mod(e, n), mod(e/n, n), e/(n*n)], c_double)/real(n, c_double)
+      corner(:, 0) = o
+      corner(:, 1) = o + [0.5_c_double, 0.0_c_double, 0.0_c_double]
+      corner(:, 2) = o + [0.5_c_double, 0.5_c_double, 0.0_c_double]
+      corner(:, 3) = o + [0.0_c_double, 0.5_c_double, 0.0_c_double]
+      do w = 1, 2
+        count = count + 1
+        do v = 1, 3
+          wedge_points(:, v, count) = corner(:, tri(v, w))
+          wedge_points(:, v + 3, count) = corner(:, tri(v, w)) + [0.0_c_double, 0.0_c_double, &
+                                                                  0.5_c_double]
+        end do
+        wedge_x(:, count) = wedge_points(1, :, count)
+        wedge_y(:, count) = wedge_points(2, :, count)
+      end do
+    end do
+    ! A tetrahedron has 4 nodes, not 6: refused.
+    call ldimesh_add_cells(insitu, int(LDIMESH_CELL_TETRAHEDRON), 1, wedge_points, wedge_x, ierr)
+    message = ldimesh_last_error(insitu)
+    if (ierr /= LDIMESH_ERROR_ARGUMENT .or. &
+        index(message, 'nodes the cell type''s node count') == 0) then
+      fortran_add_cells = -1
+      return
+    end if
+    call ldimesh_add_cells(insitu, int(LDIMESH_CELL_WEDGE), 1, wedge_points, wedge_x, ierr)
+    if (ierr == LDIMESH_OK) call ldimesh_add_field(insitu, 'y', wedge_y, ierr)
+    fortran_add_cells = int(ierr, c_int)
+  end function fortran_add_cells
 
   ! Rank 0 adds a 9³ uniform grid over [0, 1]³ of the field x (float) with the field y as its
   ! field "y" (ldimesh_add_field of a 3D array); the other ranks add nothing. Returns the status.

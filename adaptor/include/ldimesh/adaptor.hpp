@@ -87,6 +87,10 @@ class Adaptor {
   // again.
   virtual Status add_grid_block(const GridBlock& block) = 0;
   virtual Status add_hex_block(const HexBlock& block) = 0;
+  // A block of cells of one type and order — tetrahedra, wedges, pyramids, serendipity or
+  // Lagrange hexahedra (CellBlock, core/field/cell_source.hpp), in VTK's node order; a mixed mesh
+  // is one block per (type, order). A cell block's fields (add_field) have its values' layout.
+  virtual Status add_cell_block(const CellBlock& block) = 0;
   virtual Status add_source(std::shared_ptr<const FieldSource> source, const Box& owned) = 0;
   // A further named field of the block added last (temperature beside density), read in place
   // like its values and in their layout: a grid block's points with the same dims and strides,

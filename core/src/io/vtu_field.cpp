@@ -2,6 +2,7 @@
 // its own, apart from the reader, so that the reader builds without the rest of the core (the fuzz
 // target, scripts/fuzz.sh vtu).
 #include <memory>
+#include <new>
 #include <stdexcept>
 #include <vector>
 
@@ -32,6 +33,8 @@ Status read_vtu_field(const std::string& path, const std::string& field, VtuFiel
     out.lookup = std::make_unique<HexFieldLookup>(list);
   } catch (const std::invalid_argument& e) {
     return Status::invalid_argument(path + ": " + e.what());
+  } catch (const std::bad_alloc&) {
+    return Status::out_of_memory(path + ": out of memory while preparing its cells");
   }
   return Status::ok();
 }

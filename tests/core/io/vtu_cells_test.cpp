@@ -219,12 +219,21 @@ TEST(VtuCells, GhostCellsAreSkipped) {
   const VtkType t{VTK_QUADRATIC_TETRA, 10, CellType::tetrahedron, 2};
   const std::string path = temp_path("ghosts.vtu");
   write_cells(t, 4, true, path, {false, true, false, true});
+  // Through the child process (the counts cross its pipe); the cells kept are 0 and 2, whose
+  // points lie below x = 2 and from x = 6 on (place() puts cell c at x ≈ 3c).
   VtuElements elements;
-  const Status st = read_vtu(path, "u", elements);
+  const Status st = read_vtu_isolated(path, "u", elements);
   std::filesystem::remove(path);
   ASSERT_TRUE(st) << st.message();
   EXPECT_EQ(elements.cells, 2u);
   EXPECT_EQ(elements.ghost_cells, 2u);
+  ASSERT_EQ(elements.groups.size(), 1u);
+  const std::vector<double>& g = elements.groups[0].geometry;
+  ASSERT_EQ(g.size(), 2u * 10 * 3);
+  for (int i = 0; i < 10; ++i) {
+    EXPECT_LT(g[3 * i], 2.0);
+    EXPECT_GT(g[3 * (10 + i)], 5.0);
+  }
 }
 
 TEST(VtuCells, MixedTypesInOneFileMeshTheSphere) {

@@ -122,15 +122,7 @@ CellElementSource::CellElementSource(const CellBlock& block) : block_(block) {
   const std::string what = std::string("cell source: ") + cell_type_name(block.type) + "s";
   if (block.element_count == 0) throw std::invalid_argument(what + ": no cells");
   if (!block.points) throw std::invalid_argument(what + ": null point array");
-  if (!block.values) throw std::invalid_argument(what + ": null value array");
-  if (!known_scalar(block.value_type)) throw std::invalid_argument(what + ": unknown scalar type");
-  if (block.colour && !known_scalar(block.colour_type))
-    throw std::invalid_argument(what + ": unknown scalar type of the colour field");
-  if (block_.element_stride == 0) block_.element_stride = nodes_;
-  if (block_.element_stride < nodes_)
-    throw std::invalid_argument(what + ": element stride " +
-                                std::to_string(block_.element_stride) + " below the " +
-                                std::to_string(nodes_) + " nodes of a cell");
+  check_values(what);
 
   // The sub-hexahedra's lattice points, cell after cell.
   const std::size_t lattice = std::size_t(degree_ + 1) * (degree_ + 1) * (degree_ + 1);
@@ -155,7 +147,7 @@ CellElementSource::CellElementSource(const CellBlock& block) : block_(block) {
   HexBlock hex = sub_hexahedra_block(count, degree_, geometry_);
   hex.values = geometry_.data();  // not read by the constructor, which needs a non-null array
   try {
-    prepared_ = std::make_unique<HexElementSource>(hex, cell.top_collapsed);
+    prepared_ = std::make_shared<const HexElementSource>(hex, cell.top_collapsed);
   } catch (const std::invalid_argument& error) {
     const long sub = named_element(error.what());
     if (sub < 0) throw;
@@ -169,6 +161,33 @@ CellElementSource::CellElementSource(const CellBlock& block) : block_(block) {
   // The prepared source keeps what it needs of the geometry; the sources made from it do not
   // read the lattice points (hex_source.hpp).
   geometry_ = {};
+}
+
+void CellElementSource::check_values(const std::string& what) {
+  if (!block_.values) throw std::invalid_argument(what + ": null value array");
+  if (!known_scalar(block_.value_type))
+    throw std::invalid_argument(what + ": unknown scalar type");
+  if (block_.colour && !known_scalar(block_.colour_type))
+    throw std::invalid_argument(what + ": unknown scalar type of the colour field");
+  if (block_.element_stride == 0) block_.element_stride = nodes_;
+  if (block_.element_stride < nodes_)
+    throw std::invalid_argument(what + ": element stride " +
+                                std::to_string(block_.element_stride) + " below the " +
+                                std::to_string(nodes_) + " nodes of a cell");
+}
+
+CellElementSource::CellElementSource(const CellElementSource& prepared, const CellBlock& block)
+    : block_(block),
+      nodes_(prepared.nodes_),
+      sub_per_cell_(prepared.sub_per_cell_),
+      degree_(prepared.degree_),
+      prepared_(prepared.prepared_) {
+  const CellBlock& p = prepared.block_;
+  const std::string what = std::string("cell source: ") + cell_type_name(p.type) + "s";
+  if (block.type != p.type || block.order != p.order || block.element_count != p.element_count)
+    throw std::invalid_argument(
+        what + ": the block's layout (type, order, cell count) differs from the prepared source's");
+  check_values(what);
 }
 
 Box CellElementSource::bounds() const {

@@ -1,6 +1,6 @@
 // The solver-side descriptions of rank-local data blocks: pointers into the solver's own arrays
-// and their layout. What the adaptor's API takes; GridSource and HexElementSource
-// (grid_source.hpp, hex_source.hpp) cast them. Needs neither Embree nor TBB.
+// and their layout. What the adaptor's API takes; GridSource, HexElementSource and
+// CellElementSource (grid_source.hpp, hex_source.hpp, cell_source.hpp) cast them. Needs neither Embree nor TBB.
 #pragma once
 
 #include <array>
@@ -91,6 +91,69 @@ struct HexBlock {
   // Optional: a second field's nodal values in the layout of `values` (the same nodes, order
   // and element_stride) to colour the isosurface by; hits carry its polynomial's value at the
   // hit (FieldSource::bind_scalar). Null: none. Read in place like `values`.
+  const void* colour = nullptr;
+  ScalarType colour_type = ScalarType::float64;
+};
+
+// A cell's shape, polynomial space and node order (VTK's numbering in each case).
+enum class CellType : std::uint8_t {
+  // Q_p (p + 1)³ nodes in VTK_LAGRANGE_HEXAHEDRON's order (vtk_lagrange_index): VTK_HEXAHEDRON
+  // is p = 1, VTK_TRIQUADRATIC_HEXAHEDRON p = 2.
+  hexahedron,
+  // The 20-node serendipity hexahedron, VTK_QUADRATIC_HEXAHEDRON (p = 2; its space lies in Q₂):
+  // corners, then edge midpoints.
+  serendipity_hexahedron,
+  // P_p, (p + 1)(p + 2)(p + 3)/6 nodes in VTK_LAGRANGE_TETRAHEDRON's order: VTK_TETRA is p = 1,
+  // VTK_QUADRATIC_TETRA p = 2.
+  tetrahedron,
+  // P_p(triangle) ⊗ P_p(height), (p + 1)²(p + 2)/2 nodes in VTK_LAGRANGE_WEDGE's order:
+  // VTK_WEDGE is p = 1, VTK_BIQUADRATIC_QUADRATIC_WEDGE p = 2.
+  wedge,
+  // The 15-node wedge, VTK_QUADRATIC_WEDGE (p = 2): vertices, then edge midpoints.
+  serendipity_wedge,
+  // VTK_PYRAMID (p = 1, 5 nodes) and VTK_QUADRATIC_PYRAMID (p = 2, 13 nodes: vertices, then edge
+  // midpoints), with VTK's own shape functions (polynomials in r, s, t of degree p per variable).
+  pyramid,
+};
+
+// Nodes per cell of `type` and order `order`, or 0 where the type has no such order (no
+// exception: for readers that check what they are given).
+inline std::size_t cell_nodes(CellType type, int order) {
+  const std::size_t p = std::size_t(order);
+  const bool lagrange = order >= 1 && order <= 8;
+  switch (type) {
+    case CellType::hexahedron:
+      return lagrange ? (p + 1) * (p + 1) * (p + 1) : 0;
+    case CellType::tetrahedron:
+      return lagrange ? (p + 1) * (p + 2) * (p + 3) / 6 : 0;
+    case CellType::wedge:
+      return lagrange ? (p + 1) * (p + 1) * (p + 2) / 2 : 0;
+    case CellType::serendipity_hexahedron:
+      return order == 2 ? 20 : 0;
+    case CellType::serendipity_wedge:
+      return order == 2 ? 15 : 0;
+    case CellType::pyramid:
+      return order == 1 ? 5 : order == 2 ? 13 : 0;
+  }
+  return 0;
+}
+
+// A name for messages ("tetrahedron"; defined in the core library, cell_source.hpp's).
+const char* cell_type_name(CellType type);
+
+// One block of cells of one type and order, described by pointers into the caller's arrays.
+// Geometry and field have the same nodes (isoparametric, as files and most solvers give them):
+// cell e's node i sits at points[3·(e·node_count + i) + (0, 1, 2)] and has value
+// values[e·element_stride + i].
+struct CellBlock {
+  CellType type = CellType::tetrahedron;
+  int order = 1;
+  std::size_t element_count = 0;
+  const double* points = nullptr;  // node_count × (x, y, z) per cell
+  const void* values = nullptr;    // node_count values per cell (element_stride apart)
+  ScalarType value_type = ScalarType::float64;
+  std::size_t element_stride = 0;  // in values; 0 means the node count
+  // Optional: a second field in the layout of `values` to colour the isosurface by.
   const void* colour = nullptr;
   ScalarType colour_type = ScalarType::float64;
 };

@@ -21,6 +21,7 @@
 #include <cstdint>
 #include <memory>
 #include <span>
+#include <string>
 #include <vector>
 
 #include <glm/glm.hpp>
@@ -31,51 +32,6 @@
 
 namespace ldimesh {
 
-// A cell's shape, polynomial space and node order (VTK's numbering in each case).
-enum class CellType : std::uint8_t {
-  // Q_p (p + 1)³ nodes in VTK_LAGRANGE_HEXAHEDRON's order (vtk_lagrange_index): VTK_HEXAHEDRON
-  // is p = 1, VTK_TRIQUADRATIC_HEXAHEDRON p = 2.
-  hexahedron,
-  // The 20-node serendipity hexahedron, VTK_QUADRATIC_HEXAHEDRON (p = 2; its space lies in Q₂):
-  // corners, then edge midpoints.
-  serendipity_hexahedron,
-  // P_p, (p + 1)(p + 2)(p + 3)/6 nodes in VTK_LAGRANGE_TETRAHEDRON's order: VTK_TETRA is p = 1,
-  // VTK_QUADRATIC_TETRA p = 2.
-  tetrahedron,
-  // P_p(triangle) ⊗ P_p(height), (p + 1)²(p + 2)/2 nodes in VTK_LAGRANGE_WEDGE's order:
-  // VTK_WEDGE is p = 1, VTK_BIQUADRATIC_QUADRATIC_WEDGE p = 2.
-  wedge,
-  // The 15-node wedge, VTK_QUADRATIC_WEDGE (p = 2): vertices, then edge midpoints.
-  serendipity_wedge,
-  // VTK_PYRAMID (p = 1, 5 nodes) and VTK_QUADRATIC_PYRAMID (p = 2, 13 nodes: vertices, then edge
-  // midpoints), with VTK's own shape functions (polynomials in r, s, t of degree p per variable).
-  pyramid,
-};
-
-// Nodes per cell of `type` and order `order`, or 0 where the type has no such order (no
-// exception: for readers that check what they are given).
-inline std::size_t cell_nodes(CellType type, int order) {
-  const std::size_t p = std::size_t(order);
-  const bool lagrange = order >= 1 && order <= 8;
-  switch (type) {
-    case CellType::hexahedron:
-      return lagrange ? (p + 1) * (p + 1) * (p + 1) : 0;
-    case CellType::tetrahedron:
-      return lagrange ? (p + 1) * (p + 2) * (p + 3) / 6 : 0;
-    case CellType::wedge:
-      return lagrange ? (p + 1) * (p + 1) * (p + 2) / 2 : 0;
-    case CellType::serendipity_hexahedron:
-      return order == 2 ? 20 : 0;
-    case CellType::serendipity_wedge:
-      return order == 2 ? 15 : 0;
-    case CellType::pyramid:
-      return order == 1 ? 5 : order == 2 ? 13 : 0;
-  }
-  return 0;
-}
-
-// A name for messages ("tetrahedron").
-const char* cell_type_name(CellType type);
 // The highest order a type has (8 for the Lagrange families, 2 for the serendipity ones and the
 // pyramid).
 int max_cell_order(CellType type);
@@ -88,23 +44,6 @@ std::vector<glm::dvec3> cell_reference_nodes(CellType type, int order);
 // The values at `reference` of the cell's nodal basis (Lagrange) functions, one per node in the
 // node order: the cell's field there is Σ values[i] · nodal[i]. Throws as cell_node_count.
 std::vector<double> cell_shape_functions(CellType type, int order, glm::dvec3 reference);
-
-// One block of cells of one type and order, described by pointers into the caller's arrays.
-// Geometry and field have the same nodes (isoparametric, as files and most solvers give them):
-// cell e's node i sits at points[3·(e·node_count + i) + (0, 1, 2)] and has value
-// values[e·element_stride + i].
-struct CellBlock {
-  CellType type = CellType::tetrahedron;
-  int order = 1;
-  std::size_t element_count = 0;
-  const double* points = nullptr;  // node_count × (x, y, z) per cell
-  const void* values = nullptr;    // node_count values per cell (element_stride apart)
-  ScalarType value_type = ScalarType::float64;
-  std::size_t element_stride = 0;  // in values; 0 means the node count
-  // Optional: a second field in the layout of `values` to colour the isosurface by.
-  const void* colour = nullptr;
-  ScalarType colour_type = ScalarType::float64;
-};
 
 // A block of cells as a ray-caster source: the cells' sub-hexahedra (see the top of this file)
 // through HexElementSource. Hits are exact roots of each cell's polynomial on its isosurface; a
@@ -119,6 +58,12 @@ class CellElementSource final : public FieldSource {
   // The points are read here only; the value arrays must outlive the source and may change:
   // every bind() reads them.
   explicit CellElementSource(const CellBlock& block);
+  // A source over `block`, whose geometry is that of `prepared`'s block, with its own values (the
+  // adaptor's snapshot of a block at each due step): the prepared sub-hexahedra are shared, not
+  // built again; `block`'s points are not read (they may be null), only its layout. Throws
+  // std::invalid_argument where the type, order or cell count differ, for a null value array,
+  // an unknown scalar type or an element stride below the node count.
+  CellElementSource(const CellElementSource& prepared, const CellBlock& block);
 
   Box bounds() const override;
   std::unique_ptr<GeometryBinding> bind(RTCDevice device, double isovalue) const override;
@@ -138,6 +83,7 @@ class CellElementSource final : public FieldSource {
   std::shared_ptr<const Snapshot> snapshot() const;
 
  private:
+  void check_values(const std::string& what);
   // A snapshot (the colour field too when `colour`) and the non-finite nodal values it read.
   struct Counted;
   Counted convert(bool colour) const;
@@ -150,7 +96,7 @@ class CellElementSource final : public FieldSource {
   // values from the cell's nodal values.
   std::shared_ptr<const std::vector<double>> sampling_;
   std::vector<double> geometry_;  // the sub-hexahedra's lattice points (constructor only)
-  std::unique_ptr<HexElementSource> prepared_;  // the geometry, prepared once
+  std::shared_ptr<const HexElementSource> prepared_;  // the geometry, prepared once (shared)
 };
 
 }  // namespace ldimesh
