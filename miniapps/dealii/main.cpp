@@ -21,8 +21,9 @@
 // geometry and solution exactly (no reordering of deal.II's hierarchical DoF numbering needed).
 //
 // Usage: mpiexec -n R ldimesh-dealii [--order P] [--refinements L] [--steps S]
-//          [--output-every K] [--initial blobs|radius] [--isovalue V] [--options FILE]
-//          [--vtu DIR]
+//          [--output-every K] [--initial blobs|radius] [--isovalue V] [--cells hex|tet]
+//          [--options FILE] [--vtu DIR]
+// --cells tet runs the same equation on tetrahedra with FE_SimplexP (SimplexHeatSolver below).
 // --vtu DIR also writes every output step as VTK XML files the way deal.II users write them
 // (DataOut with write_higher_order_cells: VTK_LAGRANGE_HEXAHEDRON cells of order p, curved;
 // DIR/solution_NNNN.pvtu over one .vtu per rank), the field named "u".
@@ -32,13 +33,20 @@
 #include <deal.II/base/mpi.h>
 #include <deal.II/base/quadrature_lib.h>
 #include <deal.II/base/utilities.h>
+#include <deal.II/distributed/fully_distributed_tria.h>
 #include <deal.II/distributed/tria.h>
 #include <deal.II/dofs/dof_handler.h>
 #include <deal.II/dofs/dof_tools.h>
 #include <deal.II/fe/fe_q.h>
+#include <deal.II/fe/fe_simplex_p.h>
+#include <deal.II/fe/mapping_fe.h>
 #include <deal.II/fe/fe_values.h>
 #include <deal.II/fe/mapping_q.h>
 #include <deal.II/grid/grid_generator.h>
+#include <deal.II/grid/tria_description.h>
+#include <deal.II/lac/solver_cg.h>
+#include <deal.II/lac/trilinos_precondition.h>
+#include <deal.II/lac/trilinos_solver.h>
 #include <deal.II/lac/affine_constraints.h>
 #include <deal.II/lac/dynamic_sparsity_pattern.h>
 #include <deal.II/lac/full_matrix.h>
@@ -71,6 +79,7 @@ struct Args {
   unsigned int order = 4, refinements = 1;
   unsigned long steps = 200, output_every = 10;
   std::string initial = "blobs", options_path, vtu_dir;
+  std::string cells = "hex";  // or "tet": FE_SimplexP on tetrahedra (SimplexHeatSolver)
   double isovalue = 0.5;
   bool isovalue_given = false;
 };
@@ -112,6 +121,10 @@ Args parse(int argc, char** argv) {
       a.initial = argv[++i];
       if (a.initial != "blobs" && a.initial != "radius")
         throw std::invalid_argument("--initial: blobs or radius, not '" + a.initial + "'");
+    } else if (arg == "--cells" && i + 1 < argc) {
+      a.cells = argv[++i];
+      if (a.cells != "hex" && a.cells != "tet")
+        throw std::invalid_argument("--cells: hex or tet, not '" + a.cells + "'");
     } else if (arg == "--options" && i + 1 < argc) {
       a.options_path = argv[++i];
     } else if (arg == "--vtu" && i + 1 < argc) {
@@ -119,10 +132,12 @@ Args parse(int argc, char** argv) {
     } else {
       throw std::invalid_argument("unknown or incomplete option '" + arg +
                                   "' (--order, --refinements, --steps, --output-every, "
-                                  "--initial, --isovalue, --options, --vtu)");
+                                  "--initial, --isovalue, --cells, --options, --vtu)");
     }
   }
   if (a.initial == "radius" && !a.isovalue_given) a.isovalue = 0.5625;  // the sphere r = 0.75
+  if (a.cells == "tet" && a.order > 3)
+    throw std::invalid_argument("--order: 1 to 3 with --cells tet (deal.II 9.4's FE_SimplexP)");
   return a;
 }
 
@@ -334,6 +349,193 @@ class HeatSolver {
   ConditionalOStream out_;
 };
 
+// The same heat equation on tetrahedra (--cells tet), as a deal.II 9.4 user with a simplex mesh
+// writes it: the refined shell's hexahedra split into tetrahedra
+// (GridGenerator::convert_hypercube_to_simplex_mesh), dealt to the ranks in runs of cells
+// (parallel::fullydistributed::Triangulation from a partitioned serial mesh: p4est has no
+// simplices), FE_SimplexP(p) with a linear MappingFE (straight tetrahedra), the mass and
+// stiffness matrices with QGaussSimplex, and backward Euler ((M + dt κ K) u' = M u, conjugate
+// gradients): a simplex mass matrix has no diagonal lumping that stays positive for p ≥ 2.
+//
+// What the adaptor gets: each rank's locally owned cells as one block of tetrahedra of order p
+// (ldimesh::CellBlock), the solution and the mapped positions evaluated by FEValues at the
+// nodes of VTK's Lagrange tetrahedron (cell_reference_nodes; deal.II's reference tetrahedron is
+// VTK's: vertices 0, e₁, e₂, e₃): the cell's polynomial exactly, in the order the block wants.
+class SimplexHeatSolver {
+ public:
+  SimplexHeatSolver(const Args& args, MPI_Comm comm)
+      : args_(args),
+        comm_(comm),
+        triangulation_(comm),
+        fe_(args.order),
+        mapping_(FE_SimplexP<dim>(1)),
+        dof_handler_(triangulation_),
+        out_(std::cout, Utilities::MPI::this_mpi_process(comm) == 0) {}
+
+  void setup() {
+    Triangulation<dim> hexahedra, tetrahedra;
+    GridGenerator::hyper_shell(hexahedra, Point<dim>(), 0.5, 1.0, 6);
+    hexahedra.refine_global(args_.refinements);
+    GridGenerator::convert_hypercube_to_simplex_mesh(hexahedra, tetrahedra);
+    // Runs of cells per rank (cell order is the coarse cells', refined: compact pieces).
+    const unsigned int ranks = Utilities::MPI::n_mpi_processes(comm_);
+    const std::size_t total = tetrahedra.n_active_cells();
+    std::size_t index = 0;
+    for (const auto& cell : tetrahedra.active_cell_iterators())
+      cell->set_subdomain_id(types::subdomain_id(index++ * ranks / total));
+    triangulation_.create_triangulation(
+        TriangulationDescription::Utilities::create_description_from_triangulation(tetrahedra,
+                                                                                    comm_));
+    dof_handler_.distribute_dofs(fe_);
+    const IndexSet owned = dof_handler_.locally_owned_dofs();
+    IndexSet relevant;
+    DoFTools::extract_locally_relevant_dofs(dof_handler_, relevant);
+    DynamicSparsityPattern dsp(relevant);
+    DoFTools::make_sparsity_pattern(dof_handler_, dsp);
+    SparsityTools::distribute_sparsity_pattern(dsp, owned, comm_, relevant);
+    mass_.reinit(owned, owned, dsp, comm_);
+    system_.reinit(owned, owned, dsp, comm_);
+    solution_.reinit(owned, comm_);
+    ghosted_.reinit(owned, relevant, comm_);
+    rhs_.reinit(owned, comm_);
+    assemble();
+    VectorTools::interpolate(mapping_, dof_handler_, Initial(args_.initial), solution_);
+    out_ << "ldimesh-dealii: " << triangulation_.n_global_active_cells()
+         << " tetrahedra of FE_SimplexP(" << args_.order << ") with MappingFE(FE_SimplexP(1)), "
+         << dof_handler_.n_dofs() << " unknowns on " << Utilities::MPI::n_mpi_processes(comm_)
+         << " rank(s), dt " << kTimeStep << std::endl;
+  }
+
+  // One backward Euler step.
+  void advance() {
+    mass_.vmult(rhs_, solution_);
+    SolverControl control(1000, 1e-12 * rhs_.l2_norm());
+    TrilinosWrappers::SolverCG cg(control);
+    TrilinosWrappers::PreconditionJacobi jacobi;
+    jacobi.initialize(system_);
+    cg.solve(system_, solution_, rhs_, jacobi);
+    time_ += kTimeStep;
+  }
+
+  double time() const { return time_; }
+
+  // The locally owned cells as one block of tetrahedra of order p, VTK's node order.
+  void hand_over(ldimesh::Adaptor& adaptor) {
+    ghosted_ = solution_;
+    const int p = int(args_.order);
+    std::vector<Point<dim>> points;
+    for (const glm::dvec3& r : ldimesh::cell_reference_nodes(ldimesh::CellType::tetrahedron, p))
+      points.emplace_back(r.x, r.y, r.z);
+    const Quadrature<dim> nodes(points);
+    FEValues<dim> values(mapping_, fe_, nodes, update_values | update_quadrature_points);
+    std::vector<double> cell_values(nodes.size());
+    points_.clear();
+    nodal_.clear();
+    std::size_t cells = 0;
+    for (const auto& cell : dof_handler_.active_cell_iterators()) {
+      if (!cell->is_locally_owned()) continue;
+      values.reinit(cell);
+      values.get_function_values(ghosted_, cell_values);
+      for (unsigned int q = 0; q < nodes.size(); ++q) {
+        const Point<dim>& x = values.quadrature_point(q);
+        points_.insert(points_.end(), {x[0], x[1], x[2]});
+        nodal_.push_back(cell_values[q]);
+      }
+      ++cells;
+    }
+    ldimesh::CellBlock block;
+    block.type = ldimesh::CellType::tetrahedron;
+    block.order = p;
+    block.element_count = cells;
+    block.points = points_.data();
+    block.values = nodal_.data();
+    adaptor.clear_blocks();
+    if (cells > 0) check(adaptor.add_cell_block(block), "add_cell_block");
+  }
+
+  // The solution as deal.II writes simplex meshes: DataOut's patches, VTK_TETRA for p = 1 and
+  // VTK_QUADRATIC_TETRA otherwise (p = 3 is written quadratic: deal.II 9.4 has no higher
+  // simplex output), one .vtu per rank and a .pvtu record: DIR/solution_NNNN.*
+  void write_vtu(const std::string& dir, unsigned int counter) {
+    ghosted_ = solution_;
+    DataOut<dim> data_out;
+    DataOutBase::VtkFlags flags;
+    flags.time = time_;
+    // deal.II 9.4 writes simplex patches of 2 subdivisions as VTK_QUADRATIC_TETRA; with
+    // write_higher_order_cells its simplex .vtu files are unreadable (VTK: "the offsets array is
+    // not long enough"), so it stays off here.
+    flags.write_higher_order_cells = false;
+    data_out.set_flags(flags);
+    data_out.attach_dof_handler(dof_handler_);
+    data_out.add_data_vector(ghosted_, "u");
+    data_out.build_patches(mapping_, std::min(args_.order, 2u));
+    data_out.write_vtu_with_pvtu_record(dir + "/", "solution", counter, comm_, 4);
+  }
+
+  void check(const ldimesh::Status& s, const char* what) const {
+    if (!s) std::cerr << "ldimesh-dealii: " << what << ": " << s.message() << std::endl;
+  }
+
+ private:
+  static constexpr double kKappa = 0.02, kTimeStep = 0.005;
+
+  // M and M + dt κ K.
+  void assemble() {
+    const QGaussSimplex<dim> quadrature(fe_.degree + 1);
+    FEValues<dim> fv(mapping_, fe_, quadrature,
+                     update_values | update_gradients | update_JxW_values);
+    const unsigned int n = fe_.n_dofs_per_cell();
+    FullMatrix<double> mass(n, n), system(n, n);
+    std::vector<types::global_dof_index> indices(n);
+    for (const auto& cell : dof_handler_.active_cell_iterators()) {
+      if (!cell->is_locally_owned()) continue;
+      fv.reinit(cell);
+      mass = 0.0;
+      system = 0.0;
+      for (unsigned int q = 0; q < quadrature.size(); ++q)
+        for (unsigned int i = 0; i < n; ++i)
+          for (unsigned int j = 0; j < n; ++j) {
+            const double m = fv.shape_value(i, q) * fv.shape_value(j, q) * fv.JxW(q);
+            mass(i, j) += m;
+            system(i, j) +=
+                m + kTimeStep * kKappa * (fv.shape_grad(i, q) * fv.shape_grad(j, q)) * fv.JxW(q);
+          }
+      cell->get_dof_indices(indices);
+      mass_.add(indices, mass);
+      system_.add(indices, system);
+    }
+    mass_.compress(VectorOperation::add);
+    system_.compress(VectorOperation::add);
+  }
+
+  Args args_;
+  MPI_Comm comm_;
+  parallel::fullydistributed::Triangulation<dim> triangulation_;
+  FE_SimplexP<dim> fe_;
+  MappingFE<dim> mapping_;
+  DoFHandler<dim> dof_handler_;
+  TrilinosWrappers::SparseMatrix mass_, system_;
+  TrilinosWrappers::MPI::Vector solution_, ghosted_, rhs_;
+  double time_ = 0.0;
+  std::vector<double> points_, nodal_;
+  ConditionalOStream out_;
+};
+
+// The time loop of either solver.
+template <class Solver>
+void run(Solver& solver, const Args& args, ldimesh::Adaptor& adaptor) {
+  solver.setup();
+  solver.check(adaptor.set_domain({{-1.0, -1.0, -1.0}, {1.0, 1.0, 1.0}}), "set_domain");
+  for (unsigned long step = 0; step <= args.steps; ++step) {
+    if (step % args.output_every == 0) {
+      solver.hand_over(adaptor);
+      solver.check(adaptor.execute(step, solver.time()), "execute");
+      if (!args.vtu_dir.empty()) solver.write_vtu(args.vtu_dir, unsigned(step / args.output_every));
+    }
+    if (step < args.steps) solver.advance();
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -364,17 +566,12 @@ int main(int argc, char** argv) {
       std::error_code ec;
       std::filesystem::create_directories(args.vtu_dir, ec);
     }
-    HeatSolver solver(args, comm);
-    solver.setup();
-    solver.check(adaptor->set_domain({{-1.0, -1.0, -1.0}, {1.0, 1.0, 1.0}}), "set_domain");
-    for (unsigned long step = 0; step <= args.steps; ++step) {
-      if (step % args.output_every == 0) {
-        solver.hand_over(*adaptor);
-        solver.check(adaptor->execute(step, solver.time()), "execute");
-        if (!args.vtu_dir.empty())
-          solver.write_vtu(args.vtu_dir, unsigned(step / args.output_every));
-      }
-      if (step < args.steps) solver.advance();
+    if (args.cells == "tet") {
+      SimplexHeatSolver solver(args, comm);
+      run(solver, args, *adaptor);
+    } else {
+      HeatSolver solver(args, comm);
+      run(solver, args, *adaptor);
     }
   } catch (const std::exception& e) {
     // Possibly on this rank alone (a file it cannot write): the others may wait in a collective

@@ -77,6 +77,57 @@ sys.exit(0 if d["mean"] < 1e-3 and d["max"] < 5e-3 else 1)
 PY
 fi
 
+# --cells tet: the same equation on tetrahedra (FE_SimplexP(2), a fully distributed
+# triangulation of the shell's hexahedra split into tetrahedra), 2 ranks, from u = |x|², which
+# P2 holds exactly on straight tetrahedra: the adaptor's cell blocks publish the sphere r = 0.75
+# (to the GLB's quantization), and deal.II's own VTU of it (VTK_QUADRATIC_TETRA) meshed by
+# ldimesh mesh --vtu lies on the sphere to float rounding.
+opts=$(options "$tmp/tet")
+if ! timeout 300 "${mpirun[@]}" -n 2 "$app" --cells tet --initial radius --order 2 --steps 10 \
+  --output-every 10 --options "$opts" --vtu "$tmp/tet-vtu" >"$tmp/tet.log" 2>&1; then
+  cat "$tmp/tet.log"
+  fail "ldimesh-dealii --cells tet on 2 ranks"
+fi
+grep -q "1152 tetrahedra of FE_SimplexP(2)" "$tmp/tet.log" || { cat "$tmp/tet.log"; fail "the tetrahedral shell"; }
+[ -s "$tmp/tet/step_000000.glb" ] || fail "--cells tet: step 0 was not written"
+"$ldimesh" distance "$tmp/tet/step_000000.glb" --surface sphere --iso 0.5625 --json \
+  >"$tmp/tet-distance.json" || fail "ldimesh distance on the tetrahedra's step 0"
+python3 - "$tmp/tet-distance.json" "$tmp/tet/step_000000.json" <<'PY' || fail "the tetrahedra's step 0 is not on the sphere |x| = 0.75"
+import json, sys
+d = json.load(open(sys.argv[1]))["forward"]
+text = open(sys.argv[2]).read()
+print(f"--cells tet, step 0 against the sphere r = 0.75: mean {d['mean']:.2e}, max {d['max']:.2e}")
+# the hits are exact; the GLB's positions are quantized to a tenth of a pixel (2/64 here at most)
+sys.exit(0 if d["mean"] < 1e-3 and d["max"] < 4e-3 and '"triangles"' in text else 1)
+PY
+if "$ldimesh" mesh --help | grep -q -- "--vtu"; then
+  /usr/bin/python3 - "$tmp/tet-vtu/solution_0000.pvtu" <<'PY' || fail "VTK does not read deal.II's simplex VTU as quadratic tetrahedra"
+import sys
+from vtkmodules.vtkIOXML import vtkXMLPUnstructuredGridReader
+reader = vtkXMLPUnstructuredGridReader()
+reader.SetFileName(sys.argv[1])
+reader.Update()
+grid = reader.GetOutput()
+types = {grid.GetCellType(c) for c in range(grid.GetNumberOfCells())}
+print(f"deal.II's simplex VTU: {grid.GetNumberOfCells()} cells, types {types}")
+sys.exit(0 if grid.GetNumberOfCells() == 1152 and types == {24} else 1)
+PY
+  "$ldimesh" mesh --vtu "$tmp/tet-vtu/solution_0000.pvtu" --field u --iso 0.5625 --res 128 \
+    --lossless --merge --out "$tmp/tet-vtu.ply" >"$tmp/tet-vtu.log" 2>&1 ||
+    { cat "$tmp/tet-vtu.log"; fail "ldimesh mesh --vtu on deal.II's simplex .pvtu"; }
+  python3 - "$tmp/tet-vtu.ply" <<'PY' || fail "the mesh of deal.II's simplex VTU is not the closed sphere"
+import math, struct, sys
+data = open(sys.argv[1], "rb").read()
+header, body = data.split(b"end_header\n", 1)
+lines = header.decode().splitlines()
+n = int(next(l for l in lines if l.startswith("element vertex")).split()[2])
+worst = max(abs(math.sqrt(sum(c * c for c in struct.unpack_from("<3f", body, 24 * v))) - 0.75)
+            for v in range(n))
+print(f"ldimesh mesh --vtu of deal.II's quadratic tetrahedra: {n} vertices, largest | |x| - 0.75 | {worst:.1e}")
+sys.exit(0 if n > 10000 and worst < 1e-6 else 1)
+PY
+fi
+
 # The default run: two heat blobs, 3 ranks.
 opts=$(options "$tmp/blobs")
 if ! timeout 300 "${mpirun[@]}" -n 3 "$app" --order 3 --steps 30 --output-every 10 --options "$opts" \

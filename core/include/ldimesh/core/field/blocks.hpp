@@ -6,6 +6,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <vector>
 
 #include <glm/glm.hpp>
 
@@ -138,8 +139,13 @@ inline std::size_t cell_nodes(CellType type, int order) {
   return 0;
 }
 
-// A name for messages ("tetrahedron"; defined in the core library, cell_source.hpp's).
+// A name for messages ("tetrahedron"; defined in the core library, as cell_source.hpp's
+// functions).
 const char* cell_type_name(CellType type);
+// The nodes' reference (VTK parametric) coordinates, in the type's node order: where a solver
+// evaluates its cell's geometry and field to fill a CellBlock. Throws std::invalid_argument for
+// an order the type does not have.
+std::vector<glm::dvec3> cell_reference_nodes(CellType type, int order);
 
 // One block of cells of one type and order, described by pointers into the caller's arrays.
 // Geometry and field have the same nodes (isoparametric, as files and most solvers give them):

@@ -38,9 +38,6 @@ int max_cell_order(CellType type);
 // Nodes per cell of `type` and order `order`; throws std::invalid_argument for an order the type
 // does not have (1..max_cell_order; the serendipity types only 2).
 std::size_t cell_node_count(CellType type, int order);
-// The nodes' reference (VTK parametric) coordinates, in the type's node order; throws as
-// cell_node_count.
-std::vector<glm::dvec3> cell_reference_nodes(CellType type, int order);
 // The values at `reference` of the cell's nodal basis (Lagrange) functions, one per node in the
 // node order: the cell's field there is Σ values[i] · nodal[i]. Throws as cell_node_count.
 std::vector<double> cell_shape_functions(CellType type, int order, glm::dvec3 reference);
