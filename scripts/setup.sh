@@ -17,6 +17,7 @@ packages=(
   libopenmpi-dev openmpi-bin    # the distributed pipeline
   libgtest-dev                  # tests
   libdeal.ii-dev                # the deal.II mini-app (miniapps/dealii: a real FEM library)
+  libgmsh-dev                   # gmsh's library: the tests' oracle for gmsh's node orders
   libvtk9-dev                   # ldimesh mesh --vtu: VTK's XML readers
   python3-vtk9 python3-numpy    # VTK writes and reads the tests' high-order VTU files
   clang libclang-rt-14-dev      # libFuzzer target for the fragment decoder

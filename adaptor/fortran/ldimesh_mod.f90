@@ -34,6 +34,7 @@ module ldimesh_mod
   integer(c_int), parameter, public :: LDIMESH_CELL_HEXAHEDRON = 0, LDIMESH_CELL_HEXAHEDRON20 = 1, &
                                        LDIMESH_CELL_TETRAHEDRON = 2, LDIMESH_CELL_WEDGE = 3, &
                                        LDIMESH_CELL_WEDGE15 = 4, LDIMESH_CELL_PYRAMID = 5
+  integer(c_int), parameter, public :: LDIMESH_CELL_ORDER_VTK = 0, LDIMESH_CELL_ORDER_GMSH = 1
 
   ! ldimesh_grid_block of ldimesh.h, field by field (x is the first index, as in Fortran).
   type, bind(C), public :: ldimesh_grid_block
@@ -76,6 +77,7 @@ module ldimesh_mod
     integer(c_int64_t) :: value_count = 0
     integer(c_int) :: type = LDIMESH_FLOAT64
     integer(c_int64_t) :: element_stride = 0
+    integer(c_int) :: node_order = 0  ! LDIMESH_CELL_ORDER_VTK or LDIMESH_CELL_ORDER_GMSH
   end type ldimesh_cell_block
 
   ! ldimesh_step_report of ldimesh.h.
@@ -337,13 +339,15 @@ contains
     ierr = c_add_cell_block(adaptor%handle, block)
   end subroutine ldimesh_add_cell_block
 
-  ! Cells of type `cell_type` (LDIMESH_CELL_*) and order `order`, VTK's node order: points(:, i, e)
-  ! is node i of cell e, values(i, e) its value (the C API checks the counts against the type).
-  subroutine ldimesh_add_cells(adaptor, cell_type, order, points, values, ierr)
+  ! Cells of type `cell_type` (LDIMESH_CELL_*) and order `order`: points(:, i, e) is node i of
+  ! cell e, values(i, e) its value, in VTK's node order or, with node_order =
+  ! LDIMESH_CELL_ORDER_GMSH, gmsh's.
+  subroutine ldimesh_add_cells(adaptor, cell_type, order, points, values, ierr, node_order)
     type(ldimesh_adaptor), intent(in) :: adaptor
     integer, intent(in) :: cell_type, order
     real(c_double), intent(in), target, contiguous :: points(:, :, :), values(:, :)
     integer, intent(out) :: ierr
+    integer, intent(in), optional :: node_order
     type(ldimesh_cell_block) :: block
     integer :: nodes
     select case (cell_type)
@@ -374,6 +378,7 @@ contains
     block%point_count = size(points, kind=c_int64_t)
     if (size(values) > 0) block%values = c_loc(values)
     block%value_count = size(values, kind=c_int64_t)
+    if (present(node_order)) block%node_order = int(node_order, c_int)
     ierr = c_add_cell_block(adaptor%handle, block)
   end subroutine ldimesh_add_cells
 

@@ -137,7 +137,13 @@ typedef struct ldimesh_cell_block {
   int64_t value_count;    /* values the array holds */
   int type;               /* LDIMESH_FLOAT32 or LDIMESH_FLOAT64 */
   int64_t element_stride; /* values between cells; 0: the node count */
+  int node_order;         /* LDIMESH_CELL_ORDER_VTK (default) or LDIMESH_CELL_ORDER_GMSH: of the
+                             points and values within a cell (gmsh: tetrahedra of order 1-3,
+                             prisms of 6, 15, 18 nodes, pyramids of 5, 13, hexahedra of 8, 20, 27) */
 } ldimesh_cell_block;
+
+/* ldimesh_cell_block.node_order */
+enum { LDIMESH_CELL_ORDER_VTK = 0, LDIMESH_CELL_ORDER_GMSH = 1 };
 
 /* What the last ldimesh_execute did on this rank. */
 typedef struct ldimesh_step_report {

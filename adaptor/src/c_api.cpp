@@ -340,6 +340,10 @@ int ldimesh_add_cell_block(ldimesh_adaptor* a, const ldimesh_cell_block* b) {
     return fail(a, LDIMESH_ERROR_ARGUMENT,
                 what + "the point array holds " + std::to_string(b->point_count) +
                     " doubles, the cells read " + std::to_string(doubles));
+  if (b->node_order != LDIMESH_CELL_ORDER_VTK && b->node_order != LDIMESH_CELL_ORDER_GMSH)
+    return fail(a, LDIMESH_ERROR_ARGUMENT, what + "node_order must be LDIMESH_CELL_ORDER_*");
+  c.node_order = b->node_order == LDIMESH_CELL_ORDER_GMSH ? ldimesh::CellNodeOrder::gmsh
+                                                          : ldimesh::CellNodeOrder::vtk;
   c.order = b->order;
   c.element_count = std::size_t(b->element_count);
   c.points = b->points;

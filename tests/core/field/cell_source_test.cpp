@@ -463,6 +463,46 @@ TEST(CellSource, RootsOfRandomCurvedCellsMatchADenseScan) {
   }
 }
 
+TEST(CellSource, GmshOrderedCellsGiveTheSameHitsAsVtkOrderedOnes) {
+  // The same curved cells with their points and values in gmsh's order: the same LDI.
+  const auto bend = [](glm::dvec3 x) {
+    return x + 0.06 * glm::dvec3(std::sin(2.0 * x.y), std::cos(1.3 * x.z), std::sin(x.x + 0.4)) *
+                   (1.0 - x.x * x.x) * (1.0 - x.y * x.y) * (1.0 - x.z * x.z);
+  };
+  struct Case {
+    CellType type;
+    int order;
+  };
+  for (const Case c : {Case{CellType::tetrahedron, 2}, Case{CellType::tetrahedron, 3},
+                       Case{CellType::wedge, 2}, Case{CellType::serendipity_wedge, 2},
+                       Case{CellType::pyramid, 2}, Case{CellType::serendipity_hexahedron, 2},
+                       Case{CellType::hexahedron, 2}}) {
+    SCOPED_TRACE(describe(c.type, c.order));
+    const Cells vtk = grid_cells(c.type, c.order, 2, -1.0, 1.0, r2, bend);
+    const std::vector<int> from = cell_gmsh_permutation(c.type, c.order);
+    ASSERT_EQ(from.size(), cell_node_count(c.type, c.order));
+    Cells gmsh = vtk;
+    const std::size_t n = from.size();
+    for (std::size_t e = 0; e < vtk.count; ++e)
+      for (std::size_t i = 0; i < n; ++i) {
+        gmsh.values[e * n + std::size_t(from[i])] = vtk.values[e * n + i];
+        for (int a = 0; a < 3; ++a)
+          gmsh.points[3 * (e * n + std::size_t(from[i])) + a] = vtk.points[3 * (e * n + i) + a];
+      }
+    ASSERT_NE(gmsh.values, vtk.values);
+    CellBlock b = gmsh.block();
+    b.node_order = CellNodeOrder::gmsh;
+    const CellElementSource a(vtk.block()), g(b);
+    const RayCaster ca(a, 0.6), cg(g, 0.6);
+    EXPECT_GT(testing::expect_same_casts(ca, cg, testing::axis_and_oblique_views(a.bounds(), 24)),
+              200u);
+  }
+  Cells cells = grid_cells(CellType::tetrahedron, 4, 1, 0.0, 1.0, r2);
+  CellBlock b = cells.block();
+  b.node_order = CellNodeOrder::gmsh;
+  EXPECT_THROW(CellElementSource{b}, std::invalid_argument);
+}
+
 TEST(CellSource, InvalidBlocksAreRejected) {
   Cells cells = grid_cells(CellType::tetrahedron, 2, 1, 0.0, 1.0, r2);
   const auto throws = [](const CellBlock& b, const std::string& text) {

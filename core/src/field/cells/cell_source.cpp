@@ -123,6 +123,17 @@ CellElementSource::CellElementSource(const CellBlock& block) : block_(block) {
   if (block.element_count == 0) throw std::invalid_argument(what + ": no cells");
   if (!block.points) throw std::invalid_argument(what + ": null point array");
   check_values(what);
+  if (block.node_order == CellNodeOrder::gmsh) {
+    from_ = cell_gmsh_permutation(block.type, block.order);
+    if (from_.empty())
+      throw std::invalid_argument(what + " of order " + std::to_string(block.order) +
+                                  ": gmsh's node order is not taken for them (VTK's is)");
+  } else if (block.node_order != CellNodeOrder::vtk) {
+    throw std::invalid_argument(what + ": unknown node order");
+  } else {
+    for (std::size_t i = 0; i < nodes_; ++i)
+      from_.push_back(int(i));
+  }
 
   // The sub-hexahedra's lattice points, cell after cell.
   const std::size_t lattice = std::size_t(degree_ + 1) * (degree_ + 1) * (degree_ + 1);
@@ -138,7 +149,7 @@ CellElementSource::CellElementSource(const CellBlock& block) : block_(block) {
                                     " has a non-finite point");
     for (int axis = 0; axis < 3; ++axis) {
       for (std::size_t i = 0; i < nodes_; ++i)
-        nodal[i] = p[3 * i + axis];
+        nodal[i] = p[3 * from_[i] + axis];
       apply(cell.sampling.data(), rows, nodes_, nodal.data(), out.data());
       for (std::size_t r = 0; r < rows; ++r)
         geometry_[3 * (e * rows + r) + axis] = out[r];
@@ -181,12 +192,15 @@ CellElementSource::CellElementSource(const CellElementSource& prepared, const Ce
       nodes_(prepared.nodes_),
       sub_per_cell_(prepared.sub_per_cell_),
       degree_(prepared.degree_),
+      from_(prepared.from_),
       prepared_(prepared.prepared_) {
   const CellBlock& p = prepared.block_;
   const std::string what = std::string("cell source: ") + cell_type_name(p.type) + "s";
-  if (block.type != p.type || block.order != p.order || block.element_count != p.element_count)
-    throw std::invalid_argument(
-        what + ": the block's layout (type, order, cell count) differs from the prepared source's");
+  if (block.type != p.type || block.order != p.order || block.element_count != p.element_count ||
+      block.node_order != p.node_order)
+    throw std::invalid_argument(what +
+                                ": the block's layout (type, order, cell count, node order) "
+                                "differs from the prepared source's");
   check_values(what);
 }
 
@@ -209,7 +223,7 @@ CellElementSource::Counted CellElementSource::convert(bool colour) const {
           std::uint64_t nonfinite = 0;
           for (std::size_t e = range.begin(); e != range.end(); ++e) {
             for (std::size_t i = 0; i < nodes_; ++i) {
-              nodal[i] = read_value(values, type, e * block_.element_stride + i);
+              nodal[i] = read_value(values, type, e * block_.element_stride + from_[i]);
               nonfinite += !std::isfinite(nodal[i]);
             }
             apply(cell.sampling.data(), rows, nodes_, nodal.data(), to.data() + e * rows);

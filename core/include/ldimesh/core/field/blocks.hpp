@@ -147,6 +147,12 @@ const char* cell_type_name(CellType type);
 // an order the type does not have.
 std::vector<glm::dvec3> cell_reference_nodes(CellType type, int order);
 
+// Where a cell's nodes lie in the caller's arrays: VTK's numbering (every type and order), or
+// gmsh's (its tetrahedra of order 1–3 — gmsh types 4, 11, 29 —, prisms of 6, 15 and 18 nodes —
+// 6, 18, 13 —, pyramids of 5 and 13 nodes — 7, 19 —, hexahedra of 8, 20 and 27 nodes — 5, 17,
+// 12; a 13-node pyramid has VTK's shape functions either way).
+enum class CellNodeOrder : std::uint8_t { vtk, gmsh };
+
 // One block of cells of one type and order, described by pointers into the caller's arrays.
 // Geometry and field have the same nodes (isoparametric, as files and most solvers give them):
 // cell e's node i sits at points[3·(e·node_count + i) + (0, 1, 2)] and has value
@@ -162,6 +168,8 @@ struct CellBlock {
   // Optional: a second field in the layout of `values` to colour the isosurface by.
   const void* colour = nullptr;
   ScalarType colour_type = ScalarType::float64;
+  // The order of the nodes within a cell, for the points and the values alike.
+  CellNodeOrder node_order = CellNodeOrder::vtk;
 };
 
 }  // namespace ldimesh

@@ -38,6 +38,10 @@ int max_cell_order(CellType type);
 // Nodes per cell of `type` and order `order`; throws std::invalid_argument for an order the type
 // does not have (1..max_cell_order; the serendipity types only 2).
 std::size_t cell_node_count(CellType type, int order);
+// gmsh's numbering of the cells of `type` and `order` (CellNodeOrder::gmsh): VTK's node i is
+// gmsh's node permutation[i]. Empty where gmsh's order is not taken for that type and order.
+std::vector<int> cell_gmsh_permutation(CellType type, int order);
+
 // The values at `reference` of the cell's nodal basis (Lagrange) functions, one per node in the
 // node order: the cell's field there is Σ values[i] · nodal[i]. Throws as cell_node_count.
 std::vector<double> cell_shape_functions(CellType type, int order, glm::dvec3 reference);
@@ -89,6 +93,7 @@ class CellElementSource final : public FieldSource {
   std::size_t nodes_ = 0;
   int sub_per_cell_ = 1;
   int degree_ = 1;  // per axis on a sub-hexahedron
+  std::vector<int> from_;  // VTK's node i is the block's node from_[i] within a cell
   // Per sub-hexahedron: (degree + 1)³ rows × nodes: the sub-hexahedron's equispaced lattice
   // values from the cell's nodal values.
   std::shared_ptr<const std::vector<double>> sampling_;
