@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The command line over MPI: 2, 3 and 4 ranks write the same mesh (byte for byte) as one process,
-# for an analytic surface and for a raw volume split into grid blocks, coloured by a second
-# volume or not, refined (§4) or not.
+# for an analytic surface, for a raw volume split into grid blocks, coloured by a second volume
+# or not, refined (§4) or not, and for a VTU file of mixed cells.
 set -u
 ldimesh=$1
 mpiexec=$2
@@ -99,6 +99,27 @@ PY
 "$mpiexec" -n 3 --oversubscribe "$ldimesh" mesh --surface marschner-lobb --res 32 --refine 1 --no-grow \
   --out "$tmp/ng.ply" >"$tmp/ng.log" || fail "refine --no-grow: 3 ranks"
 grep -q '^  refine ' "$tmp/ng.log" || fail "refine: no 'refine' line in the summary"
+
+# Cells of every shape from a VTK-written file (tests/cli/make_vtu.py cells: quadratic hexahedra,
+# tetrahedra, wedges, pyramids): 1 to 4 ranks, and 1 or 2 threads, write the same mesh, merged or
+# not (VTK's Python module writes the file, as for cli.vtu).
+if "$ldimesh" mesh --help | grep -q -- "--vtu" &&
+  /usr/bin/python3 "$(dirname "$0")/../cli/make_vtu.py" cells "$tmp/cells.vtu"; then
+  for merge in "" --merge; do
+    "$ldimesh" mesh --vtu "$tmp/cells.vtu" --field r --iso 0.49 --res 64 $merge --threads 1 \
+      --out "$tmp/cells1.ply" >/dev/null || fail "cells $merge: one process, one thread"
+    "$ldimesh" mesh --vtu "$tmp/cells.vtu" --field r --iso 0.49 --res 64 $merge --threads 2 \
+      --out "$tmp/cells1t2.ply" >/dev/null || fail "cells $merge: one process, two threads"
+    cmp -s "$tmp/cells1.ply" "$tmp/cells1t2.ply" || fail "cells $merge: two threads wrote a different mesh"
+    for n in 2 3 4; do
+      "$mpiexec" -n "$n" --oversubscribe "$ldimesh" mesh --vtu "$tmp/cells.vtu" --field r --iso 0.49 \
+        --res 64 $merge --out "$tmp/cells$n.ply" >/dev/null || fail "cells $merge: $n ranks"
+      cmp -s "$tmp/cells1.ply" "$tmp/cells$n.ply" || fail "cells $merge: $n ranks wrote a different mesh"
+    done
+  done
+else
+  fail "cells: no VTU support or make_vtu.py failed"
+fi
 
 # An error on every rank is reported once, with a non-zero exit.
 "$mpiexec" -n 2 --oversubscribe "$ldimesh" mesh --surface teapot >"$tmp/out" 2>"$tmp/err"
