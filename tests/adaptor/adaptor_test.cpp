@@ -1221,11 +1221,13 @@ TEST(Adaptor, CellBlocksOfEveryShapePublishTheSameMeshOnBothPaths) {
   const int n = 3;
   const glm::dvec3 c(0.5);
   struct Cells {
-    CellType type;
+    CellType type = CellType::tetrahedron;
     std::vector<double> points, values, z;
     std::size_t count = 0;
   };
-  Cells tets{CellType::tetrahedron}, wedges{CellType::wedge};
+  Cells tets, wedges;
+  tets.type = CellType::tetrahedron;
+  wedges.type = CellType::wedge;
   const auto add = [&](Cells& cells, const std::vector<glm::dvec3>& corners) {
     const CellType linear = cells.type;
     for (const glm::dvec3& r : cell_reference_nodes(cells.type, 2)) {

@@ -503,6 +503,85 @@ TEST(CellSource, GmshOrderedCellsGiveTheSameHitsAsVtkOrderedOnes) {
   EXPECT_THROW(CellElementSource{b}, std::invalid_argument);
 }
 
+TEST(CellSource, LinearTetrahedraAreCastDirectlyWithTheSameHitsEverywhere) {
+  // VTK_TETRA cells take their own caster (the plane of the linear field in each tetrahedron):
+  // its axis and Embree paths give the same bits; the hits of a linear field are those of the
+  // same field on quadratic tetrahedra (the sub-hexahedra's curved search), to rounding.
+  const Field field = [](glm::dvec3 x) { return 0.9 * x.x + 0.35 * x.y - 0.2 * x.z; };
+  const Cells linear = grid_cells(CellType::tetrahedron, 1, 3, -1.0, 1.0, field);
+  const Cells quadratic = grid_cells(CellType::tetrahedron, 2, 3, -1.0, 1.0, field);
+  const CellElementSource a(linear.block()), b(quadratic.block());
+  const RayCaster axis(a, 0.1), embree(a, 0.1, RayCasterOptions{CastPath::embree}), other(b, 0.1);
+  const std::vector<View> views = testing::axis_and_oblique_views(a.bounds(), 32);
+  EXPECT_GT(testing::expect_same_casts(axis, embree, make_axis_views(a.bounds(), 32)), 1000u);
+  for (const View& view : views) {
+    const Ldi la = axis.cast(view), lb = other.cast(view);
+    ASSERT_EQ(la.offsets, lb.offsets);
+    for (std::size_t k = 0; k < la.sample_count(); ++k) {
+      EXPECT_NEAR(la.depth[k], lb.depth[k], 1e-6);
+      EXPECT_NEAR(glm::length(la.normal[k] - lb.normal[k]), 0.0, 1e-5);
+    }
+  }
+  // |x|² at the vertices (piecewise linear): the two casters still agree bit for bit, and the
+  // colour field (x, read through the sub-hexahedra built on demand) is x at every hit.
+  Cells sphere = grid_cells(CellType::tetrahedron, 1, 4, -1.25, 1.25, r2);
+  std::vector<double> colour;
+  for (std::size_t i = 0; i < sphere.points.size(); i += 3)
+    colour.push_back(sphere.points[i]);
+  CellBlock coloured = sphere.block();
+  coloured.colour = colour.data();
+  const CellElementSource s(coloured);
+  RayCasterOptions with_scalars;
+  with_scalars.scalars = true;
+  const RayCaster sa(s, 1.0, with_scalars);
+  RayCasterOptions embree_scalars = with_scalars;
+  embree_scalars.path = CastPath::embree;
+  const RayCaster se(s, 1.0, embree_scalars);
+  EXPECT_GT(testing::expect_same_casts(sa, se, make_axis_views(s.bounds(), 32)), 1000u);
+  const Ldi ldi = sa.cast(make_axis_views(s.bounds(), 32, "z")[0]);
+  ASSERT_EQ(ldi.scalar.size(), ldi.sample_count());
+  for (std::size_t p = 0; p < ldi.pixel_count(); ++p)
+    for (std::uint32_t k = ldi.begin(p); k < ldi.end(p); ++k) {
+      const int i = int(p % std::size_t(ldi.view.width)), j = int(p / std::size_t(ldi.view.width));
+      EXPECT_NEAR(ldi.scalar[k], ldi.view.pixel_point(i, j, ldi.depth[k]).x, 1e-5);
+    }
+}
+
+TEST(CellSource, RaysAlongSharedEdgesAndThroughVerticesOfTetrahedraHitOnce) {
+  // Kuhn tetrahedra of unit cubes over [0, 4]³; axis views whose pixel rays run along the cubes'
+  // edges and through their vertices (the tetrahedra's shared edges and vertices); a linear field
+  // whose plane crosses every such ray once inside the box: one hit per ray, at the plane.
+  const Field field = [](glm::dvec3 x) { return x.x + 0.37 * x.y + 0.21 * x.z; };
+  for (const int order : {1, 2}) {
+    SCOPED_TRACE("order " + std::to_string(order));
+    const Cells cells = grid_cells(CellType::tetrahedron, order, 4, 0.0, 4.0, field);
+    const CellElementSource source(cells.block());
+    const double iso = 2.3;
+    const RayCaster caster(source, iso);
+    const Box box{glm::dvec3(-0.5), glm::dvec3(4.5)};  // pixel centres at 0, 1, …, 4
+    int rays = 0;
+    for (const View& view : make_axis_views(box, 5)) {
+      const Ldi ldi = caster.cast(view);
+      for (int j = 0; j < view.height; ++j)
+        for (int i = 0; i < view.width; ++i) {
+          const glm::dvec3 o = view.pixel_point(i, j, 0.0);
+          const int axis = exact_axis(view.dir);
+          glm::dvec3 g(1.0, 0.37, 0.21);
+          const double t = (iso - glm::dot(g, o)) / glm::dot(g, view.dir);
+          const glm::dvec3 x = o + t * view.dir;
+          const bool inside = x[axis] > 1e-9 && x[axis] < 4.0 - 1e-9;
+          const std::size_t p = std::size_t(j) * view.width + i;
+          ASSERT_EQ(ldi.count(p), inside ? 1u : 0u) << "pixel " << i << "," << j;
+          if (inside) {
+            EXPECT_NEAR(ldi.depth[ldi.begin(p)], t, 1e-6);  // float depths
+          }
+          rays += inside;
+        }
+    }
+    EXPECT_GT(rays, 30);
+  }
+}
+
 TEST(CellSource, InvalidBlocksAreRejected) {
   Cells cells = grid_cells(CellType::tetrahedron, 2, 1, 0.0, 1.0, r2);
   const auto throws = [](const CellBlock& b, const std::string& text) {

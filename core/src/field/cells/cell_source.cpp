@@ -4,12 +4,15 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <limits>
+#include <mutex>
 #include <stdexcept>
 #include <string>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include "linear_tets.hpp"
 #include "reference_cells.hpp"
 
 namespace ldimesh {
@@ -135,30 +138,69 @@ CellElementSource::CellElementSource(const CellBlock& block) : block_(block) {
       from_.push_back(int(i));
   }
 
+  geometry_ = std::make_shared<Geometry>();
+  if (block.type == CellType::tetrahedron && block.order == 1) {
+    // Linear tetrahedra: cast directly (linear_tets.hpp); the sub-hexahedra only where a lookup
+    // or a colour field needs them.
+    std::vector<double>& v = geometry_->tets;
+    v.resize(12 * block.element_count);
+    constexpr double inf = std::numeric_limits<double>::infinity();
+    geometry_->bounds = {glm::dvec3(inf), glm::dvec3(-inf)};
+    for (std::size_t e = 0; e < block.element_count; ++e) {
+      const double* p = block.points + 12 * e;
+      for (int i = 0; i < 4; ++i)
+        for (int a = 0; a < 3; ++a) {
+          const double x = p[3 * from_[i] + a];
+          if (!std::isfinite(x))
+            throw std::invalid_argument(what + ": cell " + std::to_string(e) +
+                                        " has a non-finite point");
+          v[12 * e + 3 * i + a] = x;
+          geometry_->bounds.lo[a] = std::min(geometry_->bounds.lo[a], x);
+          geometry_->bounds.hi[a] = std::max(geometry_->bounds.hi[a], x);
+        }
+      if (!cells::linear_tet_is_valid(&v[12 * e]))
+        throw std::invalid_argument(what + ": cell " + std::to_string(e) +
+                                    " is inverted or degenerate (its Jacobian determinant "
+                                    "vanishes or changes sign)");
+    }
+    return;
+  }
+  std::call_once(geometry_->once, [&] {
+    geometry_->sub_hexahedra = build_sub_hexahedra(block.points, from_);
+  });
+  geometry_->bounds = geometry_->sub_hexahedra->bounds();
+}
+
+std::shared_ptr<const HexElementSource> CellElementSource::build_sub_hexahedra(
+    const double* points, const std::vector<int>& from) const {
+  const cells::ReferenceCell& cell = cells::reference_cell(block_.type, block_.order);
+  const std::string what = std::string("cell source: ") + cell_type_name(block_.type) + "s";
   // The sub-hexahedra's lattice points, cell after cell.
   const std::size_t lattice = std::size_t(degree_ + 1) * (degree_ + 1) * (degree_ + 1);
   const std::size_t rows = lattice * sub_per_cell_;
-  const std::size_t count = block.element_count * sub_per_cell_;
-  geometry_.resize(3 * rows * block.element_count);
+  const std::size_t count = block_.element_count * sub_per_cell_;
+  std::vector<double> geometry(3 * rows * block_.element_count);
   std::vector<double> nodal(nodes_), out(rows);
-  for (std::size_t e = 0; e < block.element_count; ++e) {
-    const double* p = block.points + 3 * nodes_ * e;
+  for (std::size_t e = 0; e < block_.element_count; ++e) {
+    const double* p = points + 3 * nodes_ * e;
     for (std::size_t i = 0; i < 3 * nodes_; ++i)
       if (!std::isfinite(p[i]))
         throw std::invalid_argument(what + ": cell " + std::to_string(e) +
                                     " has a non-finite point");
     for (int axis = 0; axis < 3; ++axis) {
       for (std::size_t i = 0; i < nodes_; ++i)
-        nodal[i] = p[3 * from_[i] + axis];
+        nodal[i] = p[3 * from[i] + axis];
       apply(cell.sampling.data(), rows, nodes_, nodal.data(), out.data());
       for (std::size_t r = 0; r < rows; ++r)
-        geometry_[3 * (e * rows + r) + axis] = out[r];
+        geometry[3 * (e * rows + r) + axis] = out[r];
     }
   }
-  HexBlock hex = sub_hexahedra_block(count, degree_, geometry_);
-  hex.values = geometry_.data();  // not read by the constructor, which needs a non-null array
+  HexBlock hex = sub_hexahedra_block(count, degree_, geometry);
+  hex.values = geometry.data();  // not read by the constructor, which needs a non-null array
   try {
-    prepared_ = std::make_shared<const HexElementSource>(hex, cell.top_collapsed);
+    // It keeps what it needs of the geometry; the sources made from it do not read the lattice
+    // points (hex_source.hpp), which go with this function.
+    return std::make_shared<const HexElementSource>(hex, cell.top_collapsed);
   } catch (const std::invalid_argument& error) {
     const long sub = named_element(error.what());
     if (sub < 0) throw;
@@ -169,9 +211,16 @@ CellElementSource::CellElementSource(const CellBlock& block) : block_(block) {
                                 " is inverted or degenerate (its Jacobian determinant vanishes "
                                 "or changes sign)");
   }
-  // The prepared source keeps what it needs of the geometry; the sources made from it do not
-  // read the lattice points (hex_source.hpp).
-  geometry_ = {};
+}
+
+const HexElementSource& CellElementSource::sub_hexahedra() const {
+  std::call_once(geometry_->once, [&] {
+    std::vector<int> identity(nodes_);
+    for (std::size_t i = 0; i < nodes_; ++i)
+      identity[i] = int(i);
+    geometry_->sub_hexahedra = build_sub_hexahedra(geometry_->tets.data(), identity);
+  });
+  return *geometry_->sub_hexahedra;
 }
 
 void CellElementSource::check_values(const std::string& what) {
@@ -193,7 +242,7 @@ CellElementSource::CellElementSource(const CellElementSource& prepared, const Ce
       sub_per_cell_(prepared.sub_per_cell_),
       degree_(prepared.degree_),
       from_(prepared.from_),
-      prepared_(prepared.prepared_) {
+      geometry_(prepared.geometry_) {
   const CellBlock& p = prepared.block_;
   const std::string what = std::string("cell source: ") + cell_type_name(p.type) + "s";
   if (block.type != p.type || block.order != p.order || block.element_count != p.element_count ||
@@ -205,7 +254,7 @@ CellElementSource::CellElementSource(const CellElementSource& prepared, const Ce
 }
 
 Box CellElementSource::bounds() const {
-  return prepared_->bounds();
+  return geometry_->bounds;
 }
 
 CellElementSource::Counted CellElementSource::convert(bool colour) const {
@@ -235,10 +284,11 @@ CellElementSource::Counted CellElementSource::convert(bool colour) const {
   Counted result;
   result.nonfinite = fill(block_.values, block_.value_type, snapshot->values);
   if (colour && block_.colour) fill(block_.colour, block_.colour_type, snapshot->colour);
-  HexBlock hex = sub_hexahedra_block(block_.element_count * sub_per_cell_, degree_, geometry_);
+  static const std::vector<double> no_points;  // the prepared source's copies read none
+  HexBlock hex = sub_hexahedra_block(block_.element_count * sub_per_cell_, degree_, no_points);
   hex.values = snapshot->values.data();
   if (!snapshot->colour.empty()) hex.colour = snapshot->colour.data();
-  snapshot->source = std::make_unique<HexElementSource>(*prepared_, hex);
+  snapshot->source = std::make_unique<HexElementSource>(sub_hexahedra(), hex);
   result.snapshot = std::move(snapshot);
   return result;
 }
@@ -247,7 +297,24 @@ std::shared_ptr<const CellElementSource::Snapshot> CellElementSource::snapshot()
   return convert(true).snapshot;
 }
 
+std::vector<cells::LinearTet> CellElementSource::active_tets(double isovalue,
+                                                             std::uint64_t& nonfinite) const {
+  const void* values = block_.values;
+  const ScalarType type = block_.value_type;
+  const std::size_t stride = block_.element_stride;
+  const std::vector<int>& from = from_;
+  return cells::active_linear_tets(
+      geometry_->tets, isovalue,
+      [&](std::size_t e, int i) { return read_value(values, type, e * stride + from[i]); },
+      nonfinite);
+}
+
 std::unique_ptr<GeometryBinding> CellElementSource::bind(RTCDevice device, double isovalue) const {
+  if (!geometry_->tets.empty()) {
+    std::uint64_t nonfinite = 0;
+    std::vector<cells::LinearTet> tets = active_tets(isovalue, nonfinite);
+    return cells::bind_linear_tets(device, std::move(tets), nonfinite);
+  }
   Counted c = convert(false);
   auto inner = c.snapshot->source->bind(device, isovalue);
   return std::make_unique<CellGeometryBinding>(std::move(c.snapshot), std::move(inner),
@@ -255,6 +322,11 @@ std::unique_ptr<GeometryBinding> CellElementSource::bind(RTCDevice device, doubl
 }
 
 std::unique_ptr<AxisBinding> CellElementSource::bind_axis(double isovalue) const {
+  if (!geometry_->tets.empty()) {
+    std::uint64_t nonfinite = 0;
+    std::vector<cells::LinearTet> tets = active_tets(isovalue, nonfinite);
+    return cells::bind_axis_linear_tets(std::move(tets), nonfinite);
+  }
   Counted c = convert(false);
   auto inner = c.snapshot->source->bind_axis(isovalue);
   if (!inner) return nullptr;

@@ -20,6 +20,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <span>
 #include <string>
 #include <vector>
@@ -31,6 +32,9 @@
 #include "ldimesh/core/field/hex_source.hpp"
 
 namespace ldimesh {
+namespace cells {
+struct LinearTet;  // linear_tets.hpp (internal)
+}  // namespace cells
 
 // The highest order a type has (8 for the Lagrange families, 2 for the serendipity ones and the
 // pyramid).
@@ -96,9 +100,20 @@ class CellElementSource final : public FieldSource {
   std::vector<int> from_;  // VTK's node i is the block's node from_[i] within a cell
   // Per sub-hexahedron: (degree + 1)³ rows × nodes: the sub-hexahedron's equispaced lattice
   // values from the cell's nodal values.
-  std::shared_ptr<const std::vector<double>> sampling_;
-  std::vector<double> geometry_;  // the sub-hexahedra's lattice points (constructor only)
-  std::shared_ptr<const HexElementSource> prepared_;  // the geometry, prepared once (shared)
+  // The geometry as prepared, shared by the sources made from one another: the sub-hexahedra
+  // (for linear tetrahedra only when first needed: a lookup, a colour field), the linear
+  // tetrahedra's vertices (12 per cell, VTK's order; empty for other cells), the bounds.
+  struct Geometry {
+    std::once_flag once;
+    std::shared_ptr<const HexElementSource> sub_hexahedra;
+    std::vector<double> tets;
+    Box bounds;
+  };
+  std::shared_ptr<Geometry> geometry_;
+  std::shared_ptr<const HexElementSource> build_sub_hexahedra(const double* points,
+                                                              const std::vector<int>& from) const;
+  const HexElementSource& sub_hexahedra() const;
+  std::vector<cells::LinearTet> active_tets(double isovalue, std::uint64_t& nonfinite) const;
 };
 
 }  // namespace ldimesh

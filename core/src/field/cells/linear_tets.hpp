@@ -1,0 +1,89 @@
+// Linear tetrahedra (VTK_TETRA, P1) cast directly, without sub-hexahedra: the field is linear in
+// a tetrahedron, so a ray meets its isosurface at most once, where the ray crosses the plane
+// f = isovalue inside the tetrahedron. Both casters (Embree for any ray, the axis caster over bins
+// of the tetrahedra across the ray axis) take each hit from one function, so they give the same
+// bits. Internal to CellElementSource (cell_source.hpp).
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "ldimesh/core/field/field_source.hpp"
+
+namespace ldimesh::cells {
+
+// One tetrahedron with its field minus the isovalue: f(x) = f0 + g·(x − v0), and the map from
+// x − v0 to its barycentric coordinates λ₁, λ₂, λ₃ (λ₀ = 1 − Σ).
+struct LinearTet {
+  glm::dvec3 v0{0.0};
+  glm::dmat3 to_barycentric{1.0};
+  glm::dvec3 g{0.0};
+  double f0 = 0.0;
+  glm::dvec3 lo{0.0}, hi{0.0};
+};
+
+// The tetrahedra whose values straddle `isovalue` (a value equal to it counts), from the cells'
+// 4 vertices (12 doubles each, VTK's order) and their 4 values each (`values(e, i)`); the cells
+// with a non-finite value are left out and their non-finite values counted in `nonfinite`.
+template <class Values>
+std::vector<LinearTet> active_linear_tets(std::span<const double> vertices, double isovalue,
+                                          Values values, std::uint64_t& nonfinite);
+
+// The Embree and axis bindings over the active tetrahedra.
+std::unique_ptr<GeometryBinding> bind_linear_tets(RTCDevice device, std::vector<LinearTet> tets,
+                                                  std::uint64_t nonfinite);
+std::unique_ptr<AxisBinding> bind_axis_linear_tets(std::vector<LinearTet> tets,
+                                                   std::uint64_t nonfinite);
+
+// Whether the 4 vertices (12 doubles) make a tetrahedron of non-zero volume (relative to its
+// edges' lengths).
+bool linear_tet_is_valid(const double* vertices);
+
+// ---------------------------------------------------------------------------------------------
+
+template <class Values>
+std::vector<LinearTet> active_linear_tets(std::span<const double> vertices, double isovalue,
+                                          Values values, std::uint64_t& nonfinite) {
+  std::vector<LinearTet> out;
+  nonfinite = 0;
+  const std::size_t cells = vertices.size() / 12;
+  for (std::size_t e = 0; e < cells; ++e) {
+    double f[4];
+    int bad = 0;
+    for (int i = 0; i < 4; ++i) {
+      f[i] = values(e, i);
+      bad += !std::isfinite(f[i]);
+    }
+    if (bad > 0) {
+      nonfinite += std::uint64_t(bad);
+      continue;
+    }
+    const double lo = std::min(std::min(f[0], f[1]), std::min(f[2], f[3]));
+    const double hi = std::max(std::max(f[0], f[1]), std::max(f[2], f[3]));
+    if (!(lo <= isovalue && isovalue <= hi) || lo == hi) continue;
+    const double* v = vertices.data() + 12 * e;
+    LinearTet t;
+    t.v0 = glm::dvec3(v[0], v[1], v[2]);
+    glm::dmat3 edges;  // columns: v_i − v0
+    for (int i = 1; i < 4; ++i)
+      edges[i - 1] = glm::dvec3(v[3 * i], v[3 * i + 1], v[3 * i + 2]) - t.v0;
+    t.to_barycentric = glm::inverse(edges);
+    // ∇f = (∂λ/∂x)ᵀ (f_i − f_0): the rows of to_barycentric are ∇λ_i.
+    t.g = glm::transpose(t.to_barycentric) *
+          glm::dvec3(f[1] - f[0], f[2] - f[0], f[3] - f[0]);
+    t.f0 = f[0] - isovalue;
+    t.lo = t.hi = t.v0;
+    for (int i = 1; i < 4; ++i) {
+      const glm::dvec3 p(v[3 * i], v[3 * i + 1], v[3 * i + 2]);
+      t.lo = glm::min(t.lo, p), t.hi = glm::max(t.hi, p);
+    }
+    out.push_back(t);
+  }
+  return out;
+}
+
+}  // namespace ldimesh::cells
