@@ -5,12 +5,15 @@
 // bits. Internal to CellElementSource (cell_source.hpp).
 #pragma once
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <memory>
 #include <span>
 #include <vector>
 
 #include <glm/glm.hpp>
+#include <tbb/parallel_for.h>
 
 #include "ldimesh/core/field/field_source.hpp"
 
@@ -48,40 +51,51 @@ bool linear_tet_is_valid(const double* vertices);
 template <class Values>
 std::vector<LinearTet> active_linear_tets(std::span<const double> vertices, double isovalue,
                                           Values values, std::uint64_t& nonfinite) {
+  // In chunks of cells on all cores, joined in chunk order: the same list for any thread count.
+  constexpr std::size_t kChunk = 16384;
+  const std::size_t cells = vertices.size() / 12, chunks = (cells + kChunk - 1) / kChunk;
+  std::vector<std::vector<LinearTet>> parts(chunks);
+  std::vector<std::uint64_t> bad_values(chunks, 0);
+  tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t chunk) {
+    std::vector<LinearTet>& out = parts[chunk];
+    for (std::size_t e = chunk * kChunk; e < std::min(cells, (chunk + 1) * kChunk); ++e) {
+      double f[4];
+      int bad = 0;
+      for (int i = 0; i < 4; ++i) {
+        f[i] = values(e, i);
+        bad += !std::isfinite(f[i]);
+      }
+      if (bad > 0) {
+        bad_values[chunk] += std::uint64_t(bad);
+        continue;
+      }
+      const double lo = std::min(std::min(f[0], f[1]), std::min(f[2], f[3]));
+      const double hi = std::max(std::max(f[0], f[1]), std::max(f[2], f[3]));
+      if (!(lo <= isovalue && isovalue <= hi) || lo == hi) continue;
+      const double* v = vertices.data() + 12 * e;
+      LinearTet t;
+      t.v0 = glm::dvec3(v[0], v[1], v[2]);
+      glm::dmat3 edges;  // columns: v_i − v0
+      for (int i = 1; i < 4; ++i)
+        edges[i - 1] = glm::dvec3(v[3 * i], v[3 * i + 1], v[3 * i + 2]) - t.v0;
+      t.to_barycentric = glm::inverse(edges);
+      // ∇f = (∂λ/∂x)ᵀ (f_i − f_0): the rows of to_barycentric are ∇λ_i.
+      t.g = glm::transpose(t.to_barycentric) *
+            glm::dvec3(f[1] - f[0], f[2] - f[0], f[3] - f[0]);
+      t.f0 = f[0] - isovalue;
+      t.lo = t.hi = t.v0;
+      for (int i = 1; i < 4; ++i) {
+        const glm::dvec3 p(v[3 * i], v[3 * i + 1], v[3 * i + 2]);
+        t.lo = glm::min(t.lo, p), t.hi = glm::max(t.hi, p);
+      }
+      out.push_back(t);
+    }
+  });
   std::vector<LinearTet> out;
   nonfinite = 0;
-  const std::size_t cells = vertices.size() / 12;
-  for (std::size_t e = 0; e < cells; ++e) {
-    double f[4];
-    int bad = 0;
-    for (int i = 0; i < 4; ++i) {
-      f[i] = values(e, i);
-      bad += !std::isfinite(f[i]);
-    }
-    if (bad > 0) {
-      nonfinite += std::uint64_t(bad);
-      continue;
-    }
-    const double lo = std::min(std::min(f[0], f[1]), std::min(f[2], f[3]));
-    const double hi = std::max(std::max(f[0], f[1]), std::max(f[2], f[3]));
-    if (!(lo <= isovalue && isovalue <= hi) || lo == hi) continue;
-    const double* v = vertices.data() + 12 * e;
-    LinearTet t;
-    t.v0 = glm::dvec3(v[0], v[1], v[2]);
-    glm::dmat3 edges;  // columns: v_i − v0
-    for (int i = 1; i < 4; ++i)
-      edges[i - 1] = glm::dvec3(v[3 * i], v[3 * i + 1], v[3 * i + 2]) - t.v0;
-    t.to_barycentric = glm::inverse(edges);
-    // ∇f = (∂λ/∂x)ᵀ (f_i − f_0): the rows of to_barycentric are ∇λ_i.
-    t.g = glm::transpose(t.to_barycentric) *
-          glm::dvec3(f[1] - f[0], f[2] - f[0], f[3] - f[0]);
-    t.f0 = f[0] - isovalue;
-    t.lo = t.hi = t.v0;
-    for (int i = 1; i < 4; ++i) {
-      const glm::dvec3 p(v[3 * i], v[3 * i + 1], v[3 * i + 2]);
-      t.lo = glm::min(t.lo, p), t.hi = glm::max(t.hi, p);
-    }
-    out.push_back(t);
+  for (std::size_t chunk = 0; chunk < chunks; ++chunk) {
+    out.insert(out.end(), parts[chunk].begin(), parts[chunk].end());
+    nonfinite += bad_values[chunk];
   }
   return out;
 }
