@@ -254,6 +254,8 @@ int ldimesh_add_hex_block(ldimesh_adaptor* a, const ldimesh_hex_block* b) {
   std::int64_t needed = 0;
   if (!mul(b->element_count - 1, stride, needed))
     return fail(a, LDIMESH_ERROR_ARGUMENT, what + "element_count overflows");
+  if (needed > std::numeric_limits<std::int64_t>::max() - per_element)
+    return fail(a, LDIMESH_ERROR_ARGUMENT, what + "element_count overflows");
   needed += per_element;
   if (b->value_count < needed)
     return fail(a, LDIMESH_ERROR_ARGUMENT,
@@ -330,6 +332,8 @@ int ldimesh_add_cell_block(ldimesh_adaptor* a, const ldimesh_cell_block* b) {
   std::int64_t needed = 0, doubles = 0;
   if (!mul(b->element_count - 1, stride, needed) ||
       !mul(b->element_count, 3 * per_element, doubles))
+    return fail(a, LDIMESH_ERROR_ARGUMENT, what + "element_count overflows");
+  if (needed > std::numeric_limits<std::int64_t>::max() - per_element)
     return fail(a, LDIMESH_ERROR_ARGUMENT, what + "element_count overflows");
   needed += per_element;
   if (!b->values || b->value_count < needed)

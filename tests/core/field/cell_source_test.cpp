@@ -547,6 +547,25 @@ TEST(CellSource, LinearTetrahedraAreCastDirectlyWithTheSameHitsEverywhere) {
     }
 }
 
+TEST(CellSource, GradedLinearTetrahedraKeepTheirBinsBounded) {
+  // 8³ cubes of Kuhn tetrahedra in one corner and a few tetrahedra as wide as the box: the bins
+  // (sized by the median tetrahedron) are coarsened rather than each wide one listed in
+  // thousands; the axis caster still gives the Embree caster's bits.
+  const Field field = [](glm::dvec3 x) { return x.x + 0.4 * x.y + 0.3 * x.z; };
+  Cells cells = grid_cells(CellType::tetrahedron, 1, 8, 0.0, 0.05, field);
+  for (int k = 0; k < 6; ++k)
+    add_cell(cells,
+             {glm::dvec3(0.0, 0.0, 0.1 * k), glm::dvec3(1.0, 0.0, 0.1 * k),
+              glm::dvec3(0.0, 1.0, 0.1 * k), glm::dvec3(0.2, 0.3, 0.1 * k + 0.5)},
+             field);
+  const CellElementSource source(cells.block());
+  for (const double iso : {0.03, 0.5}) {
+    const RayCaster axis(source, iso), embree(source, iso, RayCasterOptions{CastPath::embree});
+    EXPECT_GT(testing::expect_same_casts(axis, embree, make_axis_views(source.bounds(), 256)),
+              iso < 0.1 ? 100u : 1000u);
+  }
+}
+
 TEST(CellSource, RaysAlongSharedEdgesAndThroughVerticesOfTetrahedraHitOnce) {
   // Kuhn tetrahedra of unit cubes over [0, 4]³; axis views whose pixel rays run along the cubes'
   // edges and through their vertices (the tetrahedra's shared edges and vertices); a linear field

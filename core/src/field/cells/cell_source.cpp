@@ -218,8 +218,13 @@ const HexElementSource& CellElementSource::sub_hexahedra() const {
     std::vector<int> identity(nodes_);
     for (std::size_t i = 0; i < nodes_; ++i)
       identity[i] = int(i);
-    geometry_->sub_hexahedra = build_sub_hexahedra(geometry_->tets.data(), identity);
+    try {
+      geometry_->sub_hexahedra = build_sub_hexahedra(geometry_->tets.data(), identity);
+    } catch (const std::invalid_argument& e) {
+      geometry_->failure = e.what();  // kept: every later call refuses at once
+    }
   });
+  if (!geometry_->sub_hexahedra) throw std::invalid_argument(geometry_->failure);
   return *geometry_->sub_hexahedra;
 }
 

@@ -94,8 +94,25 @@ Bins make_bins(const std::vector<LinearTet>& tets, int axis) {
       size = extent / count;
     };
     bins.lo_b = lo_b, bins.lo_c = lo_c;
-    layout(lo_b, hi_b, wb[n / 2], bins.size_b, bins.nb);
-    layout(lo_c, hi_c, wc[n / 2], bins.size_c, bins.nc);
+    double median_b = wb[n / 2], median_c = wc[n / 2];
+    // Coarser bins while the entries (each tetrahedron in every bin its box touches) would
+    // exceed 16 per tetrahedron: a graded mesh's large tetrahedra would otherwise fill
+    // millions of bins each.
+    for (;;) {
+      layout(lo_b, hi_b, median_b, bins.size_b, bins.nb);
+      layout(lo_c, hi_c, median_c, bins.size_c, bins.nc);
+      std::size_t entries = 0;
+      for (std::size_t e = 0; e < n; ++e) {
+        const LinearTet& t = tets[e];
+        entries += std::size_t(bins.bin(t.hi[bins.b], bins.lo_b, bins.size_b, bins.nb) -
+                               bins.bin(t.lo[bins.b], bins.lo_b, bins.size_b, bins.nb) + 1) *
+                   std::size_t(bins.bin(t.hi[bins.c], bins.lo_c, bins.size_c, bins.nc) -
+                               bins.bin(t.lo[bins.c], bins.lo_c, bins.size_c, bins.nc) + 1);
+      }
+      if (entries <= 16 * n + 1024 || (bins.nb == 1 && bins.nc == 1)) break;
+      median_b = 2.0 * std::max(median_b, bins.size_b);
+      median_c = 2.0 * std::max(median_c, bins.size_c);
+    }
   }
   const std::size_t cells = std::size_t(bins.nb) * std::size_t(bins.nc);
   bins.first.assign(cells + 1, 0);
@@ -192,10 +209,18 @@ class LinearTetAxisBinding final : public AxisBinding {
           // The pixel centres in the box grown by 10⁻⁶ pixel (a hit the test accepts lies in
           // the box to 10⁻¹² of the tetrahedron's size).
           constexpr double pad = 1e-6;
-          const int ia = std::max(i0, int(std::ceil(x0 * inv - 0.5 - pad))),
-                    ib = std::min(i0 + w - 1, int(std::floor(x1 * inv - 0.5 + pad)));
-          const int ja = std::max(j0, int(std::ceil(y0 * inv - 0.5 - pad))),
-                    jb = std::min(j0 + h - 1, int(std::floor(y1 * inv - 0.5 + pad)));
+          // Clamped as doubles to the rectangle before the conversion (a far-away box's pixel
+          // numbers would not fit an int).
+          const auto first = [](double x, int lo, int hi) {
+            return int(std::clamp(std::ceil(x), double(lo), double(hi + 1)));
+          };
+          const auto last = [](double x, int lo, int hi) {
+            return int(std::clamp(std::floor(x), double(lo - 1), double(hi)));
+          };
+          const int ia = first(x0 * inv - 0.5 - pad, i0, i0 + w - 1),
+                    ib = last(x1 * inv - 0.5 + pad, i0, i0 + w - 1);
+          const int ja = first(y0 * inv - 0.5 - pad, j0, j0 + h - 1),
+                    jb = last(y1 * inv - 0.5 + pad, j0, j0 + h - 1);
           for (int j = ja; j <= jb; ++j)
             for (int i = ia; i <= ib; ++i) {
               const std::size_t k = std::size_t(j - j0) * std::size_t(w) + std::size_t(i - i0);
@@ -236,7 +261,10 @@ bool linear_tet_is_valid(const double* v) {
     edges[i - 1] = glm::dvec3(v[3 * i], v[3 * i + 1], v[3 * i + 2]) - v0;
     lengths *= glm::length(edges[i - 1]);
   }
-  return std::abs(glm::determinant(edges)) > 1e-12 * lengths;
+  // Stricter than the sub-hexahedra's own check (HexElementSource: 10⁻¹⁰ of their Jacobian's
+  // columns), so that a tetrahedron accepted here never fails when its sub-hexahedra are built
+  // later (a colour field, a lookup).
+  return std::abs(glm::determinant(edges)) > 1e-8 * lengths;
 }
 
 }  // namespace ldimesh::cells

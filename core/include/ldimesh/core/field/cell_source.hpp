@@ -106,6 +106,7 @@ class CellElementSource final : public FieldSource {
   struct Geometry {
     std::once_flag once;
     std::shared_ptr<const HexElementSource> sub_hexahedra;
+    std::string failure;  // a lazy build's refusal, given again without building again
     std::vector<double> tets;
     Box bounds;
   };
