@@ -366,6 +366,7 @@ contains
     end select
     if (size(points, 1) /= 3 .or. size(points, 2) /= nodes .or. size(values, 1) /= nodes .or. &
         size(points, 3) /= size(values, 2)) then
+      call forget_block(adaptor)
       ierr = fail(adaptor, 'ldimesh_add_cells: points must have the shape (3, nodes, cells) '// &
                   'and values (nodes, cells), nodes the cell type''s node count')
       return
@@ -435,29 +436,34 @@ contains
     if (present(ordering)) block%ordering = int(ordering, c_int)
     if (order >= 1 .and. order <= 8) then
       if (value_shape(1) /= (order + 1)**3) then
+        call forget_block(adaptor)
         ierr = fail(adaptor, what//'values must have (order+1)**3 rows, one column per element')
         return
       end if
     end if
     if (present(corners) .eqv. present(geometry)) then
+      call forget_block(adaptor)
       ierr = fail(adaptor, what//'give either corners or geometry')
       return
     end if
     if (present(corners)) then
       if (size(corners, 1) /= 3 .or. size(corners, 2) /= 8 .or. &
           size(corners, 3) /= value_shape(2)) then
+        call forget_block(adaptor)
         ierr = fail(adaptor, what//'corners must have the shape (3, 8, elements)')
         return
       end if
       if (size(corners) > 0) block%corners = c_loc(corners)
     else
       if (.not. present(geometry_order)) then
+        call forget_block(adaptor)
         ierr = fail(adaptor, what//'geometry needs geometry_order')
         return
       end if
       q = geometry_order
       if (size(geometry, 1) /= 3 .or. size(geometry, 3) /= value_shape(2) .or. &
           (q >= 1 .and. q <= 8 .and. size(geometry, 2) /= (q + 1)**3)) then
+        call forget_block(adaptor)
         ierr = fail(adaptor, what//'geometry must have the shape (3, (q+1)**3, elements)')
         return
       end if
@@ -543,6 +549,17 @@ contains
   end subroutine add_nodal_field
 
   ! Keeps `message` as the adaptor's last error; returns LDIMESH_ERROR_ARGUMENT.
+  ! A block refused here, before the C API saw it: the C API is handed one it refuses too, so
+  ! that no block is current and a following ldimesh_add_field is refused, not given to the block
+  ! added before (as after a block the C API refuses).
+  subroutine forget_block(adaptor)
+    type(ldimesh_adaptor), intent(in) :: adaptor
+    type(ldimesh_cell_block) :: empty
+    integer(c_int) :: ignored
+    empty%element_count = 0
+    ignored = c_add_cell_block(adaptor%handle, empty)
+  end subroutine forget_block
+
   integer function fail(adaptor, message)
     type(ldimesh_adaptor), intent(in) :: adaptor
     character(len=*), intent(in) :: message

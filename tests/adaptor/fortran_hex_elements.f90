@@ -88,8 +88,9 @@ contains
 
   ! Adds this rank's cubes (cube e on rank mod(e, ranks)) of 2³ over [0, 1]³, each as 2 linear
   ! wedges (VTK's node order: the triangle at z = 0, then at z = 1) through ldimesh_add_cells, the
-  ! field x with the field y; first a call whose shapes do not fit the type (refused). Returns the
-  ! module's status, or -1 where the wrong shapes were accepted.
+  ! field x with the field y; then a call whose shapes do not fit the type (refused) and a field
+  ! after it (refused: no block is current). Returns the module's status, -1 where the wrong
+  ! shapes were accepted, -2 where the field after them was.
   integer(c_int) function fortran_add_cells(handle, rank, ranks) bind(C, name='fortran_add_cells')
     type(c_ptr), value :: handle
     integer(c_int), value :: rank, ranks
@@ -124,7 +125,14 @@ contains
         wedge_y(:, count) = wedge_points(2, :, count)
       end do
     end do
-    ! A tetrahedron has 4 nodes, not 6: refused.
+    call ldimesh_add_cells(insitu, int(LDIMESH_CELL_WEDGE), 1, wedge_points, wedge_x, ierr)
+    if (ierr == LDIMESH_OK) call ldimesh_add_field(insitu, 'y', wedge_y, ierr)
+    if (ierr /= LDIMESH_OK) then
+      fortran_add_cells = int(ierr, c_int)
+      return
+    end if
+    ! A tetrahedron has 4 nodes, not 6: refused; then no block is current, so a field is refused
+    ! too (it would otherwise go to the wedges added before).
     call ldimesh_add_cells(insitu, int(LDIMESH_CELL_TETRAHEDRON), 1, wedge_points, wedge_x, ierr)
     message = ldimesh_last_error(insitu)
     if (ierr /= LDIMESH_ERROR_ARGUMENT .or. &
@@ -132,9 +140,12 @@ contains
       fortran_add_cells = -1
       return
     end if
-    call ldimesh_add_cells(insitu, int(LDIMESH_CELL_WEDGE), 1, wedge_points, wedge_x, ierr)
-    if (ierr == LDIMESH_OK) call ldimesh_add_field(insitu, 'y', wedge_y, ierr)
-    fortran_add_cells = int(ierr, c_int)
+    call ldimesh_add_field(insitu, 'y', wedge_x, ierr)
+    if (ierr == LDIMESH_OK) then
+      fortran_add_cells = -2
+      return
+    end if
+    fortran_add_cells = LDIMESH_OK
   end function fortran_add_cells
 
   ! Rank 0 adds a 9³ uniform grid over [0, 1]³ of the field x (float) with the field y as its
