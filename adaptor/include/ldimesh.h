@@ -111,15 +111,15 @@ typedef struct ldimesh_hex_block {
 
 /* Cell types of ldimesh_cell_block (ldimesh::CellType), each in VTK's node order. */
 enum {
-  LDIMESH_CELL_HEXAHEDRON = 0,    /* Lagrange Q_p: VTK_HEXAHEDRON (p=1), VTK_TRIQUADRATIC_HEXAHEDRON (2),
-                                     VTK_LAGRANGE_HEXAHEDRON */
-  LDIMESH_CELL_HEXAHEDRON20 = 1,  /* VTK_QUADRATIC_HEXAHEDRON (p=2, 20 nodes) */
-  LDIMESH_CELL_TETRAHEDRON = 2,   /* P_p: VTK_TETRA (1), VTK_QUADRATIC_TETRA (2),
-                                     VTK_LAGRANGE_TETRAHEDRON */
-  LDIMESH_CELL_WEDGE = 3,         /* P_p x P_p: VTK_WEDGE (1), VTK_BIQUADRATIC_QUADRATIC_WEDGE (2),
-                                     VTK_LAGRANGE_WEDGE */
-  LDIMESH_CELL_WEDGE15 = 4,       /* VTK_QUADRATIC_WEDGE (p=2, 15 nodes) */
-  LDIMESH_CELL_PYRAMID = 5        /* VTK_PYRAMID (p=1, 5 nodes), VTK_QUADRATIC_PYRAMID (2, 13) */
+  LDIMESH_CELL_HEXAHEDRON = 0,   /* Lagrange Q_p: VTK_HEXAHEDRON (p=1), VTK_TRIQUADRATIC_HEXAHEDRON
+                                    (2),   VTK_LAGRANGE_HEXAHEDRON */
+  LDIMESH_CELL_HEXAHEDRON20 = 1, /* VTK_QUADRATIC_HEXAHEDRON (p=2, 20 nodes) */
+  LDIMESH_CELL_TETRAHEDRON = 2,  /* P_p: VTK_TETRA (1), VTK_QUADRATIC_TETRA (2),
+                                    VTK_LAGRANGE_TETRAHEDRON */
+  LDIMESH_CELL_WEDGE = 3,        /* P_p x P_p: VTK_WEDGE (1), VTK_BIQUADRATIC_QUADRATIC_WEDGE (2),
+                                    VTK_LAGRANGE_WEDGE */
+  LDIMESH_CELL_WEDGE15 = 4,      /* VTK_QUADRATIC_WEDGE (p=2, 15 nodes) */
+  LDIMESH_CELL_PYRAMID = 5       /* VTK_PYRAMID (p=1, 5 nodes), VTK_QUADRATIC_PYRAMID (2, 13) */
 };
 
 /* A rank-local block of cells of one type and order (ldimesh::CellBlock): a mixed mesh is one

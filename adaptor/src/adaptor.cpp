@@ -29,8 +29,8 @@
 #include <tbb/parallel_for.h>
 
 #include "ldimesh/core/base/timing.hpp"
-#include "ldimesh/core/field/grid_source.hpp"
 #include "ldimesh/core/field/cell_source.hpp"
+#include "ldimesh/core/field/grid_source.hpp"
 #include "ldimesh/core/field/hex_source.hpp"
 #include "ldimesh/core/pipeline.hpp"
 #include "ldimesh/core/raycast/raycaster.hpp"
@@ -287,6 +287,17 @@ CopyPlan plan_grid(const GridBlock& block, const GridSource& source,
   return plan;
 }
 
+// An element or cell block's colour fields in `plan`, each copied whole (`values` nodal values;
+// a field the block lacks: none).
+void plan_whole_colours(std::size_t values, std::span<const FieldArray> colours, CopyPlan& plan) {
+  for (const FieldArray& c : colours) {
+    plan.colour_sizes.push_back(c.values ? values * scalar_bytes(c.type) : 0);
+    plan.colours.emplace_back(plan.colour_sizes.back());
+    plan.colours.back().mark(0, plan.colour_sizes.back());
+    plan.colour_held.emplace_back();
+  }
+}
+
 // The elements of the high-order block that `source` is over that a cast for `isovalues` keeps,
 // the pages of their nodal values in the copy (element after element, no gaps), and all of each
 // colour field's in `colours` (a hit on a face a kept element shares with another may be
@@ -301,12 +312,7 @@ CopyPlan plan_hex(const HexBlock& block, const HexElementSource& source,
   plan.values = PageSet(plan.values_size);
   for (std::size_t e = 0; e < block.element_count; ++e)
     if (plan.held[e]) plan.values.mark(e * n * size, n * size);
-  for (const FieldArray& c : colours) {
-    plan.colour_sizes.push_back(c.values ? block.element_count * n * scalar_bytes(c.type) : 0);
-    plan.colours.emplace_back(plan.colour_sizes.back());
-    plan.colours.back().mark(0, plan.colour_sizes.back());
-    plan.colour_held.emplace_back();
-  }
+  plan_whole_colours(block.element_count * n, colours, plan);
   return plan;
 }
 
@@ -402,9 +408,8 @@ GridBlock copy_grid(const GridBlock& block, const GridSource& source,
 
 // An element block's nodal array of `type` at `values` into `dst`, element after element without
 // gaps: the elements `held` marks (all where it is empty).
-void copy_nodal(std::size_t elements, std::size_t n, std::size_t element_stride,
-                const void* values, ScalarType type, const std::vector<std::uint8_t>& held,
-                unsigned char* dst) {
+void copy_nodal(std::size_t elements, std::size_t n, std::size_t element_stride, const void* values,
+                ScalarType type, const std::vector<std::uint8_t>& held, unsigned char* dst) {
   const std::size_t size = scalar_bytes(type);
   const std::size_t stride = element_stride == 0 ? n : element_stride;
   const auto* src = static_cast<const unsigned char*>(values);
@@ -433,12 +438,7 @@ CopyPlan plan_cells(const CellBlock& block, std::span<const FieldArray> colours)
   plan.values_size = block.element_count * n * scalar_bytes(block.value_type);
   plan.values = PageSet(plan.values_size);
   plan.values.mark(0, plan.values_size);
-  for (const FieldArray& c : colours) {
-    plan.colour_sizes.push_back(c.values ? block.element_count * n * scalar_bytes(c.type) : 0);
-    plan.colours.emplace_back(plan.colour_sizes.back());
-    plan.colours.back().mark(0, plan.colour_sizes.back());
-    plan.colour_held.emplace_back();
-  }
+  plan_whole_colours(block.element_count * n, colours, plan);
   return plan;
 }
 
@@ -576,8 +576,7 @@ class AdaptorImpl final : public Adaptor {
       if (last_add_failed_)
         return Status::invalid_argument(
             "the block added last was refused (the field would belong to the one before)");
-      if (blocks_.empty() ||
-          (!blocks_.back().grid && !blocks_.back().hex && !blocks_.back().cells))
+      if (blocks_.empty() || (!blocks_.back().grid && !blocks_.back().hex && !blocks_.back().cells))
         return Status::invalid_argument(
             blocks_.empty() ? "no block added yet (the field belongs to the block added last)"
                             : "the block added last is a FieldSource (it colours by its own "

@@ -39,18 +39,18 @@
 #include <deal.II/dofs/dof_tools.h>
 #include <deal.II/fe/fe_q.h>
 #include <deal.II/fe/fe_simplex_p.h>
-#include <deal.II/fe/mapping_fe.h>
 #include <deal.II/fe/fe_values.h>
+#include <deal.II/fe/mapping_fe.h>
 #include <deal.II/fe/mapping_q.h>
 #include <deal.II/grid/grid_generator.h>
 #include <deal.II/grid/tria_description.h>
-#include <deal.II/lac/solver_cg.h>
-#include <deal.II/lac/trilinos_precondition.h>
-#include <deal.II/lac/trilinos_solver.h>
 #include <deal.II/lac/affine_constraints.h>
 #include <deal.II/lac/dynamic_sparsity_pattern.h>
 #include <deal.II/lac/full_matrix.h>
+#include <deal.II/lac/solver_cg.h>
 #include <deal.II/lac/sparsity_tools.h>
+#include <deal.II/lac/trilinos_precondition.h>
+#include <deal.II/lac/trilinos_solver.h>
 #include <deal.II/lac/trilinos_sparse_matrix.h>
 #include <deal.II/lac/trilinos_vector.h>
 #include <deal.II/numerics/data_out.h>
@@ -385,7 +385,7 @@ class SimplexHeatSolver {
       cell->set_subdomain_id(types::subdomain_id(index++ * ranks / total));
     triangulation_.create_triangulation(
         TriangulationDescription::Utilities::create_description_from_triangulation(tetrahedra,
-                                                                                    comm_));
+                                                                                   comm_));
     dof_handler_.distribute_dofs(fe_);
     const IndexSet owned = dof_handler_.locally_owned_dofs();
     IndexSet relevant;

@@ -1245,13 +1245,21 @@ TEST(Adaptor, CellBlocksOfEveryShapePublishTheSameMeshOnBothPaths) {
     if (e % ranks() != rank_of()) continue;
     const glm::dvec3 o = glm::dvec3(e % n, (e / n) % n, e / (n * n)) / double(n);
     const double h = 1.0 / n;
-    const glm::dvec3 k[8] = {o, o + h * glm::dvec3(1, 0, 0), o + h * glm::dvec3(1, 1, 0),
-                             o + h * glm::dvec3(0, 1, 0), o + h * glm::dvec3(0, 0, 1),
-                             o + h * glm::dvec3(1, 0, 1), o + h * glm::dvec3(1, 1, 1),
+    const glm::dvec3 k[8] = {o,
+                             o + h * glm::dvec3(1, 0, 0),
+                             o + h * glm::dvec3(1, 1, 0),
+                             o + h * glm::dvec3(0, 1, 0),
+                             o + h * glm::dvec3(0, 0, 1),
+                             o + h * glm::dvec3(1, 0, 1),
+                             o + h * glm::dvec3(1, 1, 1),
                              o + h * glm::dvec3(0, 1, 1)};
     if (e % 2 == 0) {
-      for (const auto& t : {std::vector<int>{0, 1, 2, 6}, {0, 2, 3, 6}, {0, 3, 7, 6}, {0, 7, 4, 6},
-                            {0, 4, 5, 6}, {0, 5, 1, 6}})
+      for (const auto& t : {std::vector<int>{0, 1, 2, 6},
+                            {0, 2, 3, 6},
+                            {0, 3, 7, 6},
+                            {0, 7, 4, 6},
+                            {0, 4, 5, 6},
+                            {0, 5, 1, 6}})
         add(tets, {k[t[0]], k[t[1]], k[t[2]], k[t[3]]});
     } else {
       add(wedges, {k[0], k[1], k[2], k[4], k[5], k[6]});

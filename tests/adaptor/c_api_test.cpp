@@ -244,9 +244,8 @@ TEST(CApi, CellBlocksAreCheckedAndPublished) {
   ldimesh_adaptor* a = create(options(dir));
   if (!a) return;
   // The 10 nodes of VTK_QUADRATIC_TETRA in its reference tetrahedron.
-  const double ref[10][3] = {{0, 0, 0},     {1, 0, 0},   {0, 1, 0},     {0, 0, 1},
-                             {0.5, 0, 0},   {0.5, 0.5, 0}, {0, 0.5, 0}, {0, 0, 0.5},
-                             {0.5, 0, 0.5}, {0, 0.5, 0.5}};
+  const double ref[10][3] = {{0, 0, 0},     {1, 0, 0},   {0, 1, 0},   {0, 0, 1},     {0.5, 0, 0},
+                             {0.5, 0.5, 0}, {0, 0.5, 0}, {0, 0, 0.5}, {0.5, 0, 0.5}, {0, 0.5, 0.5}};
   const int n = 4;
   const double h = 2.0 / n;
   std::vector<double> points, values;

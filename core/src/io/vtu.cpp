@@ -476,8 +476,9 @@ Status read_vtu_unguarded(const std::string& path, const std::string& field, Vtu
       case VTK_LAGRANGE_TETRAHEDRON:
         kind = CellType::tetrahedron, order = order_of(kind);
         if (count == 15)
-          return Status::corrupt_input(cell + ": VTK's 15-node tetrahedron (a quadratic one with "
-                                              "face and body bubbles) is not read");
+          return Status::corrupt_input(cell +
+                                       ": VTK's 15-node tetrahedron (a quadratic one with "
+                                       "face and body bubbles) is not read");
         break;
       case VTK_WEDGE:
         kind = CellType::wedge;
@@ -488,8 +489,9 @@ Status read_vtu_unguarded(const std::string& path, const std::string& field, Vtu
       case VTK_LAGRANGE_WEDGE:
         kind = CellType::wedge, order = order_of(kind);
         if (count == 21)
-          return Status::corrupt_input(cell + ": VTK's 21-node wedge (a quadratic one with face "
-                                              "and body bubbles) is not read");
+          return Status::corrupt_input(cell +
+                                       ": VTK's 21-node wedge (a quadratic one with face "
+                                       "and body bubbles) is not read");
         break;
       case VTK_QUADRATIC_WEDGE:
         kind = CellType::serendipity_wedge, order = 2;

@@ -119,8 +119,8 @@ Status read_vtu_isolated(const std::string& path, const std::string& field, VtuE
     g.order = order;
     const std::size_t nodes = cell_nodes(g.type, order);
     if (nodes == 0 || count == 0 || g.values.size() % nodes != 0 ||
-        count != g.values.size() / nodes ||
-        g.geometry.size() % 3 != 0 || g.geometry.size() / 3 != g.values.size() ||
+        count != g.values.size() / nodes || g.geometry.size() % 3 != 0 ||
+        g.geometry.size() / 3 != g.values.size() ||
         (!g.colour.empty() && g.colour.size() != g.values.size()))
       return truncated;
     g.cells = std::size_t(count);

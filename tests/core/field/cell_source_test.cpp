@@ -73,9 +73,9 @@ void add_cell(Cells& cells, const Corners& corners, const Field& field,
 Corners cube_corners(int i, int j, int k, int n, double lo, double hi) {
   const double h = (hi - lo) / n;
   Corners c;
-  for (const glm::ivec3 o : {glm::ivec3(0, 0, 0), glm::ivec3(1, 0, 0), glm::ivec3(1, 1, 0),
-                             glm::ivec3(0, 1, 0), glm::ivec3(0, 0, 1), glm::ivec3(1, 0, 1),
-                             glm::ivec3(1, 1, 1), glm::ivec3(0, 1, 1)})
+  for (const glm::ivec3 o :
+       {glm::ivec3(0, 0, 0), glm::ivec3(1, 0, 0), glm::ivec3(1, 1, 0), glm::ivec3(0, 1, 0),
+        glm::ivec3(0, 0, 1), glm::ivec3(1, 0, 1), glm::ivec3(1, 1, 1), glm::ivec3(0, 1, 1)})
     c.push_back(glm::dvec3(lo) + h * glm::dvec3(i + o.x, j + o.y, k + o.z));
   return c;
 }
@@ -128,9 +128,9 @@ std::string describe(CellType type, int order) {
 }
 
 TEST(CellSource, ReferenceNodesAreDistinctAndTheBasisIsNodal) {
-  for (CellType type : {CellType::hexahedron, CellType::serendipity_hexahedron,
-                        CellType::tetrahedron, CellType::wedge, CellType::serendipity_wedge,
-                        CellType::pyramid})
+  for (CellType type :
+       {CellType::hexahedron, CellType::serendipity_hexahedron, CellType::tetrahedron,
+        CellType::wedge, CellType::serendipity_wedge, CellType::pyramid})
     for (int order = 1; order <= max_cell_order(type); ++order) {
       if ((type == CellType::serendipity_hexahedron || type == CellType::serendipity_wedge) &&
           order != 2)
@@ -158,11 +158,11 @@ TEST(CellSource, SphereFromQuadraticFieldsOnStraightCellsIsExact) {
     CellType type;
     int order;
   };
-  for (const Case c : {Case{CellType::tetrahedron, 2}, Case{CellType::tetrahedron, 3},
-                       Case{CellType::tetrahedron, 5}, Case{CellType::tetrahedron, 8},
-                       Case{CellType::wedge, 2}, Case{CellType::wedge, 4},
-                       Case{CellType::serendipity_wedge, 2},
-                       Case{CellType::serendipity_hexahedron, 2}, Case{CellType::hexahedron, 2}}) {
+  for (const Case c :
+       {Case{CellType::tetrahedron, 2}, Case{CellType::tetrahedron, 3},
+        Case{CellType::tetrahedron, 5}, Case{CellType::tetrahedron, 8}, Case{CellType::wedge, 2},
+        Case{CellType::wedge, 4}, Case{CellType::serendipity_wedge, 2},
+        Case{CellType::serendipity_hexahedron, 2}, Case{CellType::hexahedron, 2}}) {
     SCOPED_TRACE(describe(c.type, c.order));
     const int n = c.order >= 5 ? 2 : 3;
     const Cells cells = grid_cells(c.type, c.order, n, -1.25, 1.25, r2);
@@ -226,14 +226,15 @@ TEST(CellSource, TheFieldXOnCurvedCellsCutsThePlaneExactly) {
     CellType type;
     int order;
   };
-  for (const Case c : {Case{CellType::tetrahedron, 1}, Case{CellType::tetrahedron, 2},
-                       Case{CellType::tetrahedron, 4}, Case{CellType::wedge, 1},
-                       Case{CellType::wedge, 3}, Case{CellType::serendipity_wedge, 2},
-                       Case{CellType::pyramid, 1}, Case{CellType::pyramid, 2},
-                       Case{CellType::serendipity_hexahedron, 2}}) {
+  for (const Case c :
+       {Case{CellType::tetrahedron, 1}, Case{CellType::tetrahedron, 2},
+        Case{CellType::tetrahedron, 4}, Case{CellType::wedge, 1}, Case{CellType::wedge, 3},
+        Case{CellType::serendipity_wedge, 2}, Case{CellType::pyramid, 1},
+        Case{CellType::pyramid, 2}, Case{CellType::serendipity_hexahedron, 2}}) {
     SCOPED_TRACE(describe(c.type, c.order));
-    const Cells cells = grid_cells(c.type, c.order, 2, lo, hi, [](glm::dvec3 x) { return x.x; },
-                                   c.order > 1 ? bend : std::function<glm::dvec3(glm::dvec3)>());
+    const Cells cells = grid_cells(
+        c.type, c.order, 2, lo, hi, [](glm::dvec3 x) { return x.x; },
+        c.order > 1 ? bend : std::function<glm::dvec3(glm::dvec3)>());
     const CellElementSource source(cells.block());
     // x = ±0.5 holds the pyramids' apexes (each sub-cube's centre): hits next to the collapsed
     // top face.
@@ -270,7 +271,8 @@ TEST(CellSource, MixedCellsGiveTheSurfaceOfOneHexahedralMesh) {
     list.push_back(sources.back().get());
   }
   const RayCaster caster(list, 1.0);
-  for (const View& view : testing::axis_and_oblique_views(Box{glm::dvec3(lo), glm::dvec3(hi)}, 32)) {
+  for (const View& view :
+       testing::axis_and_oblique_views(Box{glm::dvec3(lo), glm::dvec3(hi)}, 32)) {
     const testing::SphereRays rays = testing::expect_sphere_hits(caster.cast(view), 1.0, 1e-6);
     EXPECT_GT(rays.through, 100);
   }
@@ -283,8 +285,8 @@ TEST(CellSource, AxisAndEmbreeCastersGiveTheSameHits) {
   };
   for (CellType type : {CellType::tetrahedron, CellType::wedge, CellType::pyramid}) {
     SCOPED_TRACE(cell_type_name(type));
-    const Cells cells = grid_cells(type, 2, 2, -1.0, 1.0,
-                                   [](glm::dvec3 x) { return r2(x) + 0.3 * x.x * x.y; }, bend);
+    const Cells cells = grid_cells(
+        type, 2, 2, -1.0, 1.0, [](glm::dvec3 x) { return r2(x) + 0.3 * x.x * x.y; }, bend);
     const CellElementSource source(cells.block());
     // The curved search by pieces of a cell (axis) and whole (Embree): the same roots up to
     // rounding (curved_element.hpp).
@@ -411,10 +413,10 @@ TEST(CellSource, RootsOfRandomCurvedCellsMatchADenseScan) {
     CellType type;
     int order;
   };
-  for (const Case c : {Case{CellType::tetrahedron, 2}, Case{CellType::tetrahedron, 3},
-                       Case{CellType::wedge, 2}, Case{CellType::serendipity_wedge, 2},
-                       Case{CellType::pyramid, 2}, Case{CellType::pyramid, 1},
-                       Case{CellType::serendipity_hexahedron, 2}}) {
+  for (const Case c :
+       {Case{CellType::tetrahedron, 2}, Case{CellType::tetrahedron, 3}, Case{CellType::wedge, 2},
+        Case{CellType::serendipity_wedge, 2}, Case{CellType::pyramid, 2},
+        Case{CellType::pyramid, 1}, Case{CellType::serendipity_hexahedron, 2}}) {
     SCOPED_TRACE(describe(c.type, c.order));
     const glm::dvec3 w(u(rng), u(rng), u(rng));
     const auto bend = [&](glm::dvec3 x) {
@@ -473,10 +475,10 @@ TEST(CellSource, GmshOrderedCellsGiveTheSameHitsAsVtkOrderedOnes) {
     CellType type;
     int order;
   };
-  for (const Case c : {Case{CellType::tetrahedron, 2}, Case{CellType::tetrahedron, 3},
-                       Case{CellType::wedge, 2}, Case{CellType::serendipity_wedge, 2},
-                       Case{CellType::pyramid, 2}, Case{CellType::serendipity_hexahedron, 2},
-                       Case{CellType::hexahedron, 2}}) {
+  for (const Case c :
+       {Case{CellType::tetrahedron, 2}, Case{CellType::tetrahedron, 3}, Case{CellType::wedge, 2},
+        Case{CellType::serendipity_wedge, 2}, Case{CellType::pyramid, 2},
+        Case{CellType::serendipity_hexahedron, 2}, Case{CellType::hexahedron, 2}}) {
     SCOPED_TRACE(describe(c.type, c.order));
     const Cells vtk = grid_cells(c.type, c.order, 2, -1.0, 1.0, r2, bend);
     const std::vector<int> from = cell_gmsh_permutation(c.type, c.order);
@@ -651,7 +653,7 @@ TEST(CellSource, CellsWithNonFiniteValuesProduceNoHitsAndAreCounted) {
   Cells cells = grid_cells(CellType::tetrahedron, 2, 2, -1.25, 1.25, r2);
   const CellElementSource clean(cells.block());
   const RayCaster all(clean, 1.0);
-  cells.values[7] = std::nan("");  // cell 0
+  cells.values[7] = std::nan("");       // cell 0
   cells.values[10 * 5 + 2] = INFINITY;  // cell 5
   const CellElementSource source(cells.block());
   const RayCaster caster(source, 1.0);

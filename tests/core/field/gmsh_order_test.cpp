@@ -37,13 +37,17 @@ TEST(GmshOrder, EveryTakenTypeSitsWhereGmshPutsItsNodes) {
     CellType type;
     int order;
   };
-  const Case cases[] = {
-      {4, CellType::tetrahedron, 1}, {11, CellType::tetrahedron, 2},
-      {29, CellType::tetrahedron, 3}, {6, CellType::wedge, 1},
-      {13, CellType::wedge, 2},       {18, CellType::serendipity_wedge, 2},
-      {7, CellType::pyramid, 1},      {19, CellType::pyramid, 2},
-      {5, CellType::hexahedron, 1},   {12, CellType::hexahedron, 2},
-      {17, CellType::serendipity_hexahedron, 2}};
+  const Case cases[] = {{4, CellType::tetrahedron, 1},
+                        {11, CellType::tetrahedron, 2},
+                        {29, CellType::tetrahedron, 3},
+                        {6, CellType::wedge, 1},
+                        {13, CellType::wedge, 2},
+                        {18, CellType::serendipity_wedge, 2},
+                        {7, CellType::pyramid, 1},
+                        {19, CellType::pyramid, 2},
+                        {5, CellType::hexahedron, 1},
+                        {12, CellType::hexahedron, 2},
+                        {17, CellType::serendipity_hexahedron, 2}};
   for (const Case& c : cases) {
     SCOPED_TRACE("gmsh type " + std::to_string(c.gmsh_type));
     std::string name;

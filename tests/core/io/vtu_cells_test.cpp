@@ -11,6 +11,7 @@
 
 #include <gtest/gtest.h>
 
+#include <unistd.h>
 #include <vtkCell.h>
 #include <vtkCellData.h>
 #include <vtkCellType.h>
@@ -23,7 +24,6 @@
 #include <vtkUnsignedCharArray.h>
 #include <vtkUnstructuredGrid.h>
 #include <vtkXMLUnstructuredGridWriter.h>
-#include <unistd.h>
 
 #include "ldimesh/core/field/cell_source.hpp"
 #include "ldimesh/core/io/vtu.hpp"
@@ -268,25 +268,33 @@ TEST(VtuCells, MixedTypesInOneFileMeshTheSphere) {
         std::vector<std::pair<int, std::vector<glm::dvec3>>> parts;  // (VTK type, corners)
         if (kind == 0) parts.push_back({VTK_TRIQUADRATIC_HEXAHEDRON, {c, c + 8}});
         if (kind == 1)
-          for (const auto& tet : {std::vector<int>{0, 1, 2, 6}, {0, 2, 3, 6}, {0, 3, 7, 6},
-                                  {0, 7, 4, 6}, {0, 4, 5, 6}, {0, 5, 1, 6}})
+          for (const auto& tet : {std::vector<int>{0, 1, 2, 6},
+                                  {0, 2, 3, 6},
+                                  {0, 3, 7, 6},
+                                  {0, 7, 4, 6},
+                                  {0, 4, 5, 6},
+                                  {0, 5, 1, 6}})
             parts.push_back({VTK_QUADRATIC_TETRA, {c[tet[0]], c[tet[1]], c[tet[2]], c[tet[3]]}});
         if (kind == 2) {
           parts.push_back({VTK_QUADRATIC_WEDGE, {c[0], c[1], c[2], c[4], c[5], c[6]}});
           parts.push_back({VTK_BIQUADRATIC_QUADRATIC_WEDGE, {c[0], c[2], c[3], c[4], c[6], c[7]}});
         }
         if (kind == 3) {
-          for (const auto& f : {std::vector<int>{0, 3, 2, 1}, {4, 5, 6, 7}, {0, 1, 5, 4},
-                                {1, 2, 6, 5}, {2, 3, 7, 6}, {3, 0, 4, 7}})
+          for (const auto& f : {std::vector<int>{0, 3, 2, 1},
+                                {4, 5, 6, 7},
+                                {0, 1, 5, 4},
+                                {1, 2, 6, 5},
+                                {2, 3, 7, 6},
+                                {3, 0, 4, 7}})
             parts.push_back({VTK_QUADRATIC_PYRAMID, {c[f[0]], c[f[1]], c[f[2]], c[f[3]], centre}});
           ++pyramids;
         }
         for (const auto& [type, corners] : parts) {
-          const int count = type == VTK_TRIQUADRATIC_HEXAHEDRON   ? 27
-                            : type == VTK_QUADRATIC_TETRA          ? 10
-                            : type == VTK_QUADRATIC_WEDGE          ? 15
+          const int count = type == VTK_TRIQUADRATIC_HEXAHEDRON       ? 27
+                            : type == VTK_QUADRATIC_TETRA             ? 10
+                            : type == VTK_QUADRATIC_WEDGE             ? 15
                             : type == VTK_BIQUADRATIC_QUADRATIC_WEDGE ? 18
-                                                                   : 13;
+                                                                      : 13;
           std::vector<vtkIdType> ids(count);
           for (int m = 0; m < count; ++m)
             ids[m] = points->InsertNextPoint(0.0, 0.0, 0.0);
@@ -295,9 +303,9 @@ TEST(VtuCells, MixedTypesInOneFileMeshTheSphere) {
           const double* pc = cell->GetParametricCoords();
           // The linear cell's map of the corners (VTK's vertex order for each shape).
           const CellType shape = type == VTK_TRIQUADRATIC_HEXAHEDRON ? CellType::hexahedron
-                                 : type == VTK_QUADRATIC_TETRA        ? CellType::tetrahedron
-                                 : type == VTK_QUADRATIC_PYRAMID      ? CellType::pyramid
-                                                                      : CellType::wedge;
+                                 : type == VTK_QUADRATIC_TETRA       ? CellType::tetrahedron
+                                 : type == VTK_QUADRATIC_PYRAMID     ? CellType::pyramid
+                                                                     : CellType::wedge;
           for (int m = 0; m < count; ++m) {
             const std::vector<double> w =
                 cell_shape_functions(shape, 1, glm::dvec3(pc[3 * m], pc[3 * m + 1], pc[3 * m + 2]));

@@ -165,9 +165,8 @@ CellElementSource::CellElementSource(const CellBlock& block) : block_(block) {
     }
     return;
   }
-  std::call_once(geometry_->once, [&] {
-    geometry_->sub_hexahedra = build_sub_hexahedra(block.points, from_);
-  });
+  std::call_once(geometry_->once,
+                 [&] { geometry_->sub_hexahedra = build_sub_hexahedra(block.points, from_); });
   geometry_->bounds = geometry_->sub_hexahedra->bounds();
 }
 
@@ -230,15 +229,13 @@ const HexElementSource& CellElementSource::sub_hexahedra() const {
 
 void CellElementSource::check_values(const std::string& what) {
   if (!block_.values) throw std::invalid_argument(what + ": null value array");
-  if (!known_scalar(block_.value_type))
-    throw std::invalid_argument(what + ": unknown scalar type");
+  if (!known_scalar(block_.value_type)) throw std::invalid_argument(what + ": unknown scalar type");
   if (block_.colour && !known_scalar(block_.colour_type))
     throw std::invalid_argument(what + ": unknown scalar type of the colour field");
   if (block_.element_stride == 0) block_.element_stride = nodes_;
   if (block_.element_stride < nodes_)
-    throw std::invalid_argument(what + ": element stride " +
-                                std::to_string(block_.element_stride) + " below the " +
-                                std::to_string(nodes_) + " nodes of a cell");
+    throw std::invalid_argument(what + ": element stride " + std::to_string(block_.element_stride) +
+                                " below the " + std::to_string(nodes_) + " nodes of a cell");
 }
 
 CellElementSource::CellElementSource(const CellElementSource& prepared, const CellBlock& block)

@@ -12,8 +12,8 @@
 #include <span>
 #include <vector>
 
-#include <glm/glm.hpp>
 #include <tbb/parallel_for.h>
+#include <glm/glm.hpp>
 
 #include "ldimesh/core/field/field_source.hpp"
 
@@ -80,8 +80,7 @@ std::vector<LinearTet> active_linear_tets(std::span<const double> vertices, doub
         edges[i - 1] = glm::dvec3(v[3 * i], v[3 * i + 1], v[3 * i + 2]) - t.v0;
       t.to_barycentric = glm::inverse(edges);
       // ∇f = (∂λ/∂x)ᵀ (f_i − f_0): the rows of to_barycentric are ∇λ_i.
-      t.g = glm::transpose(t.to_barycentric) *
-            glm::dvec3(f[1] - f[0], f[2] - f[0], f[3] - f[0]);
+      t.g = glm::transpose(t.to_barycentric) * glm::dvec3(f[1] - f[0], f[2] - f[0], f[3] - f[0]);
       t.f0 = f[0] - isovalue;
       t.lo = t.hi = t.v0;
       for (int i = 1; i < 4; ++i) {

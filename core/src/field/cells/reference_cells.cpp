@@ -67,9 +67,9 @@ void tetrahedron_nodes(Lattice o, int order, std::vector<Lattice>& out) {
 // A wedge of `order` in VTK's numbering (vtkLagrangeWedge): the six vertices (the triangle at
 // t = 0, then at t = 1); the edges of the bottom triangle (0–1, 1–2, 2–0), of the top one, then
 // the vertical ones (0–3, 1–4, 2–5); the interiors of the bottom and the top triangle (row by
-// row, r fastest: unlike the tetrahedron's faces, not recursive); the three quadrilateral faces along the edges 0–1, 1–2 and 2–0, each with
-// the edge's direction fastest, then t; then the interior: the triangle's interior fastest, then
-// t.
+// row, r fastest: unlike the tetrahedron's faces, not recursive); the three quadrilateral faces
+// along the edges 0–1, 1–2 and 2–0, each with the edge's direction fastest, then t; then the
+// interior: the triangle's interior fastest, then t.
 std::vector<Lattice> wedge_nodes(int p) {
   std::vector<Lattice> out;
   const Lattice tri[3] = {{0, 0, 0}, {p, 0, 0}, {0, p, 0}};
@@ -120,8 +120,9 @@ std::vector<Lattice> hexahedron_nodes(int p) {
 std::vector<Lattice> pyramid_nodes(int p) {
   std::vector<Lattice> out = {{0, 0, 0}, {p, 0, 0}, {p, p, 0}, {0, p, 0}, {0, 0, p}};
   if (p == 2)
-    out.insert(out.end(), {{1, 0, 0}, {2, 1, 0}, {1, 2, 0}, {0, 1, 0}, {0, 0, 1}, {2, 0, 1},
-                           {2, 2, 1}, {0, 2, 1}});
+    out.insert(
+        out.end(),
+        {{1, 0, 0}, {2, 1, 0}, {1, 2, 0}, {0, 1, 0}, {0, 0, 1}, {2, 0, 1}, {2, 2, 1}, {0, 2, 1}});
   return out;
 }
 
@@ -129,7 +130,8 @@ std::vector<Lattice> pyramid_nodes(int p) {
 // coefficients of r^a s^b t^c, a fastest, a, b, c ≤ 2 — measured from VTK's own evaluation
 // (polynomials of degree 2 per variable; the tests compare with VTK at random points).
 constexpr int kQuadraticPyramid[13][27] = {
-    {1, -3, 2, -3, 5, -2, 2, -2, 0, -3, 7, -4, 7, -19, 12, -4, 12, -8, 2, -4, 2, -4, 14, -10, 2, -10, 8},
+    {1,  -3, 2,  -3, 5, -2, 2, -2, 0,  -3,  7, -4,  7, -19,
+     12, -4, 12, -8, 2, -4, 2, -4, 14, -10, 2, -10, 8},
     {0, -1, 2, 0, -1, -2, 0, 2, 0, 0, 1, -4, 0, -5, 12, 0, 4, -8, 0, 0, 2, 0, 6, -10, 0, -6, 8},
     {0, 0, 0, 0, -3, 2, 0, 2, 0, 0, 0, 0, 0, -3, 4, 0, 4, -8, 0, 0, 0, 0, 6, -6, 0, -6, 8},
     {0, 0, 0, -1, -1, 2, 2, -2, 0, 0, 0, 0, 1, -5, 4, -4, 12, -8, 0, 0, 0, 0, 6, -6, 2, -10, 8},
@@ -309,9 +311,8 @@ void shape_functions(const ReferenceCell& cell, glm::dvec3 r, double* out) {
     case CellType::wedge:
       for (std::size_t i = 0; i < n; ++i) {
         const Lattice l(glm::round(cell.nodes[i] * double(p)));
-        out[i] = lagrange_factor(p, p - l.x - l.y, 1.0 - r.x - r.y) *
-                 lagrange_factor(p, l.x, r.x) * lagrange_factor(p, l.y, r.y) *
-                 lagrange_1d(p, l.z, r.z);
+        out[i] = lagrange_factor(p, p - l.x - l.y, 1.0 - r.x - r.y) * lagrange_factor(p, l.x, r.x) *
+                 lagrange_factor(p, l.y, r.y) * lagrange_1d(p, l.z, r.z);
       }
       return;
     case CellType::serendipity_hexahedron:
@@ -364,8 +365,8 @@ glm::dvec3 sub_hexahedron_point(const ReferenceCell& cell, int k, glm::dvec3 u) 
         int count = 1;
         for (int bit = 0; bit < 3; ++bit)
           if (c >> bit & 1) sum += others[bit], ++count;
-        const double w = (c & 1 ? u.x : 1.0 - u.x) * (c & 2 ? u.y : 1.0 - u.y) *
-                         (c & 4 ? u.z : 1.0 - u.z);
+        const double w =
+            (c & 1 ? u.x : 1.0 - u.x) * (c & 2 ? u.y : 1.0 - u.y) * (c & 4 ? u.z : 1.0 - u.z);
         x += w * (sum / double(count));
       }
       return x;
@@ -456,7 +457,7 @@ std::vector<int> cell_gmsh_permutation(CellType type, int order) {
       p[i] = i;
     return p;
   };
-  const std::vector<int> hex20 = {0, 1, 2,  3,  4,  5,  6,  7,  8,  11,
+  const std::vector<int> hex20 = {0,  1, 2,  3,  4,  5,  6,  7,  8,  11,
                                   13, 9, 16, 18, 19, 17, 10, 12, 14, 15};
   switch (type) {
     case CellType::tetrahedron:

@@ -1,6 +1,7 @@
 // The solver-side descriptions of rank-local data blocks: pointers into the solver's own arrays
 // and their layout. What the adaptor's API takes; GridSource, HexElementSource and
-// CellElementSource (grid_source.hpp, hex_source.hpp, cell_source.hpp) cast them. Needs neither Embree nor TBB.
+// CellElementSource (grid_source.hpp, hex_source.hpp, cell_source.hpp) cast them. Needs neither
+// Embree nor TBB.
 #pragma once
 
 #include <array>

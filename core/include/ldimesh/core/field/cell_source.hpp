@@ -96,7 +96,7 @@ class CellElementSource final : public FieldSource {
   CellBlock block_;
   std::size_t nodes_ = 0;
   int sub_per_cell_ = 1;
-  int degree_ = 1;  // per axis on a sub-hexahedron
+  int degree_ = 1;         // per axis on a sub-hexahedron
   std::vector<int> from_;  // VTK's node i is the block's node from_[i] within a cell
   // Per sub-hexahedron: (degree + 1)³ rows × nodes: the sub-hexahedron's equispaced lattice
   // values from the cell's nodal values.

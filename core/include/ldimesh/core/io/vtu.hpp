@@ -31,8 +31,9 @@ struct VtuElements {
     std::vector<double> geometry;  // the cell's nodes × (x, y, z) per cell
     std::vector<double> values;    // a field value per node, per cell
     std::vector<double> colour;    // the same of the field to colour by, when one was read
-    // Hexahedra (type hexahedron only: make_vtu_source chooses) as a block of high-order hexahedra in VTK's order, equispaced,
-    // geometry of the cells' order (valid while the group lives and is not resized).
+    // Hexahedra (type hexahedron only: make_vtu_source chooses) as a block of high-order hexahedra
+    // in VTK's order, equispaced, geometry of the cells' order (valid while the group lives and is
+    // not resized).
     HexBlock block() const;
     // Any group as a block of cells.
     CellBlock cell_block() const;
