@@ -568,6 +568,102 @@ TEST(CellSource, GradedLinearTetrahedraKeepTheirBinsBounded) {
   }
 }
 
+TEST(CellSource, LinearTetrahedraFindEveryCrossingOfABruteForceSolver) {
+  // The axis caster tests only the pixels of each tetrahedron's crossing polygon grown by a
+  // margin (linear_tets.cpp, set_crossing). Against a brute-force solver over every tetrahedron
+  // and ray (long double), on Kuhn tetrahedra and fields that make that margin matter: values
+  // exactly at the isovalue (planes through vertices, edges and faces), a plane within 10⁻¹⁵ of
+  // the mesh's boundary face z = −1, tilted differently in each tetrahedron there (its crossing
+  // polygons are slivers, the rest of the face crossed 10⁻¹⁵ outside, which the caster accepts
+  // and no neighbour covers), and a field within 10⁻¹³ of
+  // the isovalue everywhere (every tetrahedron active, its plane anywhere in it). Every crossing
+  // inside a tetrahedron or on its boundary (to 10⁻¹³ in barycentric coordinates, the caster
+  // accepting 10⁻¹²) is found, and every hit is a crossing of some tetrahedron (inside it to
+  // 10⁻⁷); depths to 10⁻⁶, as the LDI keeps them in single precision.
+  const auto jitter = [](glm::dvec3 x) {
+    const auto h = [&](double a) { return std::sin(a * 12.9898 + x.y * 78.233 + x.z * 37.719); };
+    return x + 0.04 * glm::dvec3(h(x.x), h(x.x + 1.0), h(x.x + 2.0));
+  };
+  const auto sign = [](glm::dvec3 x) {  // −1, 0 or 1 by vertex
+    return double(int(std::floor(std::abs(std::sin(x.x * 91.7 + x.y * 13.1)) * 3.0)) - 1);
+  };
+  struct Case {
+    std::string name;
+    Field field;
+    double iso;
+    bool jittered;
+  };
+  const std::vector<Case> cases = {
+      {"quantized", [](glm::dvec3 x) { return std::round(4.0 * (x.x + 0.3 * x.y)) / 4.0; }, 0.5,
+       true},
+      {"grazing", [&](glm::dvec3 x) { return x.z + 1e-15 * sign(x); }, -1.0, false},
+      {"flat",
+       [](glm::dvec3 x) { return 0.5 + 1e-13 * std::sin(9.0 * x.x - 5.0 * x.y + 3.0 * x.z); }, 0.5,
+       true},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    const Cells cells = c.jittered ? grid_cells(
+                                         CellType::tetrahedron, 1, 5, -1.0, 1.0,
+                                         [&](glm::dvec3 x) { return c.field(jitter(x)); }, jitter)
+                                   : grid_cells(CellType::tetrahedron, 1, 5, -1.0, 1.0, c.field);
+    const CellElementSource source(cells.block());
+    const RayCaster caster(source, c.iso);
+    std::size_t found = 0;
+    // Views of a larger box: the boundary's crossings lie inside the rays' depth range.
+    const Box box{source.bounds().lo - 0.1, source.bounds().hi + 0.1};
+    for (const View& view : make_axis_views(box, 40)) {
+      const Ldi ldi = caster.cast(view);
+      for (int j = 0; j < view.height; ++j)
+        for (int i = 0; i < view.width; ++i) {
+          const glm::dvec3 o = view.pixel_point(i, j, 0.0);
+          // Each tetrahedron's crossing of the ray: depth, smallest barycentric coordinate.
+          std::vector<std::pair<long double, long double>> crossings;
+          for (std::size_t e = 0; e < cells.count; ++e) {
+            using V = glm::vec<3, long double>;
+            V p[4];
+            long double f[4];
+            for (int k = 0; k < 4; ++k) {
+              p[k] = V(cells.points[12 * e + 3 * k], cells.points[12 * e + 3 * k + 1],
+                       cells.points[12 * e + 3 * k + 2]);
+              f[k] = (long double)cells.values[4 * e + k] - c.iso;
+            }
+            if (std::min({f[0], f[1], f[2], f[3]}) > 0 || std::max({f[0], f[1], f[2], f[3]}) < 0)
+              continue;
+            glm::mat<3, 3, long double> edges;
+            for (int k = 0; k < 3; ++k)
+              edges[k] = p[k + 1] - p[0];
+            const auto to_bary = glm::inverse(edges);
+            const V g = glm::transpose(to_bary) * V(f[1] - f[0], f[2] - f[0], f[3] - f[0]);
+            const V d(view.dir), org(o);
+            const long double gd = glm::dot(g, d);
+            if (std::abs(gd) <= 1e-6L * glm::length(g)) continue;  // nearly in the plane
+            const long double t = -(f[0] + glm::dot(g, org - p[0])) / gd;
+            const V l = to_bary * (org + t * d - p[0]);
+            crossings.push_back({t, std::min({l.x, l.y, l.z, 1.0L - l.x - l.y - l.z})});
+          }
+          const std::size_t pixel = std::size_t(j) * std::size_t(view.width) + std::size_t(i);
+          for (const auto& [t, inside] : crossings) {
+            if (inside < -1e-13L) continue;
+            bool hit = false;
+            for (std::uint32_t k = ldi.begin(pixel); k < ldi.end(pixel); ++k)
+              hit = hit || std::abs(ldi.depth[k] - double(t)) < 1e-6;
+            EXPECT_TRUE(hit) << "missed crossing at depth " << double(t) << ", pixel " << i << ", "
+                             << j << ", view " << view.dir.x << view.dir.y << view.dir.z;
+            found += hit;
+          }
+          for (std::uint32_t k = ldi.begin(pixel); k < ldi.end(pixel); ++k) {
+            bool known = false;
+            for (const auto& [t, inside] : crossings)
+              known = known || (inside > -1e-7L && std::abs(ldi.depth[k] - double(t)) < 1e-6);
+            EXPECT_TRUE(known) << "hit at depth " << ldi.depth[k] << " is no crossing";
+          }
+        }
+    }
+    EXPECT_GT(found, 1000u);
+  }
+}
+
 TEST(CellSource, RaysAlongSharedEdgesAndThroughVerticesOfTetrahedraHitOnce) {
   // Kuhn tetrahedra of unit cubes over [0, 4]³; axis views whose pixel rays run along the cubes'
   // edges and through their vertices (the tetrahedra's shared edges and vertices); a linear field

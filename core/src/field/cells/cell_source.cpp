@@ -304,11 +304,18 @@ std::vector<cells::LinearTet> CellElementSource::active_tets(double isovalue,
   const void* values = block_.values;
   const ScalarType type = block_.value_type;
   const std::size_t stride = block_.element_stride;
-  const std::vector<int>& from = from_;
+  const int from[4] = {from_[0], from_[1], from_[2], from_[3]};
+  // One instance per value type: the scan reads every cell's 4 values.
+  if (type == ScalarType::float64) {
+    const auto* v = static_cast<const double*>(values);
+    return cells::active_linear_tets(
+        geometry_->tets, isovalue, [&](std::size_t e, int i) { return v[e * stride + from[i]]; },
+        nonfinite);
+  }
+  const auto* v = static_cast<const float*>(values);
   return cells::active_linear_tets(
       geometry_->tets, isovalue,
-      [&](std::size_t e, int i) { return read_value(values, type, e * stride + from[i]); },
-      nonfinite);
+      [&](std::size_t e, int i) { return double(v[e * stride + from[i]]); }, nonfinite);
 }
 
 std::unique_ptr<GeometryBinding> CellElementSource::bind(RTCDevice device, double isovalue) const {

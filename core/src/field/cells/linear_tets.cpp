@@ -1,8 +1,13 @@
 #include "linear_tets.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <functional>
 #include <mutex>
+#include <stdexcept>
+
+#include <tbb/parallel_reduce.h>
 
 namespace ldimesh::cells {
 namespace {
@@ -10,14 +15,19 @@ namespace {
 // The hit of ray o + t·d, t ∈ [t0, t1], with tetrahedron `tet`: the ray's crossing of the plane
 // f = 0 where that lies in the tetrahedron (barycentric coordinates ≥ −10⁻¹², a crossing on a
 // shared face or edge found by each tetrahedron there and merged by the caster). A ray in the
-// plane (g·d = 0) has no isolated root. Both casters call this, so they give the same bits.
+// plane (g·d = 0) has no isolated root. The crossing is taken from the ray's point nearest v0,
+// so that its rounding scales with the tetrahedron, not with the ray's origin (set_crossing's
+// margin counts on it). Both casters call this, so they give the same bits.
 inline bool tet_hit(const LinearTet& tet, glm::dvec3 o, glm::dvec3 d, double t0, double t1,
                     RayHit& out) {
   const double gd = glm::dot(tet.g, d);
   if (gd == 0.0) return false;
-  const double t = -(tet.f0 + glm::dot(tet.g, o - tet.v0)) / gd;
+  const double s = glm::dot(tet.v0 - o, d) / glm::dot(d, d);
+  const glm::dvec3 near = o + s * d - tet.v0;
+  const double ds = -(tet.f0 + glm::dot(tet.g, near)) / gd;
+  const double t = s + ds;
   if (!(t >= t0 && t <= t1)) return false;
-  const glm::dvec3 l = tet.to_barycentric * (o + t * d - tet.v0);
+  const glm::dvec3 l = tet.to_barycentric * (near + ds * d);
   constexpr double eps = 1e-12;
   if (!(l.x >= -eps && l.y >= -eps && l.z >= -eps && l.x + l.y + l.z <= 1.0 + eps)) return false;
   out = {t, unit_normal(tet.g, d), 0.0f};
@@ -56,9 +66,11 @@ class LinearTetBinding final : public GeometryBinding {
 };
 
 // The tetrahedra binned across one ray axis: a uniform grid over the two other world axes (b, c),
-// bins about as wide as the median tetrahedron, each tetrahedron in every bin its box touches. A
-// ray lies in one bin, so it meets each tetrahedron there once.
+// bins about as wide as the median crossing box, each tetrahedron in every bin its box touches. A
+// ray lies in one bin, so it meets each tetrahedron there once. An entry is the tetrahedron's
+// index with two flags: the bin is the first of its range along b (kFirstB), along c (kFirstC).
 struct Bins {
+  static constexpr std::uint32_t kFirstB = 1u << 31, kFirstC = 1u << 30, kIndex = kFirstC - 1;
   int b = 0, c = 1, nb = 1, nc = 1;
   double lo_b = 0.0, lo_c = 0.0, size_b = 1.0, size_c = 1.0;
   std::vector<std::uint32_t> first, tets;  // CSR, b fastest
@@ -72,83 +84,97 @@ struct Bins {
   }
 };
 
-Bins make_bins(const std::vector<LinearTet>& tets, int axis) {
+// A tetrahedron's box (LinearTet::lo, hi), apart: the bins' passes read only these.
+struct Box {
+  glm::dvec3 lo, hi;
+};
+
+Bins make_bins(const std::vector<Box>& boxes, int axis) {
   Bins bins;
   bins.b = axis == 0 ? 1 : 0;
   bins.c = axis == 2 ? 1 : 2;
-  const std::size_t n = tets.size();
+  const std::size_t n = boxes.size();
+  if (n > Bins::kIndex) throw std::runtime_error("more than 2^30 active linear tetrahedra");
   double lo_b = INFINITY, hi_b = -INFINITY, lo_c = INFINITY, hi_c = -INFINITY;
-  std::vector<double> wb(n), wc(n);
-  for (std::size_t e = 0; e < n; ++e) {
-    lo_b = std::min(lo_b, tets[e].lo[bins.b]), hi_b = std::max(hi_b, tets[e].hi[bins.b]);
-    lo_c = std::min(lo_c, tets[e].lo[bins.c]), hi_c = std::max(hi_c, tets[e].hi[bins.c]);
-    wb[e] = tets[e].hi[bins.b] - tets[e].lo[bins.b];
-    wc[e] = tets[e].hi[bins.c] - tets[e].lo[bins.c];
+  for (const Box& box : boxes) {
+    lo_b = std::min(lo_b, box.lo[bins.b]), hi_b = std::max(hi_b, box.hi[bins.b]);
+    lo_c = std::min(lo_c, box.lo[bins.c]), hi_c = std::max(hi_c, box.hi[bins.c]);
   }
+  // The median widths, of at most 4096 boxes evenly spread over the list.
+  const std::size_t stride = std::max<std::size_t>(1, n / 4096);
+  std::vector<double> wb, wc;
+  for (std::size_t e = 0; e < n; e += stride) {
+    wb.push_back(boxes[e].hi[bins.b] - boxes[e].lo[bins.b]);
+    wc.push_back(boxes[e].hi[bins.c] - boxes[e].lo[bins.c]);
+  }
+  // Each tetrahedron's bin range (b0, b1, c0, c1) under the layout being tried.
+  std::vector<std::array<int, 4>> range(n);
+  const auto ranges = [&] {
+    return tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, n, 4096), std::size_t(0),
+        [&](const tbb::blocked_range<std::size_t>& r, std::size_t entries) {
+          for (std::size_t e = r.begin(); e != r.end(); ++e) {
+            const Box& t = boxes[e];
+            range[e] = {bins.bin(t.lo[bins.b], bins.lo_b, bins.size_b, bins.nb),
+                        bins.bin(t.hi[bins.b], bins.lo_b, bins.size_b, bins.nb),
+                        bins.bin(t.lo[bins.c], bins.lo_c, bins.size_c, bins.nc),
+                        bins.bin(t.hi[bins.c], bins.lo_c, bins.size_c, bins.nc)};
+            entries += std::size_t(range[e][1] - range[e][0] + 1) *
+                       std::size_t(range[e][3] - range[e][2] + 1);
+          }
+          return entries;
+        },
+        std::plus<>());
+  };
   if (n > 0) {
-    std::nth_element(wb.begin(), wb.begin() + n / 2, wb.end());
-    std::nth_element(wc.begin(), wc.begin() + n / 2, wc.end());
+    std::nth_element(wb.begin(), wb.begin() + wb.size() / 2, wb.end());
+    std::nth_element(wc.begin(), wc.begin() + wc.size() / 2, wc.end());
     const auto layout = [](double lo, double hi, double median, double& size, int& count) {
       const double extent = std::max(hi - lo, 1e-300);
       count = int(std::clamp(std::ceil(extent / std::max(median, extent / 4096.0)), 1.0, 4096.0));
       size = extent / count;
     };
     bins.lo_b = lo_b, bins.lo_c = lo_c;
-    double median_b = wb[n / 2], median_c = wc[n / 2];
-    // Coarser bins while the entries (each tetrahedron in every bin its box touches) would
-    // exceed 16 per tetrahedron: a graded mesh's large tetrahedra would otherwise fill
-    // millions of bins each.
+    double median_b = wb[wb.size() / 2], median_c = wc[wc.size() / 2];
+    // Coarser bins while the entries would exceed 16 per tetrahedron: a graded mesh's large
+    // tetrahedra would otherwise fill millions of bins each.
     for (;;) {
       layout(lo_b, hi_b, median_b, bins.size_b, bins.nb);
       layout(lo_c, hi_c, median_c, bins.size_c, bins.nc);
-      std::size_t entries = 0;
-      for (std::size_t e = 0; e < n; ++e) {
-        const LinearTet& t = tets[e];
-        entries += std::size_t(bins.bin(t.hi[bins.b], bins.lo_b, bins.size_b, bins.nb) -
-                               bins.bin(t.lo[bins.b], bins.lo_b, bins.size_b, bins.nb) + 1) *
-                   std::size_t(bins.bin(t.hi[bins.c], bins.lo_c, bins.size_c, bins.nc) -
-                               bins.bin(t.lo[bins.c], bins.lo_c, bins.size_c, bins.nc) + 1);
-      }
-      if (entries <= 16 * n + 1024 || (bins.nb == 1 && bins.nc == 1)) break;
+      if (ranges() <= 16 * n + 1024 || (bins.nb == 1 && bins.nc == 1)) break;
       median_b = 2.0 * std::max(median_b, bins.size_b);
       median_c = 2.0 * std::max(median_c, bins.size_c);
     }
   }
   const std::size_t cells = std::size_t(bins.nb) * std::size_t(bins.nc);
   bins.first.assign(cells + 1, 0);
-  for (int pass = 0; pass < 2; ++pass) {
-    std::vector<std::uint32_t> next;
-    if (pass == 1) {
-      for (std::size_t k = 0; k < cells; ++k)
-        bins.first[k + 1] += bins.first[k];
-      bins.tets.resize(bins.first[cells]);
-      next.assign(bins.first.begin(), bins.first.end() - 1);
-    }
-    for (std::size_t e = 0; e < n; ++e) {
-      const LinearTet& t = tets[e];
-      const int b0 = bins.bin(t.lo[bins.b], bins.lo_b, bins.size_b, bins.nb),
-                b1 = bins.bin(t.hi[bins.b], bins.lo_b, bins.size_b, bins.nb);
-      const int c0 = bins.bin(t.lo[bins.c], bins.lo_c, bins.size_c, bins.nc),
-                c1 = bins.bin(t.hi[bins.c], bins.lo_c, bins.size_c, bins.nc);
-      for (int cc = c0; cc <= c1; ++cc)
-        for (int bb = b0; bb <= b1; ++bb) {
-          const std::size_t k = std::size_t(bb) + std::size_t(bins.nb) * std::size_t(cc);
-          if (pass == 0)
-            ++bins.first[k + 1];
-          else
-            bins.tets[next[k]++] = std::uint32_t(e);
-        }
-    }
-  }
+  for (std::size_t e = 0; e < n; ++e)
+    for (int cc = range[e][2]; cc <= range[e][3]; ++cc)
+      for (int bb = range[e][0]; bb <= range[e][1]; ++bb)
+        ++bins.first[std::size_t(bb) + std::size_t(bins.nb) * std::size_t(cc) + 1];
+  for (std::size_t k = 0; k < cells; ++k)
+    bins.first[k + 1] += bins.first[k];
+  bins.tets.resize(bins.first[cells]);
+  std::vector<std::uint32_t> next(bins.first.begin(), bins.first.end() - 1);
+  for (std::size_t e = 0; e < n; ++e)
+    for (int cc = range[e][2]; cc <= range[e][3]; ++cc)
+      for (int bb = range[e][0]; bb <= range[e][1]; ++bb)
+        bins.tets[next[std::size_t(bb) + std::size_t(bins.nb) * std::size_t(cc)]++] =
+            std::uint32_t(e) | (bb == range[e][0] ? Bins::kFirstB : 0u) |
+            (cc == range[e][2] ? Bins::kFirstC : 0u);
   return bins;
 }
 
 class LinearTetAxisBinding final : public AxisBinding {
  public:
   LinearTetAxisBinding(std::vector<LinearTet> tets, std::uint64_t nonfinite)
-      : tets_(std::move(tets)), nonfinite_(nonfinite) {}
+      : tets_(std::move(tets)), boxes_(tets_.size()), nonfinite_(nonfinite) {
+    tbb::parallel_for(std::size_t(0), tets_.size(), [&](std::size_t e) {
+      boxes_[e] = {tets_[e].lo, tets_[e].hi};
+    });
+  }
   void prepare(int axis) const override {
-    std::call_once(once_[axis], [&] { bins_[axis] = make_bins(tets_, axis); });
+    std::call_once(once_[axis], [&] { bins_[axis] = make_bins(boxes_, axis); });
   }
   void cast(const AxisRays& rays, AxisHits& out) const override {
     if (tets_.empty() || rays.rays.empty()) return;
@@ -164,7 +190,7 @@ class LinearTetAxisBinding final : public AxisBinding {
       const std::size_t bin = bins.at(ray.org);
       for (std::uint32_t m = bins.first[bin]; m < bins.first[bin + 1]; ++m) {
         RayHit hit;
-        if (tet_hit(tets_[bins.tets[m]], ray.org, rays.dir, ray.t0, ray.t1, hit))
+        if (tet_hit(tets_[bins.tets[m] & Bins::kIndex], ray.org, rays.dir, ray.t0, ray.t1, hit))
           out.push_back({std::uint32_t(k), hit});
       }
     }
@@ -174,10 +200,10 @@ class LinearTetAxisBinding final : public AxisBinding {
 
  private:
   // Object order over a rectangle of an axis view's pixels: each tetrahedron whose box meets the
-  // rectangle (from the first of its bins there, so once) tests the pixel centres its box
-  // covers (to 10⁻⁶ pixel; the test itself decides) — a few pixels per tetrahedron instead of
-  // every tetrahedron of a bin per ray. The same pairs of ray and
-  // tetrahedron that hold a hit as the per-ray loop, through the same tet_hit.
+  // rectangle (from the first of its bins there, so once) tests, row by row, the pixel centres
+  // its crossing polygon grown by its margin covers (and 10⁻⁶ pixel; the test itself decides) —
+  // little more than the pixels it hits, instead of every tetrahedron of a bin per ray. The same
+  // pairs of ray and tetrahedron that hold a hit as the per-ray loop, through the same tet_hit.
   void cast_lattice(const AxisRays& rays, const Bins& bins, AxisHits& out) const {
     const View& view = *rays.lattice;
     const int w = rays.width();
@@ -192,14 +218,24 @@ class LinearTetAxisBinding final : public AxisBinding {
     const int qc0 = bins.bin(lo_c, bins.lo_c, bins.size_c, bins.nc),
               qc1 = bins.bin(hi_c, bins.lo_c, bins.size_c, bins.nc);
     const double inv = 1.0 / view.spacing;
+    constexpr std::uint32_t kAhead = 8;
     for (int cc = qc0; cc <= qc1; ++cc)
       for (int bb = qb0; bb <= qb1; ++bb) {
         const std::size_t bin = std::size_t(bb) + std::size_t(bins.nb) * std::size_t(cc);
         for (std::uint32_t m = bins.first[bin]; m < bins.first[bin + 1]; ++m) {
-          const LinearTet& tet = tets_[bins.tets[m]];
-          if (std::max(bins.bin(tet.lo[bins.b], bins.lo_b, bins.size_b, bins.nb), qb0) != bb ||
-              std::max(bins.bin(tet.lo[bins.c], bins.lo_c, bins.size_c, bins.nc), qc0) != cc)
+          // The tetrahedra a few entries ahead fetched while this one is tested (each is read
+          // once per view, in the mesh's order: a cache miss per tetrahedron otherwise).
+          if (m + kAhead < bins.first[bin + 1]) {
+            const char* ahead =
+                reinterpret_cast<const char*>(&tets_[bins.tets[m + kAhead] & Bins::kIndex]);
+            for (std::size_t line = 0; line < sizeof(LinearTet); line += 64)
+              __builtin_prefetch(ahead + line);
+          }
+          // The first of the tetrahedron's bins within the rectangle's, from the entry's flags.
+          const std::uint32_t entry = bins.tets[m];
+          if (!((entry & Bins::kFirstB) || bb == qb0) || !((entry & Bins::kFirstC) || cc == qc0))
             continue;
+          const LinearTet& tet = tets_[entry & Bins::kIndex];
           // The tetrahedron's box in image coordinates (u, v are axes: exact).
           const glm::dvec3 p = view.origin;
           const double x0 = std::min(glm::dot(tet.lo - p, view.u), glm::dot(tet.hi - p, view.u)),
@@ -221,8 +257,36 @@ class LinearTetAxisBinding final : public AxisBinding {
                     ib = last(x1 * inv - 0.5 + pad, i0, i0 + w - 1);
           const int ja = first(y0 * inv - 0.5 - pad, j0, j0 + h - 1),
                     jb = last(y1 * inv - 0.5 + pad, j0, j0 + h - 1);
-          for (int j = ja; j <= jb; ++j)
-            for (int i = ia; i <= ib; ++i) {
+          if (ia > ib || ja > jb) continue;
+          // The crossing polygon's corners in pixel coordinates (pixel centres at integers) and
+          // its margin: in each row, the columns of the polygon's slice over the row ± margin.
+          double cx[4], cy[4];
+          for (int k = 0; k < tet.corners; ++k) {
+            cx[k] = glm::dot(tet.corner[k] - p, view.u) * inv - 0.5;
+            cy[k] = glm::dot(tet.corner[k] - p, view.v) * inv - 0.5;
+          }
+          const double grow = tet.margin * inv + pad;
+          for (int j = ja; j <= jb; ++j) {
+            const double band_lo = j - grow, band_hi = j + grow;
+            double xl = INFINITY, xr = -INFINITY;
+            for (int a = 0; a < tet.corners; ++a) {
+              if (cy[a] >= band_lo && cy[a] <= band_hi)
+                xl = std::min(xl, cx[a]), xr = std::max(xr, cx[a]);
+              for (int b = a + 1; b < tet.corners; ++b) {
+                // The segment's part within the band: its ends there.
+                const double ya = cy[a], yb = cy[b];
+                if (ya == yb || std::max(ya, yb) < band_lo || std::min(ya, yb) > band_hi) continue;
+                for (const double y : {std::clamp(band_lo, std::min(ya, yb), std::max(ya, yb)),
+                                       std::clamp(band_hi, std::min(ya, yb), std::max(ya, yb))}) {
+                  const double x = cx[a] + (cx[b] - cx[a]) * ((y - ya) / (yb - ya));
+                  xl = std::min(xl, x), xr = std::max(xr, x);
+                }
+              }
+            }
+            if (!(xl <= xr)) continue;
+            const int ra = std::max(ia, first(xl - grow, i0, i0 + w - 1)),
+                      rb = std::min(ib, last(xr + grow, i0, i0 + w - 1));
+            for (int i = ra; i <= rb; ++i) {
               const std::size_t k = std::size_t(j - j0) * std::size_t(w) + std::size_t(i - i0);
               if (k >= rays.rays.size()) continue;
               const AxisRay& ray = rays.rays[k];
@@ -231,11 +295,13 @@ class LinearTetAxisBinding final : public AxisBinding {
               if (tet_hit(tet, ray.org, rays.dir, ray.t0, ray.t1, hit))
                 out.push_back({std::uint32_t(k), hit});
             }
+          }
         }
       }
   }
 
   std::vector<LinearTet> tets_;
+  std::vector<Box> boxes_;
   std::uint64_t nonfinite_;
   mutable std::once_flag once_[3];
   mutable Bins bins_[3];
@@ -251,6 +317,69 @@ std::unique_ptr<GeometryBinding> bind_linear_tets(RTCDevice device, std::vector<
 std::unique_ptr<AxisBinding> bind_axis_linear_tets(std::vector<LinearTet> tets,
                                                    std::uint64_t nonfinite) {
   return std::make_unique<LinearTetAxisBinding>(std::move(tets), nonfinite);
+}
+
+void set_crossing(LinearTet& tet, const double* v, const double* f) {
+  glm::dvec3 p[4];
+  glm::dvec3 box_lo(INFINITY), box_hi(-INFINITY);
+  double f_max = 0.0;
+  for (int i = 0; i < 4; ++i) {
+    p[i] = glm::dvec3(v[3 * i], v[3 * i + 1], v[3 * i + 2]);
+    box_lo = glm::min(box_lo, p[i]), box_hi = glm::max(box_hi, p[i]);
+    f_max = std::max(f_max, std::abs(f[i]));
+  }
+  constexpr int kEdges[6][2] = {{0, 1}, {0, 2}, {0, 3}, {1, 2}, {1, 3}, {2, 3}};
+  // The corners: the edges' sign changes and the vertices on the plane.
+  tet.corners = 0;
+  for (int i = 0; i < 4; ++i)
+    if (f[i] == 0.0) tet.corner[tet.corners++] = p[i];
+  for (const auto& e : kEdges) {
+    const double fa = f[e[0]], fb = f[e[1]];
+    if ((fa < 0.0 && fb > 0.0) || (fa > 0.0 && fb < 0.0))
+      if (tet.corners < 4)
+        tet.corner[tet.corners++] = p[e[0]] + (fa / (fa - fb)) * (p[e[1]] - p[e[0]]);
+  }
+  if (tet.corners == 0) {  // not straddling 0: the whole tetrahedron (the caller's rule)
+    for (int i = 0; i < 4; ++i)
+      tet.corner[i] = p[i];
+    tet.corners = 4;
+  }
+  // An accepted hit lies, up to tet_hit's rounding (a few ulps of the tetrahedron's size,
+  // coordinates and values), within delta of the tetrahedron and where |f| ≤ eps: generous
+  // bounds of both. Such a point is within delta of a point of the tetrahedron where
+  // |f| ≤ eps + |g| delta, and those points span the convex hull of the vertices and edge points
+  // below (where |f| = that bound); each is within `reach` of a corner, so the polygon grown by
+  // reach + delta holds them all.
+  const double size = glm::length(box_hi - box_lo);
+  double coords = 0.0;
+  for (int a = 0; a < 3; ++a)
+    coords = std::max({coords, std::abs(box_lo[a]), std::abs(box_hi[a])});
+  const double gradient = glm::length(tet.g);
+  const double delta = 1e-9 * (size + coords);
+  const double eps = 1e-9 * (f_max + gradient * (size + coords)) + gradient * delta;
+  double reach2 = 0.0;  // squared
+  const auto near = [&](glm::dvec3 x) {
+    double d2 = INFINITY;
+    for (int k = 0; k < tet.corners; ++k) {
+      const glm::dvec3 r = x - tet.corner[k];
+      d2 = std::min(d2, glm::dot(r, r));
+    }
+    reach2 = std::max(reach2, d2);
+  };
+  for (int i = 0; i < 4; ++i)
+    if (std::abs(f[i]) <= eps) near(p[i]);
+  for (const auto& e : kEdges)
+    for (const double level : {-eps, eps}) {
+      const double fa = f[e[0]] - level, fb = f[e[1]] - level;
+      if ((fa < 0.0 && fb > 0.0) || (fa > 0.0 && fb < 0.0))
+        near(p[e[0]] + (fa / (fa - fb)) * (p[e[1]] - p[e[0]]));
+    }
+  tet.margin = std::min(std::sqrt(reach2) * (1.0 + 1e-12) + delta, size + delta);
+  tet.lo = glm::dvec3(INFINITY), tet.hi = glm::dvec3(-INFINITY);
+  for (int k = 0; k < tet.corners; ++k)
+    tet.lo = glm::min(tet.lo, tet.corner[k]), tet.hi = glm::max(tet.hi, tet.corner[k]);
+  tet.lo = glm::max(tet.lo - tet.margin, box_lo - delta);
+  tet.hi = glm::min(tet.hi + tet.margin, box_hi + delta);
 }
 
 bool linear_tet_is_valid(const double* v) {

@@ -20,14 +20,23 @@
 namespace ldimesh::cells {
 
 // One tetrahedron with its field minus the isovalue: f(x) = f0 + g·(x − v0), and the map from
-// x − v0 to its barycentric coordinates λ₁, λ₂, λ₃ (λ₀ = 1 − Σ).
+// x − v0 to its barycentric coordinates λ₁, λ₂, λ₃ (λ₀ = 1 − Σ). Its crossing polygon (the plane
+// f = 0 inside it: 3 or 4 corners) grown by `margin` holds every hit tet_hit accepts, rounding
+// included (set_crossing); lo, hi bound that region.
 struct LinearTet {
   glm::dvec3 v0{0.0};
   glm::dmat3 to_barycentric{1.0};
   glm::dvec3 g{0.0};
   double f0 = 0.0;
   glm::dvec3 lo{0.0}, hi{0.0};
+  glm::dvec3 corner[4]{};
+  int corners = 0;
+  double margin = 0.0;
 };
+
+// The crossing polygon, its margin and box of `tet` (v0, g, f0 set) with vertices `v` (12
+// doubles) and values minus the isovalue `f`, which straddle 0.
+void set_crossing(LinearTet& tet, const double* v, const double* f);
 
 // The tetrahedra whose values straddle `isovalue` (a value equal to it counts), from the cells'
 // 4 vertices (12 doubles each, VTK's order) and their 4 values each (`values(e, i)`); the cells
@@ -82,11 +91,9 @@ std::vector<LinearTet> active_linear_tets(std::span<const double> vertices, doub
       // ∇f = (∂λ/∂x)ᵀ (f_i − f_0): the rows of to_barycentric are ∇λ_i.
       t.g = glm::transpose(t.to_barycentric) * glm::dvec3(f[1] - f[0], f[2] - f[0], f[3] - f[0]);
       t.f0 = f[0] - isovalue;
-      t.lo = t.hi = t.v0;
-      for (int i = 1; i < 4; ++i) {
-        const glm::dvec3 p(v[3 * i], v[3 * i + 1], v[3 * i + 2]);
-        t.lo = glm::min(t.lo, p), t.hi = glm::max(t.hi, p);
-      }
+      const double shifted[4] = {f[0] - isovalue, f[1] - isovalue, f[2] - isovalue,
+                                 f[3] - isovalue};
+      set_crossing(t, v, shifted);
       out.push_back(t);
     }
   });
