@@ -382,7 +382,13 @@ int run_mesh(const MeshArgs& args) {
     refine_rays += n;
   if (args.json) {
     nlohmann::json j;
-    j[args.grid.empty() ? "surface" : "grid"] = input.name;
+    j[!args.vtu.empty() ? "vtu" : args.grid.empty() ? "surface" : "grid"] = input.name;
+#ifdef LDIMESH_WITH_VTU
+    if (!args.vtu.empty()) {
+      j["cells"] = input.elements.cells;
+      j["ghost_cells"] = input.elements.ghost_cells;
+    }
+#endif
     j["isovalue"] = iso;
     j["resolution"] = args.res;
     j["views"] = args.views;
@@ -494,6 +500,15 @@ int run_mesh(const MeshArgs& args) {
     std::printf("  load       %8.3f s  %lldx%lldx%lld %s, values in [%g, %g]\n", load_seconds,
                 (long long)args.dims[0], (long long)args.dims[1], (long long)args.dims[2],
                 args.type.c_str(), input.volume.min_value, input.volume.max_value);
+#ifdef LDIMESH_WITH_VTU
+  if (!args.vtu.empty())
+    std::printf(
+        "  load       %8.3f s  %zu cells in %zu block%s, %zu ghost cells skipped, values in "
+        "[%g, %g]\n",
+        load_seconds, input.elements.cells, input.elements.groups.size(),
+        input.elements.groups.size() == 1 ? "" : "s", input.elements.ghost_cells,
+        input.elements.min_value, input.elements.max_value);
+#endif
   std::printf("  scene      %8.3f s  (slowest rank)\n", max_scene);
   std::printf("  ray cast   %8.3f s  %zu rays, %zu samples (%.2f M rays/s)\n", t.cast, rays,
               result.samples, rays / t.cast * 1e-6);

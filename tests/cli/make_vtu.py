@@ -24,6 +24,11 @@
   make_vtu.py badpoint OUT.vtu two order-2 Lagrange hexahedra, the second naming point 1000 of 54
                                (VTK writes and reads such a file without a word)
   make_vtu.py pieces OUT.pvtu  the sphere's cells as a .pvtu record over two .vtu pieces
+  make_vtu.py ghosts OUT.pvtu  the sphere's cells over two pieces as a parallel writer with a
+                               ghost layer leaves them (dolfinx): the cells of z < 0 and of z >= 0,
+                               each piece also holding the other's layer next to z = 0, flagged
+                               DUPLICATECELL in vtkGhostType; the cells kept are the sphere's, in
+                               its order
   make_vtu.py zeroblock OUT.vtu the sphere, zlib-compressed (base64 appended data, 32-bit
                                headers), with the block size in the compression header of its
                                array "r" set to 0: VTK 9.1's reader divides by it (SIGFPE on
@@ -34,7 +39,7 @@ import re
 import struct
 import sys
 
-from vtkmodules.vtkCommonCore import vtkDoubleArray, vtkIdList, vtkPoints
+from vtkmodules.vtkCommonCore import vtkDoubleArray, vtkIdList, vtkPoints, vtkUnsignedCharArray
 from vtkmodules.vtkCommonDataModel import (VTK_HEXAHEDRON, VTK_LAGRANGE_HEXAHEDRON,
                                            VTK_LAGRANGE_TETRAHEDRON, VTK_QUADRATIC_HEXAHEDRON,
                                            VTK_QUADRATIC_PYRAMID, VTK_QUADRATIC_TETRA,
@@ -123,7 +128,7 @@ def main():
     values = vtkDoubleArray()
     values.SetName("r")
     r2 = lambda x: x[0] ** 2 + x[1] ** 2 + x[2] ** 2
-    if kind in ("sphere", "ascii", "raw", "timesteps", "pieces", "zeroblock"):
+    if kind in ("sphere", "ascii", "raw", "timesteps", "pieces", "zeroblock", "ghosts"):
         n = 4
         for k in range(n):
             for j in range(n):
@@ -182,6 +187,9 @@ def main():
         sys.exit(f"make_vtu.py: unknown kind {kind}")
     grid.SetPoints(points)
     grid.GetPointData().AddArray(values)
+    if kind == "ghosts":
+        write_ghost_pieces(grid, out)
+        return
     if kind == "pieces":
         writer = vtkXMLPUnstructuredGridWriter()
         writer.SetNumberOfPieces(2)
@@ -228,6 +236,55 @@ def main():
         sys.exit("make_vtu.py: VTK could not write " + out)
     if kind == "zeroblock":
         zero_block_size(out, b"r")
+
+
+def write_ghost_pieces(grid, out):
+    """The cells of `grid` (the sphere's: 4³ Lagrange hexahedra in rows of z, then 2 linear ones)
+    as two pieces split at z = 0, each with the other's layer of cells beside z = 0 as ghosts,
+    and the .pvtu record naming them."""
+    lo = [grid.GetCell(c).GetBounds()[4] for c in range(grid.GetNumberOfCells())]
+    own = [[c for c in range(len(lo)) if lo[c] < -1e-9], [c for c in range(len(lo)) if lo[c] >= -1e-9]]
+    layer = [[c for c in own[1] if abs(lo[c]) < 1e-9], [c for c in own[0] if abs(lo[c] + 0.5) < 1e-9]]
+    base = out[:-len(".pvtu")]
+    names = []
+    for piece in range(2):
+        part = vtkUnstructuredGrid()
+        part.SetPoints(grid.GetPoints())
+        part.GetPointData().ShallowCopy(grid.GetPointData())
+        ghosts = vtkUnsignedCharArray()
+        ghosts.SetName("vtkGhostType")
+        # Piece 1 lists its ghosts first, piece 0 last: either way they are skipped.
+        cells = layer[1] + own[1] if piece == 1 else own[0] + layer[0]
+        for c in cells:
+            ids = vtkIdList()
+            grid.GetCellPoints(c, ids)
+            part.InsertNextCell(grid.GetCellType(c), ids)
+            ghosts.InsertNextValue(0 if c in own[piece] else 1)  # 1: DUPLICATECELL
+        part.GetCellData().AddArray(ghosts)
+        name = f"{base}_{piece}.vtu"
+        writer = vtkXMLUnstructuredGridWriter()
+        writer.SetFileName(name)
+        writer.SetInputData(part)
+        if not writer.Write():
+            sys.exit("make_vtu.py: VTK could not write " + name)
+        names.append(name.rsplit("/", 1)[-1])
+    vtk_type = {"float": "Float32", "double": "Float64"}
+    data = grid.GetPointData()
+    arrays = "".join(f'<PDataArray type="{vtk_type[data.GetArray(a).GetDataTypeAsString()]}" '
+                     f'Name="{data.GetArrayName(a)}" '
+                     f'NumberOfComponents="{data.GetArray(a).GetNumberOfComponents()}"/>'
+                     for a in range(data.GetNumberOfArrays()))
+    point_type = vtk_type[grid.GetPoints().GetData().GetDataTypeAsString()]
+    with open(out, "w") as f:
+        f.write('<?xml version="1.0"?>\n'
+                '<VTKFile type="PUnstructuredGrid" version="0.1" byte_order="LittleEndian">\n'
+                '<PUnstructuredGrid GhostLevel="1">\n'
+                f'<PPointData>{arrays}</PPointData>\n'
+                '<PCellData><PDataArray type="UInt8" Name="vtkGhostType"/></PCellData>\n'
+                f'<PPoints><PDataArray type="{point_type}" Name="Points" '
+                'NumberOfComponents="3"/></PPoints>\n'
+                + "".join(f'<Piece Source="{n}"/>\n' for n in names) +
+                '</PUnstructuredGrid>\n</VTKFile>\n')
 
 
 def zero_block_size(path, name):

@@ -2,7 +2,8 @@
 # `ldimesh mesh --vtu` on files written by VTK itself (tests/cli/make_vtu.py): order-2 Lagrange
 # hexahedra carrying |x|² beside linear hexahedra, meshed at |x|² = 0.49 — the mesh lies on the
 # sphere of radius 0.7 (`ldimesh distance` to the sphere, and the same figures to the file's own
-# isosurface with `distance --vtu`), also from a .pvtu over two pieces; one-line errors naming the field or
+# isosurface with `distance --vtu`), also from a .pvtu over two pieces, with and without ghost
+# layers; one-line errors naming the field or
 # the cell for a missing field, a vector field, an unsupported cell type, orders that differ
 # along the axes, a cell naming a point the file does not have, more points or values declared
 # than the file can hold, a component count that is not one, two arrays of one name, a missing
@@ -18,6 +19,7 @@ for kind in sphere cells ascii raw timesteps triangle tet15 degrees badpoint zer
   /usr/bin/python3 "$src/tests/cli/make_vtu.py" $kind "$tmp/$kind.vtu" || fail "make_vtu.py $kind"
 done
 /usr/bin/python3 "$src/tests/cli/make_vtu.py" pieces "$tmp/pieces.pvtu" || fail "make_vtu.py pieces"
+/usr/bin/python3 "$src/tests/cli/make_vtu.py" ghosts "$tmp/ghosts.pvtu" || fail "make_vtu.py ghosts"
 
 "$ldimesh" mesh --vtu "$tmp/sphere.vtu" --field r --iso 0.49 --res 128 --out "$tmp/sphere.ply" \
   --json >"$tmp/sphere.json" 2>"$tmp/sphere.err" || { cat "$tmp/sphere.err"; fail "--vtu sphere.vtu"; }
@@ -99,6 +101,14 @@ expect_distance_error "requires --vtu" "$tmp/sphere.ply" --surface sphere --fiel
 "$ldimesh" mesh --vtu "$tmp/pieces.pvtu" --field r --iso 0.49 --res 128 --out "$tmp/pieces.ply" \
   >/dev/null 2>"$tmp/pieces.err" || { cat "$tmp/pieces.err"; fail "--vtu pieces.pvtu"; }
 cmp -s "$tmp/sphere.ply" "$tmp/pieces.ply" || fail "the .pvtu's mesh differs from the .vtu's"
+# Two pieces that each carry the other's layer of cells beside z = 0 as ghosts (DUPLICATECELL in
+# vtkGhostType, as dolfinx writes in parallel): 34 ghost cells skipped, the sphere's 66 cells
+# each meshed once, the same mesh.
+"$ldimesh" mesh --vtu "$tmp/ghosts.pvtu" --field r --iso 0.49 --res 128 --out "$tmp/ghosts.ply" \
+  >"$tmp/ghosts.out" 2>"$tmp/ghosts.err" || { cat "$tmp/ghosts.err"; fail "--vtu ghosts.pvtu"; }
+grep -q "66 cells in 2 blocks, 34 ghost cells skipped" "$tmp/ghosts.out" ||
+  { cat "$tmp/ghosts.out"; fail "ghost cells of the .pvtu's pieces not skipped"; }
+cmp -s "$tmp/sphere.ply" "$tmp/ghosts.ply" || fail "the ghost-layered .pvtu's mesh differs from the .vtu's"
 # The same cells uncompressed, as VTK writes them: ASCII, raw appended data in two pieces, and
 # two time steps (each array once per step under its name; step 0 is read): the same mesh. The
 # checks before VTK reads the data (a byte a value, one array per name and step) pass them.
