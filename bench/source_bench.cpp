@@ -25,7 +25,7 @@
 #include "ldimesh/core/field/hex_source.hpp"
 #include "ldimesh/core/raycast/raycaster.hpp"
 
-#include "field/curved_element.hpp"  // the curved search's copies (internal)
+#include "field/hex/curved_element.hpp"  // the curved search's copies (internal)
 
 namespace {
 

@@ -17,7 +17,7 @@
 #include "ldimesh/core/raycast/raycaster.hpp"
 
 #include "curved_meshes.hpp"
-#include "field/curved_element.hpp"  // the search's copies (internal)
+#include "field/hex/curved_element.hpp"  // the search's copies (internal)
 
 namespace ldimesh {
 namespace {

@@ -1,6 +1,6 @@
 #include "curved_element.hpp"
 
-#include "bernstein_basis.hpp"
+#include "../bernstein/basis.hpp"
 
 #include <algorithm>
 #include <atomic>
