@@ -1,13 +1,10 @@
 #include "linear_tets.hpp"
 
-#include <algorithm>
-#include <array>
-#include <cmath>
-#include <functional>
-#include <mutex>
-#include <stdexcept>
+#include "../axis_bins.hpp"
 
-#include <tbb/parallel_reduce.h>
+#include <algorithm>
+#include <cmath>
+#include <mutex>
 
 namespace ldimesh::cells {
 namespace {
@@ -65,106 +62,6 @@ class LinearTetBinding final : public GeometryBinding {
   UserGeometry geometry_;  // last: its callbacks read the members above
 };
 
-// The tetrahedra binned across one ray axis: a uniform grid over the two other world axes (b, c),
-// bins about as wide as the median crossing box, each tetrahedron in every bin its box touches. A
-// ray lies in one bin, so it meets each tetrahedron there once. An entry is the tetrahedron's
-// index with two flags: the bin is the first of its range along b (kFirstB), along c (kFirstC).
-struct Bins {
-  static constexpr std::uint32_t kFirstB = 1u << 31, kFirstC = 1u << 30, kIndex = kFirstC - 1;
-  int b = 0, c = 1, nb = 1, nc = 1;
-  double lo_b = 0.0, lo_c = 0.0, size_b = 1.0, size_c = 1.0;
-  std::vector<std::uint32_t> first, tets;  // CSR, b fastest
-  int bin(double x, double lo, double size, int n) const {
-    const double k = std::floor((x - lo) / size);
-    return k < 0.0 ? 0 : k >= n ? n - 1 : int(k);
-  }
-  std::size_t at(glm::dvec3 p) const {
-    return std::size_t(bin(p[b], lo_b, size_b, nb)) +
-           std::size_t(nb) * std::size_t(bin(p[c], lo_c, size_c, nc));
-  }
-};
-
-// A tetrahedron's box (LinearTet::lo, hi), apart: the bins' passes read only these.
-struct Box {
-  glm::dvec3 lo, hi;
-};
-
-Bins make_bins(const std::vector<Box>& boxes, int axis) {
-  Bins bins;
-  bins.b = axis == 0 ? 1 : 0;
-  bins.c = axis == 2 ? 1 : 2;
-  const std::size_t n = boxes.size();
-  if (n > Bins::kIndex) throw std::runtime_error("more than 2^30 active linear tetrahedra");
-  double lo_b = INFINITY, hi_b = -INFINITY, lo_c = INFINITY, hi_c = -INFINITY;
-  for (const Box& box : boxes) {
-    lo_b = std::min(lo_b, box.lo[bins.b]), hi_b = std::max(hi_b, box.hi[bins.b]);
-    lo_c = std::min(lo_c, box.lo[bins.c]), hi_c = std::max(hi_c, box.hi[bins.c]);
-  }
-  // The median widths, of at most 4096 boxes evenly spread over the list.
-  const std::size_t stride = std::max<std::size_t>(1, n / 4096);
-  std::vector<double> wb, wc;
-  for (std::size_t e = 0; e < n; e += stride) {
-    wb.push_back(boxes[e].hi[bins.b] - boxes[e].lo[bins.b]);
-    wc.push_back(boxes[e].hi[bins.c] - boxes[e].lo[bins.c]);
-  }
-  // Each tetrahedron's bin range (b0, b1, c0, c1) under the layout being tried.
-  std::vector<std::array<int, 4>> range(n);
-  const auto ranges = [&] {
-    return tbb::parallel_reduce(
-        tbb::blocked_range<std::size_t>(0, n, 4096), std::size_t(0),
-        [&](const tbb::blocked_range<std::size_t>& r, std::size_t entries) {
-          for (std::size_t e = r.begin(); e != r.end(); ++e) {
-            const Box& t = boxes[e];
-            range[e] = {bins.bin(t.lo[bins.b], bins.lo_b, bins.size_b, bins.nb),
-                        bins.bin(t.hi[bins.b], bins.lo_b, bins.size_b, bins.nb),
-                        bins.bin(t.lo[bins.c], bins.lo_c, bins.size_c, bins.nc),
-                        bins.bin(t.hi[bins.c], bins.lo_c, bins.size_c, bins.nc)};
-            entries += std::size_t(range[e][1] - range[e][0] + 1) *
-                       std::size_t(range[e][3] - range[e][2] + 1);
-          }
-          return entries;
-        },
-        std::plus<>());
-  };
-  if (n > 0) {
-    std::nth_element(wb.begin(), wb.begin() + wb.size() / 2, wb.end());
-    std::nth_element(wc.begin(), wc.begin() + wc.size() / 2, wc.end());
-    const auto layout = [](double lo, double hi, double median, double& size, int& count) {
-      const double extent = std::max(hi - lo, 1e-300);
-      count = int(std::clamp(std::ceil(extent / std::max(median, extent / 4096.0)), 1.0, 4096.0));
-      size = extent / count;
-    };
-    bins.lo_b = lo_b, bins.lo_c = lo_c;
-    double median_b = wb[wb.size() / 2], median_c = wc[wc.size() / 2];
-    // Coarser bins while the entries would exceed 16 per tetrahedron: a graded mesh's large
-    // tetrahedra would otherwise fill millions of bins each.
-    for (;;) {
-      layout(lo_b, hi_b, median_b, bins.size_b, bins.nb);
-      layout(lo_c, hi_c, median_c, bins.size_c, bins.nc);
-      if (ranges() <= 16 * n + 1024 || (bins.nb == 1 && bins.nc == 1)) break;
-      median_b = 2.0 * std::max(median_b, bins.size_b);
-      median_c = 2.0 * std::max(median_c, bins.size_c);
-    }
-  }
-  const std::size_t cells = std::size_t(bins.nb) * std::size_t(bins.nc);
-  bins.first.assign(cells + 1, 0);
-  for (std::size_t e = 0; e < n; ++e)
-    for (int cc = range[e][2]; cc <= range[e][3]; ++cc)
-      for (int bb = range[e][0]; bb <= range[e][1]; ++bb)
-        ++bins.first[std::size_t(bb) + std::size_t(bins.nb) * std::size_t(cc) + 1];
-  for (std::size_t k = 0; k < cells; ++k)
-    bins.first[k + 1] += bins.first[k];
-  bins.tets.resize(bins.first[cells]);
-  std::vector<std::uint32_t> next(bins.first.begin(), bins.first.end() - 1);
-  for (std::size_t e = 0; e < n; ++e)
-    for (int cc = range[e][2]; cc <= range[e][3]; ++cc)
-      for (int bb = range[e][0]; bb <= range[e][1]; ++bb)
-        bins.tets[next[std::size_t(bb) + std::size_t(bins.nb) * std::size_t(cc)]++] =
-            std::uint32_t(e) | (bb == range[e][0] ? Bins::kFirstB : 0u) |
-            (cc == range[e][2] ? Bins::kFirstC : 0u);
-  return bins;
-}
-
 class LinearTetAxisBinding final : public AxisBinding {
  public:
   LinearTetAxisBinding(std::vector<LinearTet> tets, std::uint64_t nonfinite)
@@ -174,12 +71,12 @@ class LinearTetAxisBinding final : public AxisBinding {
     });
   }
   void prepare(int axis) const override {
-    std::call_once(once_[axis], [&] { bins_[axis] = make_bins(boxes_, axis); });
+    std::call_once(once_[axis], [&] { bins_[axis] = make_axis_bins(boxes_, axis); });
   }
   void cast(const AxisRays& rays, AxisHits& out) const override {
     if (tets_.empty() || rays.rays.empty()) return;
     prepare(rays.axis);
-    const Bins& bins = bins_[rays.axis];
+    const AxisBins& bins = bins_[rays.axis];
     if (rays.lattice && rays.width() > 0) {
       cast_lattice(rays, bins, out);
       return;
@@ -190,7 +87,8 @@ class LinearTetAxisBinding final : public AxisBinding {
       const std::size_t bin = bins.at(ray.org);
       for (std::uint32_t m = bins.first[bin]; m < bins.first[bin + 1]; ++m) {
         RayHit hit;
-        if (tet_hit(tets_[bins.tets[m] & Bins::kIndex], ray.org, rays.dir, ray.t0, ray.t1, hit))
+        if (tet_hit(tets_[bins.entries[m] & AxisBins::kIndex], ray.org, rays.dir, ray.t0, ray.t1,
+                    hit))
           out.push_back({std::uint32_t(k), hit});
       }
     }
@@ -204,7 +102,7 @@ class LinearTetAxisBinding final : public AxisBinding {
   // its crossing polygon grown by its margin covers (and 10⁻⁶ pixel; the test itself decides) —
   // little more than the pixels it hits, instead of every tetrahedron of a bin per ray. The same
   // pairs of ray and tetrahedron that hold a hit as the per-ray loop, through the same tet_hit.
-  void cast_lattice(const AxisRays& rays, const Bins& bins, AxisHits& out) const {
+  void cast_lattice(const AxisRays& rays, const AxisBins& bins, AxisHits& out) const {
     const View& view = *rays.lattice;
     const int w = rays.width();
     const int h = int((rays.rays.size() + std::size_t(w) - 1) / std::size_t(w));
@@ -213,29 +111,26 @@ class LinearTetAxisBinding final : public AxisBinding {
     const glm::dvec3 a = view.point(i0, j0, 0.0), b = view.point(i0 + w, j0 + h, 0.0);
     const double lo_b = std::min(a[bins.b], b[bins.b]), hi_b = std::max(a[bins.b], b[bins.b]);
     const double lo_c = std::min(a[bins.c], b[bins.c]), hi_c = std::max(a[bins.c], b[bins.c]);
-    const int qb0 = bins.bin(lo_b, bins.lo_b, bins.size_b, bins.nb),
-              qb1 = bins.bin(hi_b, bins.lo_b, bins.size_b, bins.nb);
-    const int qc0 = bins.bin(lo_c, bins.lo_c, bins.size_c, bins.nc),
-              qc1 = bins.bin(hi_c, bins.lo_c, bins.size_c, bins.nc);
+    const int qb0 = bins.bin_b(lo_b), qb1 = bins.bin_b(hi_b);
+    const int qc0 = bins.bin_c(lo_c), qc1 = bins.bin_c(hi_c);
     const double inv = 1.0 / view.spacing;
     constexpr std::uint32_t kAhead = 8;
     for (int cc = qc0; cc <= qc1; ++cc)
       for (int bb = qb0; bb <= qb1; ++bb) {
-        const std::size_t bin = std::size_t(bb) + std::size_t(bins.nb) * std::size_t(cc);
+        const std::size_t bin = bins.bin(bb, cc);
         for (std::uint32_t m = bins.first[bin]; m < bins.first[bin + 1]; ++m) {
           // The tetrahedra a few entries ahead fetched while this one is tested (each is read
           // once per view, in the mesh's order: a cache miss per tetrahedron otherwise).
           if (m + kAhead < bins.first[bin + 1]) {
             const char* ahead =
-                reinterpret_cast<const char*>(&tets_[bins.tets[m + kAhead] & Bins::kIndex]);
+                reinterpret_cast<const char*>(&tets_[bins.entries[m + kAhead] & AxisBins::kIndex]);
             for (std::size_t line = 0; line < sizeof(LinearTet); line += 64)
               __builtin_prefetch(ahead + line);
           }
           // The first of the tetrahedron's bins within the rectangle's, from the entry's flags.
-          const std::uint32_t entry = bins.tets[m];
-          if (!((entry & Bins::kFirstB) || bb == qb0) || !((entry & Bins::kFirstC) || cc == qc0))
-            continue;
-          const LinearTet& tet = tets_[entry & Bins::kIndex];
+          const std::uint32_t entry = bins.entries[m];
+          if (!AxisBins::first_in(entry, bb, cc, qb0, qc0)) continue;
+          const LinearTet& tet = tets_[entry & AxisBins::kIndex];
           // The tetrahedron's box in image coordinates (u, v are axes: exact).
           const glm::dvec3 p = view.origin;
           const double x0 = std::min(glm::dot(tet.lo - p, view.u), glm::dot(tet.hi - p, view.u)),
@@ -301,10 +196,10 @@ class LinearTetAxisBinding final : public AxisBinding {
   }
 
   std::vector<LinearTet> tets_;
-  std::vector<Box> boxes_;
+  std::vector<AxisBox> boxes_;
   std::uint64_t nonfinite_;
   mutable std::once_flag once_[3];
-  mutable Bins bins_[3];
+  mutable AxisBins bins_[3];
 };
 
 }  // namespace

@@ -11,6 +11,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include "../axis_bins.hpp"
 #include "hex_internal.hpp"
 
 namespace ldimesh::hex {
@@ -18,76 +19,6 @@ namespace {
 
 // ---------------------------------------------------------------------------------------------
 // The coherent caster of axis-parallel rays
-
-// The active elements binned by their boxes across one ray axis: a uniform grid over the two
-// other world axes (b < c), about one element wide, each element listed in every bin its box
-// touches.
-struct ElementBins {
-  int b = 0, c = 1;
-  double lo_b = 0.0, lo_c = 0.0, size_b = 1.0, size_c = 1.0;
-  int nb = 1, nc = 1;
-  std::vector<std::uint32_t> first;  // CSR over bins (b fastest)
-  std::vector<std::uint32_t> elements;
-
-  int bin_b(double x) const { return clamped_floor((x - lo_b) / size_b, 0, nb - 1); }
-  int bin_c(double x) const { return clamped_floor((x - lo_c) / size_c, 0, nc - 1); }
-};
-
-ElementBins bin_elements(const std::vector<ActiveElement>& elements, int axis) {
-  ElementBins bins;
-  bins.b = axis == 0 ? 1 : 0;
-  bins.c = axis == 2 ? 1 : 2;
-  const std::size_t n = elements.size();
-  if (n == 0) {
-    bins.first.assign(2, 0);
-    return bins;
-  }
-  double lo_b = INFINITY, hi_b = -INFINITY, lo_c = INFINITY, hi_c = -INFINITY;
-  std::vector<double> eb(n), ec(n);
-  for (std::size_t e = 0; e < n; ++e) {
-    const ActiveElement& el = elements[e];
-    lo_b = std::min(lo_b, el.lo[bins.b]), hi_b = std::max(hi_b, el.hi[bins.b]);
-    lo_c = std::min(lo_c, el.lo[bins.c]), hi_c = std::max(hi_c, el.hi[bins.c]);
-    eb[e] = el.hi[bins.b] - el.lo[bins.b];
-    ec[e] = el.hi[bins.c] - el.lo[bins.c];
-  }
-  // Bins as wide as the median element, at most 2048 per axis.
-  std::nth_element(eb.begin(), eb.begin() + n / 2, eb.end());
-  std::nth_element(ec.begin(), ec.begin() + n / 2, ec.end());
-  const auto layout = [](double lo, double hi, double median, double& size, int& count) {
-    const double extent = std::max(hi - lo, 1e-300);
-    count = int(std::clamp(std::ceil(extent / std::max(median, extent / 2048.0)), 1.0, 2048.0));
-    size = extent / count;
-  };
-  bins.lo_b = lo_b, bins.lo_c = lo_c;
-  layout(lo_b, hi_b, eb[n / 2], bins.size_b, bins.nb);
-  layout(lo_c, hi_c, ec[n / 2], bins.size_c, bins.nc);
-  const std::size_t cells = std::size_t(bins.nb) * std::size_t(bins.nc);
-  bins.first.assign(cells + 1, 0);
-  for (int pass = 0; pass < 2; ++pass) {
-    std::vector<std::uint32_t> next;
-    if (pass == 1) {
-      for (std::size_t k = 0; k < cells; ++k)
-        bins.first[k + 1] += bins.first[k];
-      bins.elements.resize(bins.first[cells]);
-      next.assign(bins.first.begin(), bins.first.end() - 1);
-    }
-    for (std::size_t e = 0; e < n; ++e) {
-      const ActiveElement& el = elements[e];
-      const int b0 = bins.bin_b(el.lo[bins.b]), b1 = bins.bin_b(el.hi[bins.b]);
-      const int c0 = bins.bin_c(el.lo[bins.c]), c1 = bins.bin_c(el.hi[bins.c]);
-      for (int cc = c0; cc <= c1; ++cc)
-        for (int bb = b0; bb <= b1; ++bb) {
-          const std::size_t k = std::size_t(bb) + std::size_t(bins.nb) * std::size_t(cc);
-          if (pass == 0)
-            ++bins.first[k + 1];
-          else
-            bins.elements[next[k]++] = std::uint32_t(e);
-        }
-    }
-  }
-  return bins;
-}
 
 // Coefficients this close to zero count as zero in the sign tests (far below any field's
 // values, far above underflow).
@@ -292,7 +223,12 @@ class HexAxisBinding final : public AxisBinding {
   std::uint64_t nonfinite_values() const override { return active_.nonfinite; }
 
   void prepare(int axis) const override {
-    std::call_once(bins_once_[axis], [&] { bins_[axis] = bin_elements(active_.elements, axis); });
+    std::call_once(bins_once_[axis], [&] {
+      std::vector<AxisBox> boxes(active_.elements.size());
+      for (std::size_t e = 0; e < boxes.size(); ++e)
+        boxes[e] = {active_.elements[e].lo, active_.elements[e].hi};
+      bins_[axis] = make_axis_bins(boxes, axis);
+    });
     std::call_once(pieces_once_, [&] {  // the curved elements' pieces, for every axis
       pieces_.resize(active_.elements.size());
       const double width = 0.25;
@@ -310,19 +246,18 @@ class HexAxisBinding final : public AxisBinding {
     if (active_.elements.empty() || rays.rays.empty()) return;
     const int axis = rays.axis;
     prepare(axis);
-    const ElementBins& bins = bins_[axis];
+    const AxisBins& bins = bins_[axis];
     std::vector<RayHit> hits;
     // The pixel loops below take whole rows (never given otherwise: prefers_column_tasks).
     if (!rays.lattice || rays.width() != rays.lattice->width) {
       for (std::size_t k = 0; k < rays.rays.size(); ++k) {
         const AxisRay& ray = rays.rays[k];
         if (!(ray.t0 <= ray.t1)) continue;
-        const std::size_t bin = std::size_t(bins.bin_b(ray.org[bins.b])) +
-                                std::size_t(bins.nb) * std::size_t(bins.bin_c(ray.org[bins.c]));
+        const std::size_t bin = bins.at(ray.org);
         hits.clear();
         with_order(active_.order, [&](auto p) {
           for (std::uint32_t m = bins.first[bin]; m < bins.first[bin + 1]; ++m) {
-            const std::uint32_t e = bins.elements[m];
+            const std::uint32_t e = bins.entries[m] & AxisBins::kIndex;
             intersect_active<p>(active_, e, ray.org, rays.dir, ray.t0, ray.t1, hits);
           }
         });
@@ -344,14 +279,11 @@ class HexAxisBinding final : public AxisBinding {
     scratch.read_lattice(rays);
     for (int cc = qc0; cc <= qc1; ++cc)
       for (int bb = qb0; bb <= qb1; ++bb) {
-        const std::size_t bin = std::size_t(bb) + std::size_t(bins.nb) * std::size_t(cc);
+        const std::size_t bin = bins.bin(bb, cc);
         for (std::uint32_t m = bins.first[bin]; m < bins.first[bin + 1]; ++m) {
-          const std::uint32_t e = bins.elements[m];
-          const ActiveElement& el = active_.elements[e];
-          if (std::max(bins.bin_b(el.lo[bins.b]), qb0) != bb ||
-              std::max(bins.bin_c(el.lo[bins.c]), qc0) != cc)
-            continue;
-          cast_element(e, rays, out, scratch);
+          const std::uint32_t entry = bins.entries[m];
+          if (!AxisBins::first_in(entry, bb, cc, qb0, qc0)) continue;
+          cast_element(entry & AxisBins::kIndex, rays, out, scratch);
         }
       }
   }
@@ -668,7 +600,7 @@ class HexAxisBinding final : public AxisBinding {
   }
 
   Activation active_;
-  mutable std::array<ElementBins, 3> bins_;
+  mutable std::array<AxisBins, 3> bins_;
   mutable std::array<std::once_flag, 3> bins_once_;
   // A curved element's pieces (the pixel rays share the search's first levels): boxes of a
   // quarter of the reference cube's width per axis (an eighth measured slower since the search is
