@@ -25,12 +25,14 @@ using Field = std::function<double(glm::dvec3)>;
 struct Cells {
   CellType type = CellType::tetrahedron;
   int order = 1;
+  int geometry_order = 0;
   std::vector<double> points, values;
   std::size_t count = 0;
   CellBlock block() const {
     CellBlock b;
     b.type = type;
     b.order = order;
+    b.geometry_order = geometry_order;
     b.element_count = count;
     b.points = points.data();
     b.values = values.data();
@@ -245,6 +247,104 @@ TEST(CellSource, TheFieldXOnCurvedCellsCutsThePlaneExactly) {
   }
 }
 
+// Cells of `type` and field order `order` whose points are the nodes of the same shape at
+// geometry order q (CellBlock::geometry_order): the n³ cubes of grid_cells, the geometry nodes
+// bent by `bend`, the field at the field nodes' images under the geometry's own map.
+Cells cells_with_geometry_order(CellType type, int order, int q, int n, double lo, double hi,
+                                const Field& field,
+                                const std::function<glm::dvec3(glm::dvec3)>& bend = {}) {
+  const CellType geometry_type = type == CellType::serendipity_hexahedron ? CellType::hexahedron
+                                 : type == CellType::serendipity_wedge    ? CellType::wedge
+                                                                          : type;
+  Cells cells;
+  cells.type = type;
+  cells.order = order;
+  cells.geometry_order = q;
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i)
+        for (const Corners& corners : split_cube(type, cube_corners(i, j, k, n, lo, hi))) {
+          std::vector<glm::dvec3> nodes;
+          for (const glm::dvec3& r : cell_reference_nodes(geometry_type, q)) {
+            glm::dvec3 x = linear_map(type, corners, r);
+            if (bend) x = bend(x);
+            nodes.push_back(x);
+            cells.points.insert(cells.points.end(), {x.x, x.y, x.z});
+          }
+          for (const glm::dvec3& r : cell_reference_nodes(type, order)) {
+            const std::vector<double> phi = cell_shape_functions(geometry_type, q, r);
+            glm::dvec3 x(0.0);
+            for (std::size_t m = 0; m < nodes.size(); ++m)
+              x += phi[m] * nodes[m];
+            cells.values.push_back(field(x));
+          }
+          ++cells.count;
+        }
+  return cells;
+}
+
+TEST(CellSource, PointsOfTheirOwnOrderGiveTheIsoparametricSurface) {
+  // CellBlock::geometry_order: straight cells given by their corners (q = 1) carry |x|² at order
+  // 2 and 3 — the unit sphere, within 10⁻⁶, and the same samples as the isoparametric block of
+  // the same cells; curved cells of geometry order 2 carry the field x at order 4 (x has degree
+  // 2 ≤ 4 on them): the plane, hit once per ray. Bad geometry orders are refused.
+  struct Case {
+    CellType type;
+    int order;
+  };
+  for (const Case c :
+       {Case{CellType::tetrahedron, 2}, Case{CellType::tetrahedron, 3}, Case{CellType::wedge, 2},
+        Case{CellType::serendipity_hexahedron, 2}, Case{CellType::serendipity_wedge, 2}}) {
+    SCOPED_TRACE(describe(c.type, c.order));
+    const Cells straight = cells_with_geometry_order(c.type, c.order, 1, 3, -1.25, 1.25, r2);
+    const Cells iso = grid_cells(c.type, c.order, 3, -1.25, 1.25, r2);
+    ASSERT_EQ(straight.values, iso.values);
+    ASSERT_LT(straight.points.size(), iso.points.size());
+    const CellElementSource a(straight.block()), b(iso.block());
+    const RayCaster ca(a, 1.0), cb(b, 1.0);
+    for (const View& view : testing::axis_and_oblique_views(a.bounds(), 24)) {
+      const Ldi la = ca.cast(view), lb = cb.cast(view);
+      const testing::SphereRays rays = testing::expect_sphere_hits(la, 1.0, 1e-6);
+      EXPECT_GT(rays.through, 60);
+      ASSERT_EQ(la.offsets, lb.offsets);
+      for (std::size_t k = 0; k < la.sample_count(); ++k)
+        EXPECT_NEAR(la.depth[k], lb.depth[k], 1e-7);
+    }
+  }
+  const auto bend = [](glm::dvec3 x) {
+    const glm::dvec3 w = (1.0 - x * x);
+    return x + 0.08 * glm::dvec3(w.x * std::sin(2.0 * x.y) * w.y * w.z,
+                                 w.y * std::sin(1.5 * x.z + 0.3) * w.x * w.z,
+                                 w.z * std::cos(1.7 * x.x) * w.x * w.y);
+  };
+  for (const CellType type : {CellType::tetrahedron, CellType::wedge, CellType::hexahedron}) {
+    SCOPED_TRACE(describe(type, 4));
+    const Cells curved = cells_with_geometry_order(
+        type, 4, 2, 2, -1.0, 1.0, [](glm::dvec3 x) { return x.x; }, bend);
+    const CellElementSource source(curved.block());
+    for (double plane : {-0.31, 0.0, 0.47})
+      expect_plane_hits(source, plane, -1.0, 1.0);
+  }
+  Cells cells = cells_with_geometry_order(CellType::tetrahedron, 3, 1, 1, 0.0, 1.0, r2);
+  for (const int q : {9, -1}) {
+    CellBlock b = cells.block();
+    b.geometry_order = q;
+    try {
+      const CellElementSource source(b);
+      ADD_FAILURE() << "geometry order " << q << " accepted";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("geometry order " + std::to_string(q)),
+                std::string::npos)
+          << e.what();
+    }
+  }
+  // A block sharing the prepared geometry must say the same geometry order.
+  const CellElementSource prepared(cells.block());
+  CellBlock other = cells.block();
+  other.geometry_order = 3;
+  EXPECT_THROW(CellElementSource(prepared, other), std::invalid_argument);
+}
+
 TEST(CellSource, MixedCellsGiveTheSurfaceOfOneHexahedralMesh) {
   // One box meshed by cubes of four kinds (hexahedra, Kuhn tetrahedra, wedges, 15-node wedges),
   // the same quadratic field |x|² on each: one sphere, two hits per ray through it, none twice at
@@ -255,7 +355,7 @@ TEST(CellSource, MixedCellsGiveTheSurfaceOfOneHexahedralMesh) {
   std::vector<Cells> kinds;
   for (CellType type :
        {CellType::hexahedron, CellType::tetrahedron, CellType::wedge, CellType::serendipity_wedge})
-    kinds.push_back(Cells{type, 2, {}, {}, 0});
+    kinds.push_back(Cells{type, 2, 0, {}, {}, 0});
   for (int k = 0; k < n; ++k)
     for (int j = 0; j < n; ++j)
       for (int i = 0; i < n; ++i) {

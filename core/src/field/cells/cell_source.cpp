@@ -39,14 +39,16 @@ void apply(const double* matrix, std::size_t rows, std::size_t n, const double* 
   }
 }
 
-// The sub-hexahedra's block over `geometry` (their equispaced lattice points), values to be set.
-HexBlock sub_hexahedra_block(std::size_t count, int degree, const std::vector<double>& geometry) {
+// The sub-hexahedra's block over `geometry` (their equispaced lattice points of degree
+// `geometry_degree`), values (of degree `degree`) to be set.
+HexBlock sub_hexahedra_block(std::size_t count, int degree, int geometry_degree,
+                             const std::vector<double>& geometry) {
   HexBlock b;
   b.order = degree;
   b.nodes = NodeSet::equispaced;
   b.ordering = NodeOrdering::lexicographic;
   b.element_count = count;
-  b.geometry_order = degree;
+  b.geometry_order = geometry_degree;
   b.geometry = geometry.data();
   b.type = ScalarType::float64;
   return b;
@@ -126,20 +128,43 @@ CellElementSource::CellElementSource(const CellBlock& block) : block_(block) {
   if (block.element_count == 0) throw std::invalid_argument(what + ": no cells");
   if (!block.points) throw std::invalid_argument(what + ": null point array");
   check_values(what);
-  if (block.node_order == CellNodeOrder::gmsh) {
-    from_ = cell_gmsh_permutation(block.type, block.order);
-    if (from_.empty())
-      throw std::invalid_argument(what + " of order " + std::to_string(block.order) +
-                                  ": gmsh's node order is not taken for them (VTK's is)");
-  } else if (block.node_order != CellNodeOrder::vtk) {
-    throw std::invalid_argument(what + ": unknown node order");
-  } else {
-    for (std::size_t i = 0; i < nodes_; ++i)
-      from_.push_back(int(i));
+  // The geometry's cell: the field's, or the same shape at the points' own order.
+  geometry_order_ = block.geometry_order == 0 ? block.order : block.geometry_order;
+  geometry_type_ = block.type;
+  if (geometry_order_ != block.order && block.type == CellType::serendipity_hexahedron)
+    geometry_type_ = CellType::hexahedron;
+  if (geometry_order_ != block.order && block.type == CellType::serendipity_wedge)
+    geometry_type_ = CellType::wedge;
+  const cells::ReferenceCell* geometry_cell = nullptr;
+  try {
+    if (block.geometry_order < 0) throw std::invalid_argument("negative");
+    geometry_cell = &cells::reference_cell(geometry_type_, geometry_order_);
+  } catch (const std::invalid_argument&) {
+    throw std::invalid_argument(what + ": geometry order " + std::to_string(block.geometry_order) +
+                                " is not one of theirs");
   }
+  geometry_nodes_ = geometry_cell->nodes.size();
+  geometry_degree_ = geometry_cell->degree;
+  const auto order_of_nodes = [&](CellType type, int order, std::size_t count) {
+    std::vector<int> from;
+    if (block.node_order == CellNodeOrder::gmsh) {
+      from = cell_gmsh_permutation(type, order);
+      if (from.empty())
+        throw std::invalid_argument(what + " of order " + std::to_string(order) +
+                                    ": gmsh's node order is not taken for them (VTK's is)");
+    } else if (block.node_order != CellNodeOrder::vtk) {
+      throw std::invalid_argument(what + ": unknown node order");
+    } else {
+      for (std::size_t i = 0; i < count; ++i)
+        from.push_back(int(i));
+    }
+    return from;
+  };
+  from_ = order_of_nodes(block.type, block.order, nodes_);
+  geometry_from_ = order_of_nodes(geometry_type_, geometry_order_, geometry_nodes_);
 
   geometry_ = std::make_shared<Geometry>();
-  if (block.type == CellType::tetrahedron && block.order == 1) {
+  if (block.type == CellType::tetrahedron && block.order == 1 && geometry_order_ == 1) {
     // Linear tetrahedra: cast directly (linear_tets.hpp); the sub-hexahedra only where a lookup
     // or a colour field needs them.
     std::vector<double>& v = geometry_->tets;
@@ -150,7 +175,7 @@ CellElementSource::CellElementSource(const CellBlock& block) : block_(block) {
       const double* p = block.points + 12 * e;
       for (int i = 0; i < 4; ++i)
         for (int a = 0; a < 3; ++a) {
-          const double x = p[3 * from_[i] + a];
+          const double x = p[3 * geometry_from_[i] + a];
           if (!std::isfinite(x))
             throw std::invalid_argument(what + ": cell " + std::to_string(e) +
                                         " has a non-finite point");
@@ -165,36 +190,37 @@ CellElementSource::CellElementSource(const CellBlock& block) : block_(block) {
     }
     return;
   }
-  std::call_once(geometry_->once,
-                 [&] { geometry_->sub_hexahedra = build_sub_hexahedra(block.points, from_); });
+  std::call_once(geometry_->once, [&] {
+    geometry_->sub_hexahedra = build_sub_hexahedra(block.points, geometry_from_);
+  });
   geometry_->bounds = geometry_->sub_hexahedra->bounds();
 }
 
 std::shared_ptr<const HexElementSource> CellElementSource::build_sub_hexahedra(
     const double* points, const std::vector<int>& from) const {
-  const cells::ReferenceCell& cell = cells::reference_cell(block_.type, block_.order);
+  const cells::ReferenceCell& cell = cells::reference_cell(geometry_type_, geometry_order_);
   const std::string what = std::string("cell source: ") + cell_type_name(block_.type) + "s";
-  // The sub-hexahedra's lattice points, cell after cell.
-  const std::size_t lattice = std::size_t(degree_ + 1) * (degree_ + 1) * (degree_ + 1);
-  const std::size_t rows = lattice * sub_per_cell_;
+  // The sub-hexahedra's lattice points (of the geometry's degree), cell after cell.
+  const std::size_t g = std::size_t(geometry_degree_) + 1, nodes = geometry_nodes_;
+  const std::size_t rows = g * g * g * sub_per_cell_;
   const std::size_t count = block_.element_count * sub_per_cell_;
   std::vector<double> geometry(3 * rows * block_.element_count);
-  std::vector<double> nodal(nodes_), out(rows);
+  std::vector<double> nodal(nodes), out(rows);
   for (std::size_t e = 0; e < block_.element_count; ++e) {
-    const double* p = points + 3 * nodes_ * e;
-    for (std::size_t i = 0; i < 3 * nodes_; ++i)
+    const double* p = points + 3 * nodes * e;
+    for (std::size_t i = 0; i < 3 * nodes; ++i)
       if (!std::isfinite(p[i]))
         throw std::invalid_argument(what + ": cell " + std::to_string(e) +
                                     " has a non-finite point");
     for (int axis = 0; axis < 3; ++axis) {
-      for (std::size_t i = 0; i < nodes_; ++i)
+      for (std::size_t i = 0; i < nodes; ++i)
         nodal[i] = p[3 * from[i] + axis];
-      apply(cell.sampling.data(), rows, nodes_, nodal.data(), out.data());
+      apply(cell.sampling.data(), rows, nodes, nodal.data(), out.data());
       for (std::size_t r = 0; r < rows; ++r)
         geometry[3 * (e * rows + r) + axis] = out[r];
     }
   }
-  HexBlock hex = sub_hexahedra_block(count, degree_, geometry);
+  HexBlock hex = sub_hexahedra_block(count, degree_, geometry_degree_, geometry);
   hex.values = geometry.data();  // not read by the constructor, which needs a non-null array
   try {
     // It keeps what it needs of the geometry; the sources made from it do not read the lattice
@@ -214,8 +240,8 @@ std::shared_ptr<const HexElementSource> CellElementSource::build_sub_hexahedra(
 
 const HexElementSource& CellElementSource::sub_hexahedra() const {
   std::call_once(geometry_->once, [&] {
-    std::vector<int> identity(nodes_);
-    for (std::size_t i = 0; i < nodes_; ++i)
+    std::vector<int> identity(geometry_nodes_);
+    for (std::size_t i = 0; i < geometry_nodes_; ++i)
       identity[i] = int(i);
     try {
       geometry_->sub_hexahedra = build_sub_hexahedra(geometry_->tets.data(), identity);
@@ -244,14 +270,19 @@ CellElementSource::CellElementSource(const CellElementSource& prepared, const Ce
       sub_per_cell_(prepared.sub_per_cell_),
       degree_(prepared.degree_),
       from_(prepared.from_),
+      geometry_type_(prepared.geometry_type_),
+      geometry_order_(prepared.geometry_order_),
+      geometry_nodes_(prepared.geometry_nodes_),
+      geometry_degree_(prepared.geometry_degree_),
+      geometry_from_(prepared.geometry_from_),
       geometry_(prepared.geometry_) {
   const CellBlock& p = prepared.block_;
   const std::string what = std::string("cell source: ") + cell_type_name(p.type) + "s";
   if (block.type != p.type || block.order != p.order || block.element_count != p.element_count ||
-      block.node_order != p.node_order)
+      block.node_order != p.node_order || block.geometry_order != p.geometry_order)
     throw std::invalid_argument(what +
-                                ": the block's layout (type, order, cell count, node order) "
-                                "differs from the prepared source's");
+                                ": the block's layout (type, order, geometry order, cell count, "
+                                "node order) differs from the prepared source's");
   check_values(what);
 }
 
@@ -287,7 +318,8 @@ CellElementSource::Counted CellElementSource::convert(bool colour) const {
   result.nonfinite = fill(block_.values, block_.value_type, snapshot->values);
   if (colour && block_.colour) fill(block_.colour, block_.colour_type, snapshot->colour);
   static const std::vector<double> no_points;  // the prepared source's copies read none
-  HexBlock hex = sub_hexahedra_block(block_.element_count * sub_per_cell_, degree_, no_points);
+  HexBlock hex = sub_hexahedra_block(block_.element_count * sub_per_cell_, degree_,
+                                     geometry_degree_, no_points);
   hex.values = snapshot->values.data();
   if (!snapshot->colour.empty()) hex.colour = snapshot->colour.data();
   snapshot->source = std::make_unique<HexElementSource>(sub_hexahedra(), hex);

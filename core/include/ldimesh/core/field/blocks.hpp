@@ -171,6 +171,11 @@ struct CellBlock {
   ScalarType colour_type = ScalarType::float64;
   // The order of the nodes within a cell, for the points and the values alike.
   CellNodeOrder node_order = CellNodeOrder::vtk;
+  // The points' own order q: 0 (default) means the field's (isoparametric: a point per value);
+  // otherwise the cells' geometry is the cell of the same shape and order q (1: straight sides),
+  // `points` holding its nodes (cell_node_count(type, q) per cell; for the 20-node hexahedron
+  // and the 15-node wedge, q = 1 is the linear hexahedron's or wedge's 8 or 6 corners).
+  int geometry_order = 0;
 };
 
 }  // namespace ldimesh

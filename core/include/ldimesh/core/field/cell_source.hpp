@@ -56,18 +56,18 @@ std::vector<double> cell_shape_functions(CellType type, int order, glm::dvec3 re
 class CellElementSource final : public FieldSource {
  public:
   // Checks the block and prepares the sub-hexahedra's geometry. Throws std::invalid_argument for
-  // an unknown type or scalar type, an order the type does not have, no cells, a null array, an
-  // element stride below the node count, and for the first cell (named by its index in the
-  // block) with a non-finite point or that is inverted or degenerate (the Jacobian determinant
-  // of its map vanishes or changes sign inside it; a pyramid's vanishes at its apex only).
-  // The points are read here only; the value arrays must outlive the source and may change:
-  // every bind() reads them.
+  // an unknown type or scalar type, an order (or geometry order) the type does not have, no
+  // cells, a null array, an element stride below the node count, and for the first cell (named
+  // by its index in the block) with a non-finite point or that is inverted or degenerate (the
+  // Jacobian determinant of its map vanishes or changes sign inside it; a pyramid's vanishes at its
+  // apex only). The points are read here only; the value arrays must outlive the source and may
+  // change: every bind() reads them.
   explicit CellElementSource(const CellBlock& block);
   // A source over `block`, whose geometry is that of `prepared`'s block, with its own values (the
   // adaptor's snapshot of a block at each due step): the prepared sub-hexahedra are shared, not
   // built again; `block`'s points are not read (they may be null), only its layout. Throws
-  // std::invalid_argument where the type, order or cell count differ, for a null value array,
-  // an unknown scalar type or an element stride below the node count.
+  // std::invalid_argument where the type, order, geometry order, node order or cell count differ,
+  // for a null value array, an unknown scalar type or an element stride below the node count.
   CellElementSource(const CellElementSource& prepared, const CellBlock& block);
 
   Box bounds() const override;
@@ -98,6 +98,13 @@ class CellElementSource final : public FieldSource {
   int sub_per_cell_ = 1;
   int degree_ = 1;         // per axis on a sub-hexahedron
   std::vector<int> from_;  // VTK's node i is the block's node from_[i] within a cell
+  // The geometry's cell (the field's unless block.geometry_order says otherwise): its type and
+  // order, node count, degree per axis on a sub-hexahedron, and node order as from_.
+  CellType geometry_type_ = CellType::tetrahedron;
+  int geometry_order_ = 1;
+  std::size_t geometry_nodes_ = 0;
+  int geometry_degree_ = 1;
+  std::vector<int> geometry_from_;
   // Per sub-hexahedron: (degree + 1)³ rows × nodes: the sub-hexahedron's equispaced lattice
   // values from the cell's nodal values.
   // The geometry as prepared, shared by the sources made from one another: the sub-hexahedra
