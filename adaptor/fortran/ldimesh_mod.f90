@@ -78,6 +78,7 @@ module ldimesh_mod
     integer(c_int) :: type = LDIMESH_FLOAT64
     integer(c_int64_t) :: element_stride = 0
     integer(c_int) :: node_order = 0  ! LDIMESH_CELL_ORDER_VTK or LDIMESH_CELL_ORDER_GMSH
+    integer(c_int) :: geometry_order = 0  ! 0: isoparametric; else the points' own order
   end type ldimesh_cell_block
 
   ! ldimesh_step_report of ldimesh.h.
@@ -341,15 +342,57 @@ contains
 
   ! Cells of type `cell_type` (LDIMESH_CELL_*) and order `order`: points(:, i, e) is node i of
   ! cell e, values(i, e) its value, in VTK's node order or, with node_order =
-  ! LDIMESH_CELL_ORDER_GMSH, gmsh's.
-  subroutine ldimesh_add_cells(adaptor, cell_type, order, points, values, ierr, node_order)
+  ! LDIMESH_CELL_ORDER_GMSH, gmsh's. With geometry_order = q (1..8) the points are the nodes of
+  ! the cell of the same shape and order q (q = 1: the corners of straight cells; the 20- and
+  ! 15-node cells then take the linear hexahedron's or wedge's corners), otherwise the values'.
+  subroutine ldimesh_add_cells(adaptor, cell_type, order, points, values, ierr, node_order, &
+                               geometry_order)
     type(ldimesh_adaptor), intent(in) :: adaptor
     integer, intent(in) :: cell_type, order
     real(c_double), intent(in), target, contiguous :: points(:, :, :), values(:, :)
     integer, intent(out) :: ierr
-    integer, intent(in), optional :: node_order
+    integer, intent(in), optional :: node_order, geometry_order
     type(ldimesh_cell_block) :: block
-    integer :: nodes
+    integer :: nodes, point_nodes
+    nodes = cell_node_count(cell_type, order)
+    point_nodes = nodes
+    if (present(geometry_order)) then
+      if (geometry_order > 0 .and. geometry_order /= order) then
+        select case (cell_type)
+        case (LDIMESH_CELL_HEXAHEDRON20)
+          point_nodes = cell_node_count(LDIMESH_CELL_HEXAHEDRON, geometry_order)
+        case (LDIMESH_CELL_WEDGE15)
+          point_nodes = cell_node_count(LDIMESH_CELL_WEDGE, geometry_order)
+        case default
+          point_nodes = cell_node_count(cell_type, geometry_order)
+        end select
+      end if
+    end if
+    if (size(points, 1) /= 3 .or. size(points, 2) /= point_nodes .or. &
+        size(values, 1) /= nodes .or. size(points, 3) /= size(values, 2)) then
+      call forget_block(adaptor)
+      ierr = fail(adaptor, 'ldimesh_add_cells: points must have the shape (3, nodes, cells) '// &
+                  'and values (nodes, cells), nodes the cell type''s node count (the '// &
+                  'geometry order''s for the points where geometry_order is given)')
+      return
+    end if
+    block%cell_type = int(cell_type, c_int)
+    block%order = int(order, c_int)
+    block%element_count = size(values, 2, kind=c_int64_t)
+    block%element_stride = size(values, 1, kind=c_int64_t)
+    if (size(points) > 0) block%points = c_loc(points)
+    block%point_count = size(points, kind=c_int64_t)
+    if (size(values) > 0) block%values = c_loc(values)
+    block%value_count = size(values, kind=c_int64_t)
+    if (present(node_order)) block%node_order = int(node_order, c_int)
+    if (present(geometry_order)) block%geometry_order = int(geometry_order, c_int)
+    ierr = c_add_cell_block(adaptor%handle, block)
+  end subroutine ldimesh_add_cells
+
+  ! Nodes of a cell of type `cell_type` (LDIMESH_CELL_*) and order `order` (the C API checks
+  ! that the order exists).
+  pure integer function cell_node_count(cell_type, order) result(nodes)
+    integer, intent(in) :: cell_type, order
     select case (cell_type)
     case (LDIMESH_CELL_HEXAHEDRON)
       nodes = (order + 1)**3
@@ -364,24 +407,7 @@ contains
     case default
       nodes = merge(5, 13, order == 1)
     end select
-    if (size(points, 1) /= 3 .or. size(points, 2) /= nodes .or. size(values, 1) /= nodes .or. &
-        size(points, 3) /= size(values, 2)) then
-      call forget_block(adaptor)
-      ierr = fail(adaptor, 'ldimesh_add_cells: points must have the shape (3, nodes, cells) '// &
-                  'and values (nodes, cells), nodes the cell type''s node count')
-      return
-    end if
-    block%cell_type = int(cell_type, c_int)
-    block%order = int(order, c_int)
-    block%element_count = size(values, 2, kind=c_int64_t)
-    block%element_stride = size(values, 1, kind=c_int64_t)
-    if (size(points) > 0) block%points = c_loc(points)
-    block%point_count = size(points, kind=c_int64_t)
-    if (size(values) > 0) block%values = c_loc(values)
-    block%value_count = size(values, kind=c_int64_t)
-    if (present(node_order)) block%node_order = int(node_order, c_int)
-    ierr = c_add_cell_block(adaptor%handle, block)
-  end subroutine ldimesh_add_cells
+  end function cell_node_count
 
   ! Elements of order `order` (1..8) with nodes `node_set` (LDIMESH_NODES_*): values(:, e) are
   ! element e's (order+1)**3 nodal values. Their geometry is either corners(3, 8, e) — the 8

@@ -123,7 +123,8 @@ enum {
 };
 
 /* A rank-local block of cells of one type and order (ldimesh::CellBlock): a mixed mesh is one
- * block per type and order. Geometry and field share the nodes (isoparametric). The values are
+ * block per type and order. Geometry and field share the nodes (isoparametric) unless
+ * geometry_order names the points' own order. The values are
  * read at every due step and may change between steps; the points are prepared when the block is
  * added and must not change while it is added. */
 typedef struct ldimesh_cell_block {
@@ -132,7 +133,8 @@ typedef struct ldimesh_cell_block {
                     1 or 2 for pyramids */
   int64_t element_count;
   const double* points;   /* the cell's nodes × (x, y, z) per cell, VTK's node order */
-  int64_t point_count;    /* doubles the array holds: at least 3 · nodes · element_count */
+  int64_t point_count;    /* doubles the array holds: at least 3 · nodes · element_count (the
+                             geometry's nodes where geometry_order is set) */
   const void* values;     /* a value per node per cell */
   int64_t value_count;    /* values the array holds */
   int type;               /* LDIMESH_FLOAT32 or LDIMESH_FLOAT64 */
@@ -140,6 +142,11 @@ typedef struct ldimesh_cell_block {
   int node_order;         /* LDIMESH_CELL_ORDER_VTK (default) or LDIMESH_CELL_ORDER_GMSH: of the
                              points and values within a cell (gmsh: tetrahedra of order 1-3,
                              prisms of 6, 15, 18 nodes, pyramids of 5, 13, hexahedra of 8, 20, 27) */
+  int geometry_order;     /* 0 (default): the points are the field's nodes (isoparametric); else
+                             q = 1..8: the points are the nodes of the cell of the same shape and
+                             order q (1: straight sides, the corners; for the 20- and 15-node cells
+                             q = 1 gives the linear hexahedron's 8 and the wedge's 6 corners), and
+                             point_count counts those nodes */
 } ldimesh_cell_block;
 
 /* ldimesh_cell_block.node_order */

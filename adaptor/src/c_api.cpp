@@ -329,9 +329,15 @@ int ldimesh_add_cell_block(ldimesh_adaptor* a, const ldimesh_cell_block* b) {
     return fail(a, LDIMESH_ERROR_ARGUMENT,
                 what + "element_stride is smaller than the " + std::to_string(per_element) +
                     " nodes of a cell");
+  const std::size_t geometry_nodes =
+      ldimesh::cell_geometry_nodes(c.type, b->order, b->geometry_order);
+  if (geometry_nodes == 0)
+    return fail(a, LDIMESH_ERROR_ARGUMENT,
+                what + "geometry_order " + std::to_string(b->geometry_order) + " of a " +
+                    ldimesh::cell_type_name(c.type) + " does not exist (0: the field's)");
   std::int64_t needed = 0, doubles = 0;
   if (!mul(b->element_count - 1, stride, needed) ||
-      !mul(b->element_count, 3 * per_element, doubles))
+      !mul(b->element_count, 3 * std::int64_t(geometry_nodes), doubles))
     return fail(a, LDIMESH_ERROR_ARGUMENT, what + "element_count overflows");
   if (needed > std::numeric_limits<std::int64_t>::max() - per_element)
     return fail(a, LDIMESH_ERROR_ARGUMENT, what + "element_count overflows");
@@ -349,6 +355,7 @@ int ldimesh_add_cell_block(ldimesh_adaptor* a, const ldimesh_cell_block* b) {
   c.node_order = b->node_order == LDIMESH_CELL_ORDER_GMSH ? ldimesh::CellNodeOrder::gmsh
                                                           : ldimesh::CellNodeOrder::vtk;
   c.order = b->order;
+  c.geometry_order = b->geometry_order;
   c.element_count = std::size_t(b->element_count);
   c.points = b->points;
   c.values = b->values;

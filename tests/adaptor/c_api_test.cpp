@@ -237,8 +237,10 @@ TEST(CApi, AWrongSizeArrayIsRejectedAndTheAdaptorKeepsWorking) {
 }
 
 // ldimesh_add_cell_block: quadratic tetrahedra (VTK's node order) over this rank's share of 4³
-// cubes of [-1, 1]³, |x|² at their nodes (exact in P2): its counts checked, its type and order,
-// and the published surface the sphere of radius 0.6.
+// cubes of [-1, 1]³, |x|² at their nodes (exact in P2), half of each cube's tetrahedra given by
+// their 10 nodes (isoparametric), half by their 4 corners (geometry_order 1): the counts checked,
+// the type, order and geometry order, and the published surface of the two blocks the sphere of
+// radius 0.6.
 TEST(CApi, CellBlocksAreCheckedAndPublished) {
   const std::string dir = temp_dir("cells");
   ldimesh_adaptor* a = create(options(dir));
@@ -248,8 +250,8 @@ TEST(CApi, CellBlocksAreCheckedAndPublished) {
                              {0.5, 0.5, 0}, {0, 0.5, 0}, {0, 0, 0.5}, {0.5, 0, 0.5}, {0, 0.5, 0.5}};
   const int n = 4;
   const double h = 2.0 / n;
-  std::vector<double> points, values;
-  std::int64_t cells = 0;
+  std::vector<double> points, values, corner_points, corner_values;
+  std::int64_t cells = 0, corner_cells = 0;
   for (int e = 0; e < n * n * n; ++e) {
     if (e % ranks() != rank_of()) continue;
     const double o[3] = {-1 + h * (e % n), -1 + h * (e / n % n), -1 + h * (e / n / n)};
@@ -258,18 +260,21 @@ TEST(CApi, CellBlocksAreCheckedAndPublished) {
         {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {1, 1, 1}}, {{0, 0, 0}, {1, 1, 0}, {0, 1, 0}, {1, 1, 1}},
         {{0, 0, 0}, {0, 1, 0}, {0, 1, 1}, {1, 1, 1}}, {{0, 0, 0}, {0, 1, 1}, {0, 0, 1}, {1, 1, 1}},
         {{0, 0, 0}, {0, 0, 1}, {1, 0, 1}, {1, 1, 1}}, {{0, 0, 0}, {1, 0, 1}, {1, 0, 0}, {1, 1, 1}}};
-    for (const auto& t : kuhn) {
-      for (const auto& r : ref) {
+    for (int k = 0; k < 6; ++k) {
+      const auto& t = kuhn[k];
+      const bool by_corners = k % 2 == 1;
+      for (int m = 0; m < 10; ++m) {
+        const double* r = ref[m];
         double x[3], r2 = 0.0;
         for (int c = 0; c < 3; ++c) {
           x[c] = o[c] + h * (t[0][c] + r[0] * (t[1][c] - t[0][c]) + r[1] * (t[2][c] - t[0][c]) +
                              r[2] * (t[3][c] - t[0][c]));
           r2 += x[c] * x[c];
-          points.push_back(x[c]);
+          if (!by_corners || m < 4) (by_corners ? corner_points : points).push_back(x[c]);
         }
-        values.push_back(r2);
+        (by_corners ? corner_values : values).push_back(r2);
       }
-      ++cells;
+      ++(by_corners ? corner_cells : cells);
     }
   }
   ldimesh_cell_block c;
@@ -307,6 +312,28 @@ TEST(CApi, CellBlocksAreCheckedAndPublished) {
   c.element_stride = 9;
   EXPECT_EQ(ldimesh_add_cell_block(a, &c), LDIMESH_ERROR_ARGUMENT);
   c.element_stride = 0;
+  EXPECT_EQ(ldimesh_add_cell_block(a, &c), LDIMESH_OK) << ldimesh_last_error(a);
+  // The other half by their corners: 4 points per cell, 10 values.
+  c.element_count = corner_cells;
+  c.points = corner_points.data();
+  c.point_count = std::int64_t(corner_points.size());
+  c.values = corner_values.data();
+  c.value_count = std::int64_t(corner_values.size());
+  EXPECT_EQ(ldimesh_add_cell_block(a, &c), LDIMESH_ERROR_ARGUMENT);  // 10 points per cell read
+  c.geometry_order = 9;
+  EXPECT_EQ(ldimesh_add_cell_block(a, &c), LDIMESH_ERROR_ARGUMENT);
+  EXPECT_NE(
+      std::string(ldimesh_last_error(a)).find("geometry_order 9 of a tetrahedron does not exist"),
+      std::string::npos)
+      << ldimesh_last_error(a);
+  c.geometry_order = 1;
+  c.point_count -= 1;
+  EXPECT_EQ(ldimesh_add_cell_block(a, &c), LDIMESH_ERROR_ARGUMENT);
+  EXPECT_NE(std::string(ldimesh_last_error(a))
+                .find("the cells read " + std::to_string(12 * corner_cells)),
+            std::string::npos)
+      << ldimesh_last_error(a);
+  c.point_count += 1;
   EXPECT_EQ(ldimesh_add_cell_block(a, &c), LDIMESH_OK) << ldimesh_last_error(a);
   EXPECT_EQ(ldimesh_execute(a, 1, 0.0), LDIMESH_OK) << ldimesh_last_error(a);
   EXPECT_EQ(ldimesh_finalize(a), LDIMESH_OK);

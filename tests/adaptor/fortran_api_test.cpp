@@ -17,6 +17,7 @@ extern "C" int fortran_add_hex_elements(ldimesh_adaptor* a, int rank, int ranks,
 extern "C" int fortran_refused_shapes(ldimesh_adaptor* a);
 extern "C" int fortran_add_grid_field(ldimesh_adaptor* a, int rank);
 extern "C" int fortran_add_cells(ldimesh_adaptor* a, int rank, int ranks);
+extern "C" int fortran_add_tets_by_corners(ldimesh_adaptor* a, int rank, int ranks);
 
 namespace ldimesh {
 namespace {
@@ -96,27 +97,36 @@ TEST(FortranApi, AGridBlocksFieldColoursItsSurface) {
   ldimesh_destroy(a);
 }
 
-// Linear wedges through ldimesh_add_cells with their field y: the plane x = 0.3, coloured by y;
-// a call whose shapes do not fit the cell type refused with a message.
+// Cells through ldimesh_add_cells with their field y: linear wedges, and quadratic tetrahedra
+// given by their corners (geometry_order = 1): the plane x = 0.3, coloured by y; calls whose
+// shapes do not fit the cell type (or the geometry order) refused with a message.
 TEST(FortranApi, CellsArePublishedOnTheirIsosurface) {
-  const std::string dir = testing::fresh_temp_dir("ldimesh_fortran_api", "cells");
-  ldimesh_adaptor* a = create(dir);
-  if (!a) return;
-  EXPECT_EQ(fortran_add_cells(a, rank_of(), ranks()), LDIMESH_OK) << ldimesh_last_error(a);
-  EXPECT_EQ(ldimesh_execute(a, 1, 0.0), LDIMESH_OK) << ldimesh_last_error(a);
-  EXPECT_EQ(ldimesh_finalize(a), LDIMESH_OK) << ldimesh_last_error(a);
-  if (rank_of() == 0) {
-    const Mesh mesh = testing::published_mesh(dir, 1);
-    EXPECT_GT(mesh.vertex_count(), 500u);
-    double far = 0.0;
-    for (const glm::vec3& v : mesh.positions)
-      far = std::max(far, std::abs(double(v.x) - 0.3));
-    EXPECT_LT(far, 1e-4);
-    testing::expect_coloured_by(
-        mesh, testing::published_step(dir, 1), "y", [](glm::dvec3 p) { return p.y; }, 1.0,
-        1.0 / 48);
+  struct Case {
+    const char* what;
+    int (*add)(ldimesh_adaptor*, int, int);
+  };
+  for (const Case& c : {Case{"wedges", fortran_add_cells},
+                        Case{"tetrahedra by their corners", fortran_add_tets_by_corners}}) {
+    SCOPED_TRACE(c.what);
+    const std::string dir = testing::fresh_temp_dir("ldimesh_fortran_api", "cells");
+    ldimesh_adaptor* a = create(dir);
+    if (!a) return;
+    EXPECT_EQ(c.add(a, rank_of(), ranks()), LDIMESH_OK) << ldimesh_last_error(a);
+    EXPECT_EQ(ldimesh_execute(a, 1, 0.0), LDIMESH_OK) << ldimesh_last_error(a);
+    EXPECT_EQ(ldimesh_finalize(a), LDIMESH_OK) << ldimesh_last_error(a);
+    if (rank_of() == 0) {
+      const Mesh mesh = testing::published_mesh(dir, 1);
+      EXPECT_GT(mesh.vertex_count(), 500u);
+      double far = 0.0;
+      for (const glm::vec3& v : mesh.positions)
+        far = std::max(far, std::abs(double(v.x) - 0.3));
+      EXPECT_LT(far, 1e-4);
+      testing::expect_coloured_by(
+          mesh, testing::published_step(dir, 1), "y", [](glm::dvec3 p) { return p.y; }, 1.0,
+          1.0 / 48);
+    }
+    ldimesh_destroy(a);
   }
-  ldimesh_destroy(a);
 }
 
 TEST(FortranApi, WrongShapesAreRefusedWithAMessage) {

@@ -16,6 +16,8 @@ module fortran_hex_elements
   real(c_float), allocatable, target, save :: y4(:, :)
   ! Wedges of the field x with the field y (fortran_add_cells).
   real(c_double), allocatable, target, save :: wedge_points(:, :, :), wedge_x(:, :), wedge_y(:, :)
+  ! Quadratic tetrahedra given by their corners, the fields x and y (fortran_add_tets_by_corners).
+  real(c_double), allocatable, target, save :: tet_corners(:, :, :), tet_x(:, :), tet_y(:, :)
   ! A grid block of the field x with its field y (fortran_add_grid_field).
   real(c_float), allocatable, target, save :: gx(:, :, :), gy(:, :, :)
 
@@ -147,6 +149,60 @@ contains
     end if
     fortran_add_cells = LDIMESH_OK
   end function fortran_add_cells
+
+  ! Adds this rank's cubes (cube e on rank mod(e, ranks)) of 2³ over [0, 1]³, each as Kuhn's 6
+  ! tetrahedra, as quadratic tetrahedra (VTK_QUADRATIC_TETRA's 10 nodes: the corners, then the
+  ! midpoints of edges 01, 12, 02, 03, 13, 23) whose points are their 4 corners
+  ! (geometry_order = 1), the field x with the field y. First the same arrays without
+  ! geometry_order: refused (the points would be 10 per cell). Returns the module's status, or -1
+  ! where the call without geometry_order was accepted.
+  integer(c_int) function fortran_add_tets_by_corners(handle, rank, ranks) &
+      bind(C, name='fortran_add_tets_by_corners')
+    type(c_ptr), value :: handle
+    integer(c_int), value :: rank, ranks
+    type(ldimesh_adaptor) :: insitu
+    integer :: e, t, v, count, ierr
+    ! Kuhn's tetrahedra as walks from corner (0, 0, 0) to (1, 1, 1): the axes in each order.
+    integer, parameter :: walk(3, 6) = reshape([1, 2, 3, 2, 1, 3, 2, 3, 1, 3, 2, 1, 3, 1, 2, &
+                                                1, 3, 2], [3, 6])
+    integer, parameter :: edge(2, 6) = reshape([1, 2, 2, 3, 1, 3, 1, 4, 2, 4, 3, 4], [2, 6])
+    real(c_double) :: o(3), x(3, 10)
+    insitu%handle = handle
+    count = 0
+    do e = 0, n**3 - 1
+      if (mod(e, ranks) == rank) count = count + 6
+    end do
+    if (allocated(tet_corners)) deallocate (tet_corners, tet_x, tet_y)
+    allocate (tet_corners(3, 4, count), tet_x(10, count), tet_y(10, count))
+    count = 0
+    do e = 0, n**3 - 1
+      if (mod(e, ranks) /= rank) cycle
+      o = real([mod(e, n), mod(e/n, n), e/(n*n)], c_double)/real(n, c_double)
+      do t = 1, 6
+        count = count + 1
+        x(:, 1) = o
+        do v = 1, 3
+          x(:, v + 1) = x(:, v)
+          x(walk(v, t), v + 1) = x(walk(v, t), v) + 1.0_c_double/real(n, c_double)
+        end do
+        do v = 1, 6
+          x(:, v + 4) = 0.5_c_double*(x(:, edge(1, v)) + x(:, edge(2, v)))
+        end do
+        tet_corners(:, :, count) = x(:, 1:4)
+        tet_x(:, count) = x(1, :)
+        tet_y(:, count) = x(2, :)
+      end do
+    end do
+    call ldimesh_add_cells(insitu, int(LDIMESH_CELL_TETRAHEDRON), 2, tet_corners, tet_x, ierr)
+    if (ierr /= LDIMESH_ERROR_ARGUMENT) then
+      fortran_add_tets_by_corners = -1
+      return
+    end if
+    call ldimesh_add_cells(insitu, int(LDIMESH_CELL_TETRAHEDRON), 2, tet_corners, tet_x, ierr, &
+                           geometry_order=1)
+    if (ierr == LDIMESH_OK) call ldimesh_add_field(insitu, 'y', tet_y, ierr)
+    fortran_add_tets_by_corners = int(ierr, c_int)
+  end function fortran_add_tets_by_corners
 
   ! Rank 0 adds a 9³ uniform grid over [0, 1]³ of the field x (float) with the field y as its
   ! field "y" (ldimesh_add_field of a 3D array); the other ranks add nothing. Returns the status.

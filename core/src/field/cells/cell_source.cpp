@@ -130,11 +130,7 @@ CellElementSource::CellElementSource(const CellBlock& block) : block_(block) {
   check_values(what);
   // The geometry's cell: the field's, or the same shape at the points' own order.
   geometry_order_ = block.geometry_order == 0 ? block.order : block.geometry_order;
-  geometry_type_ = block.type;
-  if (geometry_order_ != block.order && block.type == CellType::serendipity_hexahedron)
-    geometry_type_ = CellType::hexahedron;
-  if (geometry_order_ != block.order && block.type == CellType::serendipity_wedge)
-    geometry_type_ = CellType::wedge;
+  geometry_type_ = cell_geometry_type(block.type, block.order, block.geometry_order);
   const cells::ReferenceCell* geometry_cell = nullptr;
   try {
     if (block.geometry_order < 0) throw std::invalid_argument("negative");

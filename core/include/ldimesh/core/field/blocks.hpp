@@ -140,6 +140,24 @@ inline std::size_t cell_nodes(CellType type, int order) {
   return 0;
 }
 
+// The shape of the geometry's cell for cells of `type` and order `order` whose points are of
+// geometry order `geometry_order` (CellBlock::geometry_order; 0: the field's): the same shape,
+// except that the 20-node hexahedron and the 15-node wedge at another order are the Lagrange
+// hexahedron and wedge of that order.
+inline CellType cell_geometry_type(CellType type, int order, int geometry_order) {
+  if (geometry_order == 0 || geometry_order == order) return type;
+  if (type == CellType::serendipity_hexahedron) return CellType::hexahedron;
+  if (type == CellType::serendipity_wedge) return CellType::wedge;
+  return type;
+}
+
+// Points per cell of such cells, or 0 where the geometry order is not one the shape has.
+inline std::size_t cell_geometry_nodes(CellType type, int order, int geometry_order) {
+  if (geometry_order < 0) return 0;
+  return cell_nodes(cell_geometry_type(type, order, geometry_order),
+                    geometry_order == 0 ? order : geometry_order);
+}
+
 // A name for messages ("tetrahedron"; defined in the core library, as cell_source.hpp's
 // functions).
 const char* cell_type_name(CellType type);
