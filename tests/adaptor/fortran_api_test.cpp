@@ -38,6 +38,26 @@ ldimesh_adaptor* create(const std::string& dir) {
   return a;
 }
 
+// The published step 1 in `dir` is the whole plane x = 0.3 across the unit cube, its vertices
+// on it (within Draco's quantization), each coloured by its y.
+void expect_plane_coloured_by_y(const std::string& dir, const std::string& what) {
+  const Mesh mesh = testing::published_mesh(dir, 1);
+  EXPECT_GT(mesh.vertex_count(), 500u) << what;
+  double far = 0.0;
+  glm::dvec3 lo(1.0), hi(0.0);
+  for (const glm::vec3& v : mesh.positions) {
+    far = std::max(far, std::abs(double(v.x) - 0.3));
+    lo = glm::min(lo, glm::dvec3(v));
+    hi = glm::max(hi, glm::dvec3(v));
+  }
+  EXPECT_LT(far, 1e-4) << what;
+  // The whole plane across the cube, not a piece of it.
+  EXPECT_LT(std::max(lo.y, lo.z), 0.05) << what;
+  EXPECT_GT(std::min(hi.y, hi.z), 0.95) << what;
+  testing::expect_coloured_by(
+      mesh, testing::published_step(dir, 1), "y", [](glm::dvec3 p) { return p.y; }, 1.0, 1.0 / 48);
+}
+
 // The field x on 2³ elements of order 2, curved (interiors bent along x) or straight with float
 // values: the isosurface x = 0.3 is a plane, whatever the geometry, and the published vertices
 // lie on it (within Draco's quantization); coloured by the field y (ldimesh_add_field), which
@@ -53,24 +73,7 @@ TEST(FortranApi, HexElementsArePublishedOnTheirIsosurface) {
         << what << ": " << ldimesh_last_error(a);
     EXPECT_EQ(ldimesh_execute(a, 1, 0.0), LDIMESH_OK) << ldimesh_last_error(a);
     EXPECT_EQ(ldimesh_finalize(a), LDIMESH_OK) << ldimesh_last_error(a);
-    if (rank_of() == 0) {
-      const Mesh mesh = testing::published_mesh(dir, 1);
-      EXPECT_GT(mesh.vertex_count(), 500u) << what;
-      double far = 0.0;
-      glm::dvec3 lo(1.0), hi(0.0);
-      for (const glm::vec3& v : mesh.positions) {
-        far = std::max(far, std::abs(double(v.x) - 0.3));
-        lo = glm::min(lo, glm::dvec3(v));
-        hi = glm::max(hi, glm::dvec3(v));
-      }
-      EXPECT_LT(far, 1e-4) << what;
-      // The whole plane across the cube, not a piece of it.
-      EXPECT_LT(std::max(lo.y, lo.z), 0.05) << what;
-      EXPECT_GT(std::min(hi.y, hi.z), 0.95) << what;
-      testing::expect_coloured_by(
-          mesh, testing::published_step(dir, 1), "y", [](glm::dvec3 p) { return p.y; }, 1.0,
-          1.0 / 48);
-    }
+    if (rank_of() == 0) expect_plane_coloured_by_y(dir, what);
     ldimesh_destroy(a);
   }
 }
@@ -84,16 +87,7 @@ TEST(FortranApi, AGridBlocksFieldColoursItsSurface) {
   EXPECT_EQ(fortran_add_grid_field(a, rank_of()), LDIMESH_OK) << ldimesh_last_error(a);
   EXPECT_EQ(ldimesh_execute(a, 1, 0.0), LDIMESH_OK) << ldimesh_last_error(a);
   EXPECT_EQ(ldimesh_finalize(a), LDIMESH_OK) << ldimesh_last_error(a);
-  if (rank_of() == 0) {
-    const Mesh mesh = testing::published_mesh(dir, 1);
-    double far = 0.0;
-    for (const glm::vec3& v : mesh.positions)
-      far = std::max(far, std::abs(double(v.x) - 0.3));
-    EXPECT_LT(far, 1e-4);
-    testing::expect_coloured_by(
-        mesh, testing::published_step(dir, 1), "y", [](glm::dvec3 p) { return p.y; }, 1.0,
-        1.0 / 48);
-  }
+  if (rank_of() == 0) expect_plane_coloured_by_y(dir, "grid");
   ldimesh_destroy(a);
 }
 
@@ -114,17 +108,7 @@ TEST(FortranApi, CellsArePublishedOnTheirIsosurface) {
     EXPECT_EQ(c.add(a, rank_of(), ranks()), LDIMESH_OK) << ldimesh_last_error(a);
     EXPECT_EQ(ldimesh_execute(a, 1, 0.0), LDIMESH_OK) << ldimesh_last_error(a);
     EXPECT_EQ(ldimesh_finalize(a), LDIMESH_OK) << ldimesh_last_error(a);
-    if (rank_of() == 0) {
-      const Mesh mesh = testing::published_mesh(dir, 1);
-      EXPECT_GT(mesh.vertex_count(), 500u);
-      double far = 0.0;
-      for (const glm::vec3& v : mesh.positions)
-        far = std::max(far, std::abs(double(v.x) - 0.3));
-      EXPECT_LT(far, 1e-4);
-      testing::expect_coloured_by(
-          mesh, testing::published_step(dir, 1), "y", [](glm::dvec3 p) { return p.y; }, 1.0,
-          1.0 / 48);
-    }
+    if (rank_of() == 0) expect_plane_coloured_by_y(dir, c.what);
     ldimesh_destroy(a);
   }
 }
