@@ -46,7 +46,7 @@ class LinearTetBinding final : public GeometryBinding {
   static void bounds(const RTCBoundsFunctionArguments* args) {
     const auto* self = static_cast<const LinearTetBinding*>(args->geometryUserPtr);
     const LinearTet& t = self->tets_[args->primID];
-    write_padded_bounds(t.lo, t.hi, args->bounds_o);
+    write_padded_bounds(t.lo(), t.hi(), args->bounds_o);
   }
   static void intersect(const RTCIntersectFunctionNArguments* args) {
     if (!args->valid[0]) return;
@@ -67,7 +67,7 @@ class LinearTetAxisBinding final : public AxisBinding {
   LinearTetAxisBinding(std::vector<LinearTet> tets, std::uint64_t nonfinite)
       : tets_(std::move(tets)), boxes_(tets_.size()), nonfinite_(nonfinite) {
     tbb::parallel_for(std::size_t(0), tets_.size(), [&](std::size_t e) {
-      boxes_[e] = {tets_[e].lo, tets_[e].hi};
+      boxes_[e] = {tets_[e].lo(), tets_[e].hi()};
     });
   }
   void prepare(int axis) const override {
@@ -132,11 +132,11 @@ class LinearTetAxisBinding final : public AxisBinding {
           if (!AxisBins::first_in(entry, bb, cc, qb0, qc0)) continue;
           const LinearTet& tet = tets_[entry & AxisBins::kIndex];
           // The tetrahedron's box in image coordinates (u, v are axes: exact).
-          const glm::dvec3 p = view.origin;
-          const double x0 = std::min(glm::dot(tet.lo - p, view.u), glm::dot(tet.hi - p, view.u)),
-                       x1 = std::max(glm::dot(tet.lo - p, view.u), glm::dot(tet.hi - p, view.u));
-          const double y0 = std::min(glm::dot(tet.lo - p, view.v), glm::dot(tet.hi - p, view.v)),
-                       y1 = std::max(glm::dot(tet.lo - p, view.v), glm::dot(tet.hi - p, view.v));
+          const glm::dvec3 p = view.origin, lo = tet.lo(), hi = tet.hi();
+          const double x0 = std::min(glm::dot(lo - p, view.u), glm::dot(hi - p, view.u)),
+                       x1 = std::max(glm::dot(lo - p, view.u), glm::dot(hi - p, view.u));
+          const double y0 = std::min(glm::dot(lo - p, view.v), glm::dot(hi - p, view.v)),
+                       y1 = std::max(glm::dot(lo - p, view.v), glm::dot(hi - p, view.v));
           // The pixel centres in the box grown by 10⁻⁶ pixel (a hit the test accepts lies in
           // the box to 10⁻¹² of the tetrahedron's size).
           constexpr double pad = 1e-6;
@@ -157,10 +157,11 @@ class LinearTetAxisBinding final : public AxisBinding {
           // its margin: in each row, the columns of the polygon's slice over the row ± margin.
           double cx[4], cy[4];
           for (int k = 0; k < tet.corners; ++k) {
-            cx[k] = glm::dot(tet.corner[k] - p, view.u) * inv - 0.5;
-            cy[k] = glm::dot(tet.corner[k] - p, view.v) * inv - 0.5;
+            const glm::dvec3 c(tet.corner[k][0], tet.corner[k][1], tet.corner[k][2]);
+            cx[k] = glm::dot(c - p, view.u) * inv - 0.5;
+            cy[k] = glm::dot(c - p, view.v) * inv - 0.5;
           }
-          const double grow = tet.margin * inv + pad;
+          const double grow = double(tet.margin) * inv + pad;
           for (int j = ja; j <= jb; ++j) {
             const double band_lo = j - grow, band_hi = j + grow;
             double xl = INFINITY, xr = -INFINITY;
@@ -225,26 +226,26 @@ void set_crossing(LinearTet& tet, const double* v, const double* f) {
   }
   constexpr int kEdges[6][2] = {{0, 1}, {0, 2}, {0, 3}, {1, 2}, {1, 3}, {2, 3}};
   // The corners: the edges' sign changes and the vertices on the plane.
-  tet.corners = 0;
+  glm::dvec3 corner[4];
+  int corners = 0;
   for (int i = 0; i < 4; ++i)
-    if (f[i] == 0.0) tet.corner[tet.corners++] = p[i];
+    if (f[i] == 0.0) corner[corners++] = p[i];
   for (const auto& e : kEdges) {
     const double fa = f[e[0]], fb = f[e[1]];
     if ((fa < 0.0 && fb > 0.0) || (fa > 0.0 && fb < 0.0))
-      if (tet.corners < 4)
-        tet.corner[tet.corners++] = p[e[0]] + (fa / (fa - fb)) * (p[e[1]] - p[e[0]]);
+      if (corners < 4) corner[corners++] = p[e[0]] + (fa / (fa - fb)) * (p[e[1]] - p[e[0]]);
   }
-  if (tet.corners == 0) {  // not straddling 0: the whole tetrahedron (the caller's rule)
+  if (corners == 0) {  // not straddling 0: the whole tetrahedron (the caller's rule)
     for (int i = 0; i < 4; ++i)
-      tet.corner[i] = p[i];
-    tet.corners = 4;
+      corner[i] = p[i];
+    corners = 4;
   }
   // An accepted hit lies, up to tet_hit's rounding (a few ulps of the tetrahedron's size,
   // coordinates and values), within delta of the tetrahedron and where |f| ≤ eps: generous
   // bounds of both. Such a point is within delta of a point of the tetrahedron where
   // |f| ≤ eps + |g| delta, and those points span the convex hull of the vertices and edge points
   // below (where |f| = that bound); each is within `reach` of a corner, so the polygon grown by
-  // reach + delta holds them all.
+  // reach + delta holds them all (and by the tetrahedron's size + delta: it holds the corners).
   const double size = glm::length(box_hi - box_lo);
   double coords = 0.0;
   for (int a = 0; a < 3; ++a)
@@ -255,8 +256,8 @@ void set_crossing(LinearTet& tet, const double* v, const double* f) {
   double reach2 = 0.0;  // squared
   const auto near = [&](glm::dvec3 x) {
     double d2 = INFINITY;
-    for (int k = 0; k < tet.corners; ++k) {
-      const glm::dvec3 r = x - tet.corner[k];
+    for (int k = 0; k < corners; ++k) {
+      const glm::dvec3 r = x - corner[k];
       d2 = std::min(d2, glm::dot(r, r));
     }
     reach2 = std::max(reach2, d2);
@@ -269,12 +270,19 @@ void set_crossing(LinearTet& tet, const double* v, const double* f) {
       if ((fa < 0.0 && fb > 0.0) || (fa > 0.0 && fb < 0.0))
         near(p[e[0]] + (fa / (fa - fb)) * (p[e[1]] - p[e[0]]));
     }
-  tet.margin = std::min(std::sqrt(reach2) * (1.0 + 1e-12) + delta, size + delta);
-  tet.lo = glm::dvec3(INFINITY), tet.hi = glm::dvec3(-INFINITY);
-  for (int k = 0; k < tet.corners; ++k)
-    tet.lo = glm::min(tet.lo, tet.corner[k]), tet.hi = glm::max(tet.hi, tet.corner[k]);
-  tet.lo = glm::max(tet.lo - tet.margin, box_lo - delta);
-  tet.hi = glm::min(tet.hi + tet.margin, box_hi + delta);
+  double margin = std::min(std::sqrt(reach2) * (1.0 + 1e-12) + delta, size + delta);
+  // The corners kept as floats: the margin grows by how far each moved, and is rounded up.
+  double moved = 0.0;
+  tet.corners = corners;
+  for (int k = 0; k < corners; ++k) {
+    glm::dvec3 rounded;
+    for (int a = 0; a < 3; ++a)
+      rounded[a] = tet.corner[k][a] = float(corner[k][a]);
+    moved = std::max(moved, glm::length(rounded - corner[k]));
+  }
+  margin = (margin + moved) * (1.0 + 1e-12);
+  tet.margin = float(margin);
+  if (double(tet.margin) < margin) tet.margin = std::nextafter(tet.margin, INFINITY);
 }
 
 bool linear_tet_is_valid(const double* v) {
