@@ -9,25 +9,37 @@
 namespace ldimesh::cells {
 namespace {
 
-// The hit of ray o + t·d, t ∈ [t0, t1], with tetrahedron `tet`: the ray's crossing of the plane
-// f = 0 where that lies in the tetrahedron (barycentric coordinates ≥ −10⁻¹², a crossing on a
-// shared face or edge found by each tetrahedron there and merged by the caster). A ray in the
-// plane (g·d = 0) has no isolated root. The crossing is taken from the ray's point nearest v0,
-// so that its rounding scales with the tetrahedron, not with the ray's origin (set_crossing's
-// margin counts on it). Both casters call this, so they give the same bits.
-inline bool tet_hit(const LinearTet& tet, glm::dvec3 o, glm::dvec3 d, double t0, double t1,
-                    RayHit& out) {
-  const double gd = glm::dot(tet.g, d);
-  if (gd == 0.0) return false;
-  const double s = glm::dot(tet.v0 - o, d) / glm::dot(d, d);
+// What a hit of tetrahedron `tet` with rays of direction d shares: g·d, d·d and the normal.
+// False for rays in the plane f = 0 (g·d = 0): they have no isolated root.
+struct TetDirection {
+  double gd = 0.0, dd = 0.0;
+  glm::vec3 normal{0.0f};
+};
+inline bool tet_direction(const LinearTet& tet, glm::dvec3 d, TetDirection& out) {
+  out.gd = glm::dot(tet.g, d);
+  if (out.gd == 0.0) return false;
+  out.dd = glm::dot(d, d);
+  out.normal = unit_normal(tet.g, d);
+  return true;
+}
+
+// The hit of ray o + t·d, t ∈ [t0, t1], with tetrahedron `tet` (`dir` from tet_direction): the
+// ray's crossing of the plane f = 0 where that lies in the tetrahedron (barycentric coordinates
+// ≥ −10⁻¹², a crossing on a shared face or edge found by each tetrahedron there and merged by
+// the caster). The crossing is taken from the ray's point nearest v0, so that its rounding
+// scales with the tetrahedron, not with the ray's origin (set_crossing's margin counts on it).
+// Both casters call this, so they give the same bits.
+inline bool tet_hit(const LinearTet& tet, const TetDirection& dir, glm::dvec3 o, glm::dvec3 d,
+                    double t0, double t1, RayHit& out) {
+  const double s = glm::dot(tet.v0 - o, d) / dir.dd;
   const glm::dvec3 near = o + s * d - tet.v0;
-  const double ds = -(tet.f0 + glm::dot(tet.g, near)) / gd;
+  const double ds = -(tet.f0 + glm::dot(tet.g, near)) / dir.gd;
   const double t = s + ds;
   if (!(t >= t0 && t <= t1)) return false;
   const glm::dvec3 l = tet.to_barycentric * (near + ds * d);
   constexpr double eps = 1e-12;
   if (!(l.x >= -eps && l.y >= -eps && l.z >= -eps && l.x + l.y + l.z <= 1.0 + eps)) return false;
-  out = {t, unit_normal(tet.g, d), 0.0f};
+  out = {t, dir.normal, 0.0f};
   return true;
 }
 
@@ -52,8 +64,11 @@ class LinearTetBinding final : public GeometryBinding {
     if (!args->valid[0]) return;
     const auto* self = static_cast<const LinearTetBinding*>(args->geometryUserPtr);
     auto* q = reinterpret_cast<RayQuery*>(args->context);
+    const LinearTet& tet = self->tets_[args->primID];
+    TetDirection dir;
     RayHit hit;
-    if (tet_hit(self->tets_[args->primID], q->org, q->dir, q->t_min, q->t_max, hit))
+    if (tet_direction(tet, q->dir, dir) &&
+        tet_hit(tet, dir, q->org, q->dir, q->t_min, q->t_max, hit))
       q->hits->push_back(hit);
   }
 
@@ -86,9 +101,11 @@ class LinearTetAxisBinding final : public AxisBinding {
       if (!(ray.t0 <= ray.t1)) continue;
       const std::size_t bin = bins.at(ray.org);
       for (std::uint32_t m = bins.first[bin]; m < bins.first[bin + 1]; ++m) {
+        const LinearTet& tet = tets_[bins.entries[m] & AxisBins::kIndex];
+        TetDirection dir;
         RayHit hit;
-        if (tet_hit(tets_[bins.entries[m] & AxisBins::kIndex], ray.org, rays.dir, ray.t0, ray.t1,
-                    hit))
+        if (tet_direction(tet, rays.dir, dir) &&
+            tet_hit(tet, dir, ray.org, rays.dir, ray.t0, ray.t1, hit))
           out.push_back({std::uint32_t(k), hit});
       }
     }
@@ -153,6 +170,8 @@ class LinearTetAxisBinding final : public AxisBinding {
           const int ja = first(y0 * inv - 0.5 - pad, j0, j0 + h - 1),
                     jb = last(y1 * inv - 0.5 + pad, j0, j0 + h - 1);
           if (ia > ib || ja > jb) continue;
+          TetDirection dir;
+          if (!tet_direction(tet, rays.dir, dir)) continue;
           // The crossing polygon's corners in pixel coordinates (pixel centres at integers) and
           // its margin: in each row, the columns of the polygon's slice over the row ± margin.
           double cx[4], cy[4];
@@ -188,7 +207,7 @@ class LinearTetAxisBinding final : public AxisBinding {
               const AxisRay& ray = rays.rays[k];
               if (!(ray.t0 <= ray.t1)) continue;
               RayHit hit;
-              if (tet_hit(tet, ray.org, rays.dir, ray.t0, ray.t1, hit))
+              if (tet_hit(tet, dir, ray.org, rays.dir, ray.t0, ray.t1, hit))
                 out.push_back({std::uint32_t(k), hit});
             }
           }
