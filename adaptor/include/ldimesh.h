@@ -140,8 +140,9 @@ typedef struct ldimesh_cell_block {
   int type;               /* LDIMESH_FLOAT32 or LDIMESH_FLOAT64 */
   int64_t element_stride; /* values between cells; 0: the node count */
   int node_order;         /* LDIMESH_CELL_ORDER_VTK (default) or LDIMESH_CELL_ORDER_GMSH: of the
-                             points and values within a cell (gmsh: tetrahedra of order 1-3,
-                             prisms of 6, 15, 18 nodes, pyramids of 5, 13, hexahedra of 8, 20, 27) */
+                             points and values within a cell (gmsh: tetrahedra and hexahedra of
+                             order 1-8, 20-node hexahedra, prisms of 6, 15, 18 nodes, pyramids of
+                             5, 13) */
   int geometry_order;     /* 0 (default): the points are the field's nodes (isoparametric); else
                              q = 1..8: the points are the nodes of the cell of the same shape and
                              order q (1: straight sides, the corners; for the 20- and 15-node cells

@@ -448,47 +448,6 @@ std::vector<glm::dvec3> cell_reference_nodes(CellType type, int order) {
   return cells::reference_cell(type, order).nodes;
 }
 
-std::vector<int> cell_gmsh_permutation(CellType type, int order) {
-  // VTK's node i is gmsh's node perm[i] (gmsh 4.8's reference elements, matched by their
-  // coordinates; tests/core/field/gmsh_order_test.cpp checks them against gmsh's library).
-  const auto identity = [](int n) {
-    std::vector<int> p(n);
-    for (int i = 0; i < n; ++i)
-      p[i] = i;
-    return p;
-  };
-  const std::vector<int> hex20 = {0,  1, 2,  3,  4,  5,  6,  7,  8,  11,
-                                  13, 9, 16, 18, 19, 17, 10, 12, 14, 15};
-  switch (type) {
-    case CellType::tetrahedron:
-      if (order == 1) return identity(4);
-      if (order == 2) return {0, 1, 2, 3, 4, 5, 6, 7, 9, 8};
-      if (order == 3) return {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 11, 10, 15, 14, 13, 12, 17, 19, 18, 16};
-      return {};
-    case CellType::wedge:
-      if (order == 1) return identity(6);
-      if (order == 2) return {0, 1, 2, 3, 4, 5, 6, 9, 7, 12, 14, 13, 8, 10, 11, 15, 17, 16};
-      return {};
-    case CellType::serendipity_wedge:
-      return {0, 1, 2, 3, 4, 5, 6, 9, 7, 12, 14, 13, 8, 10, 11};
-    case CellType::pyramid:
-      if (order == 1) return identity(5);
-      if (order == 2) return {0, 1, 2, 3, 4, 5, 8, 10, 6, 7, 9, 11, 12};
-      return {};
-    case CellType::serendipity_hexahedron:
-      return hex20;
-    case CellType::hexahedron:
-      if (order == 1) return identity(8);
-      if (order == 2) {
-        std::vector<int> p = hex20;
-        p.insert(p.end(), {22, 23, 21, 24, 20, 25, 26});
-        return p;
-      }
-      return {};
-  }
-  return {};
-}
-
 std::vector<double> cell_shape_functions(CellType type, int order, glm::dvec3 reference) {
   const cells::ReferenceCell& cell = cells::reference_cell(type, order);
   std::vector<double> out(cell.nodes.size());

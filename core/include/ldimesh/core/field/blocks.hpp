@@ -167,9 +167,8 @@ const char* cell_type_name(CellType type);
 std::vector<glm::dvec3> cell_reference_nodes(CellType type, int order);
 
 // Where a cell's nodes lie in the caller's arrays: VTK's numbering (every type and order), or
-// gmsh's (its tetrahedra of order 1–3 — gmsh types 4, 11, 29 —, prisms of 6, 15 and 18 nodes —
-// 6, 18, 13 —, pyramids of 5 and 13 nodes — 7, 19 —, hexahedra of 8, 20 and 27 nodes — 5, 17,
-// 12; a 13-node pyramid has VTK's shape functions either way).
+// gmsh's (its tetrahedra and hexahedra of order 1–8, 20-node hexahedra, prisms of 6, 15 and 18
+// nodes, pyramids of 5 and 13 nodes; a 13-node pyramid has VTK's shape functions either way).
 enum class CellNodeOrder : std::uint8_t { vtk, gmsh };
 
 // One block of cells of one type and order, described by pointers into the caller's arrays.
