@@ -565,6 +565,92 @@ TEST(CellSource, RootsOfRandomCurvedCellsMatchADenseScan) {
   }
 }
 
+TEST(CellSource, StraightTetrahedraOfHigherOrderAreCastDirectly) {
+  // Straight tetrahedra of order 2, 3, 5 (isoparametric nodes on straight sides, and the same by
+  // their corners) take the direct caster; bent by 10⁻⁹ they take the curved search of their
+  // sub-hexahedra: the same samples (to the float depths' rounding); axis and Embree paths of the
+  // direct caster the same bits.
+  // Quadratic: exact in every cell, so the normal is continuous across faces (a hit on a face
+  // is found by both cells and either one's normal kept).
+  const Field field = [](glm::dvec3 x) { return r2(x) + 0.3 * x.x * x.y - 0.2 * x.z * x.x; };
+  const auto tiny = [](glm::dvec3 x) {
+    return x + 1e-9 * glm::dvec3(std::sin(3.0 * x.y), std::cos(2.0 * x.z), std::sin(x.x));
+  };
+  for (const int p : {2, 3, 5}) {
+    SCOPED_TRACE("order " + std::to_string(p));
+    const Cells straight = grid_cells(CellType::tetrahedron, p, 3, -1.25, 1.25, field);
+    const Cells corners =
+        cells_with_geometry_order(CellType::tetrahedron, p, 1, 3, -1.25, 1.25, field);
+    const Cells bent = grid_cells(CellType::tetrahedron, p, 3, -1.25, 1.25, field, tiny);
+    const CellElementSource s(straight.block()), c(corners.block()), b(bent.block());
+    EXPECT_TRUE(s.straight_tetrahedra());
+    EXPECT_TRUE(c.straight_tetrahedra());
+    EXPECT_FALSE(b.straight_tetrahedra());
+    const RayCaster cs(s, 0.8), cc(c, 0.8), cb(b, 0.8),
+        embree(s, 0.8, RayCasterOptions{CastPath::embree});
+    std::size_t samples = 0;
+    for (const View& view : testing::axis_and_oblique_views(s.bounds(), 40)) {
+      const Ldi ls = cs.cast(view), lc = cc.cast(view), lb = cb.cast(view);
+      ASSERT_EQ(ls.offsets, lb.offsets);
+      ASSERT_EQ(ls.offsets, lc.offsets);
+      for (std::size_t k = 0; k < ls.sample_count(); ++k) {
+        EXPECT_NEAR(ls.depth[k], lb.depth[k], 1e-6);
+        EXPECT_NEAR(ls.depth[k], lc.depth[k], 1e-6);
+        EXPECT_NEAR(glm::length(ls.normal[k] - lb.normal[k]), 0.0, 1e-4);
+      }
+      if (exact_axis(view.dir) >= 0) {
+        const Ldi le = embree.cast(view);
+        EXPECT_EQ(ls.offsets, le.offsets);
+        EXPECT_EQ(ls.depth, le.depth);
+      }
+      samples += ls.sample_count();
+    }
+    EXPECT_GT(samples, 2000u);
+  }
+  // One straight cubic tetrahedron with random nodal values (several roots per ray): every root
+  // a dense scan finds, within 10⁻⁶, and no other.
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int trial = 0; trial < 3; ++trial) {
+    Cells cells;
+    cells.type = CellType::tetrahedron;
+    cells.order = 3;
+    const Corners corners =
+        split_cube(CellType::tetrahedron, cube_corners(0, 0, 0, 1, -1.0, 1.0))[0];
+    add_cell(cells, corners, [](glm::dvec3) { return 0.0; }, {});
+    for (double& v : cells.values)
+      v = u(rng);
+    const CellElementSource source(cells.block());
+    ASSERT_TRUE(source.straight_tetrahedra());
+    const double iso = 0.1 * u(rng);
+    const RayCaster caster(source, iso, RayCasterOptions{CastPath::embree});
+    int compared = 0, roots = 0;
+    for (const glm::dvec3 dir : {glm::dvec3(0.3, -0.5, 0.8), glm::dvec3(-0.7, 0.2, 0.4)}) {
+      const View view = make_view(source.bounds(), dir, 16);
+      const Ldi ldi = caster.cast(view);
+      const double t_max = 2.0 * source.bounds().diagonal();
+      for (int j = 0; j < view.height; ++j)
+        for (int i = 0; i < view.width; ++i) {
+          const std::size_t pixel = std::size_t(j) * view.width + i;
+          const glm::dvec3 o = view.pixel_point(i, j, 0.0);
+          double t0 = 0.0, t1 = t_max;
+          if (!clip_ray_to_box(o, view.dir, source.bounds().lo, source.bounds().hi, t0, t1))
+            continue;
+          const auto expected = dense_roots(CellType::tetrahedron, 3, cells.points.data(),
+                                            cells.values.data(), iso, o, view.dir, t0, t1);
+          if (!expected) continue;
+          ++compared;
+          ASSERT_EQ(ldi.count(pixel), expected->size()) << "pixel " << i << "," << j;
+          for (std::size_t h = 0; h < expected->size(); ++h)
+            EXPECT_NEAR(ldi.depth[ldi.begin(pixel) + h], (*expected)[h], 1e-6);
+          roots += int(expected->size());
+        }
+    }
+    EXPECT_GT(compared, 150);
+    EXPECT_GT(roots, 40);
+  }
+}
+
 TEST(CellSource, GmshOrderedCellsGiveTheSameHitsAsVtkOrderedOnes) {
   // The same curved cells with their points and values in gmsh's order: the same LDI.
   const auto bend = [](glm::dvec3 x) {

@@ -14,6 +14,7 @@
 
 #include "linear_tets.hpp"
 #include "reference_cells.hpp"
+#include "straight_tets.hpp"
 
 namespace ldimesh {
 namespace {
@@ -186,10 +187,62 @@ CellElementSource::CellElementSource(const CellBlock& block) : block_(block) {
     }
     return;
   }
+  if (block.type == CellType::tetrahedron && block.order >= 2 &&
+      take_straight_tetrahedra(block.points))
+    return;
   std::call_once(geometry_->once, [&] {
     geometry_->sub_hexahedra = build_sub_hexahedra(block.points, geometry_from_);
   });
   geometry_->bounds = geometry_->sub_hexahedra->bounds();
+}
+
+bool CellElementSource::take_straight_tetrahedra(const double* points) {
+  // Straight when every geometry node lies within 10⁻¹² of the cell's size and coordinates of
+  // where the affine map of the vertices puts it (nodes placed by a solver or a writer in
+  // double precision are a few ulps off).
+  const cells::ReferenceCell& geometry = cells::reference_cell(geometry_type_, geometry_order_);
+  std::vector<double> v(12 * block_.element_count);
+  constexpr double inf = std::numeric_limits<double>::infinity();
+  Box bounds{glm::dvec3(inf), glm::dvec3(-inf)};
+  for (std::size_t e = 0; e < block_.element_count; ++e) {
+    const double* p = points + 3 * geometry_nodes_ * e;
+    const auto node = [&](std::size_t i) {
+      const double* x = p + 3 * geometry_from_[i];
+      return glm::dvec3(x[0], x[1], x[2]);
+    };
+    glm::dvec3 corner[4];
+    double scale = 0.0;
+    for (int i = 0; i < 4; ++i) {
+      corner[i] = node(std::size_t(i));
+      for (int a = 0; a < 3; ++a) {
+        if (!std::isfinite(corner[i][a])) return false;  // refused by the general path
+        scale = std::max(scale, std::abs(corner[i][a]));
+        v[12 * e + 3 * i + a] = corner[i][a];
+      }
+    }
+    if (!cells::linear_tet_is_valid(&v[12 * e])) return false;
+    for (int i = 1; i < 4; ++i)
+      scale = std::max(scale, glm::length(corner[i] - corner[0]));
+    for (std::size_t i = 4; i < geometry_nodes_; ++i) {
+      const glm::dvec3 r = geometry.nodes[i];
+      const glm::dvec3 at = corner[0] + r.x * (corner[1] - corner[0]) +
+                            r.y * (corner[2] - corner[0]) + r.z * (corner[3] - corner[0]);
+      const glm::dvec3 x = node(i);
+      if (!(glm::length(x - at) <= 1e-12 * scale)) return false;
+    }
+    for (int i = 0; i < 4; ++i)
+      bounds.lo = glm::min(bounds.lo, corner[i]), bounds.hi = glm::max(bounds.hi, corner[i]);
+  }
+  // The geometry is now that of linear tetrahedra: their vertices, in VTK's order.
+  geometry_->tets = std::move(v);
+  geometry_->straight = true;
+  geometry_->bounds = bounds;
+  geometry_type_ = CellType::tetrahedron;
+  geometry_order_ = 1;
+  geometry_nodes_ = 4;
+  geometry_degree_ = cells::reference_cell(CellType::tetrahedron, 1).degree;
+  geometry_from_ = {0, 1, 2, 3};
+  return true;
 }
 
 std::shared_ptr<const HexElementSource> CellElementSource::build_sub_hexahedra(
@@ -346,7 +399,24 @@ std::vector<cells::LinearTet> CellElementSource::active_tets(double isovalue,
       [&](std::size_t e, int i) { return double(v[e * stride + from[i]]); }, nonfinite);
 }
 
+cells::StraightTets CellElementSource::active_straight_tets(double isovalue) const {
+  const cells::ReferenceCell& cell = cells::reference_cell(block_.type, block_.order);
+  const std::size_t stride = block_.element_stride;
+  const int* from = from_.data();
+  if (block_.value_type == ScalarType::float64) {
+    const auto* v = static_cast<const double*>(block_.values);
+    return cells::active_straight_tets(cell, geometry_->tets, isovalue, [&](std::size_t e, int i) {
+      return v[e * stride + from[i]];
+    });
+  }
+  const auto* v = static_cast<const float*>(block_.values);
+  return cells::active_straight_tets(cell, geometry_->tets, isovalue, [&](std::size_t e, int i) {
+    return double(v[e * stride + from[i]]);
+  });
+}
+
 std::unique_ptr<GeometryBinding> CellElementSource::bind(RTCDevice device, double isovalue) const {
+  if (geometry_->straight) return cells::bind_straight_tets(device, active_straight_tets(isovalue));
   if (!geometry_->tets.empty()) {
     std::uint64_t nonfinite = 0;
     std::vector<cells::LinearTet> tets = active_tets(isovalue, nonfinite);
@@ -359,6 +429,7 @@ std::unique_ptr<GeometryBinding> CellElementSource::bind(RTCDevice device, doubl
 }
 
 std::unique_ptr<AxisBinding> CellElementSource::bind_axis(double isovalue) const {
+  if (geometry_->straight) return cells::bind_axis_straight_tets(active_straight_tets(isovalue));
   if (!geometry_->tets.empty()) {
     std::uint64_t nonfinite = 0;
     std::vector<cells::LinearTet> tets = active_tets(isovalue, nonfinite);

@@ -273,6 +273,30 @@ std::unique_ptr<ReferenceCell> build(CellType type, int p) {
         v[std::size_t(i) * n + j] = monomial(m[j], cell->nodes[i]);
     cell->inverse = invert(std::move(v), n);
   }
+  if (type == CellType::tetrahedron) {
+    // The Bernstein polynomials B_α = p!/(α₀! α₁! α₂! α₃!) λ^α, α from the node lattice, at
+    // the nodes.
+    const auto factorial = [](int k) {
+      double f = 1.0;
+      for (int i = 2; i <= k; ++i)
+        f *= i;
+      return f;
+    };
+    std::vector<double> v(std::size_t(n) * n);
+    for (int i = 0; i < n; ++i) {
+      const glm::dvec3 r = cell->nodes[i];
+      const double lambda[4] = {1.0 - r.x - r.y - r.z, r.x, r.y, r.z};
+      for (int j = 0; j < n; ++j) {
+        const Lattice l = lattice[j];
+        const int alpha[4] = {p - l.x - l.y - l.z, l.x, l.y, l.z};
+        double b = factorial(p);
+        for (int k = 0; k < 4; ++k)
+          b *= std::pow(lambda[k], alpha[k]) / factorial(alpha[k]);
+        v[std::size_t(i) * n + j] = b;
+      }
+    }
+    cell->to_bernstein = invert(std::move(v), n);
+  }
   // The sampling matrices of the sub-hexahedra.
   const int d = cell->degree, dm = d + 1;
   std::vector<double> phi(n);

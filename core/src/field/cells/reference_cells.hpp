@@ -21,6 +21,9 @@ struct ReferenceCell {
   // The nodal basis: φ_i(r) = Σ_j g_j(r) · inverse[j·N + i], g the space's own basis (Bernstein
   // polynomials, or the nodal functions themselves where inverse is empty).
   std::vector<double> inverse;
+  // Tetrahedra: N × N, the field's Bernstein–Bézier coefficients on the tetrahedron from its
+  // nodal values (c_j = Σ_i to_bernstein[j·N + i] · f_i), which bound it (convex hull).
+  std::vector<double> to_bernstein;
   // Per sub-hexahedron: (degree + 1)³ rows (ξ fastest) × N: the nodal basis at its equispaced
   // lattice.
   std::vector<double> sampling;

@@ -33,7 +33,8 @@
 
 namespace ldimesh {
 namespace cells {
-struct LinearTet;  // linear_tets.hpp (internal)
+struct LinearTet;     // linear_tets.hpp (internal)
+struct StraightTets;  // straight_tets.hpp (internal)
 }  // namespace cells
 
 // The highest order a type has (8 for the Lagrange families, 2 for the serendipity ones and the
@@ -71,6 +72,11 @@ class CellElementSource final : public FieldSource {
   CellElementSource(const CellElementSource& prepared, const CellBlock& block);
 
   Box bounds() const override;
+  // Whether the cells are tetrahedra of order ≥ 2 with straight sides (geometry order 1, or
+  // every node where the affine map of the vertices puts it, to 10⁻¹² of the cell's size), cast
+  // directly (the field along a ray a polynomial of degree p on the ray's exact segment in the
+  // tetrahedron) instead of as 4 curved sub-hexahedra each.
+  bool straight_tetrahedra() const { return geometry_->straight; }
   std::unique_ptr<GeometryBinding> bind(RTCDevice device, double isovalue) const override;
   std::unique_ptr<AxisBinding> bind_axis(double isovalue) const override;
   std::unique_ptr<ScalarProbe> bind_scalar() const override;
@@ -115,6 +121,7 @@ class CellElementSource final : public FieldSource {
     std::shared_ptr<const HexElementSource> sub_hexahedra;
     std::string failure;  // a lazy build's refusal, given again without building again
     std::vector<double> tets;
+    bool straight = false;  // tetrahedra of order ≥ 2 with straight sides: `tets` their vertices
     Box bounds;
   };
   std::shared_ptr<Geometry> geometry_;
@@ -122,6 +129,10 @@ class CellElementSource final : public FieldSource {
                                                               const std::vector<int>& from) const;
   const HexElementSource& sub_hexahedra() const;
   std::vector<cells::LinearTet> active_tets(double isovalue, std::uint64_t& nonfinite) const;
+  cells::StraightTets active_straight_tets(double isovalue) const;
+  // Whether every cell's geometry nodes (`points`, the geometry's order) lie where the affine
+  // map of its 4 vertices puts them; if so, the vertices into geometry_->tets.
+  bool take_straight_tetrahedra(const double* points);
 };
 
 }  // namespace ldimesh
