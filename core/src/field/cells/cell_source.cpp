@@ -197,9 +197,10 @@ CellElementSource::CellElementSource(const CellBlock& block) : block_(block) {
 }
 
 bool CellElementSource::take_straight_tetrahedra(const double* points) {
-  // Straight when every geometry node lies within 10⁻¹² of the cell's size and coordinates of
-  // where the affine map of the vertices puts it (nodes placed by a solver or a writer in
-  // double precision are a few ulps off).
+  // Straight when every geometry node lies where the affine map of the vertices puts it, up to
+  // the rounding of the coordinates to float (2⁻²³ of their magnitude: files often hold float32
+  // points, VTK's default) and 10⁻¹² of the cell's size: a cell that differs from straight by
+  // less is meshed as straight, its surface moved by no more than that rounding.
   const cells::ReferenceCell& geometry = cells::reference_cell(geometry_type_, geometry_order_);
   std::vector<double> v(12 * block_.element_count);
   constexpr double inf = std::numeric_limits<double>::infinity();
@@ -211,24 +212,25 @@ bool CellElementSource::take_straight_tetrahedra(const double* points) {
       return glm::dvec3(x[0], x[1], x[2]);
     };
     glm::dvec3 corner[4];
-    double scale = 0.0;
+    double coords = 0.0, size = 0.0;
     for (int i = 0; i < 4; ++i) {
       corner[i] = node(std::size_t(i));
       for (int a = 0; a < 3; ++a) {
         if (!std::isfinite(corner[i][a])) return false;  // refused by the general path
-        scale = std::max(scale, std::abs(corner[i][a]));
+        coords = std::max(coords, std::abs(corner[i][a]));
         v[12 * e + 3 * i + a] = corner[i][a];
       }
     }
     if (!cells::linear_tet_is_valid(&v[12 * e])) return false;
     for (int i = 1; i < 4; ++i)
-      scale = std::max(scale, glm::length(corner[i] - corner[0]));
+      size = std::max(size, glm::length(corner[i] - corner[0]));
+    const double tolerance = 0x1p-23 * coords + 1e-12 * size;
     for (std::size_t i = 4; i < geometry_nodes_; ++i) {
       const glm::dvec3 r = geometry.nodes[i];
       const glm::dvec3 at = corner[0] + r.x * (corner[1] - corner[0]) +
                             r.y * (corner[2] - corner[0]) + r.z * (corner[3] - corner[0]);
       const glm::dvec3 x = node(i);
-      if (!(glm::length(x - at) <= 1e-12 * scale)) return false;
+      if (!(glm::length(x - at) <= tolerance)) return false;
     }
     for (int i = 0; i < 4; ++i)
       bounds.lo = glm::min(bounds.lo, corner[i]), bounds.hi = glm::max(bounds.hi, corner[i]);

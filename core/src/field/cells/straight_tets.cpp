@@ -13,64 +13,33 @@ namespace {
 // tetrahedra that share a face overlap by that much instead of leaving a gap of rounding
 // between them, where a root would be in neither (a root found by both is merged by the caster).
 constexpr double kInside = 1e-12;
-constexpr int kMaxTetNodes = (kMaxHexOrder + 1) * (kMaxHexOrder + 2) * (kMaxHexOrder + 3) / 6;
 
-// The (p + 1) × (p + 1) matrix from a polynomial's values at s = k/p, k = 0..p, to its
-// Bernstein coefficients on [0, 1] (row-major), for p = 1..kMaxHexOrder.
-const std::vector<double>& samples_to_bernstein(int p) {
-  static std::once_flag once[kMaxHexOrder + 1];
-  static std::vector<double> matrix[kMaxHexOrder + 1];
-  std::call_once(once[p], [p] {
-    const int n = p + 1;
-    // E[k][i] = B_i^p(k/p), inverted by Gauss–Jordan elimination (small, well conditioned).
-    std::vector<double> e(std::size_t(n) * n), inv(std::size_t(n) * n, 0.0);
-    for (int k = 0; k < n; ++k)
-      for (int i = 0; i < n; ++i) {
-        const double s = double(k) / p;
-        e[std::size_t(k) * n + i] = kBinomial[p][i] * std::pow(s, i) * std::pow(1.0 - s, p - i);
-      }
-    for (int i = 0; i < n; ++i)
-      inv[std::size_t(i) * n + i] = 1.0;
-    for (int col = 0; col < n; ++col) {
-      int pivot = col;
-      for (int r = col + 1; r < n; ++r)
-        if (std::abs(e[std::size_t(r) * n + col]) > std::abs(e[std::size_t(pivot) * n + col]))
-          pivot = r;
-      for (int k = 0; k < n; ++k) {
-        std::swap(e[std::size_t(col) * n + k], e[std::size_t(pivot) * n + k]);
-        std::swap(inv[std::size_t(col) * n + k], inv[std::size_t(pivot) * n + k]);
-      }
-      const double d = e[std::size_t(col) * n + col];
-      for (int k = 0; k < n; ++k)
-        e[std::size_t(col) * n + k] /= d, inv[std::size_t(col) * n + k] /= d;
-      for (int r = 0; r < n; ++r) {
-        const double f = e[std::size_t(r) * n + col];
-        if (r == col || f == 0.0) continue;
-        for (int k = 0; k < n; ++k) {
-          e[std::size_t(r) * n + k] -= f * e[std::size_t(col) * n + k];
-          inv[std::size_t(r) * n + k] -= f * inv[std::size_t(col) * n + k];
-        }
-      }
-    }
-    matrix[p] = std::move(inv);
-  });
-  return matrix[p];
+// A tetrahedron's Bernstein–Bézier coefficients of degree m ≤ P in a dense array: c_α at
+// slot(α₁, α₂, α₃) (α₀ = m − α₁ − α₂ − α₃).
+template <int P>
+constexpr int slot(int a, int b, int c) {
+  return a + (P + 1) * (b + (P + 1) * c);
 }
 
-// The field minus the isovalue at reference point r of tetrahedron `f` (its N nodal values).
-double field_at(const ReferenceCell& cell, const double* f, glm::dvec3 r, double* phi) {
-  shape_functions(cell, r, phi);
-  double s = 0.0;
-  for (std::size_t i = 0; i < cell.nodes.size(); ++i)
-    s += phi[i] * f[i];
-  return s;
+// One de Casteljau step at barycentric point `l`, in place: degree m → m − 1,
+// c'_β = Σ_i λ_i c_{β+e_i}. In increasing order, each coefficient is read before it is written.
+template <int P>
+[[gnu::always_inline]] inline void de_casteljau_step(double* c, int m, const double* l) {
+  for (int z = 0; z < m; ++z)
+    for (int y = 0; y + z < m; ++y)
+      for (int x = 0; x + y + z < m; ++x) {
+        const int k = slot<P>(x, y, z);
+        c[k] =
+            l[0] * c[k] + l[1] * c[k + 1] + l[2] * c[k + (P + 1)] + l[3] * c[k + (P + 1) * (P + 1)];
+      }
 }
 
-// Every root of tetrahedron `tet`'s field along ray o + t·d, t ∈ [t0, t1], appended to `out`:
-// the ray's segment in the tetrahedron (barycentric coordinates ≥ −kInside, each linear in t),
-// the field's samples at p + 1 equispaced points of it, their Bernstein coefficients, the roots
-// isolated and converged (bernstein_roots); normals from the field's gradient (central
-// differences of the polynomial in the reference coordinates, mapped to the world).
+// Every root of tetrahedron `tet`'s field along ray o + t·d, t ∈ [t0, t1], passed to `out`: the
+// ray's segment [ta, tb] in the tetrahedron (barycentric coordinates ≥ −kInside, each linear in
+// t); the field on it is the polynomial whose Bernstein coefficients on [ta, tb] are the blossom
+// of the tetrahedron's Bernstein–Bézier form, b_k = c(λ(ta)^{p−k}, λ(tb)^k) (p − k de Casteljau
+// steps at λ(ta), then k at λ(tb)); roots by bernstein_roots. The normal from the gradient:
+// de Casteljau down to degree 1 at the hit, ∂f/∂λ_i = p d_i, mapped to the world.
 template <int P, class Out>
 void straight_tet_hits(const StraightTets& all, const StraightTet& tet, glm::dvec3 o, glm::dvec3 d,
                        double t0, double t1, Out&& out) {
@@ -90,33 +59,40 @@ void straight_tet_hits(const StraightTets& all, const StraightTet& tet, glm::dve
       tb = std::min(tb, t);
   }
   if (!(ta < tb)) return;  // missed, or a single point (a grazed vertex or edge)
-  const ReferenceCell& cell = *all.cell;
-  const double* f = all.values.data() + tet.values;
-  double phi[kMaxTetNodes];
-  double samples[P + 1], c[P + 1];
+  constexpr int kSlots = (P + 1) * (P + 1) * (P + 1);
+  const std::vector<int>& slots = all.slots;
+  const double* coefficients = all.values.data() + tet.values;
+  double form[kSlots];
+  for (std::size_t j = 0; j < slots.size(); ++j)
+    form[slots[j]] = coefficients[j];
+  double la[4], lb[4];
+  for (int i = 0; i < 4; ++i)
+    la[i] = alpha[i] + beta[i] * ta, lb[i] = alpha[i] + beta[i] * tb;
+  double c[P + 1];
   for (int k = 0; k <= P; ++k) {
-    const double t = k == P ? tb : ta + (tb - ta) * (double(k) / P);
-    samples[k] = field_at(cell, f, a + t * b, phi);
-  }
-  const double* m = samples_to_bernstein(P).data();
-  for (int i = 0; i <= P; ++i) {
-    double s = 0.0;
-    for (int k = 0; k <= P; ++k)
-      s += m[i * (P + 1) + k] * samples[k];
-    c[i] = s;
+    double w[kSlots];
+    std::copy(form, form + kSlots, w);
+    int m = P;
+    for (int s = 0; s < P - k; ++s)
+      de_casteljau_step<P>(w, m--, la);
+    for (int s = 0; s < k; ++s)
+      de_casteljau_step<P>(w, m--, lb);
+    c[k] = w[0];
   }
   bernstein::bernstein_roots<P>(c, [&](double s) {
     const double t = segment_point(ta, tb, s);
-    const glm::dvec3 r = a + t * b;
-    // The gradient in the reference coordinates, then in the world: ∇ₓf = (∂λ/∂x)ᵀ ∇_λ f.
-    constexpr double h = 1e-6;
-    glm::dvec3 g;
-    for (int axis = 0; axis < 3; ++axis) {
-      glm::dvec3 e(0.0);
-      e[axis] = h;
-      g[axis] = (field_at(cell, f, r + e, phi) - field_at(cell, f, r - e, phi)) / (2.0 * h);
-    }
-    out(RayHit{t, unit_normal(glm::transpose(tet.to_barycentric) * g, d), 0.0f});
+    double l[4];
+    for (int i = 0; i < 4; ++i)
+      l[i] = alpha[i] + beta[i] * t;
+    double w[kSlots];
+    std::copy(form, form + kSlots, w);
+    for (int m = P; m > 1; --m)
+      de_casteljau_step<P>(w, m, l);
+    // Degree 1: f = Σ λ_i d_i, d_0 = w[0], d_1..3 at the unit steps.
+    const double d0 = w[0];
+    const glm::dvec3 g(w[slot<P>(1, 0, 0)] - d0, w[slot<P>(0, 1, 0)] - d0,
+                       w[slot<P>(0, 0, 1)] - d0);
+    out(RayHit{t, unit_normal(double(P) * (glm::transpose(tet.to_barycentric) * g), d), 0.0f});
   });
 }
 

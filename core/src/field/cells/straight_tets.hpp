@@ -1,8 +1,9 @@
 // Straight tetrahedra of order p ≥ 2 (straight sides: an affine map from the reference
 // tetrahedron) cast directly, without sub-hexahedra: along a ray the barycentric coordinates are
 // linear in t, so the ray's segment in a tetrahedron is an interval of t found exactly, and the
-// field on it is a polynomial of degree p in t — its Bernstein coefficients on the segment from
-// p + 1 samples, its roots isolated by Bernstein subdivision (bernstein/roots.hpp). The Embree
+// field on it is a polynomial of degree p in t — its Bernstein coefficients on the segment are
+// the blossom of the field's Bernstein–Bézier form on the tetrahedron at the segment's ends —,
+// its roots isolated by Bernstein subdivision (bernstein/roots.hpp). The Embree
 // binding and the axis caster (object order over bins of the tetrahedra across the ray axis)
 // take each hit from one function, so they give the same bits. Internal to CellElementSource.
 #pragma once
@@ -22,8 +23,8 @@
 
 namespace ldimesh::cells {
 
-// One active tetrahedron: its map x − v0 → (λ₁, λ₂, λ₃), its vertices' box, and where its
-// nodal values minus the isovalue start in StraightTets::values.
+// One active tetrahedron: its map x − v0 → (λ₁, λ₂, λ₃), its vertices' box, and where the
+// Bernstein–Bézier coefficients of its field minus the isovalue start in StraightTets::values.
 struct StraightTet {
   glm::dvec3 v0{0.0};
   glm::dmat3 to_barycentric{1.0};
@@ -34,7 +35,11 @@ struct StraightTet {
 struct StraightTets {
   const ReferenceCell* cell = nullptr;  // the tetrahedron of order p (VTK's nodes)
   std::vector<StraightTet> tets;
-  std::vector<double> values;  // N per tetrahedron, VTK's order, minus the isovalue
+  // N per tetrahedron: the Bernstein–Bézier coefficients c_α of f − isovalue, in the order of
+  // the cell's nodes (coefficient j has the multi-index α of node j's lattice position).
+  std::vector<double> values;
+  // Coefficient j's slot in a dense (p + 1)³ array, α₁ + (p + 1)(α₂ + (p + 1) α₃).
+  std::vector<int> slots;
   std::uint64_t nonfinite = 0;
 };
 
@@ -93,6 +98,11 @@ StraightTets active_straight_tets(const ReferenceCell& cell, std::span<const dou
   std::vector<std::size_t> offset(chunks + 1, 0);
   StraightTets out;
   out.cell = &cell;
+  const int p = cell.order;
+  for (const glm::dvec3& r : cell.nodes) {
+    const glm::ivec3 alpha(glm::round(r * double(p)));
+    out.slots.push_back(alpha.x + (p + 1) * (alpha.y + (p + 1) * alpha.z));
+  }
   for (std::size_t chunk = 0; chunk < chunks; ++chunk) {
     offset[chunk + 1] = offset[chunk] + active[chunk].size();
     out.nonfinite += bad_values[chunk];
@@ -100,6 +110,7 @@ StraightTets active_straight_tets(const ReferenceCell& cell, std::span<const dou
   out.tets.resize(offset[chunks]);
   out.values.resize(offset[chunks] * n);
   tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t chunk) {
+    std::vector<double> f(n);
     std::size_t k = offset[chunk];
     for (const std::uint32_t local : active[chunk]) {
       const std::size_t e = chunk * kChunk + local;
@@ -116,7 +127,14 @@ StraightTets active_straight_tets(const ReferenceCell& cell, std::span<const dou
       t.to_barycentric = glm::inverse(edges);
       t.values = k * n;
       for (std::size_t i = 0; i < n; ++i)
-        out.values[k * n + i] = values(e, int(i)) - isovalue;
+        f[i] = values(e, int(i)) - isovalue;
+      for (std::size_t j = 0; j < n; ++j) {
+        const double* row = cell.to_bernstein.data() + j * n;
+        double s = 0.0;
+        for (std::size_t i = 0; i < n; ++i)
+          s += row[i] * f[i];
+        out.values[k * n + j] = s;
+      }
       ++k;
     }
   });

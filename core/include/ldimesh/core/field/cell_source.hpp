@@ -73,7 +73,7 @@ class CellElementSource final : public FieldSource {
 
   Box bounds() const override;
   // Whether the cells are tetrahedra of order ≥ 2 with straight sides (geometry order 1, or
-  // every node where the affine map of the vertices puts it, to 10⁻¹² of the cell's size), cast
+  // every node where the affine map of the vertices puts it, to float32 rounding), cast
   // directly (the field along a ray a polynomial of degree p on the ray's exact segment in the
   // tetrahedron) instead of as 4 curved sub-hexahedra each.
   bool straight_tetrahedra() const { return geometry_->straight; }
