@@ -68,15 +68,20 @@ void straight_tet_hits(const StraightTets& all, const StraightTet& tet, glm::dve
   double la[4], lb[4];
   for (int i = 0; i < 4; ++i)
     la[i] = alpha[i] + beta[i] * ta, lb[i] = alpha[i] + beta[i] * tb;
+  // chain[j]: the form after j steps at λ(ta), of degree P − j; b_k is chain[P − k] after k
+  // steps at λ(tb).
+  double chain[P + 1][kSlots];
+  std::copy(form, form + kSlots, chain[0]);
+  for (int j = 1; j <= P; ++j) {
+    std::copy(chain[j - 1], chain[j - 1] + kSlots, chain[j]);
+    de_casteljau_step<P>(chain[j], P - j + 1, la);
+  }
   double c[P + 1];
-  for (int k = 0; k <= P; ++k) {
-    double w[kSlots];
-    std::copy(form, form + kSlots, w);
-    int m = P;
-    for (int s = 0; s < P - k; ++s)
-      de_casteljau_step<P>(w, m--, la);
-    for (int s = 0; s < k; ++s)
-      de_casteljau_step<P>(w, m--, lb);
+  c[0] = chain[P][0];
+  for (int k = 1; k <= P; ++k) {
+    double* w = chain[P - k];  // not needed again: stepped in place
+    for (int m = k; m > 0; --m)
+      de_casteljau_step<P>(w, m, lb);
     c[k] = w[0];
   }
   bernstein::bernstein_roots<P>(c, [&](double s) {
