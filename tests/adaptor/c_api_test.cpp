@@ -395,25 +395,32 @@ TEST(CApi, NaNsInTheFieldAreCountedAndTheirCellsLeftOut) {
   if (!a) return;
   Slab slab;
   add_slab(a, slab);
-  // Step 1 clean; step 2 with a NaN and an Inf on every rank at points next to the sphere
-  // (|x| ≈ 0.58 at i = 5 of 25: x = −0.583); step 3 clean again.
+  // Step 1 clean; step 2 with a NaN and an Inf on every rank at points next to the sphere (on
+  // the rank's own layer nearest z = 0, at x = ∓√(0.36 − z²), y = 0: with one rank i = 5 and
+  // 19 of 25, x = ∓0.583); step 3 clean again.
   EXPECT_EQ(ldimesh_execute(a, 1, 0.0), LDIMESH_OK) << ldimesh_last_error(a);
   wait_published(a, 1);
   ldimesh_step_report report = poisoned_report();
   EXPECT_EQ(ldimesh_last_report(a, &report), LDIMESH_OK);
   EXPECT_EQ(report.nonfinite_values, 0u);
-  const long l = slab.layers / 2, mid = kN / 2;
-  const double saved[2] = {slab.at(5, mid, l), slab.at(kN - 6, mid, l)};
-  slab.at(5, mid, l) = std::nan("");
-  slab.at(kN - 6, mid, l) = std::numeric_limits<double>::infinity();
+  long l = 0;
+  for (long k = 1; k < slab.layers - (slab.ghost_above ? 1 : 0); ++k)
+    if (std::abs(Slab::coordinate(slab.z_first + k)) < std::abs(Slab::coordinate(slab.z_first + l)))
+      l = k;
+  const double z = Slab::coordinate(slab.z_first + l);
+  const long i = std::lround((1.0 - std::sqrt(std::max(0.0, 0.36 - z * z))) * 0.5 * (kN - 1));
+  const long mid = kN / 2;
+  const double saved[2] = {slab.at(i, mid, l), slab.at(kN - 1 - i, mid, l)};
+  slab.at(i, mid, l) = std::nan("");
+  slab.at(kN - 1 - i, mid, l) = std::numeric_limits<double>::infinity();
   EXPECT_EQ(ldimesh_execute(a, 2, 1.0), LDIMESH_OK) << ldimesh_last_error(a);
   EXPECT_EQ(ldimesh_last_report(a, &report), LDIMESH_OK);
   EXPECT_EQ(report.executed, 1);
   if (rank_of() == 0) {
     EXPECT_EQ(report.nonfinite_values, 2u * std::uint64_t(ranks()));
   }
-  slab.at(5, mid, l) = saved[0];
-  slab.at(kN - 6, mid, l) = saved[1];
+  slab.at(i, mid, l) = saved[0];
+  slab.at(kN - 1 - i, mid, l) = saved[1];
   wait_published(a, 2);
   EXPECT_EQ(ldimesh_execute(a, 3, 2.0), LDIMESH_OK) << ldimesh_last_error(a);
   EXPECT_EQ(ldimesh_finalize(a), LDIMESH_OK) << ldimesh_last_error(a);
