@@ -198,44 +198,52 @@ CellElementSource::CellElementSource(const CellBlock& block) : block_(block) {
 
 bool CellElementSource::take_straight_tetrahedra(const double* points) {
   // Straight when every geometry node lies where the affine map of the vertices puts it, up to
-  // the rounding of the coordinates to float (2⁻²³ of their magnitude: files often hold float32
-  // points, VTK's default) and 10⁻¹² of the cell's size: a cell that differs from straight by
-  // less is meshed as straight, its surface moved by no more than that rounding.
+  // the rounding of the coordinates: a cell whose coordinates are all floats (files often hold
+  // float32 points, VTK's default) within 2·√3·2⁻²³ of their magnitude (the node and the
+  // vertices each rounded to float), any other within 16 ulps of it; and 10⁻¹² of the cell's
+  // size. A cell that differs from straight by less is meshed as straight, its surface moved by
+  // no more than that rounding. First the check (one curved cell ends it), then the vertices.
   const cells::ReferenceCell& geometry = cells::reference_cell(geometry_type_, geometry_order_);
+  const auto node = [&](std::size_t e, std::size_t i) {
+    const double* x = points + 3 * geometry_nodes_ * e + 3 * geometry_from_[i];
+    return glm::dvec3(x[0], x[1], x[2]);
+  };
+  for (std::size_t e = 0; e < block_.element_count; ++e) {
+    double corners[12];
+    double coords = 0.0, size = 0.0;
+    bool floats = true;
+    for (std::size_t i = 0; i < geometry_nodes_; ++i) {
+      const glm::dvec3 x = node(e, i);
+      for (int a = 0; a < 3; ++a) {
+        if (!std::isfinite(x[a])) return false;  // refused by the general path
+        coords = std::max(coords, std::abs(x[a]));
+        floats = floats && double(float(x[a])) == x[a];
+        if (i < 4) corners[3 * i + a] = x[a];
+      }
+    }
+    if (!cells::linear_tet_is_valid(corners)) return false;
+    const glm::dvec3 v0 = node(e, 0), e1 = node(e, 1) - v0, e2 = node(e, 2) - v0,
+                     e3 = node(e, 3) - v0;
+    size = std::max({glm::length(e1), glm::length(e2), glm::length(e3)});
+    const double rounding = floats ? 2.0 * std::sqrt(3.0) * 0x1p-23 : 16.0 * 0x1p-52;
+    const double tolerance = rounding * coords + 1e-12 * size;
+    for (std::size_t i = 4; i < geometry_nodes_; ++i) {
+      const glm::dvec3 r = geometry.nodes[i];
+      const glm::dvec3 at = v0 + r.x * e1 + r.y * e2 + r.z * e3;
+      if (!(glm::length(node(e, i) - at) <= tolerance)) return false;
+    }
+  }
+  // The geometry is now that of linear tetrahedra: their vertices, in VTK's order.
   std::vector<double> v(12 * block_.element_count);
   constexpr double inf = std::numeric_limits<double>::infinity();
   Box bounds{glm::dvec3(inf), glm::dvec3(-inf)};
-  for (std::size_t e = 0; e < block_.element_count; ++e) {
-    const double* p = points + 3 * geometry_nodes_ * e;
-    const auto node = [&](std::size_t i) {
-      const double* x = p + 3 * geometry_from_[i];
-      return glm::dvec3(x[0], x[1], x[2]);
-    };
-    glm::dvec3 corner[4];
-    double coords = 0.0, size = 0.0;
-    for (int i = 0; i < 4; ++i) {
-      corner[i] = node(std::size_t(i));
-      for (int a = 0; a < 3; ++a) {
-        if (!std::isfinite(corner[i][a])) return false;  // refused by the general path
-        coords = std::max(coords, std::abs(corner[i][a]));
-        v[12 * e + 3 * i + a] = corner[i][a];
-      }
+  for (std::size_t e = 0; e < block_.element_count; ++e)
+    for (std::size_t i = 0; i < 4; ++i) {
+      const glm::dvec3 x = node(e, i);
+      for (int a = 0; a < 3; ++a)
+        v[12 * e + 3 * i + std::size_t(a)] = x[a];
+      bounds.lo = glm::min(bounds.lo, x), bounds.hi = glm::max(bounds.hi, x);
     }
-    if (!cells::linear_tet_is_valid(&v[12 * e])) return false;
-    for (int i = 1; i < 4; ++i)
-      size = std::max(size, glm::length(corner[i] - corner[0]));
-    const double tolerance = 0x1p-23 * coords + 1e-12 * size;
-    for (std::size_t i = 4; i < geometry_nodes_; ++i) {
-      const glm::dvec3 r = geometry.nodes[i];
-      const glm::dvec3 at = corner[0] + r.x * (corner[1] - corner[0]) +
-                            r.y * (corner[2] - corner[0]) + r.z * (corner[3] - corner[0]);
-      const glm::dvec3 x = node(i);
-      if (!(glm::length(x - at) <= tolerance)) return false;
-    }
-    for (int i = 0; i < 4; ++i)
-      bounds.lo = glm::min(bounds.lo, corner[i]), bounds.hi = glm::max(bounds.hi, corner[i]);
-  }
-  // The geometry is now that of linear tetrahedra: their vertices, in VTK's order.
   geometry_->tets = std::move(v);
   geometry_->straight = true;
   geometry_->bounds = bounds;

@@ -35,45 +35,51 @@ template <int P>
 }
 
 // Every root of tetrahedron `tet`'s field along ray o + t·d, t ∈ [t0, t1], passed to `out`: the
-// ray's segment [ta, tb] in the tetrahedron (barycentric coordinates ≥ −kInside, each linear in
-// t); the field on it is the polynomial whose Bernstein coefficients on [ta, tb] are the blossom
-// of the tetrahedron's Bernstein–Bézier form, b_k = c(λ(ta)^{p−k}, λ(tb)^k) (p − k de Casteljau
-// steps at λ(ta), then k at λ(tb)); roots by bernstein_roots. The normal from the gradient:
-// de Casteljau down to degree 1 at the hit, ∂f/∂λ_i = p d_i, mapped to the world.
+// ray's segment [ua, ub] in the tetrahedron (barycentric coordinates ≥ −kInside, each linear in
+// the local parameter u); the field on it is the polynomial whose Bernstein coefficients on
+// [ua, ub] are the blossom of the tetrahedron's Bernstein–Bézier form,
+// b_k = c(λ(ua)^{p−k}, λ(ub)^k) (a chain of de Casteljau steps at λ(ua), then k steps at λ(ub));
+// roots by bernstein_roots. The normal from the gradient: de Casteljau down to degree 1 at the
+// hit, ∂f/∂λ_i = p d_i, mapped to the world.
 template <int P, class Out>
 void straight_tet_hits(const StraightTets& all, const StraightTet& tet, glm::dvec3 o, glm::dvec3 d,
                        double t0, double t1, Out&& out) {
-  const glm::dvec3 a = tet.to_barycentric * (o - tet.v0), b = tet.to_barycentric * d;
+  // From the ray's point nearest v0 (t = s), so that the rounding of the barycentric
+  // coordinates scales with the tetrahedron, not with the ray's origin: the segments of two
+  // tetrahedra that share a face then meet to within kInside. Local parameter u = t − s.
+  const double s = glm::dot(tet.v0 - o, d) / glm::dot(d, d);
+  const glm::dvec3 a = tet.to_barycentric * (o + s * d - tet.v0), b = tet.to_barycentric * d;
   const double alpha[4] = {1.0 - a.x - a.y - a.z, a.x, a.y, a.z};
   const double beta[4] = {-(b.x + b.y + b.z), b.x, b.y, b.z};
-  double ta = t0, tb = t1;
+  double ua = t0 - s, ub = t1 - s;
   for (int i = 0; i < 4; ++i) {
     if (beta[i] == 0.0) {
       if (alpha[i] < -kInside) return;
       continue;
     }
-    const double t = (-kInside - alpha[i]) / beta[i];
+    const double u = (-kInside - alpha[i]) / beta[i];
     if (beta[i] > 0.0)
-      ta = std::max(ta, t);
+      ua = std::max(ua, u);
     else
-      tb = std::min(tb, t);
+      ub = std::min(ub, u);
   }
-  if (!(ta < tb)) return;  // missed, or a single point (a grazed vertex or edge)
-  constexpr int kSlots = (P + 1) * (P + 1) * (P + 1);
+  if (!(ua < ub)) return;  // missed, or a single point (a grazed vertex or edge)
   const std::vector<int>& slots = all.slots;
+  // The slots up to the last one the simplex uses, (0, 0, P); those outside it stay 0.
+  constexpr int kUsed = P * (P + 1) * (P + 1) + 1;
   const double* coefficients = all.values.data() + tet.values;
-  double form[kSlots];
+  double form[kUsed] = {};
   for (std::size_t j = 0; j < slots.size(); ++j)
     form[slots[j]] = coefficients[j];
   double la[4], lb[4];
   for (int i = 0; i < 4; ++i)
-    la[i] = alpha[i] + beta[i] * ta, lb[i] = alpha[i] + beta[i] * tb;
-  // chain[j]: the form after j steps at λ(ta), of degree P − j; b_k is chain[P − k] after k
-  // steps at λ(tb).
-  double chain[P + 1][kSlots];
-  std::copy(form, form + kSlots, chain[0]);
+    la[i] = alpha[i] + beta[i] * ua, lb[i] = alpha[i] + beta[i] * ub;
+  // chain[j]: the form after j steps at λ(ua), of degree P − j; b_k is chain[P − k] after k
+  // steps at λ(ub).
+  double chain[P + 1][kUsed];
+  std::copy(form, form + kUsed, chain[0]);
   for (int j = 1; j <= P; ++j) {
-    std::copy(chain[j - 1], chain[j - 1] + kSlots, chain[j]);
+    std::copy(chain[j - 1], chain[j - 1] + kUsed, chain[j]);
     de_casteljau_step<P>(chain[j], P - j + 1, la);
   }
   double c[P + 1];
@@ -84,20 +90,20 @@ void straight_tet_hits(const StraightTets& all, const StraightTet& tet, glm::dve
       de_casteljau_step<P>(w, m, lb);
     c[k] = w[0];
   }
-  bernstein::bernstein_roots<P>(c, [&](double s) {
-    const double t = segment_point(ta, tb, s);
+  bernstein::bernstein_roots<P>(c, [&](double root) {
+    const double u = segment_point(ua, ub, root);
     double l[4];
     for (int i = 0; i < 4; ++i)
-      l[i] = alpha[i] + beta[i] * t;
-    double w[kSlots];
-    std::copy(form, form + kSlots, w);
+      l[i] = alpha[i] + beta[i] * u;
+    double w[kUsed];
+    std::copy(form, form + kUsed, w);
     for (int m = P; m > 1; --m)
       de_casteljau_step<P>(w, m, l);
     // Degree 1: f = Σ λ_i d_i, d_0 = w[0], d_1..3 at the unit steps.
     const double d0 = w[0];
     const glm::dvec3 g(w[slot<P>(1, 0, 0)] - d0, w[slot<P>(0, 1, 0)] - d0,
                        w[slot<P>(0, 0, 1)] - d0);
-    out(RayHit{t, unit_normal(double(P) * (glm::transpose(tet.to_barycentric) * g), d), 0.0f});
+    out(RayHit{s + u, unit_normal(double(P) * (glm::transpose(tet.to_barycentric) * g), d), 0.0f});
   });
 }
 
