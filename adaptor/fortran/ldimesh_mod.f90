@@ -33,7 +33,8 @@ module ldimesh_mod
   integer(c_int), parameter, public :: LDIMESH_ORDER_LEXICOGRAPHIC = 0, LDIMESH_ORDER_VTK = 1
   integer(c_int), parameter, public :: LDIMESH_CELL_HEXAHEDRON = 0, LDIMESH_CELL_HEXAHEDRON20 = 1, &
                                        LDIMESH_CELL_TETRAHEDRON = 2, LDIMESH_CELL_WEDGE = 3, &
-                                       LDIMESH_CELL_WEDGE15 = 4, LDIMESH_CELL_PYRAMID = 5
+                                       LDIMESH_CELL_WEDGE15 = 4, LDIMESH_CELL_PYRAMID = 5, &
+                                       LDIMESH_CELL_PYRAMID14 = 6
   integer(c_int), parameter, public :: LDIMESH_CELL_ORDER_VTK = 0, LDIMESH_CELL_ORDER_GMSH = 1
 
   ! ldimesh_grid_block of ldimesh.h, field by field (x is the first index, as in Fortran).
@@ -363,6 +364,8 @@ contains
           point_nodes = cell_node_count(LDIMESH_CELL_HEXAHEDRON, geometry_order)
         case (LDIMESH_CELL_WEDGE15)
           point_nodes = cell_node_count(LDIMESH_CELL_WEDGE, geometry_order)
+        case (LDIMESH_CELL_PYRAMID14)
+          point_nodes = cell_node_count(LDIMESH_CELL_PYRAMID, geometry_order)
         case default
           point_nodes = cell_node_count(cell_type, geometry_order)
         end select
@@ -404,6 +407,8 @@ contains
       nodes = 20
     case (LDIMESH_CELL_WEDGE15)
       nodes = 15
+    case (LDIMESH_CELL_PYRAMID14)
+      nodes = 14
     case default
       nodes = merge(5, 13, order == 1)
     end select

@@ -119,7 +119,9 @@ enum {
   LDIMESH_CELL_WEDGE = 3,        /* P_p x P_p: VTK_WEDGE (1), VTK_BIQUADRATIC_QUADRATIC_WEDGE (2),
                                     VTK_LAGRANGE_WEDGE */
   LDIMESH_CELL_WEDGE15 = 4,      /* VTK_QUADRATIC_WEDGE (p=2, 15 nodes) */
-  LDIMESH_CELL_PYRAMID = 5       /* VTK_PYRAMID (p=1, 5 nodes), VTK_QUADRATIC_PYRAMID (2, 13) */
+  LDIMESH_CELL_PYRAMID = 5,      /* VTK_PYRAMID (p=1, 5 nodes), VTK_QUADRATIC_PYRAMID (2, 13) */
+  LDIMESH_CELL_PYRAMID14 = 6     /* gmsh's 14-node pyramid (p=2): VTK_QUADRATIC_PYRAMID's 13
+                                    nodes, then the base's centre */
 };
 
 /* A rank-local block of cells of one type and order (ldimesh::CellBlock): a mixed mesh is one
@@ -142,7 +144,7 @@ typedef struct ldimesh_cell_block {
   int node_order;         /* LDIMESH_CELL_ORDER_VTK (default) or LDIMESH_CELL_ORDER_GMSH: of the
                              points and values within a cell (gmsh: tetrahedra and hexahedra of
                              order 1-8, 20-node hexahedra, prisms of 6, 15, 18 nodes, pyramids of
-                             5, 13) */
+                             5, 13, 14) */
   int geometry_order;     /* 0 (default): the points are the field's nodes (isoparametric); else
                              q = 1..8: the points are the nodes of the cell of the same shape and
                              order q (1: straight sides, the corners; for the 20- and 15-node cells

@@ -307,14 +307,15 @@ int ldimesh_add_cell_block(ldimesh_adaptor* a, const ldimesh_cell_block* b) {
   if (!scalar_type(b->type, c.value_type))
     return fail(a, LDIMESH_ERROR_ARGUMENT,
                 what + "type must be LDIMESH_FLOAT32 or LDIMESH_FLOAT64");
-  if (b->cell_type < LDIMESH_CELL_HEXAHEDRON || b->cell_type > LDIMESH_CELL_PYRAMID)
+  if (b->cell_type < LDIMESH_CELL_HEXAHEDRON || b->cell_type > LDIMESH_CELL_PYRAMID14)
     return fail(a, LDIMESH_ERROR_ARGUMENT, what + "cell_type must be LDIMESH_CELL_*");
   static_assert(int(ldimesh::CellType::hexahedron) == LDIMESH_CELL_HEXAHEDRON &&
                 int(ldimesh::CellType::serendipity_hexahedron) == LDIMESH_CELL_HEXAHEDRON20 &&
                 int(ldimesh::CellType::tetrahedron) == LDIMESH_CELL_TETRAHEDRON &&
                 int(ldimesh::CellType::wedge) == LDIMESH_CELL_WEDGE &&
                 int(ldimesh::CellType::serendipity_wedge) == LDIMESH_CELL_WEDGE15 &&
-                int(ldimesh::CellType::pyramid) == LDIMESH_CELL_PYRAMID);
+                int(ldimesh::CellType::pyramid) == LDIMESH_CELL_PYRAMID &&
+                int(ldimesh::CellType::pyramid14) == LDIMESH_CELL_PYRAMID14);
   c.type = ldimesh::CellType(b->cell_type);
   const std::size_t nodes = ldimesh::cell_nodes(c.type, b->order);
   if (nodes == 0)

@@ -307,6 +307,12 @@ TEST(CApi, CellBlocksAreCheckedAndPublished) {
   EXPECT_NE(std::string(ldimesh_last_error(a)).find("a pyramid of order 3 does not exist"),
             std::string::npos)
       << ldimesh_last_error(a);
+  c.cell_type = LDIMESH_CELL_PYRAMID14;
+  c.order = 1;
+  EXPECT_EQ(ldimesh_add_cell_block(a, &c), LDIMESH_ERROR_ARGUMENT);
+  EXPECT_NE(std::string(ldimesh_last_error(a)).find("a 14-node pyramid of order 1 does not exist"),
+            std::string::npos)
+      << ldimesh_last_error(a);
   c.cell_type = LDIMESH_CELL_TETRAHEDRON;
   c.order = 2;
   c.element_stride = 9;

@@ -49,6 +49,7 @@ using Corners = std::vector<glm::dvec3>;
 glm::dvec3 linear_map(CellType type, const Corners& c, glm::dvec3 r) {
   const CellType linear = type == CellType::serendipity_hexahedron ? CellType::hexahedron
                           : type == CellType::serendipity_wedge    ? CellType::wedge
+                          : type == CellType::pyramid14            ? CellType::pyramid
                                                                    : type;
   const std::vector<double> w = cell_shape_functions(linear, 1, r);
   // The linear hexahedron's nodes are VTK's corner order; `corners` follow it.
@@ -93,7 +94,8 @@ std::vector<Corners> split_cube(CellType type, const Corners& c) {
     case CellType::wedge:
     case CellType::serendipity_wedge:
       return {{c[0], c[1], c[2], c[4], c[5], c[6]}, {c[0], c[2], c[3], c[4], c[6], c[7]}};
-    case CellType::pyramid: {
+    case CellType::pyramid:
+    case CellType::pyramid14: {
       glm::dvec3 m(0.0);
       for (const glm::dvec3& v : c)
         m += v / 8.0;
@@ -132,9 +134,10 @@ std::string describe(CellType type, int order) {
 TEST(CellSource, ReferenceNodesAreDistinctAndTheBasisIsNodal) {
   for (CellType type :
        {CellType::hexahedron, CellType::serendipity_hexahedron, CellType::tetrahedron,
-        CellType::wedge, CellType::serendipity_wedge, CellType::pyramid})
+        CellType::wedge, CellType::serendipity_wedge, CellType::pyramid, CellType::pyramid14})
     for (int order = 1; order <= max_cell_order(type); ++order) {
-      if ((type == CellType::serendipity_hexahedron || type == CellType::serendipity_wedge) &&
+      if ((type == CellType::serendipity_hexahedron || type == CellType::serendipity_wedge ||
+           type == CellType::pyramid14) &&
           order != 2)
         continue;
       SCOPED_TRACE(describe(type, order));
@@ -149,13 +152,17 @@ TEST(CellSource, ReferenceNodesAreDistinctAndTheBasisIsNodal) {
   EXPECT_EQ(cell_node_count(CellType::tetrahedron, 8), 165u);
   EXPECT_EQ(cell_node_count(CellType::wedge, 8), 405u);
   EXPECT_EQ(cell_node_count(CellType::pyramid, 2), 13u);
+  EXPECT_EQ(cell_node_count(CellType::pyramid14, 2), 14u);
+  EXPECT_THROW(cell_node_count(CellType::pyramid14, 1), std::invalid_argument);
   EXPECT_EQ(cell_node_count(CellType::serendipity_hexahedron, 2), 20u);
   EXPECT_EQ(cell_node_count(CellType::serendipity_wedge, 2), 15u);
 }
 
 TEST(CellSource, SphereFromQuadraticFieldsOnStraightCellsIsExact) {
-  // |x|² lies in every space of order ≥ 2 on straight tetrahedra, extruded wedges and the
-  // serendipity cells (affine maps), so the isosurface at 1 is the unit sphere up to rounding.
+  // |x|² lies in every space of order ≥ 2 on straight tetrahedra, extruded wedges, the
+  // serendipity cells and pyramids on a parallelogram (affine maps; the 14-node pyramid's space
+  // holds P₂, VTK's 13-node one does not), so the isosurface at 1 is the unit sphere up to
+  // rounding.
   struct Case {
     CellType type;
     int order;
@@ -164,7 +171,8 @@ TEST(CellSource, SphereFromQuadraticFieldsOnStraightCellsIsExact) {
        {Case{CellType::tetrahedron, 2}, Case{CellType::tetrahedron, 3},
         Case{CellType::tetrahedron, 5}, Case{CellType::tetrahedron, 8}, Case{CellType::wedge, 2},
         Case{CellType::wedge, 4}, Case{CellType::serendipity_wedge, 2},
-        Case{CellType::serendipity_hexahedron, 2}, Case{CellType::hexahedron, 2}}) {
+        Case{CellType::serendipity_hexahedron, 2}, Case{CellType::hexahedron, 2},
+        Case{CellType::pyramid14, 2}}) {
     SCOPED_TRACE(describe(c.type, c.order));
     const int n = c.order >= 5 ? 2 : 3;
     const Cells cells = grid_cells(c.type, c.order, n, -1.25, 1.25, r2);
@@ -228,11 +236,11 @@ TEST(CellSource, TheFieldXOnCurvedCellsCutsThePlaneExactly) {
     CellType type;
     int order;
   };
-  for (const Case c :
-       {Case{CellType::tetrahedron, 1}, Case{CellType::tetrahedron, 2},
-        Case{CellType::tetrahedron, 4}, Case{CellType::wedge, 1}, Case{CellType::wedge, 3},
-        Case{CellType::serendipity_wedge, 2}, Case{CellType::pyramid, 1},
-        Case{CellType::pyramid, 2}, Case{CellType::serendipity_hexahedron, 2}}) {
+  for (const Case c : {Case{CellType::tetrahedron, 1}, Case{CellType::tetrahedron, 2},
+                       Case{CellType::tetrahedron, 4}, Case{CellType::wedge, 1},
+                       Case{CellType::wedge, 3}, Case{CellType::serendipity_wedge, 2},
+                       Case{CellType::pyramid, 1}, Case{CellType::pyramid, 2},
+                       Case{CellType::pyramid14, 2}, Case{CellType::serendipity_hexahedron, 2}}) {
     SCOPED_TRACE(describe(c.type, c.order));
     const Cells cells = grid_cells(
         c.type, c.order, 2, lo, hi, [](glm::dvec3 x) { return x.x; },
@@ -443,7 +451,7 @@ double cell_field_at(CellType type, int order, const double* points, const doubl
   if (type == CellType::wedge || type == CellType::serendipity_wedge)
     inside = inside && r.x + r.y <= 1.0 + pad;
   if (type == CellType::hexahedron || type == CellType::serendipity_hexahedron ||
-      type == CellType::pyramid)
+      type == CellType::pyramid || type == CellType::pyramid14)
     inside = inside && r.x <= 1.0 + pad && r.y <= 1.0 + pad;
   if (!inside) return std::nan("");
   double f = 0.0;
@@ -513,10 +521,10 @@ TEST(CellSource, RootsOfRandomCurvedCellsMatchADenseScan) {
     CellType type;
     int order;
   };
-  for (const Case c :
-       {Case{CellType::tetrahedron, 2}, Case{CellType::tetrahedron, 3}, Case{CellType::wedge, 2},
-        Case{CellType::serendipity_wedge, 2}, Case{CellType::pyramid, 2},
-        Case{CellType::pyramid, 1}, Case{CellType::serendipity_hexahedron, 2}}) {
+  for (const Case c : {Case{CellType::tetrahedron, 2}, Case{CellType::tetrahedron, 3},
+                       Case{CellType::wedge, 2}, Case{CellType::serendipity_wedge, 2},
+                       Case{CellType::pyramid, 2}, Case{CellType::pyramid, 1},
+                       Case{CellType::pyramid14, 2}, Case{CellType::serendipity_hexahedron, 2}}) {
     SCOPED_TRACE(describe(c.type, c.order));
     const glm::dvec3 w(u(rng), u(rng), u(rng));
     const auto bend = [&](glm::dvec3 x) {

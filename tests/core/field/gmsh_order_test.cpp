@@ -2,6 +2,8 @@
 // (libgmsh, beside deal.II) gives each element type's node coordinates; VTK's node i of ours must
 // sit where gmsh's node permutation[i] sits, mapped to VTK's parametric coordinates.
 #include <algorithm>
+#include <cmath>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -24,6 +26,7 @@ glm::dvec3 to_vtk(CellType type, glm::dvec3 g) {
     case CellType::serendipity_wedge:
       return {g.x, g.y, 0.5 * (g.z + 1.0)};
     case CellType::pyramid:
+    case CellType::pyramid14:
       if (g.z == 1.0) return {0.0, 0.0, 1.0};  // the apex: VTK's (0, 0, 1)
       return {0.5 * (g.x / (1.0 - g.z) + 1.0), 0.5 * (g.y / (1.0 - g.z) + 1.0), g.z};
     default:
@@ -74,26 +77,87 @@ TEST(GmshOrder, EveryTakenTypeSitsWhereGmshPutsItsNodes) {
     int order;
   };
   // The types by number too, as gmsh's documentation lists them (MSH 4: 4, 11, 29 tetrahedra;
-  // 6, 13, 18 prisms; 7, 19 pyramids; 5, 12, 17 hexahedra).
-  const Case cases[] = {{4, CellType::tetrahedron, 1},
-                        {11, CellType::tetrahedron, 2},
-                        {29, CellType::tetrahedron, 3},
-                        {6, CellType::wedge, 1},
-                        {13, CellType::wedge, 2},
-                        {18, CellType::serendipity_wedge, 2},
-                        {7, CellType::pyramid, 1},
-                        {19, CellType::pyramid, 2},
-                        {5, CellType::hexahedron, 1},
-                        {12, CellType::hexahedron, 2},
-                        {17, CellType::serendipity_hexahedron, 2}};
+  // 6, 13, 18 prisms; 7, 19, 14 pyramids; 5, 12, 17 hexahedra).
+  const Case cases[] = {{4, CellType::tetrahedron, 1},  {11, CellType::tetrahedron, 2},
+                        {29, CellType::tetrahedron, 3}, {6, CellType::wedge, 1},
+                        {13, CellType::wedge, 2},       {18, CellType::serendipity_wedge, 2},
+                        {7, CellType::pyramid, 1},      {19, CellType::pyramid, 2},
+                        {14, CellType::pyramid14, 2},   {5, CellType::hexahedron, 1},
+                        {12, CellType::hexahedron, 2},  {17, CellType::serendipity_hexahedron, 2}};
   for (const Case& c : cases)
     expect_gmsh_positions(c.gmsh_type, c.type, c.order);
   gmsh::finalize();
   // Orders no cell of ours has.
+  EXPECT_TRUE(cell_gmsh_permutation(CellType::pyramid14, 1).empty());
   EXPECT_TRUE(cell_gmsh_permutation(CellType::tetrahedron, 9).empty());
   EXPECT_TRUE(cell_gmsh_permutation(CellType::pyramid, 3).empty());
   EXPECT_TRUE(cell_gmsh_permutation(CellType::serendipity_wedge, 3).empty());
   EXPECT_TRUE(cell_gmsh_permutation(CellType::wedge, 3).empty());
+}
+
+TEST(GmshOrder, ShapeFunctionsAreGmshsWhereTheSpacesAreTheSame) {
+  // Our nodal basis at random points of the reference cell equals gmsh's Lagrange basis
+  // (getBasisFunctions) there, node for node through the permutation: the Lagrange tetrahedra,
+  // prisms and hexahedra, the 20-node hexahedron, and the 14-node pyramid (gmsh's own space).
+  // Not VTK's 13-node pyramid and 15-node wedge, whose spaces are VTK's, not gmsh's.
+  gmsh::initialize();
+  struct Case {
+    int gmsh_type;
+    CellType type;
+    int order;
+  };
+  const Case cases[] = {{11, CellType::tetrahedron, 2},
+                        {29, CellType::tetrahedron, 3},
+                        {31, CellType::tetrahedron, 5},
+                        {13, CellType::wedge, 2},
+                        {12, CellType::hexahedron, 2},
+                        {93, CellType::hexahedron, 4},
+                        {17, CellType::serendipity_hexahedron, 2},
+                        {14, CellType::pyramid14, 2}};
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  for (const Case& c : cases) {
+    SCOPED_TRACE("gmsh type " + std::to_string(c.gmsh_type));
+    // Random points in gmsh's reference cell.
+    std::vector<double> points;
+    for (int k = 0; k < 30; ++k) {
+      double a = u(rng), b = u(rng), z = u(rng);
+      switch (c.type) {
+        case CellType::tetrahedron:
+          while (a + b + z > 1.0)
+            a = u(rng), b = u(rng), z = u(rng);
+          break;
+        case CellType::wedge:
+          while (a + b > 1.0)
+            a = u(rng), b = u(rng);
+          z = 2.0 * z - 1.0;
+          break;
+        case CellType::pyramid14:
+          z *= 0.95;
+          a = (2.0 * a - 1.0) * (1.0 - z), b = (2.0 * b - 1.0) * (1.0 - z);
+          break;
+        default:
+          a = 2.0 * a - 1.0, b = 2.0 * b - 1.0, z = 2.0 * z - 1.0;
+      }
+      points.insert(points.end(), {a, b, z});
+    }
+    int components = 0, orientations = 0;
+    std::vector<double> theirs;
+    gmsh::model::mesh::getBasisFunctions(c.gmsh_type, points, "Lagrange", components, theirs,
+                                         orientations);
+    const std::vector<int> permutation = cell_gmsh_permutation(c.type, c.order);
+    const std::size_t n = permutation.size();
+    ASSERT_EQ(theirs.size(), 30 * n);
+    double worst = 0.0;
+    for (int k = 0; k < 30; ++k) {
+      const glm::dvec3 g(points[3 * k], points[3 * k + 1], points[3 * k + 2]);
+      const std::vector<double> ours = cell_shape_functions(c.type, c.order, to_vtk(c.type, g));
+      for (std::size_t i = 0; i < n; ++i)
+        worst = std::max(worst, std::abs(ours[i] - theirs[k * n + std::size_t(permutation[i])]));
+    }
+    EXPECT_LT(worst, 1e-9);
+  }
+  gmsh::finalize();
 }
 
 }  // namespace

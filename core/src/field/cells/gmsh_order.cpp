@@ -134,12 +134,14 @@ std::vector<Lattice> gmsh_nodes(CellType type, int order, bool serendip) {
 std::vector<int> cell_gmsh_permutation(CellType type, int order) {
   // VTK's node i is gmsh's node perm[i].
   if (type == CellType::pyramid) {
-    // gmsh's 5- and 13-node pyramids (its 14-node one has a node at the base's centre, which
-    // VTK's 13-node pyramid has not).
+    // gmsh's 5- and 13-node pyramids.
     if (order == 1) return {0, 1, 2, 3, 4};
     if (order == 2) return {0, 1, 2, 3, 4, 5, 8, 10, 6, 7, 9, 11, 12};
     return {};
   }
+  if (type == CellType::pyramid14)  // the 13-node pyramid's, then the base's centre (gmsh's 13)
+    return order == 2 ? std::vector<int>{0, 1, 2, 3, 4, 5, 8, 10, 6, 7, 9, 11, 12, 13}
+                      : std::vector<int>{};
   if (cell_nodes(type, order) == 0) return {};
   // gmsh's own library describes no prism above order 2 ("FaceClosureFull not implemented for
   // prisms of order 3", gmsh 4.8): not taken.

@@ -146,6 +146,18 @@ constexpr int kQuadraticPyramid[13][27] = {
     {0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 4, -4, 0, 0, 0, 0, 0, 0, 0, -4, 4, 0, 0, 0, 0},
 };
 
+// The 14-node pyramid's space (gmsh's complete quadratic pyramid, Bergot's): in gmsh's
+// coordinates x = (2r − 1)(1 − t), y = (2s − 1)(1 − t), z = t, the monomials of P₂ and
+// q·{1, x, y}, q² with q = xy/(1 − z) = (2r − 1)(2s − 1)(1 − t) — polynomials of degree ≤ 2 per
+// variable in (r, s, t), defined at the apex too.
+void pyramid14_space(glm::dvec3 r, double* g) {
+  const double a = 2.0 * r.x - 1.0, b = 2.0 * r.y - 1.0, m = 1.0 - r.z;
+  const double x = a * m, y = b * m, z = r.z, q = a * b * m;
+  const double out[14] = {1.0,   x,     y,     z, x * x, y * y, z * z,
+                          x * y, x * z, y * z, q, q * x, q * y, q * q};
+  std::copy(out, out + 14, g);
+}
+
 // ---------------------------------------------------------------------------------------------
 // Nodal bases
 
@@ -224,7 +236,8 @@ std::vector<double> invert(std::vector<double> a, int n) {
 
 void check_order(CellType type, int order) {
   if (order < 1 || order > max_cell_order(type) ||
-      ((type == CellType::serendipity_hexahedron || type == CellType::serendipity_wedge) &&
+      ((type == CellType::serendipity_hexahedron || type == CellType::serendipity_wedge ||
+        type == CellType::pyramid14) &&
        order != 2))
     throw std::invalid_argument(std::string("cell source: a ") + cell_type_name(type) +
                                 " of order " + std::to_string(order) + " does not exist");
@@ -261,6 +274,11 @@ std::unique_ptr<ReferenceCell> build(CellType type, int p) {
       lattice = pyramid_nodes(p);
       cell->top_collapsed = true;
       break;
+    case CellType::pyramid14:
+      lattice = pyramid_nodes(2);
+      lattice.push_back({1, 1, 0});  // the base's centre
+      cell->top_collapsed = true;
+      break;
   }
   for (const Lattice& l : lattice)
     cell->nodes.push_back(glm::dvec3(l) / double(p));
@@ -271,6 +289,12 @@ std::unique_ptr<ReferenceCell> build(CellType type, int p) {
     for (int i = 0; i < n; ++i)
       for (int j = 0; j < n; ++j)
         v[std::size_t(i) * n + j] = monomial(m[j], cell->nodes[i]);
+    cell->inverse = invert(std::move(v), n);
+  }
+  if (type == CellType::pyramid14) {
+    std::vector<double> v(std::size_t(n) * n);
+    for (int i = 0; i < n; ++i)
+      pyramid14_space(cell->nodes[i], &v[std::size_t(i) * n]);
     cell->inverse = invert(std::move(v), n);
   }
   if (type == CellType::tetrahedron) {
@@ -371,6 +395,17 @@ void shape_functions(const ReferenceCell& cell, glm::dvec3 r, double* out) {
         out[i] = s;
       }
       return;
+    case CellType::pyramid14: {
+      double g[14];
+      pyramid14_space(r, g);
+      for (std::size_t i = 0; i < n; ++i) {
+        double s = 0.0;
+        for (std::size_t j = 0; j < n; ++j)
+          s += g[j] * cell.inverse[j * n + i];
+        out[i] = s;
+      }
+      return;
+    }
   }
 }
 
@@ -446,6 +481,8 @@ const char* cell_type_name(CellType type) {
       return "15-node wedge";
     case CellType::pyramid:
       return "pyramid";
+    case CellType::pyramid14:
+      return "14-node pyramid";
   }
   return "unknown cell type";
 }
@@ -459,6 +496,7 @@ int max_cell_order(CellType type) {
     case CellType::serendipity_hexahedron:
     case CellType::serendipity_wedge:
     case CellType::pyramid:
+    case CellType::pyramid14:
       return 2;
   }
   throw std::invalid_argument("cell source: unknown cell type " + std::to_string(int(type)));

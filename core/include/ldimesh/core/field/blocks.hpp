@@ -116,6 +116,10 @@ enum class CellType : std::uint8_t {
   // VTK_PYRAMID (p = 1, 5 nodes) and VTK_QUADRATIC_PYRAMID (p = 2, 13 nodes: vertices, then edge
   // midpoints), with VTK's own shape functions (polynomials in r, s, t of degree p per variable).
   pyramid,
+  // gmsh's 14-node pyramid (MSH_PYR_14, p = 2): VTK_QUADRATIC_PYRAMID's 13 nodes, then the base's
+  // centre (VTK has no such cell), with gmsh's complete quadratic pyramid space (Bergot's: P₂
+  // and xy/(1 − z)·{1, x, y}, (xy/(1 − z))², in gmsh's coordinates).
+  pyramid14,
 };
 
 // Nodes per cell of `type` and order `order`, or 0 where the type has no such order (no
@@ -136,18 +140,21 @@ inline std::size_t cell_nodes(CellType type, int order) {
       return order == 2 ? 15 : 0;
     case CellType::pyramid:
       return order == 1 ? 5 : order == 2 ? 13 : 0;
+    case CellType::pyramid14:
+      return order == 2 ? 14 : 0;
   }
   return 0;
 }
 
 // The shape of the geometry's cell for cells of `type` and order `order` whose points are of
 // geometry order `geometry_order` (CellBlock::geometry_order; 0: the field's): the same shape,
-// except that the 20-node hexahedron and the 15-node wedge at another order are the Lagrange
-// hexahedron and wedge of that order.
+// except that the 20-node hexahedron, the 15-node wedge and the 14-node pyramid at another
+// order are the Lagrange hexahedron and wedge and VTK's pyramid of that order.
 inline CellType cell_geometry_type(CellType type, int order, int geometry_order) {
   if (geometry_order == 0 || geometry_order == order) return type;
   if (type == CellType::serendipity_hexahedron) return CellType::hexahedron;
   if (type == CellType::serendipity_wedge) return CellType::wedge;
+  if (type == CellType::pyramid14) return CellType::pyramid;
   return type;
 }
 
@@ -168,7 +175,8 @@ std::vector<glm::dvec3> cell_reference_nodes(CellType type, int order);
 
 // Where a cell's nodes lie in the caller's arrays: VTK's numbering (every type and order), or
 // gmsh's (its tetrahedra and hexahedra of order 1–8, 20-node hexahedra, prisms of 6, 15 and 18
-// nodes, pyramids of 5 and 13 nodes; a 13-node pyramid has VTK's shape functions either way).
+// nodes, pyramids of 5, 13 and 14 nodes; a 13-node pyramid has VTK's shape functions either
+// way).
 enum class CellNodeOrder : std::uint8_t { vtk, gmsh };
 
 // One block of cells of one type and order, described by pointers into the caller's arrays.
