@@ -261,9 +261,7 @@ TEST(CellSource, TheFieldXOnCurvedCellsCutsThePlaneExactly) {
 Cells cells_with_geometry_order(CellType type, int order, int q, int n, double lo, double hi,
                                 const Field& field,
                                 const std::function<glm::dvec3(glm::dvec3)>& bend = {}) {
-  const CellType geometry_type = type == CellType::serendipity_hexahedron ? CellType::hexahedron
-                                 : type == CellType::serendipity_wedge    ? CellType::wedge
-                                                                          : type;
+  const CellType geometry_type = cell_geometry_type(type, order, q);
   Cells cells;
   cells.type = type;
   cells.order = order;
@@ -300,9 +298,9 @@ TEST(CellSource, PointsOfTheirOwnOrderGiveTheIsoparametricSurface) {
     CellType type;
     int order;
   };
-  for (const Case c :
-       {Case{CellType::tetrahedron, 2}, Case{CellType::tetrahedron, 3}, Case{CellType::wedge, 2},
-        Case{CellType::serendipity_hexahedron, 2}, Case{CellType::serendipity_wedge, 2}}) {
+  for (const Case c : {Case{CellType::tetrahedron, 2}, Case{CellType::tetrahedron, 3},
+                       Case{CellType::wedge, 2}, Case{CellType::serendipity_hexahedron, 2},
+                       Case{CellType::serendipity_wedge, 2}, Case{CellType::pyramid14, 2}}) {
     SCOPED_TRACE(describe(c.type, c.order));
     const Cells straight = cells_with_geometry_order(c.type, c.order, 1, 3, -1.25, 1.25, r2);
     const Cells iso = grid_cells(c.type, c.order, 3, -1.25, 1.25, r2);
