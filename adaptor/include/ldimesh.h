@@ -131,8 +131,8 @@ enum {
  * added and must not change while it is added. */
 typedef struct ldimesh_cell_block {
   int cell_type; /* LDIMESH_CELL_* */
-  int order;     /* 1..8 for hexahedra, tetrahedra and wedges; 2 for the 20- and 15-node cells;
-                    1 or 2 for pyramids */
+  int order;     /* 1..8 for hexahedra, tetrahedra and wedges; 2 for the 20- and 15-node cells
+                    and the 14-node pyramid; 1 or 2 for pyramids */
   int64_t element_count;
   const double* points;   /* the cell's nodes × (x, y, z) per cell, VTK's node order */
   int64_t point_count;    /* doubles the array holds: at least 3 · nodes · element_count (the
@@ -147,9 +147,9 @@ typedef struct ldimesh_cell_block {
                              5, 13, 14) */
   int geometry_order;     /* 0 (default): the points are the field's nodes (isoparametric); else
                              q = 1..8: the points are the nodes of the cell of the same shape and
-                             order q (1: straight sides, the corners; for the 20- and 15-node cells
-                             q = 1 gives the linear hexahedron's 8 and the wedge's 6 corners), and
-                             point_count counts those nodes */
+                             order q (1: straight sides, the corners; for the 20-, 15- and
+                             14-node cells q = 1 gives the linear hexahedron's 8, the wedge's 6 and
+                             the pyramid's 5 corners), and point_count counts those nodes */
 } ldimesh_cell_block;
 
 /* ldimesh_cell_block.node_order */

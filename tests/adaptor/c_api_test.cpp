@@ -313,6 +313,14 @@ TEST(CApi, CellBlocksAreCheckedAndPublished) {
   EXPECT_NE(std::string(ldimesh_last_error(a)).find("a 14-node pyramid of order 1 does not exist"),
             std::string::npos)
       << ldimesh_last_error(a);
+  c.order = 2;
+  c.geometry_order = 3;  // a pyramid of order 3 does not exist either
+  EXPECT_EQ(ldimesh_add_cell_block(a, &c), LDIMESH_ERROR_ARGUMENT);
+  EXPECT_NE(std::string(ldimesh_last_error(a))
+                .find("geometry_order 3 of a 14-node pyramid does not exist"),
+            std::string::npos)
+      << ldimesh_last_error(a);
+  c.geometry_order = 0;
   c.cell_type = LDIMESH_CELL_TETRAHEDRON;
   c.order = 2;
   c.element_stride = 9;

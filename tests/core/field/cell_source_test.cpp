@@ -389,7 +389,8 @@ TEST(CellSource, AxisAndEmbreeCastersGiveTheSameHits) {
     return x + 0.05 * glm::dvec3(std::sin(2.0 * x.y), std::cos(1.3 * x.z), std::sin(x.x + 0.4)) *
                    (1.0 - x.x * x.x) * (1.0 - x.y * x.y) * (1.0 - x.z * x.z);
   };
-  for (CellType type : {CellType::tetrahedron, CellType::wedge, CellType::pyramid}) {
+  for (CellType type :
+       {CellType::tetrahedron, CellType::wedge, CellType::pyramid, CellType::pyramid14}) {
     SCOPED_TRACE(cell_type_name(type));
     const Cells cells = grid_cells(
         type, 2, 2, -1.0, 1.0, [](glm::dvec3 x) { return r2(x) + 0.3 * x.x * x.y; }, bend);
@@ -741,11 +742,11 @@ TEST(CellSource, GmshOrderedCellsGiveTheSameHitsAsVtkOrderedOnes) {
     CellType type;
     int order;
   };
-  for (const Case c :
-       {Case{CellType::tetrahedron, 2}, Case{CellType::tetrahedron, 3}, Case{CellType::wedge, 2},
-        Case{CellType::serendipity_wedge, 2}, Case{CellType::pyramid, 2},
-        Case{CellType::serendipity_hexahedron, 2}, Case{CellType::hexahedron, 2},
-        Case{CellType::tetrahedron, 5}, Case{CellType::hexahedron, 4}}) {
+  for (const Case c : {Case{CellType::tetrahedron, 2}, Case{CellType::tetrahedron, 3},
+                       Case{CellType::wedge, 2}, Case{CellType::serendipity_wedge, 2},
+                       Case{CellType::pyramid, 2}, Case{CellType::serendipity_hexahedron, 2},
+                       Case{CellType::hexahedron, 2}, Case{CellType::tetrahedron, 5},
+                       Case{CellType::hexahedron, 4}, Case{CellType::pyramid14, 2}}) {
     SCOPED_TRACE(describe(c.type, c.order));
     const Cells vtk = grid_cells(c.type, c.order, 2, -1.0, 1.0, r2, bend);
     const std::vector<int> from = cell_gmsh_permutation(c.type, c.order);

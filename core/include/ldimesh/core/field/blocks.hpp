@@ -198,8 +198,9 @@ struct CellBlock {
   CellNodeOrder node_order = CellNodeOrder::vtk;
   // The points' own order q: 0 (default) means the field's (isoparametric: a point per value);
   // otherwise the cells' geometry is the cell of the same shape and order q (1: straight sides),
-  // `points` holding its nodes (cell_node_count(type, q) per cell; for the 20-node hexahedron
-  // and the 15-node wedge, q = 1 is the linear hexahedron's or wedge's 8 or 6 corners).
+  // `points` holding its nodes (cell_geometry_nodes(type, order, q) per cell; for the 20-node
+  // hexahedron, the 15-node wedge and the 14-node pyramid, q = 1 is the linear hexahedron's,
+  // wedge's or pyramid's 8, 6 or 5 corners).
   int geometry_order = 0;
 };
 
