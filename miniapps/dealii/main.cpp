@@ -21,9 +21,12 @@
 // geometry and solution exactly (no reordering of deal.II's hierarchical DoF numbering needed).
 //
 // Usage: mpiexec -n R ldimesh-dealii [--order P] [--refinements L] [--steps S]
-//          [--output-every K] [--initial blobs|radius] [--isovalue V] [--cells hex|tet]
-//          [--options FILE] [--vtu DIR]
-// --cells tet runs the same equation on tetrahedra with FE_SimplexP (SimplexHeatSolver below).
+//          [--output-every K] [--initial blobs|radius] [--isovalue V]
+//          [--cells hex|tet|mixed] [--options FILE] [--vtu DIR]
+// --cells tet runs the same equation on tetrahedra with FE_SimplexP, --cells mixed on a cube
+// meshed with hexahedra, wedges, pyramids and tetrahedra (CellHeatSolver below). --order's
+// default: 4 for hexahedra, 2 for tetrahedra, 1 (the only one deal.II 9.4 has for pyramids) for
+// the mixed mesh.
 // --vtu DIR also writes every output step as VTK XML files the way deal.II users write them
 // (DataOut with write_higher_order_cells: VTK_LAGRANGE_HEXAHEDRON cells of order p, curved;
 // DIR/solution_NNNN.pvtu over one .vtu per rank), the field named "u".
@@ -37,13 +40,20 @@
 #include <deal.II/distributed/tria.h>
 #include <deal.II/dofs/dof_handler.h>
 #include <deal.II/dofs/dof_tools.h>
+#include <deal.II/fe/fe_pyramid_p.h>
 #include <deal.II/fe/fe_q.h>
 #include <deal.II/fe/fe_simplex_p.h>
 #include <deal.II/fe/fe_values.h>
+#include <deal.II/fe/fe_wedge_p.h>
 #include <deal.II/fe/mapping_fe.h>
 #include <deal.II/fe/mapping_q.h>
 #include <deal.II/grid/grid_generator.h>
+#include <deal.II/grid/tria.h>
 #include <deal.II/grid/tria_description.h>
+#include <deal.II/hp/fe_collection.h>
+#include <deal.II/hp/fe_values.h>
+#include <deal.II/hp/mapping_collection.h>
+#include <deal.II/hp/q_collection.h>
 #include <deal.II/lac/affine_constraints.h>
 #include <deal.II/lac/dynamic_sparsity_pattern.h>
 #include <deal.II/lac/full_matrix.h>
@@ -79,9 +89,11 @@ struct Args {
   unsigned int order = 4, refinements = 1;
   unsigned long steps = 200, output_every = 10;
   std::string initial = "blobs", options_path, vtu_dir;
-  std::string cells = "hex";  // or "tet": FE_SimplexP on tetrahedra (SimplexHeatSolver)
+  // or "tet" (FE_SimplexP on tetrahedra), "mixed" (hexahedra, wedges, pyramids, tetrahedra):
+  // CellHeatSolver
+  std::string cells = "hex";
   double isovalue = 0.5;
-  bool isovalue_given = false;
+  bool isovalue_given = false, order_given = false;
 };
 
 // Parses the command line; throws std::invalid_argument with a one-line message.
@@ -105,7 +117,7 @@ Args parse(int argc, char** argv) {
     if (arg == "--order") {
       const double v = number(i);
       if (v < 1 || v > 8 || v != std::floor(v)) throw std::invalid_argument("--order: 1 to 8");
-      a.order = unsigned(v);
+      a.order = unsigned(v), a.order_given = true;
     } else if (arg == "--refinements") {
       const double v = number(i);
       if (v < 0 || v > 4 || v != std::floor(v))
@@ -123,8 +135,8 @@ Args parse(int argc, char** argv) {
         throw std::invalid_argument("--initial: blobs or radius, not '" + a.initial + "'");
     } else if (arg == "--cells" && i + 1 < argc) {
       a.cells = argv[++i];
-      if (a.cells != "hex" && a.cells != "tet")
-        throw std::invalid_argument("--cells: hex or tet, not '" + a.cells + "'");
+      if (a.cells != "hex" && a.cells != "tet" && a.cells != "mixed")
+        throw std::invalid_argument("--cells: hex, tet or mixed, not '" + a.cells + "'");
     } else if (arg == "--options" && i + 1 < argc) {
       a.options_path = argv[++i];
     } else if (arg == "--vtu" && i + 1 < argc) {
@@ -136,8 +148,11 @@ Args parse(int argc, char** argv) {
     }
   }
   if (a.initial == "radius" && !a.isovalue_given) a.isovalue = 0.5625;  // the sphere r = 0.75
+  if (!a.order_given) a.order = a.cells == "hex" ? 4 : a.cells == "tet" ? 2 : 1;
   if (a.cells == "tet" && a.order > 3)
     throw std::invalid_argument("--order: 1 to 3 with --cells tet (deal.II 9.4's FE_SimplexP)");
+  if (a.cells == "mixed" && a.order != 1)
+    throw std::invalid_argument("--order: 1 with --cells mixed (deal.II 9.4's FE_PyramidP)");
   return a;
 }
 
@@ -349,43 +364,121 @@ class HeatSolver {
   ConditionalOStream out_;
 };
 
-// The same heat equation on tetrahedra (--cells tet), as a deal.II 9.4 user with a simplex mesh
-// writes it: the refined shell's hexahedra split into tetrahedra
-// (GridGenerator::convert_hypercube_to_simplex_mesh), dealt to the ranks in runs of cells
-// (parallel::fullydistributed::Triangulation from a partitioned serial mesh: p4est has no
-// simplices), FE_SimplexP(p) with a linear MappingFE (straight tetrahedra), the mass and
-// stiffness matrices with QGaussSimplex, and backward Euler ((M + dt κ K) u' = M u, conjugate
-// gradients): a simplex mass matrix has no diagonal lumping that stays positive for p ≥ 2.
+// The cube [−1, 1]³ of n³ subcubes as a conforming mesh of all four shapes, for --cells mixed.
+// Columns of subcubes (i, j) with i + j even are hexahedra. The others alternate along z: a
+// subcube split into two wedges by its diagonal plane from (i, j) to (i + 1, j + 1), then a
+// subcube split into six pyramids on its faces with the apex at its centre, of which the bottom
+// and top ones are split again into two tetrahedra along that same diagonal. Every face between
+// columns is a whole square (a hexahedron's, a wedge's or a pyramid's), every face inside a
+// column a pair of triangles cut by the same diagonal (the wedges' ends, the tetrahedra's
+// bases), so the mesh is conforming. Vertices in deal.II's order: hexahedra and pyramid bases
+// lexicographic, the apex on the side of the base's normal (b₁ − b₀) × (b₂ − b₀), wedges'
+// triangles counter-clockwise seen from their other triangle, tetrahedra positively oriented.
+void mixed_cube(unsigned int n, Triangulation<dim>& out) {
+  std::vector<Point<dim>> vertices;
+  const auto grid = [n](unsigned int i, unsigned int j, unsigned int k) {
+    return i + (n + 1) * (j + (n + 1) * k);
+  };
+  for (unsigned int k = 0; k <= n; ++k)
+    for (unsigned int j = 0; j <= n; ++j)
+      for (unsigned int i = 0; i <= n; ++i)
+        vertices.emplace_back(-1.0 + 2.0 * i / n, -1.0 + 2.0 * j / n, -1.0 + 2.0 * k / n);
+  std::vector<CellData<dim>> cells;
+  const auto add = [&cells](std::initializer_list<unsigned int> v) {
+    CellData<dim> cell(unsigned(v.size()));
+    std::copy(v.begin(), v.end(), cell.vertices.begin());
+    cells.push_back(cell);
+  };
+  for (unsigned int k = 0; k < n; ++k)  // layer by layer: runs of cells are slabs
+    for (unsigned int j = 0; j < n; ++j)
+      for (unsigned int i = 0; i < n; ++i) {
+        // c[a + 2b + 4c]: the subcube's corner (i + a, j + b, k + c)
+        unsigned int c[8];
+        for (unsigned int m = 0; m < 8; ++m)
+          c[m] = grid(i + (m & 1), j + (m >> 1 & 1), k + (m >> 2));
+        if ((i + j) % 2 == 0) {
+          add({c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]});
+        } else if (k % 2 == 0) {
+          add({c[0], c[1], c[3], c[4], c[5], c[7]});
+          add({c[0], c[3], c[2], c[4], c[7], c[6]});
+        } else {
+          const unsigned int m = unsigned(vertices.size());
+          vertices.push_back(Point<dim>(-1.0 + (2.0 * i + 1) / n, -1.0 + (2.0 * j + 1) / n,
+                                        -1.0 + (2.0 * k + 1) / n));
+          add({c[0], c[2], c[4], c[6], m});  // x = i
+          add({c[1], c[5], c[3], c[7], m});  // x = i + 1
+          add({c[0], c[4], c[1], c[5], m});  // y = j
+          add({c[2], c[3], c[6], c[7], m});  // y = j + 1
+          add({c[0], c[1], c[3], m});        // z = k, cut along c₀ c₃
+          add({c[0], c[3], c[2], m});
+          add({c[4], c[7], c[5], m});  // z = k + 1, cut along c₄ c₇
+          add({c[4], c[6], c[7], m});
+        }
+      }
+  out.create_triangulation(vertices, cells, SubCellData());
+}
+
+// The same heat equation on the cells deal.II 9.4 has beside hexahedra: --cells tet, the refined
+// shell's hexahedra split into tetrahedra (GridGenerator::convert_hypercube_to_simplex_mesh),
+// FE_SimplexP(p) with a linear MappingFE (straight tetrahedra); --cells mixed, the cube [−1, 1]³
+// as a conforming mesh of hexahedra, wedges, pyramids and tetrahedra (mixed_cube below), each
+// cell with its own linear element — FE_Q(1), FE_WedgeP(1), FE_PyramidP(1), FE_SimplexP(1) in one
+// hp::FECollection (deal.II 9.4's pyramid is linear only), the finite-element index chosen by
+// the cell's reference cell. Either way the mesh is dealt to the ranks in runs of cells
+// (parallel::fullydistributed::Triangulation from a partitioned serial mesh: p4est has neither
+// simplices nor mixed meshes), the mass and stiffness matrices are integrated with each shape's
+// Gauss rule, and backward Euler ((M + dt κ K) u' = M u) is solved by conjugate gradients: a
+// simplex mass matrix has no diagonal lumping that stays positive for p ≥ 2.
 //
-// What the adaptor gets: each rank's locally owned cells as one block of tetrahedra of order p
-// (ldimesh::CellBlock), the solution and the mapped positions evaluated by FEValues at the
-// nodes of VTK's Lagrange tetrahedron (cell_reference_nodes; deal.II's reference tetrahedron is
-// VTK's: vertices 0, e₁, e₂, e₃): the cell's polynomial exactly, in the order the block wants.
-class SimplexHeatSolver {
+// What the adaptor gets: each rank's locally owned cells as one ldimesh::CellBlock per shape, of
+// order p, the solution and the mapped positions evaluated by FEValues at the nodes of VTK's
+// cell of that shape (cell_reference_nodes, mapped to deal.II's reference cell: the same for
+// tetrahedra, wedges and hexahedra; deal.II's pyramid has its base on [−1, 1]²): the cell's
+// polynomial exactly, in the order the block wants.
+class CellHeatSolver {
  public:
-  SimplexHeatSolver(const Args& args, MPI_Comm comm)
+  CellHeatSolver(const Args& args, MPI_Comm comm)
       : args_(args),
         comm_(comm),
         triangulation_(comm),
-        fe_(args.order),
-        mapping_(FE_SimplexP<dim>(1)),
         dof_handler_(triangulation_),
-        out_(std::cout, Utilities::MPI::this_mpi_process(comm) == 0) {}
+        out_(std::cout, Utilities::MPI::this_mpi_process(comm) == 0) {
+    const unsigned int p = args.order;
+    if (args.cells == "tet") {
+      add_shape(ReferenceCells::Tetrahedron, ldimesh::CellType::tetrahedron, FE_SimplexP<dim>(p),
+                std::make_unique<MappingFE<dim>>(FE_SimplexP<dim>(1)), QGaussSimplex<dim>(p + 1));
+    } else {  // mixed, p = 1
+      add_shape(ReferenceCells::Hexahedron, ldimesh::CellType::hexahedron, FE_Q<dim>(p),
+                std::make_unique<MappingQ<dim>>(1), QGauss<dim>(p + 1));
+      add_shape(ReferenceCells::Wedge, ldimesh::CellType::wedge, FE_WedgeP<dim>(p),
+                std::make_unique<MappingFE<dim>>(FE_WedgeP<dim>(1)), QGaussWedge<dim>(p + 1));
+      add_shape(ReferenceCells::Pyramid, ldimesh::CellType::pyramid, FE_PyramidP<dim>(p),
+                std::make_unique<MappingFE<dim>>(FE_PyramidP<dim>(1)), QGaussPyramid<dim>(p + 1));
+      add_shape(ReferenceCells::Tetrahedron, ldimesh::CellType::tetrahedron, FE_SimplexP<dim>(p),
+                std::make_unique<MappingFE<dim>>(FE_SimplexP<dim>(1)), QGaussSimplex<dim>(p + 1));
+    }
+  }
 
   void setup() {
-    Triangulation<dim> hexahedra, tetrahedra;
-    GridGenerator::hyper_shell(hexahedra, Point<dim>(), 0.5, 1.0, 6);
-    hexahedra.refine_global(args_.refinements);
-    GridGenerator::convert_hypercube_to_simplex_mesh(hexahedra, tetrahedra);
-    // Runs of cells per rank (cell order is the coarse cells', refined: compact pieces).
+    Triangulation<dim> serial;
+    if (args_.cells == "tet") {
+      Triangulation<dim> hexahedra;
+      GridGenerator::hyper_shell(hexahedra, Point<dim>(), 0.5, 1.0, 6);
+      hexahedra.refine_global(args_.refinements);
+      GridGenerator::convert_hypercube_to_simplex_mesh(hexahedra, serial);
+    } else {
+      mixed_cube(4u << args_.refinements, serial);
+    }
+    // Runs of cells per rank (the cells' order is the mesh's: compact pieces).
     const unsigned int ranks = Utilities::MPI::n_mpi_processes(comm_);
-    const std::size_t total = tetrahedra.n_active_cells();
+    const std::size_t total = serial.n_active_cells();
     std::size_t index = 0;
-    for (const auto& cell : tetrahedra.active_cell_iterators())
+    for (const auto& cell : serial.active_cell_iterators())
       cell->set_subdomain_id(types::subdomain_id(index++ * ranks / total));
     triangulation_.create_triangulation(
-        TriangulationDescription::Utilities::create_description_from_triangulation(tetrahedra,
-                                                                                   comm_));
+        TriangulationDescription::Utilities::create_description_from_triangulation(serial, comm_));
+    for (const auto& cell : dof_handler_.active_cell_iterators())
+      if (cell->is_locally_owned()) cell->set_active_fe_index(shape_index(cell->reference_cell()));
     dof_handler_.distribute_dofs(fe_);
     const IndexSet owned = dof_handler_.locally_owned_dofs();
     IndexSet relevant;
@@ -400,10 +493,15 @@ class SimplexHeatSolver {
     rhs_.reinit(owned, comm_);
     assemble();
     VectorTools::interpolate(mapping_, dof_handler_, Initial(args_.initial), solution_);
-    out_ << "ldimesh-dealii: " << triangulation_.n_global_active_cells()
-         << " tetrahedra of FE_SimplexP(" << args_.order << ") with MappingFE(FE_SimplexP(1)), "
-         << dof_handler_.n_dofs() << " unknowns on " << Utilities::MPI::n_mpi_processes(comm_)
-         << " rank(s), dt " << kTimeStep << std::endl;
+    std::vector<std::size_t> counts(shapes_.size(), 0);
+    for (const auto& cell : dof_handler_.active_cell_iterators())
+      if (cell->is_locally_owned()) ++counts[cell->active_fe_index()];
+    out_ << "ldimesh-dealii: ";
+    for (std::size_t i = 0; i < shapes_.size(); ++i)
+      out_ << (i ? ", " : "") << Utilities::MPI::sum(counts[i], comm_) << " "
+           << ldimesh::cell_type_name(shapes_[i].type) << " cells of " << fe_[i].get_name();
+    out_ << " with linear mappings, " << dof_handler_.n_dofs() << " unknowns on "
+         << Utilities::MPI::n_mpi_processes(comm_) << " rank(s), dt " << kTimeStep << std::endl;
   }
 
   // One backward Euler step.
@@ -419,43 +517,51 @@ class SimplexHeatSolver {
 
   double time() const { return time_; }
 
-  // The locally owned cells as one block of tetrahedra of order p, VTK's node order.
+  // The locally owned cells as one block per shape, of order p, VTK's node order.
   void hand_over(ldimesh::Adaptor& adaptor) {
     ghosted_ = solution_;
     const int p = int(args_.order);
-    std::vector<Point<dim>> points;
-    for (const glm::dvec3& r : ldimesh::cell_reference_nodes(ldimesh::CellType::tetrahedron, p))
-      points.emplace_back(r.x, r.y, r.z);
-    const Quadrature<dim> nodes(points);
-    FEValues<dim> values(mapping_, fe_, nodes, update_values | update_quadrature_points);
-    std::vector<double> cell_values(nodes.size());
-    points_.clear();
-    nodal_.clear();
-    std::size_t cells = 0;
-    for (const auto& cell : dof_handler_.active_cell_iterators()) {
-      if (!cell->is_locally_owned()) continue;
-      values.reinit(cell);
-      values.get_function_values(ghosted_, cell_values);
-      for (unsigned int q = 0; q < nodes.size(); ++q) {
-        const Point<dim>& x = values.quadrature_point(q);
-        points_.insert(points_.end(), {x[0], x[1], x[2]});
-        nodal_.push_back(cell_values[q]);
-      }
-      ++cells;
-    }
-    ldimesh::CellBlock block;
-    block.type = ldimesh::CellType::tetrahedron;
-    block.order = p;
-    block.element_count = cells;
-    block.points = points_.data();
-    block.values = nodal_.data();
     adaptor.clear_blocks();
-    if (cells > 0) check(adaptor.add_cell_block(block), "add_cell_block");
+    for (Shape& shape : shapes_) {
+      std::vector<Point<dim>> points;
+      for (const glm::dvec3& r : ldimesh::cell_reference_nodes(shape.type, p))
+        points.push_back(shape.reference == ReferenceCells::Pyramid  // base [−1, 1]², apex e₃
+                             ? Point<dim>((2 * r.x - 1) * (1 - r.z), (2 * r.y - 1) * (1 - r.z), r.z)
+                             : Point<dim>(r.x, r.y, r.z));
+      const Quadrature<dim> nodes(points);
+      const unsigned int index = unsigned(&shape - shapes_.data());
+      FEValues<dim> values(mapping_[index], fe_[index], nodes,
+                           update_values | update_quadrature_points);
+      std::vector<double> cell_values(nodes.size());
+      shape.points.clear();
+      shape.values.clear();
+      std::size_t cells = 0;
+      for (const auto& cell : dof_handler_.active_cell_iterators()) {
+        if (!cell->is_locally_owned() || cell->active_fe_index() != index) continue;
+        values.reinit(cell);
+        values.get_function_values(ghosted_, cell_values);
+        for (unsigned int q = 0; q < nodes.size(); ++q) {
+          const Point<dim>& x = values.quadrature_point(q);
+          shape.points.insert(shape.points.end(), {x[0], x[1], x[2]});
+          shape.values.push_back(cell_values[q]);
+        }
+        ++cells;
+      }
+      if (cells == 0) continue;
+      ldimesh::CellBlock block;
+      block.type = shape.type;
+      block.order = p;
+      block.element_count = cells;
+      block.points = shape.points.data();
+      block.values = shape.values.data();
+      check(adaptor.add_cell_block(block), "add_cell_block");
+    }
   }
 
-  // The solution as deal.II writes simplex meshes: DataOut's patches, VTK_TETRA for p = 1 and
-  // VTK_QUADRATIC_TETRA otherwise (p = 3 is written quadratic: deal.II 9.4 has no higher
-  // simplex output), one .vtu per rank and a .pvtu record: DIR/solution_NNNN.*
+  // The solution as deal.II writes simplex and mixed meshes: DataOut's patches — VTK_TETRA,
+  // VTK_WEDGE, VTK_PYRAMID and VTK_HEXAHEDRON for p = 1, VTK_QUADRATIC_TETRA otherwise (p = 3 is
+  // written quadratic: deal.II 9.4 has no higher simplex output) — one .vtu per rank and a
+  // .pvtu record: DIR/solution_NNNN.*
   void write_vtu(const std::string& dir, unsigned int counter) {
     ghosted_ = solution_;
     DataOut<dim> data_out;
@@ -479,20 +585,42 @@ class SimplexHeatSolver {
  private:
   static constexpr double kKappa = 0.02, kTimeStep = 0.005;
 
+  // One shape of the mesh: its finite element, mapping and quadrature sit at the same index of
+  // fe_, mapping_ and quadrature_.
+  struct Shape {
+    ReferenceCell reference;
+    ldimesh::CellType type;
+    std::vector<double> points, values;  // hand_over's arrays for the adaptor's block
+  };
+
+  void add_shape(ReferenceCell reference, ldimesh::CellType type, const FiniteElement<dim>& fe,
+                 std::unique_ptr<Mapping<dim>> mapping, const Quadrature<dim>& quadrature) {
+    shapes_.push_back({reference, type, {}, {}});
+    fe_.push_back(fe);
+    mapping_.push_back(*mapping);
+    quadrature_.push_back(quadrature);
+  }
+
+  unsigned int shape_index(ReferenceCell reference) const {
+    for (std::size_t i = 0; i < shapes_.size(); ++i)
+      if (shapes_[i].reference == reference) return unsigned(i);
+    throw std::runtime_error("a cell of an unexpected shape");
+  }
+
   // M and M + dt κ K.
   void assemble() {
-    const QGaussSimplex<dim> quadrature(fe_.degree + 1);
-    FEValues<dim> fv(mapping_, fe_, quadrature,
-                     update_values | update_gradients | update_JxW_values);
-    const unsigned int n = fe_.n_dofs_per_cell();
-    FullMatrix<double> mass(n, n), system(n, n);
-    std::vector<types::global_dof_index> indices(n);
+    hp::FEValues<dim> hp_values(mapping_, fe_, quadrature_,
+                                update_values | update_gradients | update_JxW_values);
+    FullMatrix<double> mass, system;
+    std::vector<types::global_dof_index> indices;
     for (const auto& cell : dof_handler_.active_cell_iterators()) {
       if (!cell->is_locally_owned()) continue;
-      fv.reinit(cell);
-      mass = 0.0;
-      system = 0.0;
-      for (unsigned int q = 0; q < quadrature.size(); ++q)
+      hp_values.reinit(cell);
+      const FEValues<dim>& fv = hp_values.get_present_fe_values();
+      const unsigned int n = cell->get_fe().n_dofs_per_cell();
+      mass.reinit(n, n);
+      system.reinit(n, n);
+      for (unsigned int q = 0; q < fv.n_quadrature_points; ++q)
         for (unsigned int i = 0; i < n; ++i)
           for (unsigned int j = 0; j < n; ++j) {
             const double m = fv.shape_value(i, q) * fv.shape_value(j, q) * fv.JxW(q);
@@ -500,6 +628,7 @@ class SimplexHeatSolver {
             system(i, j) +=
                 m + kTimeStep * kKappa * (fv.shape_grad(i, q) * fv.shape_grad(j, q)) * fv.JxW(q);
           }
+      indices.resize(n);
       cell->get_dof_indices(indices);
       mass_.add(indices, mass);
       system_.add(indices, system);
@@ -511,13 +640,14 @@ class SimplexHeatSolver {
   Args args_;
   MPI_Comm comm_;
   parallel::fullydistributed::Triangulation<dim> triangulation_;
-  FE_SimplexP<dim> fe_;
-  MappingFE<dim> mapping_;
+  std::vector<Shape> shapes_;
+  hp::FECollection<dim> fe_;
+  hp::MappingCollection<dim> mapping_;
+  hp::QCollection<dim> quadrature_;
   DoFHandler<dim> dof_handler_;
   TrilinosWrappers::SparseMatrix mass_, system_;
   TrilinosWrappers::MPI::Vector solution_, ghosted_, rhs_;
   double time_ = 0.0;
-  std::vector<double> points_, nodal_;
   ConditionalOStream out_;
 };
 
@@ -566,8 +696,8 @@ int main(int argc, char** argv) {
       std::error_code ec;
       std::filesystem::create_directories(args.vtu_dir, ec);
     }
-    if (args.cells == "tet") {
-      SimplexHeatSolver solver(args, comm);
+    if (args.cells != "hex") {
+      CellHeatSolver solver(args, comm);
       run(solver, args, *adaptor);
     } else {
       HeatSolver solver(args, comm);

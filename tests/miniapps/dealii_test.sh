@@ -2,9 +2,10 @@
 # The deal.II mini-app as a user runs it: on 2 ranks from u = |x|² (a field with a known level
 # set), steps written to a folder (server off); step 0's published mesh, decoded, lies on the
 # sphere |x| = 0.75 (ldimesh distance against the exact surface); the steps' VTU files (DataOut,
-# Lagrange cells) read by VTK, and meshed by ldimesh mesh --vtu onto the same sphere; the
-# default run (two heat blobs) on 3 ranks publishes steps with
-# triangles; a bad option is one line and exit 1.
+# Lagrange cells) read by VTK, and meshed by ldimesh mesh --vtu onto the same sphere; the same
+# on tetrahedra (--cells tet) and on a mesh of hexahedra, wedges, pyramids and tetrahedra
+# (--cells mixed, against deal.II's own VTU); the default run (two heat blobs) on 3 ranks
+# publishes steps with triangles; a bad option is one line and exit 1.
 #   dealii_test.sh LDIMESH_DEALII LDIMESH MPIEXEC
 set -u
 app=$1
@@ -88,7 +89,7 @@ if ! timeout 300 "${mpirun[@]}" -n 2 "$app" --cells tet --initial radius --order
   cat "$tmp/tet.log"
   fail "ldimesh-dealii --cells tet on 2 ranks"
 fi
-grep -q "1152 tetrahedra of FE_SimplexP(2)" "$tmp/tet.log" || { cat "$tmp/tet.log"; fail "the tetrahedral shell"; }
+grep -q "1152 tetrahedron cells of FE_SimplexP<3>(2)" "$tmp/tet.log" || { cat "$tmp/tet.log"; fail "the tetrahedral shell"; }
 [ -s "$tmp/tet/step_000000.glb" ] || fail "--cells tet: step 0 was not written"
 "$ldimesh" distance "$tmp/tet/step_000000.glb" --surface sphere --iso 0.5625 --json \
   >"$tmp/tet-distance.json" || fail "ldimesh distance on the tetrahedra's step 0"
@@ -126,6 +127,63 @@ worst = max(abs(math.sqrt(sum(c * c for c in struct.unpack_from("<3f", body, 24 
 print(f"ldimesh mesh --vtu of deal.II's quadratic tetrahedra: {n} vertices, largest | |x| - 0.75 | {worst:.1e}")
 sys.exit(0 if n > 10000 and worst < 1e-6 else 1)
 PY
+fi
+
+# --cells mixed: the cube [-1, 1]³ meshed with hexahedra, wedges, pyramids and tetrahedra
+# (FE_Q(1), FE_WedgeP(1), FE_PyramidP(1), FE_SimplexP(1) in one hp::FECollection), 2 ranks, from
+# u = |x|². Linear elements only interpolate it, so the oracle is deal.II's own VTU of the same
+# solution: VTK reads it as the four types carrying u = |x|² at the points; the adaptor's
+# published step 0 (one cell block per type) lies on that file's exact isosurface (ldimesh
+# distance --vtu, to the GLB's quantization); ldimesh mesh --vtu of the file puts its vertices
+# on the isosurface of VTK's own interpolation of the file (vtkProbeFilter), and 1 rank's file
+# gives the same mesh.
+opts=$(options "$tmp/mixed")
+if ! timeout 300 "${mpirun[@]}" -n 2 "$app" --cells mixed --initial radius --steps 10 \
+  --output-every 10 --options "$opts" --vtu "$tmp/mixed-vtu" >"$tmp/mixed.log" 2>&1; then
+  cat "$tmp/mixed.log"
+  fail "ldimesh-dealii --cells mixed on 2 ranks"
+fi
+grep -q "256 hexahedron cells of FE_Q<3>(1), 256 wedge cells of FE_WedgeP<3>(1), 512 pyramid cells of FE_PyramidP<3>(1), 512 tetrahedron cells of FE_SimplexP<3>(1)" "$tmp/mixed.log" ||
+  { cat "$tmp/mixed.log"; fail "the mixed cube's cells"; }
+[ -s "$tmp/mixed/step_000000.glb" ] || fail "--cells mixed: step 0 was not written"
+if "$ldimesh" mesh --help | grep -q -- "--vtu"; then
+  /usr/bin/python3 - "$tmp/mixed-vtu/solution_0000.pvtu" <<'PY' || fail "VTK does not read deal.II's mixed VTU as the four types carrying |x|²"
+import collections, sys
+import numpy as np
+from vtkmodules.util.numpy_support import vtk_to_numpy
+from vtkmodules.vtkIOXML import vtkXMLPUnstructuredGridReader
+reader = vtkXMLPUnstructuredGridReader()
+reader.SetFileName(sys.argv[1])
+reader.Update()
+grid = reader.GetOutput()
+types = collections.Counter(grid.GetCellType(c) for c in range(grid.GetNumberOfCells()))
+x = vtk_to_numpy(grid.GetPoints().GetData()).astype(float)
+error = np.abs(vtk_to_numpy(grid.GetPointData().GetArray("u")) - (x * x).sum(axis=1)).max()
+print(f"deal.II's mixed VTU: cells by VTK type {dict(types)}, max |u - |x|²| {error:.1e}")
+sys.exit(0 if types == {12: 256, 13: 256, 14: 512, 10: 512} and error < 1e-6 else 1)
+PY
+  "$ldimesh" distance "$tmp/mixed/step_000000.glb" --vtu "$tmp/mixed-vtu/solution_0000.pvtu" \
+    --field u --iso 0.5625 --json >"$tmp/mixed-distance.json" ||
+    fail "ldimesh distance --vtu on the mixed cube's step 0"
+  python3 - "$tmp/mixed-distance.json" <<'PY' || fail "the mixed cube's step 0 is not on deal.II's isosurface"
+import json, sys
+d = json.load(open(sys.argv[1]))["forward"]
+print(f"--cells mixed, step 0 against the isosurface of deal.II's VTU: mean {d['mean']:.2e}, max {d['max']:.2e}")
+sys.exit(0 if d["mean"] < 1e-3 and d["max"] < 4e-3 else 1)
+PY
+  "$ldimesh" mesh --vtu "$tmp/mixed-vtu/solution_0000.pvtu" --field u --iso 0.5625 --res 128 \
+    --lossless --out "$tmp/mixed-vtu.ply" >"$tmp/mixed-vtu.log" 2>&1 ||
+    { cat "$tmp/mixed-vtu.log"; fail "ldimesh mesh --vtu on deal.II's mixed .pvtu"; }
+  /usr/bin/python3 "$(dirname "$0")/probe_vertices.py" "$tmp/mixed-vtu/solution_0000.pvtu" u 0.5625 \
+    "$tmp/mixed-vtu.ply" || fail "the mesh of deal.II's mixed VTU is not on VTK's isosurface of it"
+  opts=$(options "$tmp/mixed1")
+  timeout 300 "${mpirun[@]}" -n 1 "$app" --cells mixed --initial radius --steps 1 --output-every 1 \
+    --options "$opts" --vtu "$tmp/mixed1-vtu" >"$tmp/mixed1.log" 2>&1 ||
+    { cat "$tmp/mixed1.log"; fail "ldimesh-dealii --cells mixed on 1 rank"; }
+  "$ldimesh" mesh --vtu "$tmp/mixed1-vtu/solution_0000.pvtu" --field u --iso 0.5625 --res 128 \
+    --lossless --out "$tmp/mixed1-vtu.ply" >/dev/null 2>&1 || fail "ldimesh mesh --vtu on 1 rank's file"
+  cmp -s "$tmp/mixed-vtu.ply" "$tmp/mixed1-vtu.ply" ||
+    fail "deal.II's mixed VTU from 1 and 2 ranks give different meshes"
 fi
 
 # The default run: two heat blobs, 3 ranks.
