@@ -738,7 +738,11 @@ class AdaptorImpl final : public Adaptor {
   };
   struct Block {
     std::shared_ptr<const FieldSource> source;  // no colour (a FieldSource: its own bind_scalar)
-    Box owned;
+    // Where the block's hits belong. None for element blocks: a solver's partition of its cells
+    // is no box, and their bounding boxes overlap, so each block keeps every hit of its cells
+    // and a hit that cells of two blocks or ranks both find on their shared face is merged by
+    // the duplicate rule (merge_duplicate_hits), as one caster merges its own.
+    std::optional<Box> owned;
     // What the block reads, for the background path's copy (neither: a FieldSource, which
     // cannot be copied); their colour pointers are null.
     std::optional<GridBlock> grid;
@@ -853,7 +857,8 @@ class AdaptorImpl final : public Adaptor {
             if (caster_options.scalars && !casters.owned.back()->carries_scalars())
               return Status::invalid_argument(
                   which() + " is a FieldSource without a colour field (bind_scalar)");
-            casters.blocks[i].push_back({casters.owned.back().get(), {b.owned, *domain}});
+            casters.blocks[i].push_back(
+                {casters.owned.back().get(), {b.owned.value_or(*domain), *domain}});
           }
         }
         return Status::ok();
@@ -1151,7 +1156,7 @@ class AdaptorImpl final : public Adaptor {
     }
   }
 
-  // A block whose hits belong to its own bounds (the owned region of a grid block).
+  // A grid block's hits belong to its owned region, an element block's to its cells (Block).
   // The block's own colour array is not read: its fields come by name (add_field).
   template <class Source, class Description>
   Status add_block(Description block, const char* what) {
@@ -1159,7 +1164,8 @@ class AdaptorImpl final : public Adaptor {
     last_add_failed_ = true;
     return fail_if(guard(std::string(what) + ": ", [&] {
       auto source = std::make_shared<Source>(block);
-      const Box owned = source->bounds();
+      std::optional<Box> owned;
+      if constexpr (std::is_same_v<Description, GridBlock>) owned = source->bounds();
       Block b{std::move(source), owned, std::nullopt, std::nullopt, std::nullopt, {}};
       b.colours.resize(options_.colour_fields.size());
       if constexpr (std::is_same_v<Description, GridBlock>)

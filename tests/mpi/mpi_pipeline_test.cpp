@@ -231,7 +231,9 @@ TEST(MpiPipeline, DeferredMergeOnTheRootGivesTheReducedFragments) {
   for (std::size_t v = 0; v < views.size(); ++v)
     cast.push_back(caster.cast_fragment(views[v], std::uint32_t(v), sub));
   const FragmentEncoding encoding;
-  const double tolerance = 1e-6;
+  DuplicateRule tolerance{1e-6, {}};
+  for (const View& view : views)
+    tolerance.dirs.push_back(glm::vec3(view.dir));
   std::vector<LdiFragment> plain = cast, deferred = cast;
   ReductionStats stats;
   EXPECT_TRUE(reduce_fragments(MPI_COMM_WORLD, 0, plain, encoding, tolerance, stats));

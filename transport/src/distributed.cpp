@@ -102,7 +102,7 @@ Status cast_and_reduce(MPI_Comm comm, const StepBlocks& blocks, std::span<const 
           else if (parts.size() == 1)
             fragments[first + v] = std::move(parts.front());
           else
-            fragments[first + v] = merge_fragments(parts, 0.0);
+            fragments[first + v] = merge_fragments(parts, tolerance, glm::vec3(views[v].dir));
         } catch (...) {
           failures[v] = std::current_exception();
         }
@@ -120,7 +120,10 @@ Status cast_and_reduce(MPI_Comm comm, const StepBlocks& blocks, std::span<const 
   if (any_failed) return cast ? Status::other_rank("another rank failed to ray cast") : cast;
 
   ReductionStats stats;
-  const Status reduced = reduce_fragments(comm, 0, fragments, encoding, tolerance, stats,
+  DuplicateRule rule{tolerance, {}};
+  for (std::size_t k = 0; k < fragments.size(); ++k)
+    rule.dirs.push_back(glm::vec3(views[k % views.size()].dir));
+  const Status reduced = reduce_fragments(comm, 0, fragments, encoding, rule, stats,
                                           defer && rank == 0 ? &step.pending : nullptr, faults);
   // Every rank learns whether the reduction failed anywhere (and the slowest rank's times); the
   // root the totals.
@@ -391,21 +394,16 @@ RayHitList merge_hit_lists(const std::vector<RayHitList>& answers,
     for (const RayHitList& a : answers)
       for (std::uint32_t s = a.offsets[k]; s < a.offsets[k + 1]; ++s)
         hits.push_back({a.depth[s], a.normal[s], a.scalar.empty() ? 0.0f : a.scalar[s]});
-    std::sort(hits.begin(), hits.end(), [](const Hit& a, const Hit& b) {
-      return a.depth != b.depth ? a.depth < b.depth : normal_less(a.normal, b.normal);
-    });
-    const glm::vec3 dir(views[points[k].view].dir);
-    for (std::size_t i = 0; i < hits.size();) {
-      std::size_t end = i + 1;
-      while (end < hits.size() && double(hits[end].depth) - double(hits[i].depth) <= tolerance)
-        ++end;
-      const Hit& h = *std::min_element(
-          hits.begin() + i, hits.begin() + end,
-          [&](const Hit& a, const Hit& b) { return kept_before(a.normal, b.normal, dir); });
-      merged.depth.push_back(h.depth);
-      merged.normal.push_back(h.normal);
-      if (with_scalar) merged.scalar.push_back(h.scalar);
-      i = end;
+    const std::size_t kept = merge_duplicate_hits(
+        std::span<Hit>(hits), tolerance, glm::vec3(views[points[k].view].dir),
+        [](const Hit& a, const Hit& b) {
+          return a.depth != b.depth ? a.depth < b.depth : normal_less(a.normal, b.normal);
+        },
+        [](const Hit& h) { return h.depth; }, [](const Hit& h) { return h.normal; });
+    for (std::size_t i = 0; i < kept; ++i) {
+      merged.depth.push_back(hits[i].depth);
+      merged.normal.push_back(hits[i].normal);
+      if (with_scalar) merged.scalar.push_back(hits[i].scalar);
     }
     merged.offsets.push_back(std::uint32_t(merged.depth.size()));
   }

@@ -144,7 +144,8 @@ void agree_on_scalar_ranges(MPI_Comm comm, std::vector<LdiFragment>& fragments) 
 // One round of the tree on the receiving side: decodes a child's message and merges it into
 // `fragments`. A message that does not decode leaves `fragments` as they were and sets `status`.
 void merge_message(std::span<const std::uint8_t> message, std::vector<LdiFragment>& fragments,
-                   double tolerance, Status& status, bool& upstream_error, ReductionStats& stats) {
+                   const DuplicateRule& rule, Status& status, bool& upstream_error,
+                   ReductionStats& stats) {
   auto t = std::chrono::steady_clock::now();
   std::vector<LdiFragment> received;
   bool child_error = false;
@@ -159,7 +160,7 @@ void merge_message(std::span<const std::uint8_t> message, std::vector<LdiFragmen
   try {
     for (std::size_t v = 0; v < fragments.size(); ++v) {
       const LdiFragment pair[2] = {std::move(fragments[v]), std::move(received[v])};
-      fragments[v] = merge_fragments(pair, tolerance);
+      fragments[v] = merge_fragments(pair, rule.tolerance, rule.dirs[v]);
     }
   } catch (const std::invalid_argument& e) {  // ranks disagree about the views
     status = Status::invalid_argument(std::string("reduction: ") + e.what());
@@ -170,11 +171,16 @@ void merge_message(std::span<const std::uint8_t> message, std::vector<LdiFragmen
 }  // namespace
 
 Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragments,
-                        const FragmentEncoding& encoding, double tolerance, ReductionStats& stats,
-                        PendingMerge* deferred, const ReductionFaults& faults) {
+                        const FragmentEncoding& encoding, const DuplicateRule& rule,
+                        ReductionStats& stats, PendingMerge* deferred,
+                        const ReductionFaults& faults) {
   const auto start = std::chrono::steady_clock::now();
   stats = {};
-  if (deferred) *deferred = PendingMerge{{}, tolerance};
+  if (rule.dirs.size() != fragments.size())
+    return Status::invalid_argument("reduction: " + std::to_string(rule.dirs.size()) +
+                                    " view directions for " + std::to_string(fragments.size()) +
+                                    " fragments");
+  if (deferred) *deferred = PendingMerge{{}, rule};
   int rank = 0, size = 1;
   MPI_Comm_rank(comm, &rank);
   MPI_Comm_size(comm, &size);
@@ -264,7 +270,7 @@ Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragm
       deferred->messages.push_back(std::move(message));
       continue;
     }
-    merge_message(message, fragments, tolerance, status, upstream_error, stats);
+    merge_message(message, fragments, rule, status, upstream_error, stats);
   }
   stats.wall_seconds = seconds_since(start);
   if (status && upstream_error && rank == root)
@@ -277,7 +283,7 @@ Status finish_merge(PendingMerge& pending, std::vector<LdiFragment>& fragments,
   Status status = Status::ok();
   bool upstream_error = false;
   for (const std::vector<std::uint8_t>& message : pending.messages)
-    merge_message(message, fragments, pending.tolerance, status, upstream_error, stats);
+    merge_message(message, fragments, pending.rule, status, upstream_error, stats);
   pending.messages.clear();
   if (status && upstream_error)
     status = Status::other_rank("reduction: a fragment failed to decode on another rank");

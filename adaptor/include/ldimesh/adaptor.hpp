@@ -80,7 +80,9 @@ class Adaptor {
   virtual Status set_domain(const Box& global) = 0;
   // This rank's data: blocks of point data, blocks of high-order elements, or any source (an
   // analytic field). Each call adds one block; `owned` is the part of the domain this block's
-  // hits belong to (for grid blocks: the owned region, GridSource::bounds()). The values are
+  // hits belong to (for grid blocks: the owned region, GridSource::bounds(); element blocks own
+  // their cells, however the solver partitions them: a root on a face shared with another
+  // block or rank is kept once, docs/method.md "Element blocks own their cells"). The values are
   // read in place at every due step and may change between steps; the geometry (a grid's
   // coordinates, an element block's corners or geometry nodes) is prepared when the block is
   // added and must not change while it is added — to move a mesh, clear_blocks() and add it

@@ -78,7 +78,8 @@ Status validate_fragment(const LdiFragment& f) {
   return Status::ok();
 }
 
-LdiFragment merge_fragments(std::span<const LdiFragment> fragments, double tolerance) {
+LdiFragment merge_fragments(std::span<const LdiFragment> fragments, double tolerance,
+                            const glm::vec3& dir) {
   if (fragments.empty()) return {};
   const LdiFragment& first = fragments.front();
   LdiFragment out;
@@ -128,22 +129,20 @@ LdiFragment merge_fragments(std::span<const LdiFragment> fragments, double toler
       c.sample += f.counts[c.pixel];
       ++c.pixel;
     }
-    std::sort(samples.begin(), samples.end(), [](const Sample& a, const Sample& b) {
-      return std::tie(a.depth, a.normal.x, a.normal.y, a.normal.z, a.scalar) <
-             std::tie(b.depth, b.normal.x, b.normal.y, b.normal.z, b.scalar);
-    });
-    std::uint32_t kept = 0;
-    float last = 0.0f;
-    for (const Sample& s : samples) {
-      if (kept > 0 && double(s.depth) - double(last) <= tolerance) continue;
-      last = s.depth;
-      ++kept;
-      out.depth.push_back(s.depth);
-      out.normal.push_back(s.normal);
-      if (with_scalar) out.scalar.push_back(s.scalar);
+    const std::size_t kept = merge_duplicate_hits(
+        std::span<Sample>(samples), tolerance, dir,
+        [](const Sample& a, const Sample& b) {
+          return std::tie(a.depth, a.normal.x, a.normal.y, a.normal.z, a.scalar) <
+                 std::tie(b.depth, b.normal.x, b.normal.y, b.normal.z, b.scalar);
+        },
+        [](const Sample& s) { return s.depth; }, [](const Sample& s) { return s.normal; });
+    for (std::size_t k = 0; k < kept; ++k) {
+      out.depth.push_back(samples[k].depth);
+      out.normal.push_back(samples[k].normal);
+      if (with_scalar) out.scalar.push_back(samples[k].scalar);
     }
     out.pixels.push_back(next);
-    out.counts.push_back(kept);
+    out.counts.push_back(std::uint32_t(kept));
   }
   return out;
 }

@@ -29,33 +29,15 @@ void AxisHits::grow() {
 namespace {
 
 // Sorts one ray's hits by depth and merges hits closer than `tolerance` (a root found by both
-// primitives that share a face, or two roots closer than rounding can tell apart): each run of
-// hits within `tolerance` of its first becomes the one kept_before chooses.
+// primitives that share a face, or two roots closer than rounding can tell apart) by the
+// duplicate rule (merge_duplicate_hits).
 std::size_t sort_and_merge(std::span<RayHit> hits, double tolerance, glm::dvec3 dir) {
-  const auto less = [&](const RayHit& a, const RayHit& b) {
-    if (a.t != b.t) return a.t < b.t;
-    return normal_less(a.normal, b.normal);
-  };
-  if (hits.size() <= 16) {  // a ray's few hits, often in order already
-    for (std::size_t k = 1; k < hits.size(); ++k)
-      for (std::size_t m = k; m > 0 && less(hits[m], hits[m - 1]); --m)
-        std::swap(hits[m], hits[m - 1]);
-  } else {
-    std::sort(hits.begin(), hits.end(), less);
-  }
-  const glm::vec3 d(dir);
-  std::size_t kept = 0;
-  for (std::size_t k = 0; k < hits.size();) {
-    const double first = hits[k].t;
-    std::size_t end = k + 1;
-    while (end < hits.size() && hits[end].t - first <= tolerance)
-      ++end;
-    hits[kept++] = *std::min_element(
-        hits.begin() + k, hits.begin() + end,
-        [&](const RayHit& a, const RayHit& b) { return kept_before(a.normal, b.normal, d); });
-    k = end;
-  }
-  return kept;
+  return merge_duplicate_hits(
+      hits, tolerance, glm::vec3(dir),
+      [](const RayHit& a, const RayHit& b) {
+        return a.t != b.t ? a.t < b.t : normal_less(a.normal, b.normal);
+      },
+      [](const RayHit& h) { return h.t; }, [](const RayHit& h) { return h.normal; });
 }
 
 // Per-thread buffers of the axis casts, kept between tasks: a task's arrays are large enough

@@ -22,10 +22,18 @@ struct ReductionStats {
   int messages_received = 0;
 };
 
+// How the reduction merges the samples of one pixel that ranks found twice (merge_fragments):
+// closer than `tolerance` in depth, the one kept_before chooses for the direction of the
+// fragment's view, dirs[k] for fragments[k].
+struct DuplicateRule {
+  double tolerance = 0.0;
+  std::vector<glm::vec3> dirs;
+};
+
 // What the root of a deferred reduction received but has not merged (see reduce_fragments).
 struct PendingMerge {
   std::vector<std::vector<std::uint8_t>> messages;  // the root's children's, in merge order
-  double tolerance = 0.0;
+  DuplicateRule rule;
 };
 
 // Faults a reduction injects on purpose, to test its receivers' validation on real damaged
@@ -36,13 +44,13 @@ struct ReductionFaults {
 
 // Collective over `comm`. Every rank passes its fragments, one per view, in the same view
 // order on all ranks. On `root` the result is the merged fragment of every view (samples of
-// all ranks per pixel, sorted, duplicates closer than `tolerance` merged); on the other ranks
-// it is left empty. The reduction is a binomial tree: in round k a rank receives from the rank
-// 2^k above it, decodes, merges and forwards one message to the rank below it, so the root
-// receives ⌈log2 P⌉ messages whose total size is that of the merged data, not P of them.
-// Merging decodes and re-encodes, which the codec keeps exact (re-encoding decoded data gives
-// the same bytes). A fragment that does not decode makes the result an error Status on the
-// rank that received it and on the root; no rank blocks.
+// all ranks per pixel, sorted, duplicates merged by `rule`, whose dirs hold one direction per
+// fragment, else invalid_argument); on the other ranks it is left empty. The reduction is a
+// binomial tree: in round k a rank receives from the rank 2^k above it, decodes, merges and
+// forwards one message to the rank below it, so the root receives ⌈log2 P⌉ messages whose total
+// size is that of the merged data, not P of them. Merging decodes and re-encodes, which the codec
+// keeps exact (re-encoding decoded data gives the same bytes). A fragment that does not decode
+// makes the result an error Status on the rank that received it and on the root; no rank blocks.
 //
 // With `deferred` (used on the root; reset on every rank), the root receives its children's
 // messages but does not decompress or merge them: they are returned in *deferred and the root's
@@ -58,8 +66,9 @@ struct ReductionFaults {
 // below it. Threads: MPI is called from the calling thread only (MPI_THREAD_FUNNELED suffices);
 // quantizing runs on TBB; the result is the same for any thread count.
 Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragments,
-                        const FragmentEncoding& encoding, double tolerance, ReductionStats& stats,
-                        PendingMerge* deferred = nullptr, const ReductionFaults& faults = {});
+                        const FragmentEncoding& encoding, const DuplicateRule& rule,
+                        ReductionStats& stats, PendingMerge* deferred = nullptr,
+                        const ReductionFaults& faults = {});
 
 // Decodes and merges the messages reduce_fragments deferred into `fragments` (the root's own,
 // as it returned them); leaves `pending` empty. Not collective; any one thread (the root's

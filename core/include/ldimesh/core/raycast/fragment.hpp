@@ -2,6 +2,7 @@
 // sample), and how fragments of one view become a full LDI again.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <span>
@@ -13,6 +14,54 @@
 #include "ldimesh/core/raycast/ldi.hpp"
 
 namespace ldimesh {
+
+// Normals in a total order, component by component: ties between hits of the same depth.
+inline bool normal_less(const glm::vec3& a, const glm::vec3& b) {
+  if (a.x != b.x) return a.x < b.x;
+  if (a.y != b.y) return a.y < b.y;
+  return a.z < b.z;
+}
+
+// Of hits of one ray closer than a merge tolerance (a root that primitives, blocks or ranks on
+// either side of a face all found), whether the one with normal `a` is kept before the one with
+// `b`: the normal facing the viewer of a ray along `dir` most (smaller a · dir), then the
+// smaller normal. Every merge of duplicates keeps hits by it (merge_duplicate_hits) — one
+// caster's, the blocks' of a rank, the ranks' in the reduction and in sample requests — so
+// that one process and several ranks keep the same hit; where a gradient jumps at a cell face
+// the duplicates' normals differ along the ray, so the choice does not hang on rounding or on
+// the order in which they were found.
+inline bool kept_before(const glm::vec3& a, const glm::vec3& b, const glm::vec3& dir) {
+  const float da = glm::dot(a, dir), db = glm::dot(b, dir);
+  return da != db ? da < db : normal_less(a, b);
+}
+
+// The duplicate rule: sorts one ray's hits by `less` (depth first) and merges each run of hits
+// whose depth lies within `tolerance` of the run's first into the one kept_before chooses (the
+// first such in `less` order). Returns how many are kept, at the front of `hits`. `depth(h)` and
+// `normal(h)` read a hit.
+template <class Hit, class Less, class Depth, class Normal>
+std::size_t merge_duplicate_hits(std::span<Hit> hits, double tolerance, const glm::vec3& dir,
+                                 Less less, Depth depth, Normal normal) {
+  if (hits.size() <= 16) {  // a ray's few hits, often in order already
+    for (std::size_t k = 1; k < hits.size(); ++k)
+      for (std::size_t m = k; m > 0 && less(hits[m], hits[m - 1]); --m)
+        std::swap(hits[m], hits[m - 1]);
+  } else {
+    std::sort(hits.begin(), hits.end(), less);
+  }
+  std::size_t kept = 0;
+  for (std::size_t k = 0; k < hits.size();) {
+    const double first = double(depth(hits[k]));
+    std::size_t end = k + 1;
+    while (end < hits.size() && double(depth(hits[end])) - first <= tolerance)
+      ++end;
+    hits[kept++] = *std::min_element(
+        hits.begin() + k, hits.begin() + end,
+        [&](const Hit& a, const Hit& b) { return kept_before(normal(a), normal(b), dir); });
+    k = end;
+  }
+  return kept;
+}
 
 // Samples of the listed pixels of one view, in CSR form over the listed pixels: pixel
 // pixels[k] holds counts[k] ≥ 1 samples, sorted by depth, stored consecutively. Pixel ids are
@@ -57,13 +106,15 @@ LdiFragment fragment_from_ldi(const Ldi& ldi, std::uint32_t view_index);
 Status validate_fragment(const LdiFragment& fragment);
 
 // Fragments of one view merged: per pixel the samples of all fragments are concatenated,
-// sorted by depth (ties by normal) and samples closer than `tolerance` in depth merged into
-// the first of them (one root found by two ranks on their shared face). The result does not
+// sorted by depth (ties by normal, then scalar) and merged by the duplicate rule
+// (merge_duplicate_hits) with `tolerance` and the view's direction `dir` (one root found by two
+// blocks or ranks on their shared face: the one a single caster would keep). The result does not
 // depend on the order of the fragments. All fragments must be of the same view (same view
 // index, pixel_count and depth interval) and carry a scalar alike; throws
 // std::invalid_argument otherwise. The scalar range is the union of the fragments' (NaN where
 // none has one). An empty list gives an empty fragment.
-LdiFragment merge_fragments(std::span<const LdiFragment> fragments, double tolerance);
+LdiFragment merge_fragments(std::span<const LdiFragment> fragments, double tolerance,
+                            const glm::vec3& dir);
 
 // The full LDI of `view` with the fragment's samples; throws std::invalid_argument if the
 // fragment's pixel_count differs from the view's.

@@ -25,25 +25,6 @@ struct RayHitList {
   std::vector<float> scalar;  // empty unless the source has a scalar
 };
 
-// Normals in a total order, component by component: ties between hits of the same depth.
-inline bool normal_less(const glm::vec3& a, const glm::vec3& b) {
-  if (a.x != b.x) return a.x < b.x;
-  if (a.y != b.y) return a.y < b.y;
-  return a.z < b.z;
-}
-
-// Of hits of one ray closer than a merge tolerance (a root that primitives, blocks or ranks on
-// either side of a face all found), whether the one with normal `a` is kept before the one with
-// `b`: the normal facing the viewer of a ray along `dir` most (smaller a · dir), then the
-// smaller normal. RayCaster and MpiSampleSource merge duplicates by it (the first of the
-// smallest, std::min_element), so that one process and several ranks keep the same hit; where
-// a gradient jumps at a cell face the duplicates' normals differ along the ray, so the choice
-// does not hang on rounding or on the order in which they were found.
-inline bool kept_before(const glm::vec3& a, const glm::vec3& b, const glm::vec3& dir) {
-  const float da = glm::dot(a, dir), db = glm::dot(b, dir);
-  return da != db ? da < db : normal_less(a, b);
-}
-
 // The part of the global domain one rank ray casts. A point belongs to it iff lo ≤ p < hi on
 // every axis, with ≤ hi where the box reaches the global box's upper face, so that boxes tiling
 // the global box own every point exactly once.
