@@ -736,12 +736,21 @@ class AdaptorImpl final : public Adaptor {
     FieldArray array;
     std::shared_ptr<const FieldSource> source;  // null: the block lacks the field
   };
+  // An element block's subdomain: its cells' bounds grown by 10⁻⁹ of the domain's diagonal, so
+  // that the half-open box holds every hit of its cells (those on the bounds' upper faces, and
+  // on rays lying in them, included), clipped to the domain. Only rays that can meet its cells
+  // are cast.
+  static Box element_box(const Box& bounds, const Box& domain) {
+    const double grow = 1e-9 * domain.diagonal();
+    return {glm::max(bounds.lo - grow, domain.lo), glm::min(bounds.hi + grow, domain.hi)};
+  }
+
   struct Block {
     std::shared_ptr<const FieldSource> source;  // no colour (a FieldSource: its own bind_scalar)
     // Where the block's hits belong. None for element blocks: a solver's partition of its cells
     // is no box, and their bounding boxes overlap, so each block keeps every hit of its cells
-    // and a hit that cells of two blocks or ranks both find on their shared face is merged by
-    // the duplicate rule (merge_duplicate_hits), as one caster merges its own.
+    // (element_box) and a hit that cells of two blocks or ranks both find on their shared face
+    // is merged by the duplicate rule (merge_duplicate_hits), as one caster merges its own.
     std::optional<Box> owned;
     // What the block reads, for the background path's copy (neither: a FieldSource, which
     // cannot be copied); their colour pointers are null.
@@ -858,7 +867,8 @@ class AdaptorImpl final : public Adaptor {
               return Status::invalid_argument(
                   which() + " is a FieldSource without a colour field (bind_scalar)");
             casters.blocks[i].push_back(
-                {casters.owned.back().get(), {b.owned.value_or(*domain), *domain}});
+                {casters.owned.back().get(),
+                 {b.owned ? *b.owned : element_box(b.source->bounds(), *domain), *domain}});
           }
         }
         return Status::ok();

@@ -5,9 +5,13 @@
 // within the rectangle (first_in, from flags in the entry: the box itself is not read).
 #pragma once
 
+#include <algorithm>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <span>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 #include <glm/glm.hpp>
@@ -40,6 +44,43 @@ struct AxisBins {
     return ((entry & kFirstB) || bb == qb0) && ((entry & kFirstC) || cc == qc0);
   }
 };
+
+// Calls visit(index) once for each box listed in the bins that the rectangle [lo_b, hi_b] ×
+// [lo_c, hi_c] (world coordinates along the bins' axes) meets, from the first of its bins there,
+// bin by bin (b fastest). With `ahead`, ahead(index) is called for the box `distance` entries
+// further on in the same bin before each visit (to prefetch what the visits read).
+template <class Visit, class Ahead = std::nullptr_t>
+void visit_rectangle(const AxisBins& bins, double lo_b, double hi_b, double lo_c, double hi_c,
+                     Visit&& visit, Ahead&& ahead = nullptr, std::uint32_t distance = 8) {
+  const int qb0 = bins.bin_b(lo_b), qb1 = bins.bin_b(hi_b);
+  const int qc0 = bins.bin_c(lo_c), qc1 = bins.bin_c(hi_c);
+  for (int cc = qc0; cc <= qc1; ++cc)
+    for (int bb = qb0; bb <= qb1; ++bb) {
+      const std::size_t bin = bins.bin(bb, cc);
+      const std::uint32_t end = bins.first[bin + 1];
+      for (std::uint32_t m = bins.first[bin]; m < end; ++m) {
+        if constexpr (!std::is_null_pointer_v<std::decay_t<Ahead>>)
+          if (m + distance < end) ahead(bins.entries[m + distance] & AxisBins::kIndex);
+        const std::uint32_t entry = bins.entries[m];
+        if (AxisBins::first_in(entry, bb, cc, qb0, qc0)) visit(entry & AxisBins::kIndex);
+      }
+    }
+}
+
+// The integers [first, last] in [a, b] within [lo, hi]; empty where first > last. Clamped as
+// doubles before the conversion: a far-away box's pixel numbers would not fit an int.
+inline std::pair<int, int> integer_range(double a, double b, int lo, int hi) {
+  return {int(std::clamp(std::ceil(a), double(lo), double(hi + 1))),
+          int(std::clamp(std::floor(b), double(lo - 1), double(hi)))};
+}
+
+// The pixel columns (or rows) of a view whose centres, at (n + ½)·spacing from the view's
+// origin, lie in [x0, x1] (image coordinates along u or v) grown by `pad` pixel, within
+// [lo, hi] (integer_range).
+inline std::pair<int, int> pixel_range(double x0, double x1, double inv_spacing, double pad, int lo,
+                                       int hi) {
+  return integer_range(x0 * inv_spacing - 0.5 - pad, x1 * inv_spacing - 0.5 + pad, lo, hi);
+}
 
 // The bins of `boxes` across ray axis `axis` (0, 1, 2): as wide as the median box (of at most
 // 4 096 spread over the list), at most 4 096 per axis, coarsened while the entries would exceed

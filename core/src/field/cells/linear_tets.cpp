@@ -128,26 +128,18 @@ class LinearTetAxisBinding final : public AxisBinding {
     const glm::dvec3 a = view.point(i0, j0, 0.0), b = view.point(i0 + w, j0 + h, 0.0);
     const double lo_b = std::min(a[bins.b], b[bins.b]), hi_b = std::max(a[bins.b], b[bins.b]);
     const double lo_c = std::min(a[bins.c], b[bins.c]), hi_c = std::max(a[bins.c], b[bins.c]);
-    const int qb0 = bins.bin_b(lo_b), qb1 = bins.bin_b(hi_b);
-    const int qc0 = bins.bin_c(lo_c), qc1 = bins.bin_c(hi_c);
     const double inv = 1.0 / view.spacing;
-    constexpr std::uint32_t kAhead = 8;
-    for (int cc = qc0; cc <= qc1; ++cc)
-      for (int bb = qb0; bb <= qb1; ++bb) {
-        const std::size_t bin = bins.bin(bb, cc);
-        for (std::uint32_t m = bins.first[bin]; m < bins.first[bin + 1]; ++m) {
-          // The tetrahedra a few entries ahead fetched while this one is tested (each is read
-          // once per view, in the mesh's order: a cache miss per tetrahedron otherwise).
-          if (m + kAhead < bins.first[bin + 1]) {
-            const char* ahead =
-                reinterpret_cast<const char*>(&tets_[bins.entries[m + kAhead] & AxisBins::kIndex]);
-            for (std::size_t line = 0; line < sizeof(LinearTet); line += 64)
-              __builtin_prefetch(ahead + line);
-          }
-          // The first of the tetrahedron's bins within the rectangle's, from the entry's flags.
-          const std::uint32_t entry = bins.entries[m];
-          if (!AxisBins::first_in(entry, bb, cc, qb0, qc0)) continue;
-          const LinearTet& tet = tets_[entry & AxisBins::kIndex];
+    // The tetrahedra a few entries ahead are fetched while one is tested (each is read once per
+    // view, in the mesh's order: a cache miss per tetrahedron otherwise).
+    const auto ahead = [&](std::uint32_t e) {
+      const char* next = reinterpret_cast<const char*>(&tets_[e]);
+      for (std::size_t line = 0; line < sizeof(LinearTet); line += 64)
+        __builtin_prefetch(next + line);
+    };
+    visit_rectangle(
+        bins, lo_b, hi_b, lo_c, hi_c,
+        [&](std::uint32_t e) {
+          const LinearTet& tet = tets_[e];
           // The tetrahedron's box in image coordinates (u, v are axes: exact).
           const glm::dvec3 p = view.origin, lo = tet.lo(), hi = tet.hi();
           const double x0 = std::min(glm::dot(lo - p, view.u), glm::dot(hi - p, view.u)),
@@ -157,21 +149,11 @@ class LinearTetAxisBinding final : public AxisBinding {
           // The pixel centres in the box grown by 10⁻⁶ pixel (a hit the test accepts lies in
           // the box to 10⁻¹² of the tetrahedron's size).
           constexpr double pad = 1e-6;
-          // Clamped as doubles to the rectangle before the conversion (a far-away box's pixel
-          // numbers would not fit an int).
-          const auto first = [](double x, int lo, int hi) {
-            return int(std::clamp(std::ceil(x), double(lo), double(hi + 1)));
-          };
-          const auto last = [](double x, int lo, int hi) {
-            return int(std::clamp(std::floor(x), double(lo - 1), double(hi)));
-          };
-          const int ia = first(x0 * inv - 0.5 - pad, i0, i0 + w - 1),
-                    ib = last(x1 * inv - 0.5 + pad, i0, i0 + w - 1);
-          const int ja = first(y0 * inv - 0.5 - pad, j0, j0 + h - 1),
-                    jb = last(y1 * inv - 0.5 + pad, j0, j0 + h - 1);
-          if (ia > ib || ja > jb) continue;
+          const auto [ia, ib] = pixel_range(x0, x1, inv, pad, i0, i0 + w - 1);
+          const auto [ja, jb] = pixel_range(y0, y1, inv, pad, j0, j0 + h - 1);
+          if (ia > ib || ja > jb) return;
           TetDirection dir;
-          if (!tet_direction(tet, rays.dir, dir)) continue;
+          if (!tet_direction(tet, rays.dir, dir)) return;
           // The crossing polygon's corners in pixel coordinates (pixel centres at integers) and
           // its margin: in each row, the columns of the polygon's slice over the row ± margin.
           double cx[4], cy[4];
@@ -199,9 +181,8 @@ class LinearTetAxisBinding final : public AxisBinding {
               }
             }
             if (!(xl <= xr)) continue;
-            const int ra = std::max(ia, first(xl - grow, i0, i0 + w - 1)),
-                      rb = std::min(ib, last(xr + grow, i0, i0 + w - 1));
-            for (int i = ra; i <= rb; ++i) {
+            const auto [ra, rb] = integer_range(xl - grow, xr + grow, i0, i0 + w - 1);
+            for (int i = std::max(ia, ra); i <= std::min(ib, rb); ++i) {
               const std::size_t k = std::size_t(j - j0) * std::size_t(w) + std::size_t(i - i0);
               if (k >= rays.rays.size()) continue;
               const AxisRay& ray = rays.rays[k];
@@ -211,8 +192,8 @@ class LinearTetAxisBinding final : public AxisBinding {
                 out.push_back({std::uint32_t(k), hit});
             }
           }
-        }
-      }
+        },
+        ahead);
   }
 
   std::vector<LinearTet> tets_;

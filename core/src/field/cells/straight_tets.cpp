@@ -199,45 +199,29 @@ class StraightTetAxisBinding final : public AxisBinding {
     const glm::dvec3 a = view.point(i0, j0, 0.0), b = view.point(i0 + w, j0 + h, 0.0);
     const double lo_b = std::min(a[bins.b], b[bins.b]), hi_b = std::max(a[bins.b], b[bins.b]);
     const double lo_c = std::min(a[bins.c], b[bins.c]), hi_c = std::max(a[bins.c], b[bins.c]);
-    const int qb0 = bins.bin_b(lo_b), qb1 = bins.bin_b(hi_b);
-    const int qc0 = bins.bin_c(lo_c), qc1 = bins.bin_c(hi_c);
     const double inv = 1.0 / view.spacing;
-    const auto first = [](double x, int lo, int hi) {
-      return int(std::clamp(std::ceil(x), double(lo), double(hi + 1)));
-    };
-    const auto last = [](double x, int lo, int hi) {
-      return int(std::clamp(std::floor(x), double(lo - 1), double(hi)));
-    };
-    for (int cc = qc0; cc <= qc1; ++cc)
-      for (int bb = qb0; bb <= qb1; ++bb) {
-        const std::size_t bin = bins.bin(bb, cc);
-        for (std::uint32_t m = bins.first[bin]; m < bins.first[bin + 1]; ++m) {
-          const std::uint32_t entry = bins.entries[m];
-          if (!AxisBins::first_in(entry, bb, cc, qb0, qc0)) continue;
-          const StraightTet& tet = tets_.tets[entry & AxisBins::kIndex];
-          const glm::dvec3 p = view.origin;
-          const double x0 = std::min(glm::dot(tet.lo - p, view.u), glm::dot(tet.hi - p, view.u)),
-                       x1 = std::max(glm::dot(tet.lo - p, view.u), glm::dot(tet.hi - p, view.u));
-          const double y0 = std::min(glm::dot(tet.lo - p, view.v), glm::dot(tet.hi - p, view.v)),
-                       y1 = std::max(glm::dot(tet.lo - p, view.v), glm::dot(tet.hi - p, view.v));
-          constexpr double pad = 1e-6;
-          const int ia = first(x0 * inv - 0.5 - pad, i0, i0 + w - 1),
-                    ib = last(x1 * inv - 0.5 + pad, i0, i0 + w - 1);
-          const int ja = first(y0 * inv - 0.5 - pad, j0, j0 + h - 1),
-                    jb = last(y1 * inv - 0.5 + pad, j0, j0 + h - 1);
-          for (int j = ja; j <= jb; ++j)
-            for (int i = ia; i <= ib; ++i) {
-              const std::size_t k = std::size_t(j - j0) * std::size_t(w) + std::size_t(i - i0);
-              if (k >= rays.rays.size()) continue;
-              const AxisRay& ray = rays.rays[k];
-              if (!(ray.t0 <= ray.t1)) continue;
-              straight_tet_hits<P>(tets_, tet, ray.org, rays.dir, ray.t0, ray.t1,
-                                   [&](const RayHit& hit) {
-                                     out.push_back({std::uint32_t(k), hit});
-                                   });
-            }
+    visit_rectangle(bins, lo_b, hi_b, lo_c, hi_c, [&](std::uint32_t e) {
+      const StraightTet& tet = tets_.tets[e];
+      const glm::dvec3 p = view.origin;
+      const double x0 = std::min(glm::dot(tet.lo - p, view.u), glm::dot(tet.hi - p, view.u)),
+                   x1 = std::max(glm::dot(tet.lo - p, view.u), glm::dot(tet.hi - p, view.u));
+      const double y0 = std::min(glm::dot(tet.lo - p, view.v), glm::dot(tet.hi - p, view.v)),
+                   y1 = std::max(glm::dot(tet.lo - p, view.v), glm::dot(tet.hi - p, view.v));
+      constexpr double pad = 1e-6;
+      const auto [ia, ib] = pixel_range(x0, x1, inv, pad, i0, i0 + w - 1);
+      const auto [ja, jb] = pixel_range(y0, y1, inv, pad, j0, j0 + h - 1);
+      for (int j = ja; j <= jb; ++j)
+        for (int i = ia; i <= ib; ++i) {
+          const std::size_t k = std::size_t(j - j0) * std::size_t(w) + std::size_t(i - i0);
+          if (k >= rays.rays.size()) continue;
+          const AxisRay& ray = rays.rays[k];
+          if (!(ray.t0 <= ray.t1)) continue;
+          straight_tet_hits<P>(tets_, tet, ray.org, rays.dir, ray.t0, ray.t1,
+                               [&](const RayHit& hit) {
+                                 out.push_back({std::uint32_t(k), hit});
+                               });
         }
-      }
+    });
   }
 
   StraightTets tets_;

@@ -273,19 +273,10 @@ class HexAxisBinding final : public AxisBinding {
       lo_b = std::min(lo_b, ray.org[bins.b]), hi_b = std::max(hi_b, ray.org[bins.b]);
       lo_c = std::min(lo_c, ray.org[bins.c]), hi_c = std::max(hi_c, ray.org[bins.c]);
     }
-    const int qb0 = bins.bin_b(lo_b), qb1 = bins.bin_b(hi_b);
-    const int qc0 = bins.bin_c(lo_c), qc1 = bins.bin_c(hi_c);
     Scratch scratch;
     scratch.read_lattice(rays);
-    for (int cc = qc0; cc <= qc1; ++cc)
-      for (int bb = qb0; bb <= qb1; ++bb) {
-        const std::size_t bin = bins.bin(bb, cc);
-        for (std::uint32_t m = bins.first[bin]; m < bins.first[bin + 1]; ++m) {
-          const std::uint32_t entry = bins.entries[m];
-          if (!AxisBins::first_in(entry, bb, cc, qb0, qc0)) continue;
-          cast_element(entry & AxisBins::kIndex, rays, out, scratch);
-        }
-      }
+    visit_rectangle(bins, lo_b, hi_b, lo_c, hi_c,
+                    [&](std::uint32_t e) { cast_element(e, rays, out, scratch); });
   }
 
  private:
