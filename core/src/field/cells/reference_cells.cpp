@@ -234,6 +234,25 @@ std::vector<double> invert(std::vector<double> a, int n) {
   return inv;
 }
 
+// The cells whose shape functions come from a basis of their space inverted at the nodes
+// (ReferenceCell::inverse): the serendipity hexahedron and wedge (monomials) and the 14-node
+// pyramid (Bergot's space).
+bool inverted_at_nodes(CellType type) {
+  return type == CellType::serendipity_hexahedron || type == CellType::serendipity_wedge ||
+         type == CellType::pyramid14;
+}
+
+// That basis at reference point r: one value per node into g.
+void space_basis(CellType type, glm::dvec3 r, double* g) {
+  if (type == CellType::pyramid14) {
+    pyramid14_space(r, g);
+    return;
+  }
+  const std::vector<Lattice> m = serendipity_monomials(type);
+  for (std::size_t j = 0; j < m.size(); ++j)
+    g[j] = monomial(m[j], r);
+}
+
 void check_order(CellType type, int order) {
   if (order < 1 || order > max_cell_order(type) ||
       ((type == CellType::serendipity_hexahedron || type == CellType::serendipity_wedge ||
@@ -283,18 +302,10 @@ std::unique_ptr<ReferenceCell> build(CellType type, int p) {
   for (const Lattice& l : lattice)
     cell->nodes.push_back(glm::dvec3(l) / double(p));
   const int n = int(cell->nodes.size());
-  if (type == CellType::serendipity_hexahedron || type == CellType::serendipity_wedge) {
-    const std::vector<Lattice> m = serendipity_monomials(type);
+  if (inverted_at_nodes(type)) {
     std::vector<double> v(std::size_t(n) * n);
     for (int i = 0; i < n; ++i)
-      for (int j = 0; j < n; ++j)
-        v[std::size_t(i) * n + j] = monomial(m[j], cell->nodes[i]);
-    cell->inverse = invert(std::move(v), n);
-  }
-  if (type == CellType::pyramid14) {
-    std::vector<double> v(std::size_t(n) * n);
-    for (int i = 0; i < n; ++i)
-      pyramid14_space(cell->nodes[i], &v[std::size_t(i) * n]);
+      space_basis(type, cell->nodes[i], &v[std::size_t(i) * n]);
     cell->inverse = invert(std::move(v), n);
   }
   if (type == CellType::tetrahedron) {
@@ -364,11 +375,10 @@ void shape_functions(const ReferenceCell& cell, glm::dvec3 r, double* out) {
       }
       return;
     case CellType::serendipity_hexahedron:
-    case CellType::serendipity_wedge: {
-      const std::vector<Lattice> m = serendipity_monomials(cell.type);
+    case CellType::serendipity_wedge:
+    case CellType::pyramid14: {
       double g[20];
-      for (std::size_t j = 0; j < n; ++j)
-        g[j] = monomial(m[j], r);
+      space_basis(cell.type, r, g);
       for (std::size_t i = 0; i < n; ++i) {
         double s = 0.0;
         for (std::size_t j = 0; j < n; ++j)
@@ -395,17 +405,6 @@ void shape_functions(const ReferenceCell& cell, glm::dvec3 r, double* out) {
         out[i] = s;
       }
       return;
-    case CellType::pyramid14: {
-      double g[14];
-      pyramid14_space(r, g);
-      for (std::size_t i = 0; i < n; ++i) {
-        double s = 0.0;
-        for (std::size_t j = 0; j < n; ++j)
-          s += g[j] * cell.inverse[j * n + i];
-        out[i] = s;
-      }
-      return;
-    }
   }
 }
 
