@@ -45,6 +45,7 @@
 #include "ldimesh/transport/distributed.hpp"
 #include "ldimesh/transport/glb.hpp"
 #include "ldimesh/transport/snapshot_store.hpp"
+#include "ldimesh/transport/step_package.hpp"
 #include "serve.hpp"
 
 namespace {
@@ -323,26 +324,37 @@ int run_mesh(const MeshArgs& args) {
   if (!root) return 0;
 
   ldimesh::MeshingResult& result = step.meshing;
-  // Vertices where the colour field has no finite value (NaN/Inf in it) take the lowest colour.
-  const std::size_t uncoloured = ldimesh::replace_nonfinite_scalars(result.mesh);
+  const double r_used = ldimesh::trim_r(options.meshing);
+  const bool want_glb = has_extension(args.out, ".glb") || !args.steps_dir.empty();
+  // The step as the adaptor packages it (step_package.hpp): vertices where the colour field has
+  // no finite value (NaN/Inf in it) take the lowest colour; the GLB and the metadata.
+  ldimesh::StepDescription description;
+  description.step = args.step;
+  description.time = args.time;
+  description.isovalues = {iso};
+  description.views = views;
+  description.r = r_used;
+  if (!args.colour_by.empty()) description.colour_fields = {colour_name(args)};
+  description.glb = args.glb;
+  description.encode = want_glb;
+  ldimesh::PackagedStep packaged;
+  {
+    std::vector<ldimesh::MeshingResult> one(1);
+    one[0].mesh = std::move(result.mesh);
+    one[0].samples = result.samples;
+    one[0].quads = result.quads;
+    if (const ldimesh::Status s = ldimesh::package_step(description, std::move(one), packaged); !s)
+      throw std::runtime_error(s.message());
+  }
+  result.mesh = std::move(packaged.mesh);
+  const std::size_t uncoloured = packaged.uncoloured;
   if (uncoloured > 0 && !args.json)
     std::fprintf(stderr,
                  "ldimesh: warning: %zu vertices without a finite colour value (NaN/Inf in the "
                  "--colour-by field), given the lowest colour\n",
                  uncoloured);
-  const double r_used = ldimesh::trim_r(options.meshing);
-  double write_seconds = 0.0, glb_seconds = 0.0;
-  std::vector<std::uint8_t> glb;
-  ldimesh::GlbInfo glb_info;
-  const bool want_glb = has_extension(args.out, ".glb") || !args.steps_dir.empty();
-  if (want_glb) {
-    start = std::chrono::steady_clock::now();
-    if (const ldimesh::Status s = ldimesh::encode_glb(
-            result.mesh, ldimesh::step_glb_options(views.front(), args.glb), glb, &glb_info);
-        !s)
-      throw std::runtime_error(s.message());
-    glb_seconds = seconds_since(start);
-  }
+  double write_seconds = 0.0;
+  const std::vector<std::uint8_t>& glb = packaged.glb;
   if (!args.out.empty()) {
     start = std::chrono::steady_clock::now();
     if (has_extension(args.out, ".glb")) {
@@ -357,15 +369,14 @@ int run_mesh(const MeshArgs& args) {
   }
   if (!args.steps_dir.empty()) {
     // A step as the job's server would publish it, for `ldimesh-serve --dir`.
-    ldimesh::StepMetadata meta = ldimesh::describe_step(args.step, args.time, {iso}, views, r_used,
-                                                        result.samples, result.quads, glb_info);
-    if (glb_info.has_scalar)
-      meta.scalar =
-          ldimesh::ScalarRange{colour_name(args), glb_info.scalar_min, glb_info.scalar_max};
-    meta.seconds = {{"cast", step.seconds.cast},     {"encode", step.seconds.encode},
-                    {"reduce", step.seconds.reduce}, {"decode", step.seconds.decode},
-                    {"mesh", step.seconds.mesh},     {"glb", glb_seconds}};
-    const ldimesh::Snapshot snapshot = ldimesh::make_snapshot(std::move(meta), std::move(glb));
+    ldimesh::StepMetadata meta = std::move(packaged.metadata);
+    meta.seconds.insert({{"cast", step.seconds.cast},
+                         {"encode", step.seconds.encode},
+                         {"reduce", step.seconds.reduce},
+                         {"decode", step.seconds.decode},
+                         {"mesh", step.seconds.mesh}});
+    const ldimesh::Snapshot snapshot =
+        ldimesh::make_snapshot(std::move(meta), std::move(packaged.glb));
     std::filesystem::create_directories(args.steps_dir);
     if (const ldimesh::Status s = ldimesh::write_step_files(args.steps_dir, snapshot); !s)
       throw std::runtime_error(s.message());

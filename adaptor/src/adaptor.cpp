@@ -39,6 +39,7 @@
 #include "ldimesh/transport/http_server.hpp"
 #include "ldimesh/transport/mpi_reduce.hpp"
 #include "ldimesh/transport/snapshot_store.hpp"
+#include "ldimesh/transport/step_package.hpp"
 #include "options.hpp"
 
 namespace ldimesh {
@@ -750,7 +751,7 @@ class AdaptorImpl final : public Adaptor {
     // Where the block's hits belong. None for element blocks: a solver's partition of its cells
     // is no box, and their bounding boxes overlap, so each block keeps every hit of its cells
     // (element_box) and a hit that cells of two blocks or ranks both find on their shared face
-    // is merged by the duplicate rule (merge_duplicate_hits), as one caster merges its own.
+    // is merged by the duplicate rule (collapse_duplicate_hits), as one caster merges its own.
     std::optional<Box> owned;
     // What the block reads, for the background path's copy (neither: a FieldSource, which
     // cannot be copied); their colour pointers are null.
@@ -836,8 +837,8 @@ class AdaptorImpl final : public Adaptor {
           throw std::logic_error("testing.fault: an injected exception");
         casters.views = make_axis_views(*domain, options_.resolution, options_.views);
         for (const View& v : casters.views)
-          casters.tolerance = std::max(casters.tolerance,
-                                       merge_tolerance(options_.encoding, v, domain->diagonal()));
+          casters.tolerance = std::max(
+              casters.tolerance, reduction_tolerance(options_.encoding, v, domain->diagonal()));
         // The hits of an isovalue carry a colour where "colour_by" names a field for it, and
         // then every block's.
         for (std::size_t i = 0; i < options_.isovalues.size(); ++i) {
@@ -1268,64 +1269,33 @@ class AdaptorImpl final : public Adaptor {
     std::vector<MeshingResult> results;
     if (job.meshed) {
       results = std::move(*job.meshed);
-    } else if (Status s = mesh_step(MPI_COMM_NULL, StepBlocks(options_.isovalues.size()), job.views,
-                                    0.0, meshing, job.cast, results);
+    } else if (Status s =
+                   mesh_on_root(options_.isovalues.size(), job.views, meshing, job.cast, results);
                !s) {
       return s;
     }
-    Mesh mesh;
-    std::size_t samples = 0, quads = 0;
-    std::vector<std::uint32_t> surfaces;  // where each isovalue's vertices start
-    for (std::size_t i = 0; i < results.size(); ++i) {
-      const MeshingResult& r = results[i];
-      samples += r.samples;
-      quads += r.quads;
-      surfaces.push_back(std::uint32_t(mesh.positions.size()));
-      append_mesh(mesh, r.mesh);
-      // An isosurface without a colour field beside coloured ones: values the GLB leaves out.
-      if (!options_.colour_fields.empty() && options_.surface_field[i] < 0)
-        mesh.scalars.resize(mesh.positions.size(), 0.0f);
-    }
     const double decode_s = job.cast.seconds.decode, mesh_s = job.cast.seconds.mesh;
-    const auto t = Clock::now();
-    // Each isosurface's colour field (option "colour_by"); the GLB gives each field its own
-    // range where the surfaces are not all coloured by one.
-    std::vector<int> groups = options_.surface_field;
-    const bool mixed = options_.colour_fields.size() > 1 ||
-                       std::find(groups.begin(), groups.end(), -1) != groups.end();
-    if (!mixed) groups.assign(surfaces.size(), options_.colour_fields.empty() ? -1 : 0);
-    // Vertices where the colour field has no finite value (NaN/Inf in the solver's array)
-    // take the field's lowest colour, and the log says how many.
-    const std::size_t uncoloured = replace_nonfinite_colours(mesh, surfaces, groups);
-    GlbOptions glb_options = step_glb_options(job.views.front(), options_.glb);
-    // Several isovalues: a mesh each, which the viewer shows or hides.
-    if (surfaces.size() > 1) glb_options.surfaces = std::move(surfaces);
-    if (mixed) glb_options.scalar_groups = groups;
-    std::vector<std::uint8_t> glb;
-    GlbInfo info;
-    LDIMESH_RETURN_IF_ERROR(encode_glb(mesh, glb_options, glb, &info));
-    const double glb_s = seconds_since(t);
-
-    StepMetadata meta = describe_step(job.step, job.time, options_.isovalues, job.views,
-                                      trim_r(meshing), samples, quads, info);
-    meta.seconds = job.seconds;
+    StepDescription description;
+    description.step = job.step;
+    description.time = job.time;
+    description.isovalues = options_.isovalues;
+    description.views = job.views;
+    description.r = trim_r(meshing);
+    description.colour_fields = options_.colour_fields;
+    description.surface_field = options_.surface_field;
+    description.glb = options_.glb;
+    PackagedStep packaged;
+    LDIMESH_RETURN_IF_ERROR(package_step(description, std::move(results), packaged));
+    const GlbInfo& info = packaged.info;
+    const double glb_s = packaged.glb_seconds;
+    const std::size_t uncoloured = packaged.uncoloured;
+    StepMetadata meta = std::move(packaged.metadata);
+    meta.seconds.insert(job.seconds.begin(), job.seconds.end());
     meta.seconds["decode"] = decode_s;
     meta.seconds["mesh"] = mesh_s;
-    meta.seconds["glb"] = glb_s;
     meta.skipped_steps = job.skipped_steps;
     meta.nonfinite_values = job.nonfinite_values;
-    if (info.has_scalar && options_.colour_fields.size() == 1)
-      meta.scalar = ScalarRange{options_.colour_fields[0], info.scalar_min, info.scalar_max};
-    if (mixed)
-      for (std::size_t i = 0; i < groups.size(); ++i) {
-        std::optional<ScalarRange> range;
-        if (groups[i] >= 0 && i < info.surface_scalar_ranges.size() &&
-            info.surface_scalar_ranges[i])
-          range =
-              ScalarRange{options_.colour_fields[std::size_t(groups[i])],
-                          (*info.surface_scalar_ranges[i])[0], (*info.surface_scalar_ranges[i])[1]};
-        meta.surface_scalars.push_back(std::move(range));
-      }
+    std::vector<std::uint8_t> glb = std::move(packaged.glb);
     const std::size_t bytes = glb.size();
     Snapshot snapshot = make_snapshot(std::move(meta), std::move(glb));
     if (!options_.output_dir.empty()) write_step(snapshot);
@@ -1360,29 +1330,6 @@ class AdaptorImpl final : public Adaptor {
                " vertices without a finite colour value (NaN/Inf in the colour field), shown at "
                "the lowest colour";
     return notes;
-  }
-
-  // Of the surfaces starting at vertices `surfaces` (none: one surface) each coloured by field
-  // `groups[s]` (−1: none), the vertices without a finite colour take the lowest finite value of
-  // their field on the step's surfaces (0 where there is none); returns how many did.
-  static std::size_t replace_nonfinite_colours(Mesh& mesh,
-                                               const std::vector<std::uint32_t>& surfaces,
-                                               const std::vector<int>& groups) {
-    if (mesh.scalars.empty()) return 0;
-    const std::size_t count = std::max<std::size_t>(1, surfaces.size());
-    const auto range = [&](std::size_t s) {
-      const std::size_t first = surfaces.empty() ? 0 : surfaces[s];
-      const std::size_t last = s + 1 < surfaces.size() ? surfaces[s + 1] : mesh.scalars.size();
-      return std::span<float>(mesh.scalars.data() + first, last - first);
-    };
-    std::size_t replaced = 0;
-    for (int g = 0; g <= *std::max_element(groups.begin(), groups.end()); ++g) {
-      std::vector<std::span<float>> parts;
-      for (std::size_t s = 0; s < count; ++s)
-        if (groups[s] == g) parts.push_back(range(s));
-      replaced += replace_nonfinite_scalars(parts);
-    }
-    return replaced;
   }
 
   MPI_Comm comm_;

@@ -219,7 +219,7 @@ TEST(MpiPipeline, CurvedElementsDealtToTheRanksGiveTheOneProcessMesh) {
 }
 
 // The root may leave the decoding and merging of what it receives to later (its worker thread):
-// finish_merge then gives the fragments of the plain reduction, to the bit; a message that does
+// finish_reduction then gives the fragments of the plain reduction, to the bit; a message that does
 // not decode is an error there.
 TEST(MpiPipeline, DeferredMergeOnTheRootGivesTheReducedFragments) {
   const SurfaceInfo* s = find_surface("torus");
@@ -237,7 +237,7 @@ TEST(MpiPipeline, DeferredMergeOnTheRootGivesTheReducedFragments) {
   std::vector<LdiFragment> plain = cast, deferred = cast;
   ReductionStats stats;
   EXPECT_TRUE(reduce_fragments(MPI_COMM_WORLD, 0, plain, encoding, tolerance, stats));
-  PendingMerge pending;
+  PendingReduction pending;
   EXPECT_TRUE(reduce_fragments(MPI_COMM_WORLD, 0, deferred, encoding, tolerance, stats, &pending));
   // Views that differ between the ranks (rank 1 casts at another resolution) fail both
   // reductions on the root, the deferred one inside the step as the plain one.
@@ -250,7 +250,7 @@ TEST(MpiPipeline, DeferredMergeOnTheRootGivesTheReducedFragments) {
   std::vector<LdiFragment> odd_plain = odd;
   const Status plain_odd =
       reduce_fragments(MPI_COMM_WORLD, 0, odd_plain, encoding, tolerance, stats);
-  PendingMerge odd_pending;
+  PendingReduction odd_pending;
   const Status deferred_odd =
       reduce_fragments(MPI_COMM_WORLD, 0, odd, encoding, tolerance, stats, &odd_pending);
   if (rank_of() != 0) return;  // nothing collective below
@@ -261,8 +261,8 @@ TEST(MpiPipeline, DeferredMergeOnTheRootGivesTheReducedFragments) {
     EXPECT_EQ(odd_pending.messages.size(), std::size_t(std::bit_width(unsigned(ranks() - 1))) - 1);
   }
   EXPECT_EQ(pending.messages.size(), std::size_t(std::bit_width(unsigned(ranks() - 1))));
-  PendingMerge broken = pending;
-  ASSERT_TRUE(finish_merge(pending, deferred, stats));
+  PendingReduction broken = pending;
+  ASSERT_TRUE(finish_reduction(pending, deferred, stats));
   EXPECT_TRUE(pending.messages.empty());
   ASSERT_EQ(deferred.size(), plain.size());
   std::size_t samples = 0;
@@ -279,7 +279,7 @@ TEST(MpiPipeline, DeferredMergeOnTheRootGivesTheReducedFragments) {
     std::vector<LdiFragment> own = cast;
     for (LdiFragment& f : own)
       quantize_fragment(f, encoding);
-    EXPECT_FALSE(finish_merge(broken, own, stats));
+    EXPECT_FALSE(finish_reduction(broken, own, stats));
   }
 }
 

@@ -592,7 +592,7 @@ TEST(FragmentCodec, ReencodingDecodedFragmentGivesSameBytes) {
     }
   }
   const std::vector<LdiFragment> parts{decoded(encode_fragment(a)), decoded(encode_fragment(b))};
-  const LdiFragment merged = merge_fragments(parts, 0.0, glm::vec3(0, 0, 1));
+  const LdiFragment merged = combine_fragments(parts, 0.0, glm::vec3(0, 0, 1));
   EXPECT_EQ(merged.pixels, whole.pixels);
   expect_idempotent(merged, {});
   expect_within_bounds(whole, decoded(encode_fragment(merged)), {});

@@ -51,7 +51,8 @@ Status root_status(MPI_Comm comm, const Status& status) {
 
 }  // namespace
 
-double merge_tolerance(const FragmentEncoding& encoding, const View& view, double domain_diagonal) {
+double reduction_tolerance(const FragmentEncoding& encoding, const View& view,
+                           double domain_diagonal) {
   return std::max(1e-9 * domain_diagonal,
                   2.0 * depth_error_bound(encoding, 0.0, view.depth_extent));
 }
@@ -102,7 +103,7 @@ Status cast_and_reduce(MPI_Comm comm, const StepBlocks& blocks, std::span<const 
           else if (parts.size() == 1)
             fragments[first + v] = std::move(parts.front());
           else
-            fragments[first + v] = merge_fragments(parts, tolerance, glm::vec3(views[v].dir));
+            fragments[first + v] = combine_fragments(parts, tolerance, glm::vec3(views[v].dir));
         } catch (...) {
           failures[v] = std::current_exception();
         }
@@ -171,7 +172,7 @@ Status mesh_step(MPI_Comm comm, const StepBlocks& blocks, std::span<const View> 
   if (!step.pending.messages.empty()) {
     const auto start = std::chrono::steady_clock::now();
     ReductionStats stats;
-    status = finish_merge(step.pending, step.fragments, stats);
+    status = finish_reduction(step.pending, step.fragments, stats);
     step.seconds.decode += seconds_since(start);
   }
   if (status && step.fragments.size() != blocks.size() * nv)
@@ -207,6 +208,16 @@ Status mesh_step(MPI_Comm comm, const StepBlocks& blocks, std::span<const View> 
   return collective ? root_status(comm, status) : status;
 }
 
+Status mesh_on_root(std::size_t isovalues, std::span<const View> views,
+                    const MeshingOptions& options, CastStep& step,
+                    std::vector<MeshingResult>& results) {
+  if (meshing_samples(options))
+    return Status::invalid_argument(
+        "mesh_on_root: refinement or projecting merging asks every rank for samples (mesh_step)");
+  // Without samples mesh_step reads of its blocks only their count, and no communicator.
+  return mesh_step(MPI_COMM_NULL, StepBlocks(isovalues), views, 0.0, options, step, results);
+}
+
 Status mesh_distributed(MPI_Comm comm, const RayCaster& caster, const Subdomain& sub,
                         std::span<const View> views, const DistributedOptions& options,
                         DistributedResult& result) {
@@ -215,7 +226,8 @@ Status mesh_distributed(MPI_Comm comm, const RayCaster& caster, const Subdomain&
   MPI_Comm_rank(comm, &rank);
   double tolerance = 0.0;
   for (const View& view : views)
-    tolerance = std::max(tolerance, merge_tolerance(options.encoding, view, sub.global.diagonal()));
+    tolerance =
+        std::max(tolerance, reduction_tolerance(options.encoding, view, sub.global.diagonal()));
   const StepBlocks blocks{{CastBlock{&caster, sub}}};
   CastStep step;
   Status status =
@@ -373,11 +385,11 @@ std::vector<std::vector<std::uint8_t>> gather(MPI_Comm comm,
 
 // Per ray, the hits of all answers by depth; each run of hits within `tolerance` of its first
 // (a hit on a shared face, seen by two ranks or two blocks) becomes the one kept_before chooses,
-// as one caster merges its own duplicates, so that a ray lying in a face plane between ranks,
+// as one caster collapses its own duplicates, so that a ray lying in a face plane between ranks,
 // which both answer, keeps the hit that one process keeps.
-RayHitList merge_hit_lists(const std::vector<RayHitList>& answers,
-                           std::span<const SamplePoint> points, std::span<const View> views,
-                           double tolerance) {
+RayHitList combine_hit_lists(const std::vector<RayHitList>& answers,
+                             std::span<const SamplePoint> points, std::span<const View> views,
+                             double tolerance) {
   const bool with_scalar = std::any_of(answers.begin(), answers.end(),
                                        [](const RayHitList& a) { return !a.scalar.empty(); });
   struct Hit {
@@ -394,7 +406,7 @@ RayHitList merge_hit_lists(const std::vector<RayHitList>& answers,
     for (const RayHitList& a : answers)
       for (std::uint32_t s = a.offsets[k]; s < a.offsets[k + 1]; ++s)
         hits.push_back({a.depth[s], a.normal[s], a.scalar.empty() ? 0.0f : a.scalar[s]});
-    const std::size_t kept = merge_duplicate_hits(
+    const std::size_t kept = collapse_duplicate_hits(
         std::span<Hit>(hits), tolerance, glm::vec3(views[points[k].view].dir),
         [](const Hit& a, const Hit& b) {
           return a.depth != b.depth ? a.depth < b.depth : normal_less(a.normal, b.normal);
@@ -425,7 +437,7 @@ RayHitList MpiSampleSource::cast_here(std::span<const SamplePoint> points) const
     none.offsets.assign(points.size() + 1, 0);
     return none;
   }
-  return merge_hit_lists(answers, points, views_, tolerance_);
+  return combine_hit_lists(answers, points, views_, tolerance_);
 }
 
 std::vector<std::uint8_t> MpiSampleSource::answer(std::span<const SamplePoint> points) const {
@@ -456,7 +468,7 @@ RayHitList MpiSampleSource::sample(std::span<const SamplePoint> points) {
   } else {
     answers = ask_all(points);
   }
-  return merge_hit_lists(answers, points, views_, tolerance_);
+  return combine_hit_lists(answers, points, views_, tolerance_);
 }
 
 std::vector<RayHitList> MpiSampleSource::ask_all(std::span<const SamplePoint> points) {

@@ -96,8 +96,8 @@ Status unpack(std::span<const std::uint8_t> in, std::size_t views, std::vector<L
   return Status::ok();
 }
 
-// What merge_message would reject, found without decompressing: the envelope, each fragment's
-// frame and checksums, and views that differ from `fragments`' (as merge_fragments checks them).
+// What combine_message would reject, found without decompressing: the envelope, each fragment's
+// frame and checksums, and views that differ from `fragments`' (as combine_fragments checks them).
 Status check_message(std::span<const std::uint8_t> in, const std::vector<LdiFragment>& fragments,
                      bool& upstream_error) {
   std::vector<std::span<const std::uint8_t>> parts;
@@ -108,7 +108,7 @@ Status check_message(std::span<const std::uint8_t> in, const std::vector<LdiFrag
     const LdiFragment& own = fragments[v];
     if (shape.view != own.view || shape.pixel_count != own.pixel_count ||
         shape.depth_lo != own.depth_lo || shape.depth_hi != own.depth_hi)
-      return Status::corrupt_input("reduction: merge_fragments: fragments of different views");
+      return Status::corrupt_input("reduction: combine_fragments: fragments of different views");
   }
   return Status::ok();
 }
@@ -141,11 +141,11 @@ void agree_on_scalar_ranges(MPI_Comm comm, std::vector<LdiFragment>& fragments) 
   }
 }
 
-// One round of the tree on the receiving side: decodes a child's message and merges it into
+// One round of the tree on the receiving side: decodes a child's message and combines it into
 // `fragments`. A message that does not decode leaves `fragments` as they were and sets `status`.
-void merge_message(std::span<const std::uint8_t> message, std::vector<LdiFragment>& fragments,
-                   const DuplicateRule& rule, Status& status, bool& upstream_error,
-                   ReductionStats& stats) {
+void combine_message(std::span<const std::uint8_t> message, std::vector<LdiFragment>& fragments,
+                     const DuplicateRule& rule, Status& status, bool& upstream_error,
+                     ReductionStats& stats) {
   auto t = std::chrono::steady_clock::now();
   std::vector<LdiFragment> received;
   bool child_error = false;
@@ -160,19 +160,19 @@ void merge_message(std::span<const std::uint8_t> message, std::vector<LdiFragmen
   try {
     for (std::size_t v = 0; v < fragments.size(); ++v) {
       const LdiFragment pair[2] = {std::move(fragments[v]), std::move(received[v])};
-      fragments[v] = merge_fragments(pair, rule.tolerance, rule.dirs[v]);
+      fragments[v] = combine_fragments(pair, rule.tolerance, rule.dirs[v]);
     }
   } catch (const std::invalid_argument& e) {  // ranks disagree about the views
     status = Status::invalid_argument(std::string("reduction: ") + e.what());
   }
-  stats.merge_seconds += seconds_since(t);
+  stats.combine_seconds += seconds_since(t);
 }
 
 }  // namespace
 
 Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragments,
                         const FragmentEncoding& encoding, const DuplicateRule& rule,
-                        ReductionStats& stats, PendingMerge* deferred,
+                        ReductionStats& stats, PendingReduction* deferred,
                         const ReductionFaults& faults) {
   const auto start = std::chrono::steady_clock::now();
   stats = {};
@@ -180,7 +180,7 @@ Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragm
     return Status::invalid_argument("reduction: " + std::to_string(rule.dirs.size()) +
                                     " view directions for " + std::to_string(fragments.size()) +
                                     " fragments");
-  if (deferred) *deferred = PendingMerge{{}, rule};
+  if (deferred) *deferred = PendingReduction{{}, rule};
   int rank = 0, size = 1;
   MPI_Comm_rank(comm, &rank);
   MPI_Comm_size(comm, &size);
@@ -190,7 +190,7 @@ Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragm
 
   // The ranks agree on each view's scalar range (the union of their finite scalars): the lossy
   // codec quantizes a fragment's scalars over it, so that every rank, and every intermediate
-  // rank that re-encodes a merge, puts a value on the same grid.
+  // rank that re-encodes a combination, puts a value on the same grid.
   agree_on_scalar_ranges(comm, fragments);
 
   // Quantize this rank's own samples first, as they would arrive from any other rank, so that
@@ -259,8 +259,8 @@ Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragm
     ++stats.messages_received;
 
     if (deferred && rank == root) {
-      // Decoded and merged later (finish_merge); checked now, so that a message the merge would
-      // reject fails the step here, as the plain reduction does.
+      // Decoded and combined later (finish_reduction); checked now, so that a message combining
+      // would reject fails the step here, as the plain reduction does.
       bool child_error = false;
       if (const Status checked = check_message(message, fragments, child_error); !checked) {
         status = checked;
@@ -270,7 +270,7 @@ Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragm
       deferred->messages.push_back(std::move(message));
       continue;
     }
-    merge_message(message, fragments, rule, status, upstream_error, stats);
+    combine_message(message, fragments, rule, status, upstream_error, stats);
   }
   stats.wall_seconds = seconds_since(start);
   if (status && upstream_error && rank == root)
@@ -278,12 +278,12 @@ Status reduce_fragments(MPI_Comm comm, int root, std::vector<LdiFragment>& fragm
   return status;
 }
 
-Status finish_merge(PendingMerge& pending, std::vector<LdiFragment>& fragments,
-                    ReductionStats& stats) {
+Status finish_reduction(PendingReduction& pending, std::vector<LdiFragment>& fragments,
+                        ReductionStats& stats) {
   Status status = Status::ok();
   bool upstream_error = false;
   for (const std::vector<std::uint8_t>& message : pending.messages)
-    merge_message(message, fragments, pending.rule, status, upstream_error, stats);
+    combine_message(message, fragments, pending.rule, status, upstream_error, stats);
   pending.messages.clear();
   if (status && upstream_error)
     status = Status::other_rank("reduction: a fragment failed to decode on another rank");

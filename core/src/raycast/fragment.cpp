@@ -78,8 +78,8 @@ Status validate_fragment(const LdiFragment& f) {
   return Status::ok();
 }
 
-LdiFragment merge_fragments(std::span<const LdiFragment> fragments, double tolerance,
-                            const glm::vec3& dir) {
+LdiFragment combine_fragments(std::span<const LdiFragment> fragments, double tolerance,
+                              const glm::vec3& dir) {
   if (fragments.empty()) return {};
   const LdiFragment& first = fragments.front();
   LdiFragment out;
@@ -93,9 +93,9 @@ LdiFragment merge_fragments(std::span<const LdiFragment> fragments, double toler
     widen_scalar_range(out.scalar_lo, out.scalar_hi, f.scalar_lo, f.scalar_hi);
     if (f.view != first.view || f.pixel_count != first.pixel_count ||
         f.depth_lo != first.depth_lo || f.depth_hi != first.depth_hi)
-      throw std::invalid_argument("merge_fragments: fragments of different views");
+      throw std::invalid_argument("combine_fragments: fragments of different views");
     if (!f.depth.empty() && f.scalar.empty() == with_scalar)
-      throw std::invalid_argument("merge_fragments: some fragments carry a scalar, others not");
+      throw std::invalid_argument("combine_fragments: some fragments carry a scalar, others not");
   }
 
   // A k-way merge over pixel ids: each fragment's cursor walks its pixels in increasing order.
@@ -129,7 +129,7 @@ LdiFragment merge_fragments(std::span<const LdiFragment> fragments, double toler
       c.sample += f.counts[c.pixel];
       ++c.pixel;
     }
-    const std::size_t kept = merge_duplicate_hits(
+    const std::size_t kept = collapse_duplicate_hits(
         std::span<Sample>(samples), tolerance, dir,
         [](const Sample& a, const Sample& b) {
           return std::tie(a.depth, a.normal.x, a.normal.y, a.normal.z, a.scalar) <

@@ -28,11 +28,11 @@ void AxisHits::grow() {
 
 namespace {
 
-// Sorts one ray's hits by depth and merges hits closer than `tolerance` (a root found by both
+// Sorts one ray's hits by depth and collapses hits closer than `tolerance` (a root found by both
 // primitives that share a face, or two roots closer than rounding can tell apart) by the
-// duplicate rule (merge_duplicate_hits).
-std::size_t sort_and_merge(std::span<RayHit> hits, double tolerance, glm::dvec3 dir) {
-  return merge_duplicate_hits(
+// duplicate rule (collapse_duplicate_hits).
+std::size_t sort_and_collapse(std::span<RayHit> hits, double tolerance, glm::dvec3 dir) {
+  return collapse_duplicate_hits(
       hits, tolerance, glm::vec3(dir),
       [](const RayHit& a, const RayHit& b) {
         return a.t != b.t ? a.t < b.t : normal_less(a.normal, b.normal);
@@ -135,7 +135,7 @@ RayCaster::RayCaster(std::span<const FieldSource* const> sources, double isovalu
   if (options.path == CastPath::automatic) {
     for (const FieldSource* source : sources_) {
       std::unique_ptr<AxisBinding> binding = source->bind_axis(isovalue);
-      if (!binding) {  // one source without: Embree for all, so that roots merge alike
+      if (!binding) {  // one source without: Embree for all, so that roots collapse alike
         axis_bindings_.clear();
         break;
       }
@@ -301,7 +301,7 @@ void RayCaster::trace(const View& view, glm::dvec2 image_position, const RaySegm
 
 std::size_t RayCaster::finish_ray(const RaySegment& segment, glm::dvec3 org, glm::dvec3 dir,
                                   std::span<RayHit> hits) const {
-  const std::size_t n = sort_and_merge(hits, duplicate_tolerance_, dir);
+  const std::size_t n = sort_and_collapse(hits, duplicate_tolerance_, dir);
   // Sources report roots on the closed segment; the half-open rule keeps a root on the face
   // two subdomains share in exactly one of them.
   std::size_t kept = 0;

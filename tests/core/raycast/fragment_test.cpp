@@ -38,7 +38,7 @@ TEST(Fragment, LdiRoundTripKeepsEverySample) {
   EXPECT_THROW(ldi_from_fragment(f, kView), std::invalid_argument);
 }
 
-TEST(Fragment, MergeConcatenatesSortsAndDropsDuplicates) {
+TEST(Fragment, CombiningConcatenatesSortsAndCollapsesDuplicates) {
   // Pixel 5 gets 0.3 from a and the next float above it from b: closer than the tolerance, one
   // is dropped. Pixel 9 gets two samples 1e-5 apart: farther than the tolerance, both stay.
   const float near_duplicate = std::nextafter(0.3f, 1.0f);
@@ -47,29 +47,29 @@ TEST(Fragment, MergeConcatenatesSortsAndDropsDuplicates) {
   const LdiFragment a = fragment({1, 5, 9}, {2, 1, 1}, {0.1f, 0.5f, 0.3f, 0.7f + 1e-5f});
   const LdiFragment b = fragment({0, 5, 9}, {1, 2, 1}, {0.2f, 0.1f, near_duplicate, 0.7f});
   const std::vector<LdiFragment> ab{a, b}, ba{b, a};
-  const LdiFragment m = merge_fragments(ab, 1e-6, kDir);
+  const LdiFragment m = combine_fragments(ab, 1e-6, kDir);
   ASSERT_TRUE(validate_fragment(m)) << validate_fragment(m).message();
   EXPECT_EQ(m.pixels, (std::vector<std::uint32_t>{0, 1, 5, 9}));
   EXPECT_EQ(m.counts, (std::vector<std::uint32_t>{1, 2, 2, 2}));
   EXPECT_EQ(m.depth, (std::vector<float>{0.2f, 0.1f, 0.5f, 0.1f, 0.3f, 0.7f, 0.7f + 1e-5f}));
-  const LdiFragment n = merge_fragments(ba, 1e-6, kDir);  // order of fragments does not matter
+  const LdiFragment n = combine_fragments(ba, 1e-6, kDir);  // order of fragments does not matter
   EXPECT_EQ(n.depth, m.depth);
   EXPECT_EQ(n.pixels, m.pixels);
   // Empty fragments merge to nothing; fragments of different views are refused.
   const std::vector<LdiFragment> empties{make_empty_fragment(kView, 2),
                                          make_empty_fragment(kView, 2)};
-  EXPECT_EQ(merge_fragments(empties, 1e-6, kDir).sample_count(), 0u);
+  EXPECT_EQ(combine_fragments(empties, 1e-6, kDir).sample_count(), 0u);
   LdiFragment other = a;
   other.view = 3;
   const std::vector<LdiFragment> mixed{a, other};
-  EXPECT_THROW(merge_fragments(mixed, 1e-6, kDir), std::invalid_argument);
+  EXPECT_THROW(combine_fragments(mixed, 1e-6, kDir), std::invalid_argument);
 }
 
 // A root on a face two cells share, found by both with their own gradients (a C⁰ field: they
 // differ): merging fragments of two blocks or ranks keeps the hit that one caster keeps of the
 // same two (kept_before: the normal facing the viewer most), not the smaller depth, whichever
 // fragment holds which, and whatever the rounding that orders their depths.
-TEST(Fragment, MergeKeepsTheDuplicateOneCasterKeeps) {
+TEST(Fragment, CombiningKeepsTheDuplicateOneCasterKeeps) {
   LdiFragment a = fragment({5}, {1}, {0.3f});
   LdiFragment b = fragment({5}, {1}, {std::nextafter(0.3f, 0.0f)});
   a.normal = {glm::normalize(glm::vec3(0.2f, 0.0f, -1.0f))};  // faces the viewer (dir +z) most
@@ -77,14 +77,14 @@ TEST(Fragment, MergeKeepsTheDuplicateOneCasterKeeps) {
   for (const bool swapped : {false, true}) {
     const std::vector<LdiFragment> pair =
         swapped ? std::vector<LdiFragment>{b, a} : std::vector<LdiFragment>{a, b};
-    const LdiFragment m = merge_fragments(pair, 1e-6, kDir);
+    const LdiFragment m = combine_fragments(pair, 1e-6, kDir);
     ASSERT_EQ(m.depth.size(), 1u);
     EXPECT_EQ(m.depth[0], 0.3f);
     EXPECT_EQ(m.normal[0], a.normal[0]);
   }
   std::vector<RayHit> hits{{double(b.depth[0]), b.normal[0], 0.0f},
                            {double(a.depth[0]), a.normal[0], 0.0f}};
-  const std::size_t kept = merge_duplicate_hits(
+  const std::size_t kept = collapse_duplicate_hits(
       std::span<RayHit>(hits), 1e-6, kDir,
       [](const RayHit& x, const RayHit& y) { return x.t < y.t; },
       [](const RayHit& h) { return h.t; }, [](const RayHit& h) { return h.normal; });
@@ -92,7 +92,7 @@ TEST(Fragment, MergeKeepsTheDuplicateOneCasterKeeps) {
   EXPECT_EQ(hits[0].normal, a.normal[0]);
   // Without a tolerance both stay, by depth.
   const std::vector<LdiFragment> pair{a, b};
-  EXPECT_EQ(merge_fragments(pair, 0.0, kDir).depth,
+  EXPECT_EQ(combine_fragments(pair, 0.0, kDir).depth,
             (std::vector<float>{std::nextafter(0.3f, 0.0f), 0.3f}));
 }
 

@@ -28,8 +28,8 @@ LdiFragment cast_tiled(const RayCaster& caster, const View& view, const Box& glo
   std::vector<LdiFragment> fragments;
   for (const Box& box : decompose_box(global, parts))
     fragments.push_back(caster.cast_fragment(view, 0, {box, global}));
-  return merge_fragments(fragments, 0.0,
-                         glm::vec3(view.dir));  // no tolerance: a double hit would show
+  return combine_fragments(fragments, 0.0,
+                           glm::vec3(view.dir));  // no tolerance: a double hit would show
 }
 
 void expect_same(const Ldi& whole, const LdiFragment& tiled) {
@@ -85,7 +85,7 @@ TEST(Subdomain, AHitOnASharedFaceIsProducedExactlyOnce) {
     const LdiFragment a = caster.cast_fragment(view, 0, {left, kCube});
     const LdiFragment b = caster.cast_fragment(view, 0, {right, kCube});
     const std::vector<LdiFragment> both{a, b};
-    const LdiFragment merged = merge_fragments(both, 0.0, glm::vec3(view.dir));
+    const LdiFragment merged = combine_fragments(both, 0.0, glm::vec3(view.dir));
     std::size_t through = 0;
     for (std::uint32_t c : merged.counts)
       ASSERT_EQ(c, 1u);
@@ -143,7 +143,7 @@ TEST(Subdomain, GridBlocksWithGhostLayersTileLikeOneBlock) {
       std::vector<LdiFragment> fragments;
       for (std::size_t r = 0; r < parts.size(); ++r)
         fragments.push_back(casters[r]->cast_fragment(view, 0, {parts[r].owned, one.bounds()}));
-      expect_same(single.cast(view), merge_fragments(fragments, 0.0, glm::vec3(view.dir)));
+      expect_same(single.cast(view), combine_fragments(fragments, 0.0, glm::vec3(view.dir)));
     }
   }
   EXPECT_THROW(grid_part(whole, {30, 1, 1}, {0, 0, 0}), std::invalid_argument);

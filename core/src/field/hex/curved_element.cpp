@@ -1,6 +1,7 @@
 #include "curved_element.hpp"
 
 #include "../bernstein/basis.hpp"
+#include "../bernstein/conversion.hpp"
 
 #include <algorithm>
 #include <atomic>
@@ -32,36 +33,14 @@ constexpr int kMaxBoxes = 4096;
 constexpr double kSignMargin = 1e-12;
 constexpr double kBoxMargin = 1e-9;
 
-// Calls fn(std::integral_constant<int, n>) for the degree n (1..kMaxHexOrder): kernels with
-// the degree as a constant, so that their loops unroll and their sums stay in registers.
-template <class Fn>
-decltype(auto) with_degree(int n, Fn&& fn) {
-  switch (n) {
-    case 1:
-      return fn(std::integral_constant<int, 1>{});
-    case 2:
-      return fn(std::integral_constant<int, 2>{});
-    case 3:
-      return fn(std::integral_constant<int, 3>{});
-    case 4:
-      return fn(std::integral_constant<int, 4>{});
-    case 5:
-      return fn(std::integral_constant<int, 5>{});
-    case 6:
-      return fn(std::integral_constant<int, 6>{});
-    case 7:
-      return fn(std::integral_constant<int, 7>{});
-    default:
-      return fn(std::integral_constant<int, 8>{});
-  }
-}
-
-// Value and gradient at r of the tensor of degree n with `count` interleaved components
+// Value and gradient at r of the tensor of degree n (1..kMaxHexOrder, with_order: the loops
+// unrolled) with `count` interleaved components
 // (coefficient m's component c at c[m·count + c]), by sum factorisation: ξ contracted first
 // (value and ξ-derivative per row), then η, then ζ.
 template <int count>
-void evaluate_tensor(int n, const double* c, glm::dvec3 r, double* value, glm::dvec3* gradient) {
-  with_degree(n, [&](auto degree) {
+void evaluate_components(int n, const double* c, glm::dvec3 r, double* value,
+                         glm::dvec3* gradient) {
+  bernstein::with_order(n, [&](auto degree) {
     constexpr int N = degree, m = N + 1;
     double bx[kMaxNodes], dx[kMaxNodes], by[kMaxNodes], dy[kMaxNodes], bz[kMaxNodes], dz[kMaxNodes];
     bernstein_basis<N>(r.x, bx, dx);
@@ -325,12 +304,12 @@ Sample evaluate(const Element& e, glm::dvec3 xi) {
   Sample s;
   double x[3];
   glm::dvec3 gx[3];
-  evaluate_tensor<3>(e.q, &e.geometry[0].x, xi, x, gx);
+  evaluate_components<3>(e.q, &e.geometry[0].x, xi, x, gx);
   s.x = glm::dvec3(x[0], x[1], x[2]);
   // Columns ∂x/∂ξ_k: row r of the Jacobian is the gradient of x_r.
   for (int k = 0; k < 3; ++k)
     s.jacobian[k] = glm::dvec3(gx[0][k], gx[1][k], gx[2][k]);
-  if (e.field) evaluate_tensor<1>(e.p, e.field, xi, &s.f, &s.gradient);
+  if (e.field) evaluate_components<1>(e.p, e.field, xi, &s.f, &s.gradient);
   return s;
 }
 
@@ -748,7 +727,7 @@ std::atomic<bool> use_avx2{processor_has_avx2()};
 template <class Kernel, class Task>
 void run(int n, const Task& task) {
   const bool avx2 = use_avx2.load(std::memory_order_relaxed);
-  with_degree(n, [&](auto degree) {
+  bernstein::with_order(n, [&](auto degree) {
 #if defined(__x86_64__)
     if (avx2) return run_avx2<Kernel, degree>(task);
 #endif

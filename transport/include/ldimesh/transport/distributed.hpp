@@ -50,7 +50,8 @@ struct DistributedResult {
 
 // The tolerance below which two samples of one pixel from different ranks are one root: the
 // larger of 1e-9 of the domain diagonal and twice the depth quantization error.
-double merge_tolerance(const FragmentEncoding& encoding, const View& view, double domain_diagonal);
+double reduction_tolerance(const FragmentEncoding& encoding, const View& view,
+                           double domain_diagonal);
 
 // ---------------------------------------------------------------------------------------------
 // One step of the method over MPI, in two halves. The CLI (mesh_distributed) and the in situ
@@ -74,7 +75,7 @@ using StepBlocks = std::vector<std::vector<CastBlock>>;
 struct CastStep {
   // Isovalue-major: isovalue i, view v at i · views + v (their view_index likewise).
   std::vector<LdiFragment> fragments;
-  PendingMerge pending;  // a deferred reduction's messages, merged by mesh_step
+  PendingReduction pending;  // a deferred reduction's messages, combined by mesh_step
   DistributedTimes seconds;
   std::uint64_t bytes_to_root = 0;
   std::uint64_t bytes_moved = 0;       // all ranks' bytes sent together
@@ -87,8 +88,8 @@ bool meshing_samples(const MeshingOptions& options);
 
 // The collective half, on every rank of `comm` (rank 0 the root). Every rank casts each of its
 // blocks along every view (a block's samples only where it owns the ray, the half-open rule of
-// subdomain_segment) and merges its blocks' fragments per view; the fragments are reduced to
-// the root (reduce_fragments with `tolerance`; with `defer`, the root's merging of what it
+// subdomain_segment) and combines its blocks' fragments per view; the fragments are reduced to
+// the root (reduce_fragments with `tolerance`; with `defer`, the root's combining of what it
 // received is left to mesh_step, off the collective part). A failed `local` status (this rank
 // could not set up its blocks) or an exception while casting sends no fragments and fails the
 // step on every rank: the failing rank returns its own status (an exception's by
@@ -100,18 +101,25 @@ Status cast_and_reduce(MPI_Comm comm, const StepBlocks& blocks, std::span<const 
                        bool defer, CastStep& step, double bind_seconds = 0.0,
                        const ReductionFaults& faults = {});
 
-// The root half. On the root: merges what a deferred reduction left (finish_merge), decodes each
-// isovalue's LDIs and meshes them with `options` (mesh_ldis), results[i] for isovalue i (ldis,
+// The root half. On the root: combines what a deferred reduction left (finish_reduction), decodes
+// each isovalue's LDIs and meshes them with `options` (mesh_ldis), results[i] for isovalue i (ldis,
 // when given, gets the LDIs too). Where meshing_samples(options), every rank calls it: the root
 // meshes with an MpiSampleSource over each isovalue's blocks while the other ranks serve it,
 // and every rank returns the root's status. Otherwise only the root calls it: it is not
 // collective and makes no MPI call (any thread may run it; `comm` is not used, and of `blocks`
 // only the count of isovalues).
-// Errors (a failed merge, meshing's exceptions) come back as a Status.
+// Errors (a failed combination, meshing's exceptions) come back as a Status.
 Status mesh_step(MPI_Comm comm, const StepBlocks& blocks, std::span<const View> views,
                  double tolerance, const MeshingOptions& options, CastStep& step,
                  std::vector<MeshingResult>& results,
                  std::vector<std::vector<Ldi>>* ldis = nullptr);
+
+// The root half where meshing asks no rank for samples (meshing_samples(options) false): mesh_step
+// on the root alone for `isovalues` isovalues — not collective, no MPI call, any one thread.
+// invalid_argument where the options need samples.
+Status mesh_on_root(std::size_t isovalues, std::span<const View> views,
+                    const MeshingOptions& options, CastStep& step,
+                    std::vector<MeshingResult>& results);
 
 // Collective over `comm` (rank 0 is the root): one step of one caster over the subdomain `sub`
 // it owns. Every rank ray casts the part `sub` owns of each of `views` (the same views on
@@ -138,9 +146,9 @@ Status mesh_distributed(MPI_Comm comm, const RayCaster& caster, const Subdomain&
 // sample() call is one round trip, whatever the number of views: the root broadcasts a header
 // (ray count) and all rays (view index and image position each); every rank casts the parts it
 // owns of the rays (cast_sample_points with its subdomain; a ray lying in a face plane two
-// ranks share is cast by both); the answers are gathered to the root and merged per ray
-// (concatenated, sorted by depth, each run of hits within `tolerance` of its first merged into
-// the one whose normal faces the viewer most, as a RayCaster merges the duplicates of its own
+// ranks share is cast by both); the answers are gathered to the root and combined per ray
+// (concatenated, sorted by depth, each run of hits within `tolerance` of its first collapsed into
+// the one whose normal faces the viewer most, as a RayCaster collapses the duplicates of its own
 // primitives), so the root gets what one process would.
 //
 // Requests are checked on the root before anything is sent: an unknown view throws
@@ -153,10 +161,10 @@ Status mesh_distributed(MPI_Comm comm, const RayCaster& caster, const Subdomain&
 class MpiSampleSource final : public SampleSource {
  public:
   // `caster` must outlive this object; `views` and `sub` as for mesh_distributed; `tolerance`
-  // as for the reduction (merge_tolerance).
+  // as for the reduction (reduction_tolerance).
   MpiSampleSource(MPI_Comm comm, const RayCaster& caster, Subdomain sub, std::vector<View> views,
                   double tolerance);
-  // This rank's answers from several blocks (each cast where it owns the ray, their hits merged
+  // This rank's answers from several blocks (each cast where it owns the ray, their hits combined
   // per ray as the ranks' are); none: this rank answers without hits. Their casters must
   // outlive this object.
   MpiSampleSource(MPI_Comm comm, std::vector<CastBlock> blocks, std::vector<View> views,

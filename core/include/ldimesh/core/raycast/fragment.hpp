@@ -22,10 +22,10 @@ inline bool normal_less(const glm::vec3& a, const glm::vec3& b) {
   return a.z < b.z;
 }
 
-// Of hits of one ray closer than a merge tolerance (a root that primitives, blocks or ranks on
+// Of hits of one ray closer than a duplicate tolerance (a root that primitives, blocks or ranks on
 // either side of a face all found), whether the one with normal `a` is kept before the one with
 // `b`: the normal facing the viewer of a ray along `dir` most (smaller a · dir), then the
-// smaller normal. Every merge of duplicates keeps hits by it (merge_duplicate_hits) — one
+// smaller normal. Every collapse of duplicates keeps hits by it (collapse_duplicate_hits) — one
 // caster's, the blocks' of a rank, the ranks' in the reduction and in sample requests — so
 // that one process and several ranks keep the same hit; where a gradient jumps at a cell face
 // the duplicates' normals differ along the ray, so the choice does not hang on rounding or on
@@ -35,13 +35,13 @@ inline bool kept_before(const glm::vec3& a, const glm::vec3& b, const glm::vec3&
   return da != db ? da < db : normal_less(a, b);
 }
 
-// The duplicate rule: sorts one ray's hits by `less` (depth first) and merges each run of hits
+// The duplicate rule: sorts one ray's hits by `less` (depth first) and collapses each run of hits
 // whose depth lies within `tolerance` of the run's first into the one kept_before chooses (the
 // first such in `less` order). Returns how many are kept, at the front of `hits`. `depth(h)` and
 // `normal(h)` read a hit.
 template <class Hit, class Less, class Depth, class Normal>
-std::size_t merge_duplicate_hits(std::span<Hit> hits, double tolerance, const glm::vec3& dir,
-                                 Less less, Depth depth, Normal normal) {
+std::size_t collapse_duplicate_hits(std::span<Hit> hits, double tolerance, const glm::vec3& dir,
+                                    Less less, Depth depth, Normal normal) {
   if (hits.size() <= 16) {  // a ray's few hits, often in order already
     for (std::size_t k = 1; k < hits.size(); ++k)
       for (std::size_t m = k; m > 0 && less(hits[m], hits[m - 1]); --m)
@@ -105,16 +105,16 @@ LdiFragment fragment_from_ldi(const Ldi& ldi, std::uint32_t view_index);
 // unset (both NaN) or finite with lo ≤ hi); a Status naming the first violation.
 Status validate_fragment(const LdiFragment& fragment);
 
-// Fragments of one view merged: per pixel the samples of all fragments are concatenated,
-// sorted by depth (ties by normal, then scalar) and merged by the duplicate rule
-// (merge_duplicate_hits) with `tolerance` and the view's direction `dir` (one root found by two
+// Fragments of one view combined: per pixel the samples of all fragments are concatenated,
+// sorted by depth (ties by normal, then scalar) and collapsed by the duplicate rule
+// (collapse_duplicate_hits) with `tolerance` and the view's direction `dir` (one root found by two
 // blocks or ranks on their shared face: the one a single caster would keep). The result does not
 // depend on the order of the fragments. All fragments must be of the same view (same view
 // index, pixel_count and depth interval) and carry a scalar alike; throws
 // std::invalid_argument otherwise. The scalar range is the union of the fragments' (NaN where
 // none has one). An empty list gives an empty fragment.
-LdiFragment merge_fragments(std::span<const LdiFragment> fragments, double tolerance,
-                            const glm::vec3& dir);
+LdiFragment combine_fragments(std::span<const LdiFragment> fragments, double tolerance,
+                              const glm::vec3& dir);
 
 // The full LDI of `view` with the fragment's samples; throws std::invalid_argument if the
 // fragment's pixel_count differs from the view's.
