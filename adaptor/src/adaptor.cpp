@@ -1234,6 +1234,10 @@ class AdaptorImpl final : public Adaptor {
       wait_as_batch_thread(false);
       const Status failed = guard("", [&] { return publish(job); });
       std::lock_guard lock(mutex_);
+      // Counted where the worker becomes idle, under the same lock: whoever sees the step
+      // published also sees the root free for the next one (a due step is skipped while it is
+      // busy; counted earlier, a step due at once could still find it working).
+      if (failed) ++published_;
       working_ = false;
       if (!failed) background_failure(failed, "step " + std::to_string(job.step) + ": ", true);
       idle_.notify_all();
@@ -1300,10 +1304,6 @@ class AdaptorImpl final : public Adaptor {
     Snapshot snapshot = make_snapshot(std::move(meta), std::move(glb));
     if (!options_.output_dir.empty()) write_step(snapshot);
     LDIMESH_RETURN_IF_ERROR(store_->publish(std::move(snapshot)));
-    {
-      std::lock_guard lock(mutex_);
-      ++published_;
-    }
     if (options_.log) {
       std::printf(
           "ldimesh: step %llu  t=%g  %zu triangles  %zu bytes  cast %.3f reduce %.3f mesh %.3f glb "
