@@ -1,0 +1,100 @@
+#include "caster_thread.hpp"
+
+#include <chrono>
+#include <string>
+#include <utility>
+
+#include "ldimesh/core/base/timing.hpp"
+
+namespace ldimesh {
+
+CasterThread::CasterThread(MPI_Comm comm, const AdaptorOptions& options,
+                           const BlockSnapshot& snapshot, RootWorker* worker, Schedule& schedule,
+                           Failures& failures)
+    : options_(options),
+      snapshot_(snapshot),
+      worker_(worker),
+      schedule_(schedule),
+      failures_(failures) {
+  MPI_Comm_dup(comm, &comm_);
+  MPI_Comm_rank(comm_, &rank_);
+  thread_ = std::thread([this] { run(); });
+}
+
+void CasterThread::wait_idle() {
+  std::unique_lock lock(mutex_);
+  idle_.wait(lock, [&] { return !busy_; });
+}
+
+void CasterThread::hand(CasterJob job) {
+  std::lock_guard lock(mutex_);
+  job_ = std::move(job);
+  busy_ = true;
+  wake_.notify_all();
+}
+
+bool CasterThread::busy() const {
+  std::lock_guard lock(mutex_);
+  return busy_;
+}
+
+void CasterThread::stop() {
+  if (!thread_.joinable()) return;
+  {
+    std::unique_lock lock(mutex_);
+    idle_.wait(lock, [&] { return !busy_; });
+    stopping_ = true;
+    wake_.notify_all();
+  }
+  thread_.join();
+  MPI_Comm_free(&comm_);
+}
+
+void CasterThread::run() {
+  while (true) {
+    CasterJob cj;
+    wait_as_batch_thread(true);
+    {
+      std::unique_lock lock(mutex_);
+      wake_.wait(lock, [&] { return stopping_ || job_.has_value(); });
+      if (!job_) return;
+      cj = std::move(*job_);
+      job_.reset();
+    }
+    wait_as_batch_thread(false);
+    const std::uint64_t step = cj.job.step;
+    const Status failed = guard("", [&] { return cast(cj); });
+    if (!failed)
+      failures_.background(failed, "step " + std::to_string(step) + " skipped: ", rank_ == 0);
+    std::lock_guard lock(mutex_);
+    busy_ = false;
+    idle_.notify_all();
+  }
+}
+
+Status CasterThread::cast(CasterJob& cj) {
+  StepCasters casters;
+  Status s =
+      collective_step(comm_, options_, snapshot_.blocks(), cj.domain, cj.status, cj.job, casters);
+  double max_blocked = 0.0;
+  MPI_Reduce(&cj.blocked_seconds, &max_blocked, 1, MPI_DOUBLE, MPI_MAX, 0, comm_);
+  // The snapshot stays until the next step: the ranks serve the root's samples from it.
+  if (s && meshing_samples(meshing_options(options_, cj.job.merge))) {
+    const bool merging = rank_ == 0 && cj.job.merge;
+    if (merging) schedule_.merge_started(cj.job.step);
+    const auto merge_start = std::chrono::steady_clock::now();
+    s = guard("", [&] { return mesh_with_samples(comm_, options_, casters, cj.job); });
+    // What the merge (decoding and meshing, the samples' round trips included) took.
+    if (merging)
+      schedule_.merge_finished(s ? std::optional<double>(seconds_since(merge_start))
+                                 : std::nullopt);
+  }
+  LDIMESH_RETURN_IF_ERROR(s);
+  if (rank_ == 0) {
+    cj.job.seconds["blocked"] = max_blocked;
+    worker_->hand(std::move(cj.job));
+  }
+  return Status::ok();
+}
+
+}  // namespace ldimesh
