@@ -41,8 +41,6 @@ struct Input {
 };
 
 // The name of the field the mesh is coloured by: --colour-by's point array, or for --grid the
-
-// The name of the field the mesh is coloured by: --colour-by's point array, or for --grid the
 // colour file's name without folder and extension.
 std::string colour_name(const MeshArgs& args);
 

@@ -152,9 +152,9 @@ class AdaptorImpl final : public Adaptor {
     report_ = {};
     report_.step = step;
     const Decision decision = decide(step);
-    if (decision.run != 1) {
-      report_.skipped_busy = decision.run == 2;
-      if (decision.run == 2 && rank_ == 0) {
+    if (decision.run != Run::yes) {
+      report_.skipped_busy = decision.run == Run::busy;
+      if (decision.run == Run::busy && rank_ == 0) {
         schedule_.skipped();
         if (options_.log)
           std::printf("ldimesh: step %llu skipped: still processing an earlier step\n",
@@ -207,11 +207,12 @@ class AdaptorImpl final : public Adaptor {
   std::uint64_t published_steps() const override { return worker_ ? worker_->published() : 0; }
 
  private:
-  // What every rank does with a step: whether it runs (1), is not due (0) or is skipped while
-  // the root is busy (2) — the root's call; whether every rank can snapshot its blocks; whether
-  // "auto" merging has stopped (the root's).
+  // What every rank does with a step: whether it runs, is not due or is skipped while the root
+  // is busy (the root's call); whether every rank can snapshot its blocks; whether "auto"
+  // merging has stopped (the root's).
+  enum class Run { not_due = 0, yes = 1, busy = 2 };  // ordered: the reduction takes the largest
   struct Decision {
-    int run = 0;
+    Run run = Run::not_due;
     bool snapshot = false;
     bool merge_stopped = false;
   };
@@ -226,16 +227,20 @@ class AdaptorImpl final : public Adaptor {
       // newest due step is always published. The caster first: it hands its step to the worker
       // before it is idle.
       const bool busy = (caster_ && caster_->busy()) || worker_->busy();
-      flags[0] = busy && !options_.coalesce ? 2 : 1;
-      if (flags[0] == 1) flags[2] = schedule_.merge_stopped(step) ? 1 : 0;
+      const Run run = busy && !options_.coalesce ? Run::busy : Run::yes;
+      flags[0] = int(run);
+      if (run == Run::yes) flags[2] = schedule_.merge_stopped(step) ? 1 : 0;
     }
     MPI_Allreduce(MPI_IN_PLACE, flags, 3, MPI_INT, MPI_MAX, comm_);
-    return {flags[0], flags[1] == 0, flags[2] != 0};
+    return {Run(flags[0]), flags[1] == 0, flags[2] != 0};
   }
 
   // The synchronous path: the solver waits for the cast and the reduction (and for the
   // meshing, where it needs every rank's samples).
+  // With "coalesce" the caster thread may still hold an earlier step: it is handed to the worker
+  // first, so that the worker never gets an older step after this one.
   Status run_synchronously(Job job, Clock::time_point start) {
+    if (caster_) caster_->wait_idle();
     StepCasters casters;
     Status s = collective_step(comm_, options_, blocks_, domain_, Status::ok(), job, casters);
     if (s && meshing_samples(meshing_options(options_, job.merge)))
@@ -291,19 +296,19 @@ class AdaptorImpl final : public Adaptor {
     // others' finish the previous step's reduction with it: a short wait. With "coalesce" the
     // solver waits here for the rest of the previous step's cast and reduction.
     caster_->wait_idle();
-    std::size_t planned = 0;
-    Status copied = snapshot_.plan(blocks_, options_.isovalues, field_bits_, planned);
+    BlockSnapshot::Plan plan;
+    Status copied = BlockSnapshot::plan(blocks_, options_.isovalues, field_bits_, plan);
     // Whether some rank's copy exceeds memory_mb, and the largest copy. (A rank that failed
     // goes on: its caster thread fails the step everywhere, as on the synchronous path.)
-    long long over[2] = {copied && planned > (options_.memory_mb << 20) ? 1 : 0,
-                         static_cast<long long>(planned)};
+    long long over[2] = {copied && plan.bytes > (options_.memory_mb << 20) ? 1 : 0,
+                         static_cast<long long>(plan.bytes)};
     MPI_Allreduce(MPI_IN_PLACE, over, 2, MPI_LONG_LONG, MPI_MAX, comm_);
     largest = over[1];
-    if (over[0]) {  // synchronous: the previous snapshot is no longer needed (the caster is idle)
-      snapshot_.clear();
-      return false;
-    }
-    if (copied) copied = snapshot_.take(blocks_);
+    // Synchronous where some copy is too large (the previous snapshot is no longer needed: the
+    // caster is idle), or with none where this rank failed.
+    if (over[0] || !copied) snapshot_.clear();
+    if (over[0]) return false;
+    if (copied) copied = snapshot_.take(blocks_, std::move(plan));
     report_.background = true;
     report_.snapshot_bytes = copied ? snapshot_.bytes() : 0;
     CasterJob cj;

@@ -271,40 +271,41 @@ std::size_t BlockSnapshot::CopyPlan::bytes() const {
 }
 
 Status BlockSnapshot::plan(const std::vector<Block>& blocks, std::span<const double> isovalues,
-                           std::span<const std::uint8_t> field_bits, std::size_t& bytes) {
-  bytes = 0;
-  plans_.clear();
+                           std::span<const std::uint8_t> field_bits, Plan& plan) {
+  plan = {};
   return guard("snapshot: ", [&] {
-    plans_.resize(blocks.size());
+    std::vector<CopyPlan>& plans = plan.blocks;
+    plans.resize(blocks.size());
     for (std::size_t k = 0; k < blocks.size(); ++k) {
       const Block& b = blocks[k];
       std::vector<FieldArray> colours;
       for (const Colour& c : b.colours)
         colours.push_back(c.array);
-      plans_[k] = b.grid ? plan_grid(*b.grid, static_cast<const GridSource&>(*b.source), isovalues,
-                                     colours, field_bits)
-                  : b.cells ? plan_cells(*b.cells, colours)
-                            : plan_hex(*b.hex, static_cast<const HexElementSource&>(*b.source),
-                                       isovalues, colours);
-      bytes += plans_[k].bytes();
+      plans[k] = b.grid ? plan_grid(*b.grid, static_cast<const GridSource&>(*b.source), isovalues,
+                                    colours, field_bits)
+                 : b.cells ? plan_cells(*b.cells, colours)
+                           : plan_hex(*b.hex, static_cast<const HexElementSource&>(*b.source),
+                                      isovalues, colours);
+      plan.bytes += plans[k].bytes();
     }
     return Status::ok();
   });
 }
 
-Status BlockSnapshot::take(const std::vector<Block>& blocks) {
+Status BlockSnapshot::take(const std::vector<Block>& blocks, Plan plan) {
+  std::vector<CopyPlan>& plans = plan.blocks;
   const Status taken = guard("snapshot: ", [&] {
     // Every page the copies will not write is given back before any is written.
     copies_.resize(blocks.size());
     blocks_.clear();
     for (std::size_t k = 0; k < blocks.size(); ++k)
-      begin_copy(plans_[k], copies_[k]);
+      begin_copy(plans[k], copies_[k]);
     for (std::size_t k = 0; k < blocks.size(); ++k) {
       const Block& b = blocks[k];
       BlockCopy& into = copies_[k];
       Block copy;
       copy.owned = b.owned;
-      const std::vector<std::uint8_t>& held = plans_[k].held;
+      const std::vector<std::uint8_t>& held = plans[k].held;
       if (b.grid) {  // the bricks the step's isovalues need, with the points around them
         const auto& live = static_cast<const GridSource&>(*b.source);
         copy.grid = copy_grid(*b.grid, live, held, into);
@@ -326,7 +327,7 @@ Status BlockSnapshot::take(const std::vector<Block>& blocks) {
         if (!live.values) continue;
         SparseCopy& colour = into.colours[f];
         const std::vector<std::uint8_t>& field_held =
-            plans_[k].colour_held[f].empty() ? held : plans_[k].colour_held[f];
+            plans[k].colour_held[f].empty() ? held : plans[k].colour_held[f];
         if (b.grid)
           copy_points(*b.grid, static_cast<const GridSource&>(*b.source), field_held, live.values,
                       live.type, colour.held(), colour.data());
@@ -341,13 +342,11 @@ Status BlockSnapshot::take(const std::vector<Block>& blocks) {
     }
     return Status::ok();
   });
-  plans_.clear();
-  if (!taken) blocks_.clear();
+  if (!taken) clear();
   return taken;
 }
 
 void BlockSnapshot::clear() {
-  plans_.clear();
   copies_.clear();
   blocks_.clear();
 }

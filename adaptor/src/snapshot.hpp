@@ -20,15 +20,21 @@ namespace ldimesh {
 // idle; the caster thread reads blocks() until it is idle again.
 class BlockSnapshot {
  public:
+  struct CopyPlan;
+  // What a step copies of its blocks (plan), and the bytes the copy will hold.
+  struct Plan {
+    std::vector<CopyPlan> blocks;
+    std::size_t bytes = 0;
+  };
   // Chooses what a step for `isovalues` reads of `blocks`: a grid block's bricks (and, of each
   // colour field, those of the isovalues whose bits — 1 << i, 1 << 7 from the eighth on —
-  // `field_bits` has), an element block's elements, a cell block's every cell. `bytes`: what
-  // the copy will hold. Errors: the memory to plan it (resource_exhausted).
-  Status plan(const std::vector<Block>& blocks, std::span<const double> isovalues,
-              std::span<const std::uint8_t> field_bits, std::size_t& bytes);
-  // Copies what plan chose of `blocks` (the same), the pages no longer needed given back before
-  // any is written. Errors: the system refused the memory (blocks() then empty).
-  Status take(const std::vector<Block>& blocks);
+  // `field_bits` has), an element block's elements, a cell block's every cell. Errors: the
+  // memory to plan it (out_of_memory).
+  static Status plan(const std::vector<Block>& blocks, std::span<const double> isovalues,
+                     std::span<const std::uint8_t> field_bits, Plan& plan);
+  // Copies what `plan` chose of `blocks` (those it was made for), the pages no longer needed
+  // given back before any is written. Errors: the system refused the memory (no snapshot then).
+  Status take(const std::vector<Block>& blocks, Plan plan);
   // Gives the memory back (no snapshot).
   void clear();
   // Sources over the copies, with their colour fields, as the step's blocks.
@@ -58,7 +64,6 @@ class BlockSnapshot {
   };
 
  private:
-  std::vector<CopyPlan> plans_;
   std::vector<BlockCopy> copies_;
   std::vector<Block> blocks_;
 };

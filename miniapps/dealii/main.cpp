@@ -446,16 +446,16 @@ class CellHeatSolver {
     const unsigned int p = args.order;
     if (args.cells == "tet") {
       add_shape(ReferenceCells::Tetrahedron, ldimesh::CellType::tetrahedron, FE_SimplexP<dim>(p),
-                std::make_unique<MappingFE<dim>>(FE_SimplexP<dim>(1)), QGaussSimplex<dim>(p + 1));
+                MappingFE<dim>(FE_SimplexP<dim>(1)), QGaussSimplex<dim>(p + 1));
     } else {  // mixed, p = 1
       add_shape(ReferenceCells::Hexahedron, ldimesh::CellType::hexahedron, FE_Q<dim>(p),
-                std::make_unique<MappingQ<dim>>(1), QGauss<dim>(p + 1));
+                MappingQ<dim>(1), QGauss<dim>(p + 1));
       add_shape(ReferenceCells::Wedge, ldimesh::CellType::wedge, FE_WedgeP<dim>(p),
-                std::make_unique<MappingFE<dim>>(FE_WedgeP<dim>(1)), QGaussWedge<dim>(p + 1));
+                MappingFE<dim>(FE_WedgeP<dim>(1)), QGaussWedge<dim>(p + 1));
       add_shape(ReferenceCells::Pyramid, ldimesh::CellType::pyramid, FE_PyramidP<dim>(p),
-                std::make_unique<MappingFE<dim>>(FE_PyramidP<dim>(1)), QGaussPyramid<dim>(p + 1));
+                MappingFE<dim>(FE_PyramidP<dim>(1)), QGaussPyramid<dim>(p + 1));
       add_shape(ReferenceCells::Tetrahedron, ldimesh::CellType::tetrahedron, FE_SimplexP<dim>(p),
-                std::make_unique<MappingFE<dim>>(FE_SimplexP<dim>(1)), QGaussSimplex<dim>(p + 1));
+                MappingFE<dim>(FE_SimplexP<dim>(1)), QGaussSimplex<dim>(p + 1));
     }
   }
 
@@ -594,10 +594,10 @@ class CellHeatSolver {
   };
 
   void add_shape(ReferenceCell reference, ldimesh::CellType type, const FiniteElement<dim>& fe,
-                 std::unique_ptr<Mapping<dim>> mapping, const Quadrature<dim>& quadrature) {
+                 const Mapping<dim>& mapping, const Quadrature<dim>& quadrature) {
     shapes_.push_back({reference, type, {}, {}});
     fe_.push_back(fe);
-    mapping_.push_back(*mapping);
+    mapping_.push_back(mapping);
     quadrature_.push_back(quadrature);
   }
 

@@ -50,16 +50,10 @@ std::unique_ptr<Adaptor> make(const std::string& options, const char* surface = 
   return a;
 }
 
-bool thread_multiple() {
-  int level = MPI_THREAD_SINGLE;
-  MPI_Query_thread(&level);
-  return level >= MPI_THREAD_MULTIPLE;
-}
+using testing::thread_multiple;
 
-// Distinct per thread level: the funneled and the --thread-multiple runs may run at once.
 std::string temp_dir(const std::string& name) {
-  return testing::fresh_temp_dir(thread_multiple() ? "ldimesh_adaptor_mt" : "ldimesh_adaptor",
-                                 name);
+  return testing::adaptor_temp_dir("ldimesh_adaptor", name);
 }
 
 TEST(Adaptor, InvalidOptionsAreReportedOnEveryRankWithTheKey) {

@@ -1,5 +1,5 @@
 // What the adaptor tests read back: a published step's metadata and mesh from its output_dir
-// files, and checks of what a viewer gets.
+// files, and checks of what a viewer gets; where they write it.
 #pragma once
 
 #include <algorithm>
@@ -8,12 +8,27 @@
 #include <string>
 
 #include <gtest/gtest.h>
+#include <mpi.h>
 
+#include "../mpi/mpi_gtest.hpp"
 #include "ldimesh/core/base/mesh.hpp"
 #include "ldimesh/transport/glb.hpp"
 #include "ldimesh/transport/snapshot_store.hpp"
 
 namespace ldimesh::testing {
+
+// Whether MPI runs with MPI_THREAD_MULTIPLE (the --thread-multiple runs: the background path).
+inline bool thread_multiple() {
+  int level = MPI_THREAD_SINGLE;
+  MPI_Query_thread(&level);
+  return level >= MPI_THREAD_MULTIPLE;
+}
+
+// A fresh folder for test `name` of an adaptor test program, distinct per thread level: the
+// funneled and the --thread-multiple runs may run at once.
+inline std::string adaptor_temp_dir(const std::string& prefix, const std::string& name) {
+  return fresh_temp_dir(thread_multiple() ? prefix + "_mt" : prefix, name);
+}
 
 // The metadata of step `step` written into `dir` (read_step_files: GLB and metadata checked);
 // a test failure and empty metadata (step 0) when the files are missing or invalid.
