@@ -38,7 +38,8 @@ case $target in
     # goes on finding crashes, leaks and undefined behaviour; the OK line reports the slowest
     # input, and a real hang still stops the run.
     timeout=30
-    sources=(transport/src/glb.cpp core/src/base/mesh.cpp core/src/base/status.cpp)
+    sources=(transport/src/glb.cpp transport/src/glb_decode.cpp transport/src/glb_format.cpp
+             core/src/base/mesh.cpp core/src/base/status.cpp)
     libs=(-I/usr/include/eigen3 -ldraco) ;;
   http)
     name=http_request_fuzz
