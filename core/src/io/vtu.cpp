@@ -354,14 +354,23 @@ Status check_xml(const std::string& path, std::uintmax_t bytes, vtkXMLDataElemen
   reader->Update();
 }
 
-Status read_vtu_unguarded(const std::string& path, const std::string& field, VtuElements& out,
-                          const std::string& colour_field) {
+// Any double (an array may be a float one, with NaN or 1e300): compared as doubles and printed
+// with %g, never converted to int.
+std::string text(double x) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%g", x);
+  return std::string(b);
+}
+
+// Reads the file at `path`: its XML first, the sizes it declares checked against its bytes
+// (check_xml), then its data. `grid` is `reader`'s output.
+Status read_grid(const std::string& path, const std::string& field, const std::string& colour_field,
+                 vtkSmartPointer<vtkXMLReader>& reader, vtkUnstructuredGrid*& grid) {
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec))
     return Status::io("'" + path + "': no such file");
   if (field.empty()) return Status::invalid_argument("give the point array to mesh (--field NAME)");
   const std::string ext = std::filesystem::path(path).extension().string();
-  vtkSmartPointer<vtkXMLReader> reader;
   if (ext == ".pvtu")
     reader = vtkSmartPointer<vtkXMLPUnstructuredGridReader>::New();
   else
@@ -386,12 +395,104 @@ Status read_vtu_unguarded(const std::string& path, const std::string& field, Vtu
       return st;
   }
   vtk_data_pass(reader);
-  vtkUnstructuredGrid* grid = vtkUnstructuredGrid::SafeDownCast(reader->GetOutputDataObject(0));
+  grid = vtkUnstructuredGrid::SafeDownCast(reader->GetOutputDataObject(0));
   if (!errors->message.empty())
     return Status::corrupt_input("'" + path +
                                  "': VTK cannot read it: " + first_line(errors->message));
   if (!grid || grid->GetNumberOfCells() == 0)
     return Status::corrupt_input("'" + path + "': no cells (not a VTK XML unstructured grid?)");
+  return Status::ok();
+}
+
+// The family and order of cell c of `grid` (VTK type `type`, `count` points; `cell` names it in
+// messages), checked against HigherOrderDegrees (`degrees`, or null) and the node counts — or
+// why it is not read.
+Status cell_kind(int type, vtkIdType count, vtkIdType c, vtkDataArray* degrees,
+                 const std::string& cell, CellType& kind, int& order) {
+  // The smallest order whose node count is at least `count`, of a Lagrange family (0: none).
+  const auto order_of = [&](CellType family) {
+    for (int p = 1; p <= kMaxHexOrder; ++p)
+      if (vtkIdType(cell_nodes(family, p)) >= count) return p;
+    return 0;
+  };
+  kind = CellType::hexahedron;
+  order = 1;
+  switch (type) {
+    case VTK_HEXAHEDRON:
+      break;
+    case VTK_TRIQUADRATIC_HEXAHEDRON:
+      order = 2;
+      break;
+    case VTK_LAGRANGE_HEXAHEDRON:
+      order = order_of(CellType::hexahedron);
+      break;
+    case VTK_QUADRATIC_HEXAHEDRON:
+      kind = CellType::serendipity_hexahedron, order = 2;
+      break;
+    case VTK_TETRA:
+      kind = CellType::tetrahedron;
+      break;
+    case VTK_QUADRATIC_TETRA:
+      kind = CellType::tetrahedron, order = 2;
+      break;
+    case VTK_LAGRANGE_TETRAHEDRON:
+      kind = CellType::tetrahedron, order = order_of(kind);
+      if (count == 15)
+        return Status::corrupt_input(cell +
+                                     ": VTK's 15-node tetrahedron (a quadratic one with "
+                                     "face and body bubbles) is not read");
+      break;
+    case VTK_WEDGE:
+      kind = CellType::wedge;
+      break;
+    case VTK_BIQUADRATIC_QUADRATIC_WEDGE:
+      kind = CellType::wedge, order = 2;
+      break;
+    case VTK_LAGRANGE_WEDGE:
+      kind = CellType::wedge, order = order_of(kind);
+      if (count == 21)
+        return Status::corrupt_input(cell +
+                                     ": VTK's 21-node wedge (a quadratic one with face "
+                                     "and body bubbles) is not read");
+      break;
+    case VTK_QUADRATIC_WEDGE:
+      kind = CellType::serendipity_wedge, order = 2;
+      break;
+    case VTK_PYRAMID:
+      kind = CellType::pyramid;
+      break;
+    case VTK_QUADRATIC_PYRAMID:
+      kind = CellType::pyramid, order = 2;
+      break;
+    default:
+      return Status::corrupt_input(
+          cell + " is " + type_name(type) + " (VTK type " + std::to_string(type) +
+          "): hexahedra, tetrahedra, wedges and pyramids (linear, quadratic, Lagrange) are read");
+  }
+  if (degrees && (type == VTK_LAGRANGE_HEXAHEDRON || type == VTK_LAGRANGE_WEDGE)) {
+    double d[3];
+    degrees->GetTuple(c, d);
+    // A wedge's first two are its triangle's order, the third its height's.
+    if (d[0] != d[1] || d[1] != d[2])
+      return Status::corrupt_input(cell + ": orders " + text(d[0]) + ", " + text(d[1]) + ", " +
+                                   text(d[2]) + " differ along the axes (not supported)");
+    if (d[0] != double(order))
+      return Status::corrupt_input(cell + ": HigherOrderDegrees says order " + text(d[0]) +
+                                   " but it has " + std::to_string(count) + " points");
+  }
+  const std::size_t nodes = cell_nodes(kind, order);
+  if (nodes == 0 || vtkIdType(nodes) != count)
+    return Status::corrupt_input(cell + " (" + type_name(type) + ") has " + std::to_string(count) +
+                                 " points: not the node count of an " + "order of 1–" +
+                                 std::to_string(kMaxHexOrder));
+  return Status::ok();
+}
+
+Status read_vtu_unguarded(const std::string& path, const std::string& field, VtuElements& out,
+                          const std::string& colour_field) {
+  vtkSmartPointer<vtkXMLReader> reader;
+  vtkUnstructuredGrid* grid = nullptr;
+  LDIMESH_RETURN_IF_ERROR(read_grid(path, field, colour_field, reader, grid));
 
   vtkDataArray* values = nullptr;
   if (Status st = scalar_point_array(grid, path, field, values); !st) return st;
@@ -428,13 +529,6 @@ Status read_vtu_unguarded(const std::string& path, const std::string& field, Vtu
   out.min_value = std::numeric_limits<double>::infinity();
   out.max_value = -out.min_value;
   const vtkIdType n = grid->GetNumberOfCells();
-  // Any double (an array may be a float one, with NaN or 1e300): compared as doubles and printed
-  // with %g, never converted to int.
-  const auto text = [](double x) {
-    char b[32];
-    std::snprintf(b, sizeof b, "%g", x);
-    return std::string(b);
-  };
   for (vtkIdType c = 0; c < n; ++c) {
     if (ghosts) {
       const double flag = ghosts->GetTuple1(c);
@@ -447,82 +541,9 @@ Status read_vtu_unguarded(const std::string& path, const std::string& field, Vtu
     const std::string cell = "'" + path + "': cell " + std::to_string(c);
     grid->GetCellPoints(c, ids);
     const vtkIdType count = ids->GetNumberOfIds();
-    // The smallest order whose node count is at least `count`, of a Lagrange family (0: none).
-    const auto order_of = [&](CellType family) {
-      for (int p = 1; p <= kMaxHexOrder; ++p)
-        if (vtkIdType(cell_nodes(family, p)) >= count) return p;
-      return 0;
-    };
     CellType kind = CellType::hexahedron;
     int order = 1;
-    switch (type) {
-      case VTK_HEXAHEDRON:
-        break;
-      case VTK_TRIQUADRATIC_HEXAHEDRON:
-        order = 2;
-        break;
-      case VTK_LAGRANGE_HEXAHEDRON:
-        order = order_of(CellType::hexahedron);
-        break;
-      case VTK_QUADRATIC_HEXAHEDRON:
-        kind = CellType::serendipity_hexahedron, order = 2;
-        break;
-      case VTK_TETRA:
-        kind = CellType::tetrahedron;
-        break;
-      case VTK_QUADRATIC_TETRA:
-        kind = CellType::tetrahedron, order = 2;
-        break;
-      case VTK_LAGRANGE_TETRAHEDRON:
-        kind = CellType::tetrahedron, order = order_of(kind);
-        if (count == 15)
-          return Status::corrupt_input(cell +
-                                       ": VTK's 15-node tetrahedron (a quadratic one with "
-                                       "face and body bubbles) is not read");
-        break;
-      case VTK_WEDGE:
-        kind = CellType::wedge;
-        break;
-      case VTK_BIQUADRATIC_QUADRATIC_WEDGE:
-        kind = CellType::wedge, order = 2;
-        break;
-      case VTK_LAGRANGE_WEDGE:
-        kind = CellType::wedge, order = order_of(kind);
-        if (count == 21)
-          return Status::corrupt_input(cell +
-                                       ": VTK's 21-node wedge (a quadratic one with face "
-                                       "and body bubbles) is not read");
-        break;
-      case VTK_QUADRATIC_WEDGE:
-        kind = CellType::serendipity_wedge, order = 2;
-        break;
-      case VTK_PYRAMID:
-        kind = CellType::pyramid;
-        break;
-      case VTK_QUADRATIC_PYRAMID:
-        kind = CellType::pyramid, order = 2;
-        break;
-      default:
-        return Status::corrupt_input(
-            cell + " is " + type_name(type) + " (VTK type " + std::to_string(type) +
-            "): hexahedra, tetrahedra, wedges and pyramids (linear, quadratic, Lagrange) are read");
-    }
-    if (degrees && (type == VTK_LAGRANGE_HEXAHEDRON || type == VTK_LAGRANGE_WEDGE)) {
-      double d[3];
-      degrees->GetTuple(c, d);
-      // A wedge's first two are its triangle's order, the third its height's.
-      if (d[0] != d[1] || d[1] != d[2])
-        return Status::corrupt_input(cell + ": orders " + text(d[0]) + ", " + text(d[1]) + ", " +
-                                     text(d[2]) + " differ along the axes (not supported)");
-      if (d[0] != double(order))
-        return Status::corrupt_input(cell + ": HigherOrderDegrees says order " + text(d[0]) +
-                                     " but it has " + std::to_string(count) + " points");
-    }
-    const std::size_t nodes = cell_nodes(kind, order);
-    if (nodes == 0 || vtkIdType(nodes) != count)
-      return Status::corrupt_input(cell + " (" + type_name(type) + ") has " +
-                                   std::to_string(count) + " points: not the node count of an " +
-                                   "order of 1–" + std::to_string(kMaxHexOrder));
+    LDIMESH_RETURN_IF_ERROR(cell_kind(type, count, c, degrees, cell, kind, order));
     VtuElements::Group& g = groups[{int(kind), order}];
     g.type = kind;
     g.order = order;
