@@ -491,10 +491,8 @@ Status extract_surface(const Mesh& m, const std::vector<std::uint32_t>& tris,
   return Status::ok();
 }
 
-Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
-                            std::vector<std::uint8_t>& out, GlbInfo* info) {
-  if (Status s = check_options(options); !s) return s;
-  if (Status s = check_encodable(mesh); !s) return s;
+// GlbOptions::surfaces and scalar_groups against the mesh.
+Status check_surfaces(const Mesh& mesh, const GlbOptions& options) {
   for (std::size_t k = 0; k < options.surfaces.size(); ++k)
     if ((k == 0 && options.surfaces[0] != 0) ||
         (k > 0 && options.surfaces[k] < options.surfaces[k - 1]) ||
@@ -510,6 +508,40 @@ Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
       return Status::invalid_argument(
           "glb: a scalar group must be −1 or below the number of surfaces, and the mesh must "
           "have scalars where one is not −1");
+  return Status::ok();
+}
+
+// The encoded surfaces joined into `json` and `bin`: each surface's parts as primitives of its
+// mesh, the surfaces as meshes and nodes.
+void join_surfaces(std::deque<Surface>& surfaces, const GlbOptions& options, Json& json,
+                   std::vector<std::uint8_t>& bin) {
+  for (Surface& s : surfaces) {
+    Json surface;
+    std::vector<std::uint8_t> surface_bin;
+    for (std::size_t k = 0; k < s.parts; ++k) {
+      if (s.jsons[k].is_null()) continue;
+      if (surface.is_null()) {
+        surface = std::move(s.jsons[k]);
+        surface_bin = std::move(s.bins[k]);
+      } else {
+        append_part(surface, surface_bin, s.jsons[k], s.bins[k]);
+      }
+    }
+    if (json.is_null()) {
+      json = std::move(surface);
+      bin = std::move(surface_bin);
+      if (options.surfaces.size() > 1) json["nodes"][0]["extras"] = surface_extras(s.index);
+    } else {
+      append_surface(json, bin, surface, surface_bin, s.index);
+    }
+  }
+}
+
+Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
+                            std::vector<std::uint8_t>& out, GlbInfo* info) {
+  if (Status s = check_options(options); !s) return s;
+  if (Status s = check_encodable(mesh); !s) return s;
+  LDIMESH_RETURN_IF_ERROR(check_surfaces(mesh, options));
   GlbInfo result;
   result.position_bits = glb_position_bits(mesh, options);
   result.position_error_bound = glb_position_error_bound(mesh, options);
@@ -600,29 +632,9 @@ Status encode_glb_unguarded(const Mesh& mesh, const GlbOptions& options,
   }
   LDIMESH_RETURN_IF_ERROR(encode_parts(surfaces, options, result.position_bits));
 
-  // Joined: each surface's parts as primitives of its mesh, the surfaces as meshes and nodes.
   Json json;
   std::vector<std::uint8_t> bin;
-  for (Surface& s : surfaces) {
-    Json surface;
-    std::vector<std::uint8_t> surface_bin;
-    for (std::size_t k = 0; k < s.parts; ++k) {
-      if (s.jsons[k].is_null()) continue;
-      if (surface.is_null()) {
-        surface = std::move(s.jsons[k]);
-        surface_bin = std::move(s.bins[k]);
-      } else {
-        append_part(surface, surface_bin, s.jsons[k], s.bins[k]);
-      }
-    }
-    if (json.is_null()) {
-      json = std::move(surface);
-      bin = std::move(surface_bin);
-      if (options.surfaces.size() > 1) json["nodes"][0]["extras"] = surface_extras(s.index);
-    } else {
-      append_surface(json, bin, surface, surface_bin, s.index);
-    }
-  }
+  join_surfaces(surfaces, options, json, bin);
 
   // Add what a client needs beyond glTF's attributes, in the place glTF reserves for
   // application data ("extras"), and name the writer (Draco writes "draco_decoder").

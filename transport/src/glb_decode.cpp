@@ -22,17 +22,10 @@ namespace {
 using namespace glb_format;
 
 // Appends the Draco primitive `primitive` (already checked to be a JSON object) to `out`.
-Status decode_primitive(const Json& json, const Json& primitive, std::span<const std::uint8_t> bin,
-                        Mesh& out, GlbInfo& info,
-                        const std::vector<std::array<std::uint8_t, 3>>& view_colours) {
-  if (const auto mode = primitive.find("mode");
-      mode != primitive.end() && !(mode->is_number_integer() && mode->get<std::int64_t>() == 4))
-    return Status::corrupt_input("glb: a primitive is not made of triangles");
-  const auto extensions = primitive.find("extensions");
-  if (extensions == primitive.end() || !extensions->is_object() || !extensions->contains(kDraco) ||
-      !(*extensions)[kDraco].is_object())
-    return Status::corrupt_input("glb: a primitive is not Draco-compressed (unsupported)");
-  const Json& draco_ext = (*extensions)[kDraco];
+// The bytes of the Draco mesh that the primitive's extension `draco_ext` names: its
+// bufferView's stretch of the BIN chunk, every index and length checked.
+Status draco_bytes(const Json& json, const Json& draco_ext, std::span<const std::uint8_t> bin,
+                   std::span<const std::uint8_t>& bytes) {
   const Json* views = array_member(json, "bufferViews");
   if (!views) return Status::corrupt_input("glb: no bufferViews");
   std::size_t view_index = 0, buffer_index = 0, length = 0, offset = 0;
@@ -50,24 +43,14 @@ Status decode_primitive(const Json& json, const Json& primitive, std::span<const
   }
   if (length > bin.size() - offset)
     return Status::corrupt_input("glb: the Draco bufferView runs past the BIN chunk");
-  const auto attributes = draco_ext.find("attributes");
-  const auto gltf_attributes = primitive.find("attributes");
-  if (attributes == draco_ext.end() || !attributes->is_object() ||
-      gltf_attributes == primitive.end() || !gltf_attributes->is_object())
-    return Status::corrupt_input("glb: a Draco primitive has no attribute map");
+  bytes = bin.subspan(offset, length);
+  return Status::ok();
+}
 
-  draco::DecoderBuffer buffer;
-  buffer.Init(reinterpret_cast<const char*>(bin.data() + offset), length);
-  draco::Decoder decoder;
-  auto decoded = decoder.DecodeMeshFromBuffer(&buffer);
-  if (!decoded.ok())
-    return Status::corrupt_input("glb: Draco could not decode the mesh: " +
-                                 decoded.status().error_msg_string());
-  const std::unique_ptr<draco::Mesh> dm = std::move(decoded).value();
-  if (!dm) return Status::corrupt_input("glb: Draco returned no mesh");
-  const std::size_t n = dm->num_points(), t = dm->num_faces();
-
-  // The glTF accessors must agree with the Draco data (KHR_draco_mesh_compression).
+// The glTF accessors of the primitive's attributes and indices agree with the Draco mesh of `n`
+// points and `t` triangles (KHR_draco_mesh_compression).
+Status check_accessors(const Json& json, const Json& primitive, const Json& gltf_attributes,
+                       std::size_t n, std::size_t t) {
   const Json* accessors = array_member(json, "accessors");
   if (!accessors) return Status::corrupt_input("glb: no accessors");
   const auto accessor_count = [&](const Json& index, std::size_t& count) {
@@ -80,7 +63,7 @@ Status decode_primitive(const Json& json, const Json& primitive, std::span<const
     count = c->get<std::size_t>();
     return true;
   };
-  for (const auto& [name, index] : gltf_attributes->items()) {
+  for (const auto& [name, index] : gltf_attributes.items()) {
     std::size_t count = 0;
     if (!accessor_count(index, count) || count != n)
       return Status::corrupt_input("glb: accessor of " + name + " disagrees with the Draco data");
@@ -90,6 +73,40 @@ Status decode_primitive(const Json& json, const Json& primitive, std::span<const
     if (!accessor_count(*indices, count) || count != 3 * t)
       return Status::corrupt_input("glb: the index accessor disagrees with the Draco data");
   }
+  return Status::ok();
+}
+
+Status decode_primitive(const Json& json, const Json& primitive, std::span<const std::uint8_t> bin,
+                        Mesh& out, GlbInfo& info,
+                        const std::vector<std::array<std::uint8_t, 3>>& view_colours) {
+  if (const auto mode = primitive.find("mode");
+      mode != primitive.end() && !(mode->is_number_integer() && mode->get<std::int64_t>() == 4))
+    return Status::corrupt_input("glb: a primitive is not made of triangles");
+  const auto extensions = primitive.find("extensions");
+  if (extensions == primitive.end() || !extensions->is_object() || !extensions->contains(kDraco) ||
+      !(*extensions)[kDraco].is_object())
+    return Status::corrupt_input("glb: a primitive is not Draco-compressed (unsupported)");
+  const Json& draco_ext = (*extensions)[kDraco];
+  std::span<const std::uint8_t> bytes;
+  LDIMESH_RETURN_IF_ERROR(draco_bytes(json, draco_ext, bin, bytes));
+  const auto attributes = draco_ext.find("attributes");
+  const auto gltf_attributes = primitive.find("attributes");
+  if (attributes == draco_ext.end() || !attributes->is_object() ||
+      gltf_attributes == primitive.end() || !gltf_attributes->is_object())
+    return Status::corrupt_input("glb: a Draco primitive has no attribute map");
+
+  draco::DecoderBuffer buffer;
+  buffer.Init(reinterpret_cast<const char*>(bytes.data()), bytes.size());
+  draco::Decoder decoder;
+  auto decoded = decoder.DecodeMeshFromBuffer(&buffer);
+  if (!decoded.ok())
+    return Status::corrupt_input("glb: Draco could not decode the mesh: " +
+                                 decoded.status().error_msg_string());
+  const std::unique_ptr<draco::Mesh> dm = std::move(decoded).value();
+  if (!dm) return Status::corrupt_input("glb: Draco returned no mesh");
+  const std::size_t n = dm->num_points(), t = dm->num_faces();
+
+  LDIMESH_RETURN_IF_ERROR(check_accessors(json, primitive, *gltf_attributes, n, t));
 
   const auto attribute = [&](const char* name, int min_components) -> const draco::PointAttribute* {
     const auto it = attributes->find(name);
