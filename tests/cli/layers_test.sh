@@ -4,7 +4,9 @@
 #    as C++17, and a C one that includes ldimesh.h, compile without Embree's or TBB's headers
 #    (none is even read);
 # 2. a client-only configuration (LDIMESH_CLIENT_ONLY, with MPI, Embree, TBB and OpenMesh
-#    unfindable) builds ldimesh-fetch, whose link line names none of them, and it runs.
+#    unfindable) builds ldimesh-fetch, whose link line names none of them, and it runs;
+# 3. the folders' #include graph (core's stages, transport, adaptor, cli, viewer, miniapps) has no
+#    cycle (folder_layers.py).
 # Usage: layers_test.sh SOURCE_DIR CXX CC "MPI_INCLUDE_DIRS" [BUILD_DIR]
 set -euo pipefail
 src=$1 cxx=$2 cc=$3 mpi_includes=$4
@@ -59,3 +61,4 @@ if grep -Eio '(-l|lib)(mpi|embree|tbb|openmesh)[^ ]*' <<<"$link"; then
 fi
 "$work/client/bin/ldimesh-fetch" --help >/dev/null || fail "the client-only ldimesh-fetch does not run"
 echo "client only: ldimesh-fetch built and linked without MPI, Embree, TBB, OpenMesh"
+python3 "$(dirname "$0")/folder_layers.py" "$src" || fail "an include cycle between folders"

@@ -482,15 +482,15 @@ class FailingAlongX final : public FieldSource {
   std::unique_ptr<GeometryBinding> bind(RTCDevice device, double isovalue) const override {
     return inner_.bind(device, isovalue);
   }
-  std::unique_ptr<AxisBinding> bind_axis(double isovalue) const override {
+  std::unique_ptr<AxisCaster> bind_axis(double isovalue) const override {
     return std::make_unique<Binding>(inner_.bind_axis(isovalue));
   }
   double duplicate_tolerance() const override { return inner_.duplicate_tolerance(); }
 
  private:
-  class Binding final : public AxisBinding {
+  class Binding final : public AxisCaster {
    public:
-    explicit Binding(std::unique_ptr<AxisBinding> inner) : inner_(std::move(inner)) {}
+    explicit Binding(std::unique_ptr<AxisCaster> inner) : inner_(std::move(inner)) {}
     void cast(const AxisRays& rays, AxisHits& hits) const override {
       if (rays.axis == 0) throw std::runtime_error("no memory left for the x view (test)");
       inner_->cast(rays, hits);
@@ -503,7 +503,7 @@ class FailingAlongX final : public FieldSource {
     std::uint64_t nonfinite_values() const override { return inner_->nonfinite_values(); }
 
    private:
-    std::unique_ptr<AxisBinding> inner_;
+    std::unique_ptr<AxisCaster> inner_;
   };
   const FieldSource& inner_;
 };

@@ -134,12 +134,12 @@ RayCaster::RayCaster(std::span<const FieldSource* const> sources, double isovalu
     duplicate_tolerance_ = std::max(duplicate_tolerance_, source->duplicate_tolerance());
   if (options.path == CastPath::automatic) {
     for (const FieldSource* source : sources_) {
-      std::unique_ptr<AxisBinding> binding = source->bind_axis(isovalue);
+      std::unique_ptr<AxisCaster> binding = source->bind_axis(isovalue);
       if (!binding) {  // one source without: Embree for all, so that roots collapse alike
-        axis_bindings_.clear();
+        axis_casters_.clear();
         break;
       }
-      axis_bindings_.push_back(std::move(binding));
+      axis_casters_.push_back(std::move(binding));
     }
   }
   if (options.scalars)
@@ -148,7 +148,7 @@ RayCaster::RayCaster(std::span<const FieldSource* const> sources, double isovalu
       has_scalar_ = has_scalar_ || scalar_probes_.back() != nullptr;
     }
   axis_seconds_ = seconds_since(start);
-  if (axis_bindings_.empty()) ensure_scene();
+  if (axis_casters_.empty()) ensure_scene();
 }
 
 void RayCaster::ensure_scene() const {
@@ -194,7 +194,7 @@ double RayCaster::build_seconds() const {
 }
 
 void RayCaster::prepare_axis_casters(const View& view) const {
-  for (const auto& binding : axis_bindings_)
+  for (const auto& binding : axis_casters_)
     binding->prepare(exact_axis(view.dir));
 }
 
@@ -206,7 +206,7 @@ void RayCaster::prepare(const View& view) const {
 }
 
 bool RayCaster::uses_axis_casters(const View& view) const {
-  return !axis_bindings_.empty() && exact_axis(view.dir) >= 0 && exact_axis(view.u) >= 0 &&
+  return !axis_casters_.empty() && exact_axis(view.dir) >= 0 && exact_axis(view.u) >= 0 &&
          exact_axis(view.v) >= 0;
 }
 
@@ -217,8 +217,8 @@ bool RayCaster::carries_scalars() const {
 
 std::size_t RayCaster::primitive_count() const {
   std::size_t n = 0;
-  if (!axis_bindings_.empty()) {
-    for (const auto& b : axis_bindings_)
+  if (!axis_casters_.empty()) {
+    for (const auto& b : axis_casters_)
       n += b->primitive_count();
     return n;
   }
@@ -229,8 +229,8 @@ std::size_t RayCaster::primitive_count() const {
 
 std::uint64_t RayCaster::nonfinite_values() const {
   std::uint64_t n = 0;
-  if (!axis_bindings_.empty()) {
-    for (const auto& b : axis_bindings_)
+  if (!axis_casters_.empty()) {
+    for (const auto& b : axis_casters_)
       n += b->nonfinite_values();
     return n;
   }
@@ -332,7 +332,7 @@ void RayCaster::cast_axis_rays(const AxisRays& rays, std::span<const RaySegment>
                                HitRun& run) const {
   AxisScratch& x = axis_scratch();
   x.hits.clear();
-  for (const auto& binding : axis_bindings_)
+  for (const auto& binding : axis_casters_)
     binding->cast(rays, x.hits);
   const std::size_t n = rays.rays.size();
   run.counts.reserve(run.counts.size() + n);
@@ -387,8 +387,8 @@ std::vector<RayCaster::HitRun> RayCaster::cast_rows(const View& view, Segment se
     // several columns (all rows) where every source prefers them (a grid whose fastest memory
     // axis runs along the view's v axis: a block of rows would be a slab a few cells thin along
     // it, reading a line or two of every grid row), the runs then put back in row order.
-    bool by_columns = !axis_bindings_.empty();
-    for (const auto& binding : axis_bindings_)
+    bool by_columns = !axis_casters_.empty();
+    for (const auto& binding : axis_casters_)
       by_columns = by_columns && binding->prefers_column_tasks(view);
     const int span = by_columns ? view.width : view.height;
     const int per_task = by_columns ? columns_per_task(view) : rows_per_task(view);

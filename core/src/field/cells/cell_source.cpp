@@ -71,10 +71,10 @@ class CellGeometryBinding final : public GeometryBinding {
   std::uint64_t nonfinite_;
 };
 
-class CellAxisBinding final : public AxisBinding {
+class CellAxisCaster final : public AxisCaster {
  public:
-  CellAxisBinding(std::shared_ptr<const CellElementSource::Snapshot> snapshot,
-                  std::unique_ptr<AxisBinding> inner, std::uint64_t nonfinite)
+  CellAxisCaster(std::shared_ptr<const CellElementSource::Snapshot> snapshot,
+                 std::unique_ptr<AxisCaster> inner, std::uint64_t nonfinite)
       : snapshot_(std::move(snapshot)), inner_(std::move(inner)), nonfinite_(nonfinite) {}
   void cast(const AxisRays& rays, AxisHits& hits) const override { inner_->cast(rays, hits); }
   void prepare(int axis) const override { inner_->prepare(axis); }
@@ -86,7 +86,7 @@ class CellAxisBinding final : public AxisBinding {
 
  private:
   std::shared_ptr<const CellElementSource::Snapshot> snapshot_;
-  std::unique_ptr<AxisBinding> inner_;
+  std::unique_ptr<AxisCaster> inner_;
   std::uint64_t nonfinite_;
 };
 
@@ -438,7 +438,7 @@ std::unique_ptr<GeometryBinding> CellElementSource::bind(RTCDevice device, doubl
                                                c.nonfinite);
 }
 
-std::unique_ptr<AxisBinding> CellElementSource::bind_axis(double isovalue) const {
+std::unique_ptr<AxisCaster> CellElementSource::bind_axis(double isovalue) const {
   if (geometry_->straight) return cells::bind_axis_straight_tets(active_straight_tets(isovalue));
   if (!geometry_->tets.empty()) {
     std::uint64_t nonfinite = 0;
@@ -448,7 +448,7 @@ std::unique_ptr<AxisBinding> CellElementSource::bind_axis(double isovalue) const
   Counted c = convert(false);
   auto inner = c.snapshot->source->bind_axis(isovalue);
   if (!inner) return nullptr;
-  return std::make_unique<CellAxisBinding>(std::move(c.snapshot), std::move(inner), c.nonfinite);
+  return std::make_unique<CellAxisCaster>(std::move(c.snapshot), std::move(inner), c.nonfinite);
 }
 
 std::unique_ptr<ScalarProbe> CellElementSource::bind_scalar() const {

@@ -77,9 +77,9 @@ class LinearTetBinding final : public GeometryBinding {
   UserGeometry geometry_;  // last: its callbacks read the members above
 };
 
-class LinearTetAxisBinding final : public AxisBinding {
+class LinearTetAxisCaster final : public AxisCaster {
  public:
-  LinearTetAxisBinding(std::vector<LinearTet> tets, std::uint64_t nonfinite)
+  LinearTetAxisCaster(std::vector<LinearTet> tets, std::uint64_t nonfinite)
       : tets_(std::move(tets)), boxes_(tets_.size()), nonfinite_(nonfinite) {
     tbb::parallel_for(std::size_t(0), tets_.size(), [&](std::size_t e) {
       boxes_[e] = {tets_[e].lo(), tets_[e].hi()};
@@ -210,9 +210,9 @@ std::unique_ptr<GeometryBinding> bind_linear_tets(RTCDevice device, std::vector<
   return std::make_unique<LinearTetBinding>(device, std::move(tets), nonfinite);
 }
 
-std::unique_ptr<AxisBinding> bind_axis_linear_tets(std::vector<LinearTet> tets,
-                                                   std::uint64_t nonfinite) {
-  return std::make_unique<LinearTetAxisBinding>(std::move(tets), nonfinite);
+std::unique_ptr<AxisCaster> bind_axis_linear_tets(std::vector<LinearTet> tets,
+                                                  std::uint64_t nonfinite) {
+  return std::make_unique<LinearTetAxisCaster>(std::move(tets), nonfinite);
 }
 
 void set_crossing(LinearTet& tet, const double* v, const double* f) {

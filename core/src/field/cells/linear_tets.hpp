@@ -58,11 +58,11 @@ template <class Values>
 std::vector<LinearTet> active_linear_tets(std::span<const double> vertices, double isovalue,
                                           Values values, std::uint64_t& nonfinite);
 
-// The Embree and axis bindings over the active tetrahedra.
+// The Embree and axis casters over the active tetrahedra.
 std::unique_ptr<GeometryBinding> bind_linear_tets(RTCDevice device, std::vector<LinearTet> tets,
                                                   std::uint64_t nonfinite);
-std::unique_ptr<AxisBinding> bind_axis_linear_tets(std::vector<LinearTet> tets,
-                                                   std::uint64_t nonfinite);
+std::unique_ptr<AxisCaster> bind_axis_linear_tets(std::vector<LinearTet> tets,
+                                                  std::uint64_t nonfinite);
 
 // Whether the 4 vertices (12 doubles) make a tetrahedron of non-zero volume (relative to its
 // edges' lengths).

@@ -145,9 +145,9 @@ class StraightTetBinding final : public GeometryBinding {
   UserGeometry geometry_;  // last: its callbacks read the members above
 };
 
-class StraightTetAxisBinding final : public AxisBinding {
+class StraightTetAxisCaster final : public AxisCaster {
  public:
-  explicit StraightTetAxisBinding(StraightTets tets)
+  explicit StraightTetAxisCaster(StraightTets tets)
       : tets_(std::move(tets)), boxes_(tets_.tets.size()) {
     tbb::parallel_for(std::size_t(0), tets_.tets.size(), [&](std::size_t e) {
       boxes_[e] = {tets_.tets[e].lo, tets_.tets[e].hi};
@@ -236,8 +236,8 @@ std::unique_ptr<GeometryBinding> bind_straight_tets(RTCDevice device, StraightTe
   return std::make_unique<StraightTetBinding>(device, std::move(tets));
 }
 
-std::unique_ptr<AxisBinding> bind_axis_straight_tets(StraightTets tets) {
-  return std::make_unique<StraightTetAxisBinding>(std::move(tets));
+std::unique_ptr<AxisCaster> bind_axis_straight_tets(StraightTets tets) {
+  return std::make_unique<StraightTetAxisCaster>(std::move(tets));
 }
 
 }  // namespace ldimesh::cells

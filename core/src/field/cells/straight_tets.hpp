@@ -52,7 +52,7 @@ StraightTets active_straight_tets(const ReferenceCell& cell, std::span<const dou
                                   double isovalue, Values values);
 
 std::unique_ptr<GeometryBinding> bind_straight_tets(RTCDevice device, StraightTets tets);
-std::unique_ptr<AxisBinding> bind_axis_straight_tets(StraightTets tets);
+std::unique_ptr<AxisCaster> bind_axis_straight_tets(StraightTets tets);
 
 // ---------------------------------------------------------------------------------------------
 

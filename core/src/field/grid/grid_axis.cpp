@@ -26,12 +26,12 @@ namespace {
 // through them with the same arithmetic; only rays whose segment ends inside the block walk
 // their columns as above.
 template <class T>
-class GridAxisBinding final : public AxisBinding {
+class GridAxisCaster final : public AxisCaster {
  public:
   // `held`: the source's (GridSource::held_), kept alive for primitive_count().
-  GridAxisBinding(const GridView<T>& grid, double iso, std::array<std::int64_t, 3> first,
-                  std::array<std::int64_t, 3> last, std::array<std::int64_t, 3> bricks,
-                  int brick_cells, std::shared_ptr<const std::vector<std::uint8_t>> held)
+  GridAxisCaster(const GridView<T>& grid, double iso, std::array<std::int64_t, 3> first,
+                 std::array<std::int64_t, 3> last, std::array<std::int64_t, 3> bricks,
+                 int brick_cells, std::shared_ptr<const std::vector<std::uint8_t>> held)
       : g_(grid),
         held_(std::move(held)),
         iso_(iso),
@@ -278,11 +278,11 @@ class GridAxisBinding final : public AxisBinding {
     const Lattice lattice{ray, width, oa, dir, lo, hi};
     // The axes as template constants: the slab solver for (a, whether u is the lower transverse
     // axis).
-    using Solver = void (GridAxisBinding::*)(const Lattice&, LatticeScratch&, AxisHits&) const;
+    using Solver = void (GridAxisCaster::*)(const Lattice&, LatticeScratch&, AxisHits&) const;
     static constexpr Solver kSolvers[6] = {
-        &GridAxisBinding::solve_slab<0, false>, &GridAxisBinding::solve_slab<0, true>,
-        &GridAxisBinding::solve_slab<1, false>, &GridAxisBinding::solve_slab<1, true>,
-        &GridAxisBinding::solve_slab<2, false>, &GridAxisBinding::solve_slab<2, true>};
+        &GridAxisCaster::solve_slab<0, false>, &GridAxisCaster::solve_slab<0, true>,
+        &GridAxisCaster::solve_slab<1, false>, &GridAxisCaster::solve_slab<1, true>,
+        &GridAxisCaster::solve_slab<2, false>, &GridAxisCaster::solve_slab<2, true>};
     (this->*kSolvers[a * 2 + int(ua < va)])(lattice, x, out);
     return true;
   }
@@ -708,19 +708,19 @@ class GridAxisBinding final : public AxisBinding {
 }  // namespace
 
 template <class T>
-std::unique_ptr<AxisBinding> bind_grid_axis(const GridView<T>& grid, double iso,
-                                            std::array<std::int64_t, 3> first,
-                                            std::array<std::int64_t, 3> last,
-                                            std::array<std::int64_t, 3> bricks, int brick_cells,
-                                            std::shared_ptr<const std::vector<std::uint8_t>> held) {
-  return std::make_unique<GridAxisBinding<T>>(grid, iso, first, last, bricks, brick_cells,
-                                              std::move(held));
+std::unique_ptr<AxisCaster> bind_grid_axis(const GridView<T>& grid, double iso,
+                                           std::array<std::int64_t, 3> first,
+                                           std::array<std::int64_t, 3> last,
+                                           std::array<std::int64_t, 3> bricks, int brick_cells,
+                                           std::shared_ptr<const std::vector<std::uint8_t>> held) {
+  return std::make_unique<GridAxisCaster<T>>(grid, iso, first, last, bricks, brick_cells,
+                                             std::move(held));
 }
 
-template std::unique_ptr<AxisBinding> bind_grid_axis<float>(
+template std::unique_ptr<AxisCaster> bind_grid_axis<float>(
     const GridView<float>&, double, std::array<std::int64_t, 3>, std::array<std::int64_t, 3>,
     std::array<std::int64_t, 3>, int, std::shared_ptr<const std::vector<std::uint8_t>>);
-template std::unique_ptr<AxisBinding> bind_grid_axis<double>(
+template std::unique_ptr<AxisCaster> bind_grid_axis<double>(
     const GridView<double>&, double, std::array<std::int64_t, 3>, std::array<std::int64_t, 3>,
     std::array<std::int64_t, 3>, int, std::shared_ptr<const std::vector<std::uint8_t>>);
 

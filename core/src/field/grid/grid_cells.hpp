@@ -24,8 +24,8 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include "ldimesh/core/field/axis_caster.hpp"
 #include "ldimesh/core/field/grid_source.hpp"
-#include "ldimesh/core/raycast/axis_binding.hpp"
 
 namespace ldimesh::grid {
 
@@ -525,10 +525,10 @@ std::unique_ptr<GeometryBinding> bind_grid(RTCDevice device, const GridView<T>& 
                                            const std::array<std::int64_t, 3>& bricks,
                                            int brick_cells);
 template <class T>
-std::unique_ptr<AxisBinding> bind_grid_axis(const GridView<T>& grid, double iso,
-                                            std::array<std::int64_t, 3> first,
-                                            std::array<std::int64_t, 3> last,
-                                            std::array<std::int64_t, 3> bricks, int brick_cells,
-                                            std::shared_ptr<const std::vector<std::uint8_t>> held);
+std::unique_ptr<AxisCaster> bind_grid_axis(const GridView<T>& grid, double iso,
+                                           std::array<std::int64_t, 3> first,
+                                           std::array<std::int64_t, 3> last,
+                                           std::array<std::int64_t, 3> bricks, int brick_cells,
+                                           std::shared_ptr<const std::vector<std::uint8_t>> held);
 
 }  // namespace ldimesh::grid

@@ -448,8 +448,8 @@ void GridSource::for_each_needed_run(
       });
 }
 
-std::unique_ptr<AxisBinding> GridSource::bind_axis(double isovalue) const {
-  auto bind_typed = [&](const auto* values) -> std::unique_ptr<AxisBinding> {
+std::unique_ptr<AxisCaster> GridSource::bind_axis(double isovalue) const {
+  auto bind_typed = [&](const auto* values) -> std::unique_ptr<AxisCaster> {
     return bind_grid_axis(make_view(block_, values, held_), isovalue, first_cell_, last_cell_,
                           bricks_, brick_cells_, held_);
   };

@@ -21,7 +21,7 @@
 
 #include <glm/glm.hpp>
 
-#include "ldimesh/core/raycast/axis_binding.hpp"
+#include "ldimesh/core/field/axis_caster.hpp"
 
 namespace ldimesh::curved {
 

@@ -215,9 +215,9 @@ void converge_roots(std::vector<LineRoot<P>>& roots) {
 // the roots by the same subdivision. Rays of other queries (single points) find their elements
 // through the bins. Both give the roots of the Embree binding, to the bit, for affine elements;
 // curved ones are searched piece by piece here and whole there: the same roots to rounding.
-class HexAxisBinding final : public AxisBinding {
+class HexAxisCaster final : public AxisCaster {
  public:
-  explicit HexAxisBinding(Activation active) : active_(std::move(active)) {}
+  explicit HexAxisCaster(Activation active) : active_(std::move(active)) {}
 
   std::size_t primitive_count() const override { return active_.elements.size(); }
   std::uint64_t nonfinite_values() const override { return active_.nonfinite; }
@@ -603,8 +603,8 @@ class HexAxisBinding final : public AxisBinding {
 
 }  // namespace
 
-std::unique_ptr<AxisBinding> make_axis_binding(Activation active) {
-  return std::make_unique<HexAxisBinding>(std::move(active));
+std::unique_ptr<AxisCaster> make_axis_caster(Activation active) {
+  return std::make_unique<HexAxisCaster>(std::move(active));
 }
 
 }  // namespace ldimesh::hex

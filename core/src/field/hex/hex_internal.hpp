@@ -16,9 +16,9 @@
 #include "../bernstein/roots.hpp"
 #include "../bernstein/segment.hpp"
 #include "curved_element.hpp"
+#include "ldimesh/core/field/axis_caster.hpp"
 #include "ldimesh/core/field/field_source.hpp"
 #include "ldimesh/core/field/hex_source.hpp"
-#include "ldimesh/core/raycast/axis_binding.hpp"
 
 namespace ldimesh::hex {
 
@@ -118,6 +118,6 @@ void intersect_active(const Activation& act, std::size_t k, glm::dvec3 org, glm:
 }
 
 // The coherent caster of axis-parallel rays over the active elements (hex_axis.cpp).
-std::unique_ptr<AxisBinding> make_axis_binding(Activation active);
+std::unique_ptr<AxisCaster> make_axis_caster(Activation active);
 
 }  // namespace ldimesh::hex

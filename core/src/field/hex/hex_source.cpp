@@ -630,8 +630,8 @@ std::unique_ptr<GeometryBinding> HexElementSource::bind(RTCDevice device, double
   return std::make_unique<HexBinding>(device, activate(*this, isovalue));
 }
 
-std::unique_ptr<AxisBinding> HexElementSource::bind_axis(double isovalue) const {
-  return make_axis_binding(activate(*this, isovalue));
+std::unique_ptr<AxisCaster> HexElementSource::bind_axis(double isovalue) const {
+  return make_axis_caster(activate(*this, isovalue));
 }
 
 }  // namespace ldimesh

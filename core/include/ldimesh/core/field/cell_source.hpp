@@ -78,7 +78,7 @@ class CellElementSource final : public FieldSource {
   // tetrahedron) instead of as 4 curved sub-hexahedra each.
   bool straight_tetrahedra() const { return geometry_->straight; }
   std::unique_ptr<GeometryBinding> bind(RTCDevice device, double isovalue) const override;
-  std::unique_ptr<AxisBinding> bind_axis(double isovalue) const override;
+  std::unique_ptr<AxisCaster> bind_axis(double isovalue) const override;
   std::unique_ptr<ScalarProbe> bind_scalar() const override;
 
   const CellBlock& block() const { return block_; }

@@ -24,7 +24,7 @@
 #include <glm/glm.hpp>
 
 #include "ldimesh/core/base/geometry.hpp"
-#include "ldimesh/core/raycast/axis_binding.hpp"
+#include "ldimesh/core/field/axis_caster.hpp"
 
 namespace ldimesh {
 
@@ -161,10 +161,10 @@ class FieldSource {
   // A committed Embree user geometry on `device` with the primitives whose value range may
   // contain `isovalue` (possibly none). Thread-safe: a source can be bound several times.
   virtual std::unique_ptr<GeometryBinding> bind(RTCDevice device, double isovalue) const = 0;
-  // The source bound to `isovalue` for rays parallel to an axis (axis_binding.hpp), with the
+  // The source bound to `isovalue` for rays parallel to an axis (axis_caster.hpp), with the
   // same primitives and the same roots as bind(); null if the source has no such caster (the
   // ray caster then uses bind() for every ray). Thread-safe.
-  virtual std::unique_ptr<AxisBinding> bind_axis(double /*isovalue*/) const { return nullptr; }
+  virtual std::unique_ptr<AxisCaster> bind_axis(double /*isovalue*/) const { return nullptr; }
   // A length below which two hits on one ray count as the same root (hits found twice where
   // primitives touch). Sources with a natural length scale may override.
   virtual double duplicate_tolerance() const { return 1e-9 * bounds().diagonal(); }

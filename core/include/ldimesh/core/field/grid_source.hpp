@@ -45,7 +45,7 @@ class GridSource final : public FieldSource {
   std::unique_ptr<GeometryBinding> bind(RTCDevice device, double isovalue) const override;
   // The same bricks, culled the same way, for rays parallel to an axis: each ray walks the cells
   // of its column of active bricks, where the interpolant is linear (the same roots as bind()).
-  std::unique_ptr<AxisBinding> bind_axis(double isovalue) const override;
+  std::unique_ptr<AxisCaster> bind_axis(double isovalue) const override;
   // The block's colour field (GridBlock::colour), its trilinear interpolant read in place at
   // each hit; null without one.
   std::unique_ptr<ScalarProbe> bind_scalar() const override;

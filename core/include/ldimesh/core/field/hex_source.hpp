@@ -111,7 +111,7 @@ class HexElementSource final : public FieldSource {
   std::unique_ptr<GeometryBinding> bind(RTCDevice device, double isovalue) const override;
   // The same active elements for rays parallel to an axis: object order over the pixels each
   // element covers (the same roots as bind()).
-  std::unique_ptr<AxisBinding> bind_axis(double isovalue) const override;
+  std::unique_ptr<AxisCaster> bind_axis(double isovalue) const override;
   // The block's colour field (HexBlock::colour): its nodal values read now, each hit's value from
   // the element that holds it (HexFieldLookup); null without one.
   std::unique_ptr<ScalarProbe> bind_scalar() const override;

@@ -164,7 +164,7 @@ class RayCaster {
 
   std::vector<const FieldSource*> sources_;
   double isovalue_ = 0.0;
-  std::vector<std::unique_ptr<AxisBinding>> axis_bindings_;  // empty: Embree for every ray
+  std::vector<std::unique_ptr<AxisCaster>> axis_casters_;    // empty: Embree for every ray
   std::vector<std::unique_ptr<ScalarProbe>> scalar_probes_;  // per source, null: no colour field
   bool has_scalar_ = false;  // a source has a colour field: every hit carries its value
   double duplicate_tolerance_ = 0.0;

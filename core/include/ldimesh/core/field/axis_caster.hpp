@@ -83,9 +83,9 @@ struct AxisRays {
 };
 
 // A source bound to one isovalue for axis-parallel rays.
-class AxisBinding {
+class AxisCaster {
  public:
-  virtual ~AxisBinding() = default;
+  virtual ~AxisCaster() = default;
   // Appends every root with t in [t0, t1] of every ray to `hits`, in any order, exactly as the
   // source's Embree binding reports them (roots on a face two primitives share may come twice;
   // the caster merges them). Thread-safe.
