@@ -296,19 +296,21 @@ class AdaptorImpl final : public Adaptor {
     // others' finish the previous step's reduction with it: a short wait. With "coalesce" the
     // solver waits here for the rest of the previous step's cast and reduction.
     caster_->wait_idle();
-    BlockSnapshot::Plan plan;
-    Status copied = BlockSnapshot::plan(blocks_, options_.isovalues, field_bits_, plan);
+    StatusOr<BlockSnapshot::Plan> plan =
+        BlockSnapshot::plan(blocks_, options_.isovalues, field_bits_);
+    const std::size_t planned = plan.ok() ? plan->bytes : 0;
     // Whether some rank's copy exceeds memory_mb, and the largest copy. (A rank that failed
     // goes on: its caster thread fails the step everywhere, as on the synchronous path.)
-    long long over[2] = {copied && plan.bytes > (options_.memory_mb << 20) ? 1 : 0,
-                         static_cast<long long>(plan.bytes)};
+    long long over[2] = {planned > (options_.memory_mb << 20) ? 1 : 0,
+                         static_cast<long long>(planned)};
     MPI_Allreduce(MPI_IN_PLACE, over, 2, MPI_LONG_LONG, MPI_MAX, comm_);
     largest = over[1];
     // Synchronous where some copy is too large (the previous snapshot is no longer needed: the
     // caster is idle), or with none where this rank failed.
-    if (over[0] || !copied) snapshot_.clear();
+    if (over[0] || !plan.ok()) snapshot_.clear();
     if (over[0]) return false;
-    if (copied) copied = snapshot_.take(blocks_, std::move(plan));
+    const Status copied =
+        plan.ok() ? snapshot_.take(blocks_, std::move(plan).value()) : plan.status();
     report_.background = true;
     report_.snapshot_bytes = copied ? snapshot_.bytes() : 0;
     CasterJob cj;

@@ -270,26 +270,28 @@ std::size_t BlockSnapshot::CopyPlan::bytes() const {
   return total;
 }
 
-Status BlockSnapshot::plan(const std::vector<Block>& blocks, std::span<const double> isovalues,
-                           std::span<const std::uint8_t> field_bits, Plan& plan) {
-  plan = {};
-  return guard("snapshot: ", [&] {
-    std::vector<CopyPlan>& plans = plan.blocks;
-    plans.resize(blocks.size());
+StatusOr<BlockSnapshot::Plan> BlockSnapshot::plan(const std::vector<Block>& blocks,
+                                                  std::span<const double> isovalues,
+                                                  std::span<const std::uint8_t> field_bits) {
+  Plan plan;
+  LDIMESH_RETURN_IF_ERROR(guard("snapshot: ", [&] {
+    plan.blocks.resize(blocks.size());
     for (std::size_t k = 0; k < blocks.size(); ++k) {
       const Block& b = blocks[k];
       std::vector<FieldArray> colours;
       for (const Colour& c : b.colours)
         colours.push_back(c.array);
-      plans[k] = b.grid ? plan_grid(*b.grid, static_cast<const GridSource&>(*b.source), isovalues,
-                                    colours, field_bits)
-                 : b.cells ? plan_cells(*b.cells, colours)
-                           : plan_hex(*b.hex, static_cast<const HexElementSource&>(*b.source),
-                                      isovalues, colours);
-      plan.bytes += plans[k].bytes();
+      CopyPlan& p = plan.blocks[k];
+      p = b.grid ? plan_grid(*b.grid, static_cast<const GridSource&>(*b.source), isovalues, colours,
+                             field_bits)
+          : b.cells ? plan_cells(*b.cells, colours)
+                    : plan_hex(*b.hex, static_cast<const HexElementSource&>(*b.source), isovalues,
+                               colours);
+      plan.bytes += p.bytes();
     }
     return Status::ok();
-  });
+  }));
+  return plan;
 }
 
 Status BlockSnapshot::take(const std::vector<Block>& blocks, Plan plan) {

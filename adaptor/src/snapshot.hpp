@@ -30,8 +30,8 @@ class BlockSnapshot {
   // colour field, those of the isovalues whose bits — 1 << i, 1 << 7 from the eighth on —
   // `field_bits` has), an element block's elements, a cell block's every cell. Errors: the
   // memory to plan it (out_of_memory).
-  static Status plan(const std::vector<Block>& blocks, std::span<const double> isovalues,
-                     std::span<const std::uint8_t> field_bits, Plan& plan);
+  static StatusOr<Plan> plan(const std::vector<Block>& blocks, std::span<const double> isovalues,
+                             std::span<const std::uint8_t> field_bits);
   // Copies what `plan` chose of `blocks` (those it was made for), the pages no longer needed
   // given back before any is written. Errors: the system refused the memory (no snapshot then).
   Status take(const std::vector<Block>& blocks, Plan plan);

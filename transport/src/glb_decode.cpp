@@ -24,8 +24,8 @@ using namespace glb_format;
 // Appends the Draco primitive `primitive` (already checked to be a JSON object) to `out`.
 // The bytes of the Draco mesh that the primitive's extension `draco_ext` names: its
 // bufferView's stretch of the BIN chunk, every index and length checked.
-Status draco_bytes(const Json& json, const Json& draco_ext, std::span<const std::uint8_t> bin,
-                   std::span<const std::uint8_t>& bytes) {
+StatusOr<std::span<const std::uint8_t>> draco_bytes(const Json& json, const Json& draco_ext,
+                                                    std::span<const std::uint8_t> bin) {
   const Json* views = array_member(json, "bufferViews");
   if (!views) return Status::corrupt_input("glb: no bufferViews");
   std::size_t view_index = 0, buffer_index = 0, length = 0, offset = 0;
@@ -43,8 +43,7 @@ Status draco_bytes(const Json& json, const Json& draco_ext, std::span<const std:
   }
   if (length > bin.size() - offset)
     return Status::corrupt_input("glb: the Draco bufferView runs past the BIN chunk");
-  bytes = bin.subspan(offset, length);
-  return Status::ok();
+  return bin.subspan(offset, length);
 }
 
 // The glTF accessors of the primitive's attributes and indices agree with the Draco mesh of `n`
@@ -87,8 +86,8 @@ Status decode_primitive(const Json& json, const Json& primitive, std::span<const
       !(*extensions)[kDraco].is_object())
     return Status::corrupt_input("glb: a primitive is not Draco-compressed (unsupported)");
   const Json& draco_ext = (*extensions)[kDraco];
-  std::span<const std::uint8_t> bytes;
-  LDIMESH_RETURN_IF_ERROR(draco_bytes(json, draco_ext, bin, bytes));
+  LDIMESH_ASSIGN_OR_RETURN(const std::span<const std::uint8_t> bytes,
+                           draco_bytes(json, draco_ext, bin));
   const auto attributes = draco_ext.find("attributes");
   const auto gltf_attributes = primitive.find("attributes");
   if (attributes == draco_ext.end() || !attributes->is_object() ||

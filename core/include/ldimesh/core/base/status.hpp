@@ -70,6 +70,45 @@ class Status {
   std::string message_;
 };
 
+// A value, or the Status of why there is none (after Abseil's and Draco's StatusOr): what code
+// that returns a value returns, instead of an out-parameter beside a Status. An ok Status without
+// a value is a bug, kept as an internal error.
+template <class T>
+class StatusOr {
+ public:
+  StatusOr(T value) : value_(std::move(value)) {}         // NOLINT(google-explicit-constructor)
+  StatusOr(Status status) : status_(std::move(status)) {  // NOLINT(google-explicit-constructor)
+    assert(!status_.is_ok());
+    if (status_.is_ok()) status_ = Status::internal("StatusOr: an ok Status without a value");
+  }
+
+  bool ok() const { return status_.is_ok(); }
+  explicit operator bool() const { return ok(); }
+  const Status& status() const& { return status_; }
+  Status status() && { return std::move(status_); }
+  // The value; only where ok().
+  T& value() & {
+    assert(ok());
+    return *value_;
+  }
+  const T& value() const& {
+    assert(ok());
+    return *value_;
+  }
+  T&& value() && {
+    assert(ok());
+    return std::move(*value_);
+  }
+  T& operator*() & { return value(); }
+  const T& operator*() const& { return value(); }
+  T* operator->() { return &value(); }
+  const T* operator->() const { return &value(); }
+
+ private:
+  Status status_ = Status::ok();
+  std::optional<T> value_;
+};
+
 // The Status of the exception being handled (call inside a catch block): std::bad_alloc → out
 // of memory, std::invalid_argument → invalid argument, anything else → internal. `where` leads
 // the message ("ldimesh_execute: ").
@@ -94,3 +133,14 @@ Status guard(std::string_view where, Body&& body) noexcept {
     if (::ldimesh::Status ldimesh_status_ = (expr); !ldimesh_status_.is_ok()) \
       return ldimesh_status_;                                                 \
   } while (0)
+
+// `lhs` = the value of the StatusOr `expr`, or return its Status from the enclosing function:
+//   LDIMESH_ASSIGN_OR_RETURN(const Plan plan, make_plan(...));
+#define LDIMESH_ASSIGN_OR_RETURN(lhs, expr) \
+  LDIMESH_ASSIGN_OR_RETURN_IMPL(LDIMESH_STATUS_CONCAT(ldimesh_or_, __LINE__), lhs, expr)
+#define LDIMESH_ASSIGN_OR_RETURN_IMPL(or_value, lhs, expr) \
+  auto or_value = (expr);                                  \
+  if (!or_value.ok()) return std::move(or_value).status(); \
+  lhs = std::move(or_value).value()
+#define LDIMESH_STATUS_CONCAT(a, b) LDIMESH_STATUS_CONCAT_IMPL(a, b)
+#define LDIMESH_STATUS_CONCAT_IMPL(a, b) a##b
