@@ -84,8 +84,8 @@ Status parse_colour_by(const nlohmann::json& v, AdaptorOptions& o) {
   return Status::ok();
 }
 
-// What is meshed: "isovalues", "colour_by", "views", "resolution", "r", "refinement", "merging".
-Status parse_meshing(const nlohmann::json& j, AdaptorOptions& o) {
+// What is cast: "isovalues", "colour_by", "views", "resolution", "r".
+Status parse_surfaces(const nlohmann::json& j, AdaptorOptions& o) {
   if (j.contains("isovalues")) {
     const auto& v = j["isovalues"];
     if (!v.is_array() || v.empty()) return bad("isovalues", "must be a non-empty array of numbers");
@@ -112,6 +112,11 @@ Status parse_meshing(const nlohmann::json& j, AdaptorOptions& o) {
     o.r = j["r"].get<double>();
     if (!(o.r >= 0.0 && o.r <= 1.0)) return bad("r", "must lie in [0, 1]");
   }
+  return Status::ok();
+}
+
+// How the views are meshed beyond §3: "refinement" (§4), "merging" (§5).
+Status parse_meshing(const nlohmann::json& j, AdaptorOptions& o) {
   if (j.contains("refinement")) {
     // true: two levels (a quarter of the pixel spacing where the surface curves); a number:
     // that many levels; false or 0: off.
@@ -133,7 +138,7 @@ Status parse_meshing(const nlohmann::json& j, AdaptorOptions& o) {
   return Status::ok();
 }
 
-// When steps run: "cadence", "busy", "background".
+// When steps run: "cadence", "busy".
 Status parse_schedule(const nlohmann::json& j, AdaptorOptions& o) {
   if (j.contains("cadence")) {
     const auto& c = j["cadence"];
@@ -149,7 +154,6 @@ Status parse_schedule(const nlohmann::json& j, AdaptorOptions& o) {
     if (b != "skip" && b != "coalesce") return bad("busy", "must be \"skip\" or \"coalesce\"");
     o.coalesce = b == "coalesce";
   }
-  if (j.contains("background")) o.background = j["background"].get<bool>();
   return Status::ok();
 }
 
@@ -225,9 +229,12 @@ Status parse_object(const nlohmann::json& j, AdaptorOptions& o) {
                   "refinement", "merging", "server", "output_dir", "keep", "memory_mb", "encoding",
                   "glb", "log", "background", "testing"}));
   try {
-    LDIMESH_RETURN_IF_ERROR(parse_meshing(j, o));
+    // In the order the options are documented (docs/adaptor.md): the first bad one is named.
+    LDIMESH_RETURN_IF_ERROR(parse_surfaces(j, o));
     LDIMESH_RETURN_IF_ERROR(parse_schedule(j, o));
+    LDIMESH_RETURN_IF_ERROR(parse_meshing(j, o));
     LDIMESH_RETURN_IF_ERROR(parse_delivery(j, o));
+    if (j.contains("background")) o.background = j["background"].get<bool>();
     if (j.contains("testing")) LDIMESH_RETURN_IF_ERROR(parse_testing(j["testing"], o));
   } catch (const nlohmann::json::exception& e) {
     return Status::invalid_options(std::string("options: a value has the wrong type: ") + e.what());

@@ -2,7 +2,7 @@
 """folder_layers.py SOURCE_DIR: the folders' #include graph has no cycle. A node is a library
 folder — core/<stage> (base, field, raycast, mesh, refine, merge, io, metrics; core/(top) for
 pipeline), transport, adaptor, cli, viewer, miniapps — and an edge A → B that a file in A includes
-one of B's. Prints the edges; exit status 1, naming a cycle, where there is one."""
+one of B's (by path, or by file name where an include path finds it). Prints the edges; exit status 1, naming a cycle, where there is one."""
 import os
 import re
 import sys
@@ -21,6 +21,15 @@ def node_of(path):
     return rel[0]
 
 
+# Headers by file name, for includes found through an include path ("serve.hpp" from cli/).
+headers = {}
+for top in ("core", "transport", "adaptor", "cli", "viewer", "miniapps"):
+    for root, _, files in os.walk(os.path.join(src, top)):
+        for f in files:
+            if f.endswith((".hpp", ".h")):
+                headers.setdefault(f, []).append(os.path.join(root, f))
+
+
 def target_of(including, name):
     if name.startswith("ldimesh/core/"):
         parts = name.split("/")
@@ -30,7 +39,10 @@ def target_of(including, name):
     if name in ("ldimesh/adaptor.hpp", "ldimesh.h"):
         return "adaptor"
     local = os.path.normpath(os.path.join(os.path.dirname(including), name))
-    return node_of(local) if os.path.exists(local) else None
+    if os.path.exists(local):
+        return node_of(local)
+    found = {node_of(h) for h in headers.get(os.path.basename(name), []) if h.endswith(name)}
+    return found.pop() if len(found) == 1 else None
 
 
 edges = {}

@@ -483,14 +483,14 @@ class FailingAlongX final : public FieldSource {
     return inner_.bind(device, isovalue);
   }
   std::unique_ptr<AxisCaster> bind_axis(double isovalue) const override {
-    return std::make_unique<Binding>(inner_.bind_axis(isovalue));
+    return std::make_unique<Caster>(inner_.bind_axis(isovalue));
   }
   double duplicate_tolerance() const override { return inner_.duplicate_tolerance(); }
 
  private:
-  class Binding final : public AxisCaster {
+  class Caster final : public AxisCaster {
    public:
-    explicit Binding(std::unique_ptr<AxisCaster> inner) : inner_(std::move(inner)) {}
+    explicit Caster(std::unique_ptr<AxisCaster> inner) : inner_(std::move(inner)) {}
     void cast(const AxisRays& rays, AxisHits& hits) const override {
       if (rays.axis == 0) throw std::runtime_error("no memory left for the x view (test)");
       inner_->cast(rays, hits);

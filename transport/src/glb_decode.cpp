@@ -7,6 +7,7 @@
 #include <memory>
 #include <new>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include <draco/compression/decode.h>
@@ -21,7 +22,6 @@ namespace {
 
 using namespace glb_format;
 
-// Appends the Draco primitive `primitive` (already checked to be a JSON object) to `out`.
 // The bytes of the Draco mesh that the primitive's extension `draco_ext` names: its
 // bufferView's stretch of the BIN chunk, every index and length checked.
 StatusOr<std::span<const std::uint8_t>> draco_bytes(const Json& json, const Json& draco_ext,
@@ -75,6 +75,7 @@ Status check_accessors(const Json& json, const Json& primitive, const Json& gltf
   return Status::ok();
 }
 
+// Appends the Draco primitive `primitive` (already checked to be a JSON object) to `out`.
 Status decode_primitive(const Json& json, const Json& primitive, std::span<const std::uint8_t> bin,
                         Mesh& out, GlbInfo& info,
                         const std::vector<std::array<std::uint8_t, 3>>& view_colours) {

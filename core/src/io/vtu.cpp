@@ -404,7 +404,7 @@ Status read_grid(const std::string& path, const std::string& field, const std::s
   return Status::ok();
 }
 
-// The family and order of cell c of `grid` (VTK type `type`, `count` points; `cell` names it in
+// The family and order of cell c (VTK type `type`, `count` points; `cell` names it in
 // messages), checked against HigherOrderDegrees (`degrees`, or null) and the node counts — or
 // why it is not read.
 Status cell_kind(int type, vtkIdType count, vtkIdType c, vtkDataArray* degrees,

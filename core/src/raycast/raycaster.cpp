@@ -134,12 +134,12 @@ RayCaster::RayCaster(std::span<const FieldSource* const> sources, double isovalu
     duplicate_tolerance_ = std::max(duplicate_tolerance_, source->duplicate_tolerance());
   if (options.path == CastPath::automatic) {
     for (const FieldSource* source : sources_) {
-      std::unique_ptr<AxisCaster> binding = source->bind_axis(isovalue);
-      if (!binding) {  // one source without: Embree for all, so that roots collapse alike
+      std::unique_ptr<AxisCaster> caster = source->bind_axis(isovalue);
+      if (!caster) {  // one source without: Embree for all, so that roots collapse alike
         axis_casters_.clear();
         break;
       }
-      axis_casters_.push_back(std::move(binding));
+      axis_casters_.push_back(std::move(caster));
     }
   }
   if (options.scalars)
@@ -194,8 +194,8 @@ double RayCaster::build_seconds() const {
 }
 
 void RayCaster::prepare_axis_casters(const View& view) const {
-  for (const auto& binding : axis_casters_)
-    binding->prepare(exact_axis(view.dir));
+  for (const auto& caster : axis_casters_)
+    caster->prepare(exact_axis(view.dir));
 }
 
 void RayCaster::prepare(const View& view) const {
@@ -332,8 +332,8 @@ void RayCaster::cast_axis_rays(const AxisRays& rays, std::span<const RaySegment>
                                HitRun& run) const {
   AxisScratch& x = axis_scratch();
   x.hits.clear();
-  for (const auto& binding : axis_casters_)
-    binding->cast(rays, x.hits);
+  for (const auto& caster : axis_casters_)
+    caster->cast(rays, x.hits);
   const std::size_t n = rays.rays.size();
   run.counts.reserve(run.counts.size() + n);
   run.depth.reserve(run.depth.size() + x.hits.size());
@@ -388,8 +388,8 @@ std::vector<RayCaster::HitRun> RayCaster::cast_rows(const View& view, Segment se
     // axis runs along the view's v axis: a block of rows would be a slab a few cells thin along
     // it, reading a line or two of every grid row), the runs then put back in row order.
     bool by_columns = !axis_casters_.empty();
-    for (const auto& binding : axis_casters_)
-      by_columns = by_columns && binding->prefers_column_tasks(view);
+    for (const auto& caster : axis_casters_)
+      by_columns = by_columns && caster->prefers_column_tasks(view);
     const int span = by_columns ? view.width : view.height;
     const int per_task = by_columns ? columns_per_task(view) : rows_per_task(view);
     const int tasks = (span + per_task - 1) / per_task;

@@ -1,3 +1,5 @@
+// A grid block's coherent caster of rays parallel to an axis (GridAxisCaster, below): object
+// order for an axis view's lattice of pixel rays, column walks over straddle bits for the others.
 #include "grid_cells.hpp"
 
 namespace ldimesh::grid {

@@ -113,8 +113,8 @@ struct Brick {
 namespace {
 
 // Bit i: v[i] ≥ threshold (false for NaN); bit i of `finite`: v[i] is neither NaN nor ±Inf.
-// The grid caster's binding classifies every point so; with SSE2 (every x86-64) four floats or
-// two doubles per comparison — the portable loop took about three cycles per point.
+// The axis caster's bind pass (classify_cells) classifies every point so; with SSE2 (every x86-64)
+// four floats or two doubles per comparison — the portable loop took about three cycles per point.
 template <class T>
 std::uint64_t sign_bits(const T* v, T threshold, std::uint64_t& finite) {
 #if defined(__SSE2__)

@@ -136,6 +136,8 @@ Status guard(std::string_view where, Body&& body) noexcept {
 
 // `lhs` = the value of the StatusOr `expr`, or return its Status from the enclosing function:
 //   LDIMESH_ASSIGN_OR_RETURN(const Plan plan, make_plan(...));
+// It expands to statements (not the body of an if without braces), one use per line, and `lhs`
+// holds no comma (a type with one: an alias first).
 #define LDIMESH_ASSIGN_OR_RETURN(lhs, expr) \
   LDIMESH_ASSIGN_OR_RETURN_IMPL(LDIMESH_STATUS_CONCAT(ldimesh_or_, __LINE__), lhs, expr)
 #define LDIMESH_ASSIGN_OR_RETURN_IMPL(or_value, lhs, expr) \
