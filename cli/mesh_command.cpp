@@ -52,10 +52,8 @@ void write_outputs(const MeshArgs& args, MeshRun& run) {
   description.encode = has_extension(args.out, ".glb") || !args.steps_dir.empty();
   PackagedStep packaged;
   {
-    std::vector<MeshingResult> one(1);
-    one[0].mesh = std::move(result.mesh);
-    one[0].samples = result.samples;
-    one[0].quads = result.quads;
+    std::vector<StepSurface> one(1);
+    one[0] = {std::move(result.mesh), result.samples, result.quads};
     if (const Status s = package_step(description, std::move(one), packaged); !s)
       throw std::runtime_error(s.message());
   }

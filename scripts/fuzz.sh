@@ -24,7 +24,7 @@ shift || true
 case $target in
   fragment)
     name=fragment_decoder_fuzz
-    sources=(core/src/raycast/fragment.cpp core/src/raycast/ldi.cpp transport/src/fragment_codec.cpp)
+    sources=(core/src/raycast/fragment.cpp core/src/raycast/ldi.cpp transport/reduction/src/fragment_codec.cpp)
     libs=(-lzstd) ;;
   ply)
     name=ply_reader_fuzz
@@ -38,12 +38,14 @@ case $target in
     # goes on finding crashes, leaks and undefined behaviour; the OK line reports the slowest
     # input, and a real hang still stops the run.
     timeout=30
-    sources=(transport/src/glb.cpp transport/src/glb_decode.cpp transport/src/glb_format.cpp
+    sources=(transport/delivery/src/glb.cpp transport/delivery/src/glb_decode.cpp
+             transport/delivery/src/glb_format.cpp
              core/src/base/mesh.cpp core/src/base/status.cpp)
     libs=(-I/usr/include/eigen3 -ldraco) ;;
   http)
     name=http_request_fuzz
-    sources=(transport/src/http_server.cpp transport/src/snapshot_store.cpp core/src/base/status.cpp)
+    sources=(transport/delivery/src/http_server.cpp transport/delivery/src/snapshot_store.cpp
+             core/src/base/status.cpp)
     # Debian's cpp-httplib is a library built with these definitions (class layouts follow them).
     pkg-config --exists cpp-httplib || { echo "fuzz: cpp-httplib not found (scripts/setup.sh)" >&2; exit 1; }
     libs=($(pkg-config --cflags --libs cpp-httplib) -DLDIMESH_SOURCE_DIR=\"/nonexistent\"
@@ -115,7 +117,7 @@ out=build-fuzz/$target
 bin=$out/$name
 sources+=(tests/fuzz/$name.cpp)
 headers=(core/include/ldimesh/core/*.hpp core/include/ldimesh/core/*/*.hpp
-         transport/include/ldimesh/transport/*.hpp adaptor/src/*.hpp)
+         transport/*/include/ldimesh/transport/*.hpp adaptor/src/*.hpp)
 mkdir -p "$out/corpus" "$out/artifacts"
 
 # Rebuild when the binary is missing or older than any source or header.
@@ -129,7 +131,8 @@ if [ "$stale" -eq 1 ]; then
   echo "fuzz: building $bin with $cxx (ASan, UBSan, libFuzzer)"
   # FUZZING_BUILD_MODE_UNSAFE_FOR_PRODUCTION: the fragment decoder skips its checksums here.
   "$cxx" -std=c++20 -O1 -g -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=all \
-    -DFUZZING_BUILD_MODE_UNSAFE_FOR_PRODUCTION -Wall -Wextra -Icore/include -Itransport/include \
+    -DFUZZING_BUILD_MODE_UNSAFE_FOR_PRODUCTION -Wall -Wextra -Icore/include \
+    -Itransport/reduction/include -Itransport/delivery/include \
     "${sources[@]}" "${libs[@]}" -o "$bin"
 fi
 

@@ -164,8 +164,11 @@ Status RootWorker::publish(Job& job) {
   description.colour_fields = options_.colour_fields;
   description.surface_field = options_.surface_field;
   description.glb = options_.glb;
+  std::vector<StepSurface> surfaces;
+  for (MeshingResult& r : results)
+    surfaces.push_back({std::move(r.mesh), r.samples, r.quads});
   PackagedStep packaged;
-  LDIMESH_RETURN_IF_ERROR(package_step(description, std::move(results), packaged));
+  LDIMESH_RETURN_IF_ERROR(package_step(description, std::move(surfaces), packaged));
   StepMetadata meta = std::move(packaged.metadata);
   meta.seconds.insert(job.seconds.begin(), job.seconds.end());
   meta.seconds["decode"] = job.cast.seconds.decode;

@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """folder_layers.py SOURCE_DIR: the folders' #include graph has no cycle. A node is a library
 folder — core/<stage> (base, field, raycast, mesh, refine, merge, io, metrics; core/(top) for
-pipeline), transport, adaptor, cli, viewer, miniapps — and an edge A → B that a file in A includes
+pipeline), transport/<side> (reduction, delivery), adaptor, cli, viewer, miniapps — and an edge A → B that a file in A includes
 one of B's (by path, or by file name where an include path finds it). Prints the edges; exit status 1, naming a cycle, where there is one."""
 import os
 import re
@@ -18,6 +18,8 @@ def node_of(path):
             return "core/" + rel[2] if len(rel) > 3 else "core/(top)"
         if rel[1] == "include":  # core/include/ldimesh/core/<stage>/...
             return "core/" + rel[4] if len(rel) > 5 else "core/(top)"
+    if rel[0] == "transport" and len(rel) > 2:  # transport/<side>/{src,include}/...
+        return "transport/" + rel[1]
     return rel[0]
 
 
@@ -35,7 +37,8 @@ def target_of(including, name):
         parts = name.split("/")
         return "core/" + parts[2] if len(parts) > 3 else "core/(top)"
     if name.startswith("ldimesh/transport/"):
-        return "transport"
+        found = {node_of(h) for h in headers.get(os.path.basename(name), []) if h.endswith(name)}
+        return found.pop() if len(found) == 1 else "transport/?"
     if name in ("ldimesh/adaptor.hpp", "ldimesh.h"):
         return "adaptor"
     local = os.path.normpath(os.path.join(os.path.dirname(including), name))

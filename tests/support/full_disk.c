@@ -3,7 +3,7 @@
 // starts writing) fail as on a full disk: half of the bytes reach the file, then fwrite stops
 // short with errno ENOSPC, as the kernel's write does when the disk fills mid-file. Writes to
 // any other file are left alone (a step's GLB is written through a hidden temporary file,
-// ".step_N.glb.tmp.…", by one fwrite: transport/src/snapshot_store.cpp).
+// ".step_N.glb.tmp.…", by one fwrite: transport/delivery/src/snapshot_store.cpp).
 #define _GNU_SOURCE
 #include <dlfcn.h>
 #include <errno.h>

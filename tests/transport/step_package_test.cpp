@@ -11,8 +11,8 @@ namespace ldimesh {
 namespace {
 
 // A square of two triangles at height z, its vertices coloured by `colour` (none if empty).
-MeshingResult square(float z, std::vector<float> colour, std::size_t samples) {
-  MeshingResult r;
+StepSurface square(float z, std::vector<float> colour, std::size_t samples) {
+  StepSurface r;
   r.mesh.positions = {{0, 0, z}, {1, 0, z}, {1, 1, z}, {0, 1, z}};
   r.mesh.normals.assign(4, {0, 0, 1});
   r.mesh.triangles = {0, 1, 2, 0, 2, 3};
@@ -37,7 +37,7 @@ constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
 // Two isosurfaces: one mesh each in the GLB, in order, the counts summed, the step described.
 TEST(StepPackage, SurfacesAreJoinedInOrderAndDescribed) {
-  std::vector<MeshingResult> results;
+  std::vector<StepSurface> results;
   results.push_back(square(0.2f, {}, 10));
   results.push_back(square(0.7f, {}, 5));
   PackagedStep out;
@@ -57,7 +57,7 @@ TEST(StepPackage, SurfacesAreJoinedInOrderAndDescribed) {
   ASSERT_TRUE(decode_glb(out.glb, decoded));
   EXPECT_EQ(decoded.triangle_count(), 4u);
   // Without encoding: the joined mesh only.
-  std::vector<MeshingResult> again;
+  std::vector<StepSurface> again;
   again.push_back(square(0.2f, {}, 10));
   StepDescription plain = description(1);
   plain.encode = false;
@@ -69,7 +69,7 @@ TEST(StepPackage, SurfacesAreJoinedInOrderAndDescribed) {
 // One colour field: the non-finite values take the field's lowest finite value on the step's
 // surfaces, and the metadata names the field and its range.
 TEST(StepPackage, OneFieldColoursEverySurfaceAndRepairsNonFiniteValues) {
-  std::vector<MeshingResult> results;
+  std::vector<StepSurface> results;
   results.push_back(square(0.2f, {2.0f, kNaN, 3.0f, 4.0f}, 1));
   results.push_back(square(0.7f, {1.5f, 2.5f, INFINITY, 3.5f}, 1));
   StepDescription d = description(2);
@@ -90,7 +90,7 @@ TEST(StepPackage, OneFieldColoursEverySurfaceAndRepairsNonFiniteValues) {
 // Surfaces coloured by different fields, or one by none: each field its own range, per surface
 // in the metadata, and a repaired value from its own field only.
 TEST(StepPackage, SurfacesOfDifferentFieldsKeepTheirOwnRanges) {
-  std::vector<MeshingResult> results;
+  std::vector<StepSurface> results;
   results.push_back(square(0.2f, {10.0f, 20.0f, kNaN, 30.0f}, 1));
   results.push_back(square(0.5f, {}, 1));
   results.push_back(square(0.7f, {-1.0f, 0.0f, 1.0f, 2.0f}, 1));

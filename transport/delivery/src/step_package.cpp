@@ -26,8 +26,7 @@ std::size_t replace_nonfinite_colours(Mesh& mesh, const std::vector<std::uint32_
   return replaced;
 }
 
-Status package_step(const StepDescription& d, std::vector<MeshingResult> results,
-                    PackagedStep& out) {
+Status package_step(const StepDescription& d, std::vector<StepSurface> results, PackagedStep& out) {
   out = {};
   const bool coloured = !d.colour_fields.empty();
   std::vector<int> fields = d.surface_field;
@@ -35,7 +34,7 @@ Status package_step(const StepDescription& d, std::vector<MeshingResult> results
   std::size_t samples = 0, quads = 0;
   std::vector<std::uint32_t> surfaces;  // where each isovalue's vertices start
   for (std::size_t i = 0; i < results.size(); ++i) {
-    MeshingResult& r = results[i];
+    StepSurface& r = results[i];
     samples += r.samples;
     quads += r.quads;
     surfaces.push_back(std::uint32_t(out.mesh.positions.size()));

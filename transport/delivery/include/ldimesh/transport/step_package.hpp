@@ -14,7 +14,6 @@
 #include "ldimesh/core/base/mesh.hpp"
 #include "ldimesh/core/base/status.hpp"
 #include "ldimesh/core/base/view.hpp"
-#include "ldimesh/core/pipeline.hpp"
 #include "ldimesh/transport/glb.hpp"
 #include "ldimesh/transport/snapshot_store.hpp"
 
@@ -35,6 +34,14 @@ struct StepDescription {
   bool encode = true;  // false: only the joined mesh (a PLY or OBJ to write), no GLB
 };
 
+// One isosurface of the step as the root meshed it (MeshingResult's mesh and counts): the
+// packaging needs nothing else of the meshing, so the delivery side does not depend on core.
+struct StepSurface {
+  Mesh mesh;
+  std::size_t samples = 0;  // samples in all LDIs
+  std::size_t quads = 0;    // quads after trimming
+};
+
 struct PackagedStep {
   Mesh mesh;  // the isosurfaces joined, in isovalue order, the colour values repaired
   std::vector<std::uint8_t> glb;
@@ -46,12 +53,12 @@ struct PackagedStep {
   double glb_seconds = 0.0;
 };
 
-// Joins `results` (one per isovalue) and, with `description.encode`, encodes the GLB and
+// Joins `surfaces` (one per isovalue) and, with `description.encode`, encodes the GLB and
 // describes the step. Several isovalues become one mesh each in the GLB (GlbOptions::surfaces);
 // where the surfaces are not all coloured by one field, each field gets its own range
 // (GlbOptions::scalar_groups, StepMetadata::surface_scalars), and a surface without a field
 // beside coloured ones carries values the GLB leaves out. Errors: encode_glb's.
-Status package_step(const StepDescription& description, std::vector<MeshingResult> results,
+Status package_step(const StepDescription& description, std::vector<StepSurface> surfaces,
                     PackagedStep& out);
 
 // Of the surfaces starting at vertices `surfaces` (empty: one surface) each coloured by field
