@@ -18,58 +18,20 @@ CasterThread::CasterThread(MPI_Comm comm, const AdaptorOptions& options,
       failures_(failures) {
   MPI_Comm_dup(comm, &comm_);
   MPI_Comm_rank(comm_, &rank_);
-  thread_ = std::thread([this] { run(); });
-}
-
-void CasterThread::wait_idle() {
-  std::unique_lock lock(mutex_);
-  idle_.wait(lock, [&] { return !busy_; });
-}
-
-void CasterThread::hand(CasterJob job) {
-  std::lock_guard lock(mutex_);
-  job_ = std::move(job);
-  busy_ = true;
-  wake_.notify_all();
-}
-
-bool CasterThread::busy() const {
-  std::lock_guard lock(mutex_);
-  return busy_;
+  thread_.start([this](CasterJob& cj) { return work(cj); });
 }
 
 void CasterThread::stop() {
-  if (!thread_.joinable()) return;
-  {
-    std::unique_lock lock(mutex_);
-    idle_.wait(lock, [&] { return !busy_; });
-    stopping_ = true;
-    wake_.notify_all();
-  }
-  thread_.join();
+  if (comm_ == MPI_COMM_NULL) return;
+  thread_.stop();
   MPI_Comm_free(&comm_);
 }
 
-void CasterThread::run() {
-  while (true) {
-    CasterJob cj;
-    wait_as_batch_thread(true);
-    {
-      std::unique_lock lock(mutex_);
-      wake_.wait(lock, [&] { return stopping_ || job_.has_value(); });
-      if (!job_) return;
-      cj = std::move(*job_);
-      job_.reset();
-    }
-    wait_as_batch_thread(false);
-    const std::uint64_t step = cj.job.step;
-    const Status failed = guard("", [&] { return cast(cj); });
-    if (!failed)
-      failures_.background(failed, "step " + std::to_string(step) + " skipped: ", rank_ == 0);
-    std::lock_guard lock(mutex_);
-    busy_ = false;
-    idle_.notify_all();
-  }
+bool CasterThread::work(CasterJob& cj) {
+  const std::uint64_t step = cj.job.step;
+  const Status s = guard("", [&] { return cast(cj); });
+  if (!s) failures_.background(s, "step " + std::to_string(step) + " skipped: ", rank_ == 0);
+  return bool(s);
 }
 
 Status CasterThread::cast(CasterJob& cj) {

@@ -4,13 +4,12 @@
 // hand-off to the root's worker. Internal to the adaptor library.
 #pragma once
 
-#include <condition_variable>
-#include <mutex>
 #include <optional>
-#include <thread>
+#include <utility>
 
 #include <mpi.h>
 
+#include "job_thread.hpp"
 #include "root_worker.hpp"
 #include "schedule.hpp"
 #include "snapshot.hpp"
@@ -37,16 +36,16 @@ class CasterThread {
   CasterThread& operator=(const CasterThread&) = delete;
 
   // Waits until the thread has no step (the snapshot can then be taken again).
-  void wait_idle();
+  void wait_idle() { thread_.wait_idle(); }
   // Gives the thread a step (it must be idle); busy until the step is reduced, meshed where
   // meshing needs the ranks, and handed to the worker.
-  void hand(CasterJob job);
-  bool busy() const;
+  void hand(CasterJob job) { thread_.hand(std::move(job)); }
+  bool busy() const { return thread_.busy(); }
   // Finishes the step it has, then stops the thread. Idempotent; collective (MPI_Comm_free).
   void stop();
 
  private:
-  void run();
+  bool work(CasterJob& cj);
   Status cast(CasterJob& cj);
 
   MPI_Comm comm_ = MPI_COMM_NULL;
@@ -56,12 +55,7 @@ class CasterThread {
   RootWorker* worker_;
   Schedule& schedule_;
   Failures& failures_;
-  std::thread thread_;
-  mutable std::mutex mutex_;
-  std::condition_variable wake_, idle_;
-  std::optional<CasterJob> job_;
-  bool busy_ = false;  // from the hand-off until the step is handed on
-  bool stopping_ = false;
+  JobThread<CasterJob> thread_;  // busy from the hand-off until the step is handed on
 };
 
 }  // namespace ldimesh

@@ -56,71 +56,29 @@ Status RootWorker::start() {
     std::filesystem::create_directories(options_.output_dir, ec);
     if (ec) return Status::io("options: 'output_dir' cannot be created: " + ec.message());
   }
-  thread_ = std::thread([this] { work(); });
+  thread_.start([this](Job& job) { return work(job); });
   return Status::ok();
 }
 
 bool RootWorker::hand(Job job) {
-  std::lock_guard lock(mutex_);
-  const bool replaced = pending_.has_value();
-  if (replaced) {
-    job.skipped_steps += pending_->skipped_steps + 1;
+  return thread_.hand(std::move(job), [&](const Job& waiting, Job& job) {
+    job.skipped_steps += waiting.skipped_steps + 1;
     if (options_.log)
       std::printf("ldimesh: step %llu replaces step %llu, which was still waiting\n",
-                  (unsigned long long)job.step, (unsigned long long)pending_->step);
-  }
-  pending_ = std::move(job);
-  wake_.notify_all();
-  return replaced;
-}
-
-bool RootWorker::busy() const {
-  std::lock_guard lock(mutex_);
-  return working_ || pending_.has_value();
-}
-
-std::uint64_t RootWorker::published() const {
-  std::lock_guard lock(mutex_);
-  return published_;
+                  (unsigned long long)job.step, (unsigned long long)waiting.step);
+  });
 }
 
 void RootWorker::stop() {
-  if (thread_.joinable()) {
-    {
-      std::unique_lock lock(mutex_);
-      idle_.wait(lock, [&] { return !pending_ && !working_; });
-      stopping_ = true;
-      wake_.notify_all();
-    }
-    thread_.join();
-  }
+  thread_.stop();
   if (server_) server_->stop();
 }
 
 // Decode, mesh, encode, publish — off the solver's path.
-void RootWorker::work() {
-  while (true) {
-    Job job;
-    wait_as_batch_thread(true);
-    {
-      std::unique_lock lock(mutex_);
-      wake_.wait(lock, [&] { return stopping_ || pending_.has_value(); });
-      if (!pending_) return;
-      job = std::move(*pending_);
-      pending_.reset();
-      working_ = true;
-    }
-    wait_as_batch_thread(false);
-    const Status failed = guard("", [&] { return publish(job); });
-    if (!failed) failures_.background(failed, "step " + std::to_string(job.step) + ": ", true);
-    std::lock_guard lock(mutex_);
-    // Counted where the worker becomes idle, under the same lock: whoever sees the step
-    // published also sees the root free for the next one (a due step is skipped while it is
-    // busy; counted earlier, a step due at once could still find it working).
-    if (failed) ++published_;
-    working_ = false;
-    idle_.notify_all();
-  }
+bool RootWorker::work(Job& job) {
+  const Status s = guard("", [&] { return publish(job); });
+  if (!s) failures_.background(s, "step " + std::to_string(job.step) + ": ", true);
+  return bool(s);
 }
 
 // Writes the step's files into output_dir. A failure (disk full, the folder gone or no longer

@@ -3,14 +3,11 @@
 // store, the HTTP server, output_dir). Internal to the adaptor library.
 #pragma once
 
-#include <condition_variable>
 #include <cstdint>
 #include <memory>
-#include <mutex>
-#include <optional>
 #include <string>
-#include <thread>
 
+#include "job_thread.hpp"
 #include "ldimesh/transport/http_server.hpp"
 #include "ldimesh/transport/snapshot_store.hpp"
 #include "options.hpp"
@@ -31,16 +28,17 @@ class RootWorker {
   // is then counted as skipped (a job waits while the worker publishes the one before).
   bool hand(Job job);
   // Whether a job waits or is being published.
-  bool busy() const;
+  bool busy() const { return thread_.busy(); }
   // Steps published so far. A step counts where the worker becomes idle: whoever sees it
-  // published also sees the worker free for the next one.
-  std::uint64_t published() const;
+  // published also sees the worker free for the next one (a due step is skipped while it is
+  // busy; counted earlier, a step due at once could still find it working).
+  std::uint64_t published() const { return thread_.succeeded(); }
   // Publishes what waits, then stops the thread and the server. Idempotent.
   void stop();
   std::string url() const { return server_ ? server_->url() : std::string(); }
 
  private:
-  void work();
+  bool work(Job& job);
   Status publish(Job& job);
   void write_step(const Snapshot& snapshot);
 
@@ -48,13 +46,7 @@ class RootWorker {
   Failures& failures_;
   std::unique_ptr<SnapshotStore> store_;
   std::unique_ptr<HttpServer> server_;
-  std::thread thread_;
-  mutable std::mutex mutex_;
-  std::condition_variable wake_, idle_;
-  std::optional<Job> pending_;
-  bool working_ = false;
-  bool stopping_ = false;
-  std::uint64_t published_ = 0;
+  JobThread<Job> thread_;
   std::uint64_t unwritten_steps_ = 0;  // in a row, not written to output_dir (worker only)
 };
 

@@ -6,7 +6,6 @@
 #include <cstdint>
 #include <map>
 #include <memory>
-#include <mutex>
 #include <optional>
 #include <string>
 #include <vector>
@@ -64,33 +63,5 @@ Status collective_step(MPI_Comm comm, const AdaptorOptions& options,
 // calls.
 Status mesh_with_samples(MPI_Comm comm, const AdaptorOptions& options, const StepCasters& casters,
                          Job& job);
-
-// Puts the calling thread in Linux's SCHED_BATCH class while it waits for work (`waiting`), back
-// in the normal class while it works. The caster's and the root's worker threads wait so: waking
-// a batch thread does not take the core from the thread that wakes it (the solver's, handing a
-// step over at the end of execute(); docs/benchmarks.md). Working in the normal class, neither
-// leaves the batch class to threads they start (TBB's workers, which the solver's own TBB work
-// may share). Nothing where the system refuses it.
-void wait_as_batch_thread(bool waiting);
-
-// This rank's failures, from any of its threads: the last one's message (last_error) and the
-// last failure of its background work (what finalize returns).
-class Failures {
- public:
-  explicit Failures(bool log) : log_(log) {}
-  // A failure of an API call: kept as the last error, and returned.
-  Status api(Status failure);
-  // A failure of the background work (caster or worker thread), prefixed by `prefix`: kept,
-  // and logged where `log_it`.
-  void background(const Status& failed, const std::string& prefix, bool log_it);
-  std::string last_error() const;
-  Status background_status() const;
-
- private:
-  bool log_;
-  mutable std::mutex mutex_;
-  std::string last_error_;
-  Status background_ = Status::ok();
-};
 
 }  // namespace ldimesh
