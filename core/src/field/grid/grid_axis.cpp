@@ -455,99 +455,157 @@ class GridAxisCaster final : public AxisCaster {
     return i;
   }
 
-  void cast_ray(int a, glm::dvec3 dir, const AxisRay& ray, std::vector<RayHit>& hits) const {
-    const int b = a == 0 ? 1 : 0, c = a == 2 ? 1 : 2;  // the transverse axes, b < c
-    const glm::dvec3 o = ray.org;
-    if (o[b] < g_.coord(b, first_[b]) || o[b] > g_.coord(b, last_[b] + 1) ||
-        o[c] < g_.coord(c, first_[c]) || o[c] > g_.coord(c, last_[c] + 1))
-      return;
-    std::array<std::int64_t, 3> cell;
-    cell[b] = cell_index(b, o[b]);
-    cell[c] = cell_index(c, o[c]);
-    const std::uint64_t* column =
-        &columns_[a][std::size_t(cell[b] - first_[b] + cells_[b] * (cell[c] - first_[c])) *
-                     column_words(a)];
-    // No straddling cell in the column: nothing to find (solve_cell finds nothing elsewhere).
-    if (std::all_of(column, column + column_words(a), [](std::uint64_t w) { return w == 0; }))
-      return;
-    // Local coordinates across the ray, as solve_cell computes them.
-    double p[3];
-    glm::dvec3 inv_size(0.0);  // one over the cells' edges across the ray (the gradients')
-    for (int k : {b, c}) {
-      const double lo = g_.coord(k, cell[k]), size = g_.coord(k, cell[k] + 1) - lo;
-      p[k] = std::clamp((o[k] - lo) / size, 0.0, 1.0);
-      inv_size[k] = 1.0 / size;
-    }
-    // The four face points' weights in trilinear_value's order (b is the lower bit).
-    const double wb[2] = {1.0 - p[b], p[b]}, wc[2] = {1.0 - p[c], p[c]};
-    const double w[4] = {wb[0] * wc[0], wb[1] * wc[0], wb[0] * wc[1], wb[1] * wc[1]};
-    const std::int64_t sa = g_.strides[a], sb = g_.strides[b], sc = g_.strides[c];
-    const T* points = g_.values + cell[b] * sb + cell[c] * sc;
-    const auto face = [&](std::int64_t node) {
-      const T* q = points + node * sa;
-      const double f[4] = {double(q[0]) - iso_, double(q[sb]) - iso_, double(q[sc]) - iso_,
-                           double(q[sb + sc]) - iso_};
-      return face_value(w, f);
-    };
-    // Where corner n of a cell (index x + 2y + 4z, as solve_cell has them) lies from the cell's
-    // lowest point.
-    std::int64_t offsets[8];
-    for (int n = 0; n < 8; ++n)
-      offsets[n] = ((n >> a) & 1) * sa + ((n >> b) & 1) * sb + ((n >> c) & 1) * sc;
-    const int step = dir[a] > 0.0 ? 1 : -1;
-    const double inv = 1.0 / dir[a];
-    std::array<int, 3> steps{0, 0, 0};
-    steps[a] = step;
-    const auto t_at = [&](std::int64_t node) { return (g_.coord(a, node) - o[a]) * inv; };
-
-    // The face value last computed, by node index (consecutive cells share a face).
-    std::int64_t cached_node = -1;
-    double cached_value = 0.0;
-    const auto face_cached = [&](std::int64_t node) {
-      if (node != cached_node) {
-        cached_value = face(node);
-        cached_node = node;
-      }
-      return cached_value;
-    };
-    // The hit in cell i on [ta, tb] whose face values fa, fb (finite, nonzero) differ in sign:
-    // the one root of the linear function between the faces (as trilinear_segment_roots
-    // computes it for a segment along one axis), and the gradient there, as solve_cell.
-    const auto emit_root = [&](std::int64_t i, double fa, double fb, double ta, double tb) {
-      double corner[8];
-      const T* lower = points + i * sa;
-      for (int n = 0; n < 8; ++n)
-        corner[n] = double(lower[offsets[n]]) - iso_;
-      glm::dvec3 local(0.0), inv_cell = inv_size;  // across the ray: the column's, once
-      local[b] = p[b];
-      local[c] = p[c];
-      inv_cell[a] = 1.0 / (g_.coord(a, i + 1) - g_.coord(a, i));
-      std::array<std::int64_t, 3> at = cell;
-      at[a] = i;
-      const CellNormals<T> normals(g_, at, corner, iso_);
-      hits.push_back(axis_root(normals, a, step, local, inv_cell, fa, fb, ta, tb, dir));
-    };
-    // The cells whose face values differ in sign, solved (emit_root) in ray order when the
-    // buffer fills, before solve_cell adds a hit and at the end.
+  // One ray's cast along axis a through its column of cells (cast_ray's state, its steps as
+  // always-inline methods): the column's transverse cell and the ray's local coordinates in it,
+  // the face value last computed, the cells waiting to be solved, and where the column's
+  // straddle bits lie.
+  struct ColumnCast {
+    // A cell whose face values differ in sign, waiting to be solved (emit_root) in ray order.
     struct Pending {
       std::int64_t i;
       double fa, fb, ta, tb;
     };
-    constexpr int kPending = 32;
+    static constexpr int kPending = 32;
+
+    const GridAxisCaster& s;
+    const GridView<T>& g;
+    const double iso;
+    const int a, b, c;  // the ray's axis, the transverse axes (b < c)
+    const glm::dvec3 o, dir;
+    const AxisRay& ray;
+    std::vector<RayHit>& hits;
+    std::array<std::int64_t, 3> cell;
+    double p[3];                // local coordinates across the ray, as solve_cell has them
+    glm::dvec3 inv_size{0.0};   // one over the cells' edges across the ray (the gradients')
+    double w[4];                // the four face points' weights (trilinear_value's order)
+    std::int64_t sa, sb, sc;    // the strides along a, b, c
+    const T* points = nullptr;  // the column's lowest points
+    std::int64_t offsets[8];    // corner n of a cell (x + 2y + 4z) from its lowest point
+    int step = 1;
+    double inv = 0.0;  // 1 / dir[a]
+    std::array<int, 3> steps{0, 0, 0};
+    std::int64_t cached_node = -1;  // the face value last computed (cells share faces)
+    double cached_value = 0.0;
     Pending pending[kPending];
     int n_pending = 0;
-    const auto flush = [&] {
+    std::size_t base = 0, along = 0;  // straddle word of cell 0 along a, words between cells
+    unsigned bit0 = 0;
+
+    ColumnCast(const GridAxisCaster& caster, int axis, glm::dvec3 d, const AxisRay& r,
+               std::vector<RayHit>& out)
+        : s(caster),
+          g(caster.g_),
+          iso(caster.iso_),
+          a(axis),
+          b(axis == 0 ? 1 : 0),
+          c(axis == 2 ? 1 : 2),
+          o(r.org),
+          dir(d),
+          ray(r),
+          hits(out) {}
+
+    // The ray's column of straddle words, or null where the ray misses the block's cross-section
+    // or no cell of its column straddles (solve_cell finds nothing elsewhere).
+    [[gnu::always_inline]] const std::uint64_t* column() {
+      if (o[b] < g.coord(b, s.first_[b]) || o[b] > g.coord(b, s.last_[b] + 1) ||
+          o[c] < g.coord(c, s.first_[c]) || o[c] > g.coord(c, s.last_[c] + 1))
+        return nullptr;
+      cell[b] = s.cell_index(b, o[b]);
+      cell[c] = s.cell_index(c, o[c]);
+      const std::size_t words = s.column_words(a);
+      const std::uint64_t* col = &s.columns_[a][std::size_t(cell[b] - s.first_[b] +
+                                                            s.cells_[b] * (cell[c] - s.first_[c])) *
+                                                words];
+      if (std::all_of(col, col + words, [](std::uint64_t x) { return x == 0; })) return nullptr;
+      return col;
+    }
+
+    // What every cell of the column shares: local coordinates and weights across the ray, the
+    // corner offsets, the direction, where the straddle bits lie.
+    [[gnu::always_inline]] void prepare() {
+      for (int k : {b, c}) {
+        const double lo = g.coord(k, cell[k]), size = g.coord(k, cell[k] + 1) - lo;
+        p[k] = std::clamp((o[k] - lo) / size, 0.0, 1.0);
+        inv_size[k] = 1.0 / size;
+      }
+      const double wb[2] = {1.0 - p[b], p[b]}, wc[2] = {1.0 - p[c], p[c]};
+      w[0] = wb[0] * wc[0];
+      w[1] = wb[1] * wc[0];
+      w[2] = wb[0] * wc[1];
+      w[3] = wb[1] * wc[1];
+      sa = g.strides[a];
+      sb = g.strides[b];
+      sc = g.strides[c];
+      points = g.values + cell[b] * sb + cell[c] * sc;
+      for (int n = 0; n < 8; ++n)
+        offsets[n] = ((n >> a) & 1) * sa + ((n >> b) & 1) * sb + ((n >> c) & 1) * sc;
+      step = dir[a] > 0.0 ? 1 : -1;
+      inv = 1.0 / dir[a];
+      steps[a] = step;
+      const std::size_t cw = s.row_words();
+      const std::int64_t rb = cell[b] - s.first_[b], rc = cell[c] - s.first_[c];
+      if (a == 0) {
+        base = std::size_t(rb + s.cells_[1] * rc) * cw;
+      } else {
+        base = (a == 1 ? std::size_t(s.cells_[1]) * std::size_t(rc) : std::size_t(rc)) * cw +
+               std::size_t(rb) / 64;
+        along = a == 1 ? cw : std::size_t(s.cells_[1]) * cw;
+        bit0 = unsigned(rb % 64);
+      }
+    }
+
+    [[gnu::always_inline]] double t_at(std::int64_t node) const {
+      return (g.coord(a, node) - o[a]) * inv;
+    }
+    // The value on the face at node `node` along a, at the ray (computed once per face).
+    [[gnu::always_inline]] double face(std::int64_t node) {
+      if (node != cached_node) {
+        const T* q = points + node * sa;
+        const double f[4] = {double(q[0]) - iso, double(q[sb]) - iso, double(q[sc]) - iso,
+                             double(q[sb + sc]) - iso};
+        cached_value = face_value(w, f);
+        cached_node = node;
+      }
+      return cached_value;
+    }
+    // Whether the column's cell at relative index k along a straddles.
+    [[gnu::always_inline]] bool straddling(std::int64_t k) const {
+      if (a == 0) return bool((s.straddle_[base + std::size_t(k) / 64] >> (k % 64)) & 1u);
+      return bool((s.straddle_[base + std::size_t(k) * along] >> bit0) & 1u);
+    }
+
+    // The hit in cell i on [ta, tb] whose face values fa, fb (finite, nonzero) differ in sign:
+    // the one root of the linear function between the faces (as trilinear_segment_roots
+    // computes it for a segment along one axis), and the gradient there, as solve_cell.
+    void emit_root(std::int64_t i, double fa, double fb, double ta, double tb) {
+      double corner[8];
+      const T* lower = points + i * sa;
+      for (int n = 0; n < 8; ++n)
+        corner[n] = double(lower[offsets[n]]) - iso;
+      glm::dvec3 local(0.0), inv_cell = inv_size;  // across the ray: the column's, once
+      local[b] = p[b];
+      local[c] = p[c];
+      inv_cell[a] = 1.0 / (g.coord(a, i + 1) - g.coord(a, i));
+      std::array<std::int64_t, 3> at = cell;
+      at[a] = i;
+      const CellNormals<T> normals(g, at, corner, iso);
+      hits.push_back(axis_root(normals, a, step, local, inv_cell, fa, fb, ta, tb, dir));
+    }
+    // The waiting cells solved, in ray order.
+    [[gnu::always_inline]] void flush() {
       for (int k = 0; k < n_pending; ++k)
         emit_root(pending[k].i, pending[k].fa, pending[k].fb, pending[k].ta, pending[k].tb);
       n_pending = 0;
-    };
+    }
+
     // Cell i on [ta, tb], entered / left exactly on its faces or not: the shortcut where it
-    // decides, solve_cell (the Embree binding's) where it does not.
-    const auto solve = [&](std::int64_t i, double ta, double tb, bool on_entry,
-                           bool on_exit) [[gnu::always_inline]] {
+    // decides (the cell waits in `pending` when the buffer has room), solve_cell (the Embree
+    // binding's) where it does not, after the waiting cells.
+    [[gnu::always_inline]] void solve(std::int64_t i, double ta, double tb, bool on_entry,
+                                      bool on_exit) {
       if (on_entry && on_exit) {
-        const double fa = face_cached(step > 0 ? i : i + 1);
-        const double fb = face_cached(step > 0 ? i + 1 : i);
+        const double fa = face(step > 0 ? i : i + 1);
+        const double fb = face(step > 0 ? i + 1 : i);
         if (std::isfinite(fa) && std::isfinite(fb) && fa != 0.0 && fb != 0.0) {
           // A candidate whatever the signs, kept only where they differ: no branch on the
           // outcome, which is near random.
@@ -563,105 +621,102 @@ class GridAxisCaster final : public AxisCaster {
       entry_face[a] = on_entry;
       exit_face[a] = on_exit;
       // Checking corners for NaN and ±Inf changes nothing for a cell without them.
-      solve_cell<true>(g_, iso_, o, dir, cell, steps, ta, tb, entry_face, exit_face, hits);
-    };
+      solve_cell<true>(g, iso, o, dir, cell, steps, ta, tb, entry_face, exit_face, hits);
+    }
 
     // The brick (the Embree binding's primitive) of cell i along a, and its stretch of the ray
     // clipped as clip_ray_to_box clips it.
-    const auto stretch_of = [&](std::int64_t i) {
+    [[gnu::always_inline]] Stretch stretch_of(std::int64_t i) const {
       Stretch st;
-      st.lo = first_[a] + (i - first_[a]) / brick_cells_ * brick_cells_;
-      st.hi = std::min(last_[a], st.lo + brick_cells_ - 1);
+      st.lo = s.first_[a] + (i - s.first_[a]) / s.brick_cells_ * s.brick_cells_;
+      st.hi = std::min(s.last_[a], st.lo + s.brick_cells_ - 1);
       double ta = t_at(st.lo), tb = t_at(st.hi + 1);
       if (ta > tb) std::swap(ta, tb);
       st.face_in = ta;
       st.t0 = std::max(ray.t0, ta);
       st.t1 = std::min(ray.t1, tb);
       return st;
-    };
-
-    // The column's straddle bits: word and bit of its cell at relative index k along a.
-    const std::size_t cw = row_words();
-    const std::int64_t rb = cell[b] - first_[b], rc = cell[c] - first_[c];
-    std::size_t base = 0, along = 0;  // word of cell 0 along a, words between cells along a
-    unsigned bit0 = 0;
-    if (a == 0) {
-      base = std::size_t(rb + cells_[1] * rc) * cw;
-    } else {
-      base = (a == 1 ? std::size_t(cells_[1]) * std::size_t(rc) : std::size_t(rc)) * cw +
-             std::size_t(rb) / 64;
-      along = a == 1 ? cw : std::size_t(cells_[1]) * cw;
-      bit0 = unsigned(rb % 64);
     }
-    const auto straddling = [&](std::int64_t k) {
-      if (a == 0) return bool((straddle_[base + std::size_t(k) / 64] >> (k % 64)) & 1u);
-      return bool((straddle_[base + std::size_t(k) * along] >> bit0) & 1u);
-    };
 
-    // The brick the ray's segment starts inside (not on its face): the Embree binding walks it
-    // from the segment's start point; so does this caster, cell by cell.
-    std::int64_t start_lo = -1, start_hi = -2;
-    {
-      const double t_first = std::min(t_at(first_[a]), t_at(last_[a] + 1));
-      if (ray.t0 > t_first) {
-        const double e = o[a] + ray.t0 * dir[a];
-        std::int64_t guess = first_[a];
-        if (e >= g_.coord(a, last_[a] + 1)) {
-          guess = last_[a];
-        } else if (e > g_.coord(a, first_[a])) {
-          guess = cell_index(a, e);
-        }
-        for (std::int64_t i : {guess, guess - step, guess + step}) {
-          if (i < first_[a] || i > last_[a]) continue;
-          const Stretch st = stretch_of(i);
-          if (st.t0 > st.face_in && st.t0 < st.t1) {
-            start_lo = st.lo;
-            start_hi = st.hi;
-            // solve_cell finds nothing in a cell that does not straddle: only those are solved.
-            walk(a, st, o, dir, step, inv,
+    // The brick the ray's segment starts inside (not on its face), walked from the segment's
+    // start point as the Embree binding walks it, cell by cell; its cells in [lo, hi] (none:
+    // lo > hi).
+    void start_brick(std::int64_t& lo, std::int64_t& hi) {
+      lo = -1, hi = -2;
+      const std::int64_t first = s.first_[a], last = s.last_[a];
+      if (!(ray.t0 > std::min(t_at(first), t_at(last + 1)))) return;
+      const double e = o[a] + ray.t0 * dir[a];
+      std::int64_t guess = first;
+      if (e >= g.coord(a, last + 1)) {
+        guess = last;
+      } else if (e > g.coord(a, first)) {
+        guess = s.cell_index(a, e);
+      }
+      for (std::int64_t i : {guess, guess - step, guess + step}) {
+        if (i < first || i > last) continue;
+        const Stretch st = stretch_of(i);
+        if (st.t0 > st.face_in && st.t0 < st.t1) {
+          lo = st.lo;
+          hi = st.hi;
+          // solve_cell finds nothing in a cell that does not straddle: only those are solved.
+          s.walk(a, st, o, dir, step, inv,
                  [&](std::int64_t k, double ta, double tb, bool on_entry, bool on_exit) {
-                   if (straddling(k - first_[a])) solve(k, ta, tb, on_entry, on_exit);
+                   if (straddling(k - first)) solve(k, ta, tb, on_entry, on_exit);
                  });
-            break;
-          }
+          return;
         }
       }
     }
 
-    // Whether the segment covers the block's whole stretch along a: then every brick is entered
-    // and left on its faces, and so is every cell (no clipping to compute).
-    const bool whole = ray.t0 <= std::min(t_at(first_[a]), t_at(last_[a] + 1)) &&
-                       ray.t1 >= std::max(t_at(first_[a]), t_at(last_[a] + 1));
-    // The straddling cells, in ray order.
-    const std::int64_t n_blocks = (cells_[a] + kColumnBlock - 1) / kColumnBlock;
-    const std::size_t wpc = column_words(a);
-    for (std::size_t wi = 0; wi < wpc; ++wi) {
-      const std::size_t w = step > 0 ? wi : wpc - 1 - wi;
-      std::uint64_t bits = column[w];
-      while (bits) {
-        const int bit = step > 0 ? std::countr_zero(bits) : 63 - std::countl_zero(bits);
-        bits &= ~(std::uint64_t(1) << bit);
-        const std::int64_t q = std::int64_t(w) * 64 + bit;
-        if (q >= n_blocks) continue;
-        const std::int64_t k0 = first_[a] + q * kColumnBlock;
-        const std::int64_t k1 = std::min(last_[a], k0 + kColumnBlock - 1);
-        for (std::int64_t m = 0; m <= k1 - k0; ++m) {
-          const std::int64_t i = step > 0 ? k0 + m : k1 - m;
-          if (i >= start_lo && i <= start_hi) continue;  // walked above
-          if (!straddling(i - first_[a])) continue;
-          const double t_in = t_at(step > 0 ? i : i + 1), t_out = t_at(step > 0 ? i + 1 : i);
-          if (whole) {
-            if (t_out > t_in) solve(i, t_in, t_out, true, true);
-            continue;
+    // The straddling cells of `col` in ray order, but those in [skip_lo, skip_hi] (walked by
+    // start_brick).
+    [[gnu::always_inline]] void straddling_cells(const std::uint64_t* col, std::int64_t skip_lo,
+                                                 std::int64_t skip_hi) {
+      const std::int64_t first = s.first_[a], last = s.last_[a];
+      // Whether the segment covers the block's whole stretch along a: then every brick is
+      // entered and left on its faces, and so is every cell (no clipping to compute).
+      const bool whole = ray.t0 <= std::min(t_at(first), t_at(last + 1)) &&
+                         ray.t1 >= std::max(t_at(first), t_at(last + 1));
+      const std::int64_t n_blocks = (s.cells_[a] + kColumnBlock - 1) / kColumnBlock;
+      const std::size_t wpc = s.column_words(a);
+      for (std::size_t wi = 0; wi < wpc; ++wi) {
+        const std::size_t wd = step > 0 ? wi : wpc - 1 - wi;
+        std::uint64_t bits = col[wd];
+        while (bits) {
+          const int bit = step > 0 ? std::countr_zero(bits) : 63 - std::countl_zero(bits);
+          bits &= ~(std::uint64_t(1) << bit);
+          const std::int64_t q = std::int64_t(wd) * 64 + bit;
+          if (q >= n_blocks) continue;
+          const std::int64_t k0 = first + q * kColumnBlock;
+          const std::int64_t k1 = std::min(last, k0 + kColumnBlock - 1);
+          for (std::int64_t m = 0; m <= k1 - k0; ++m) {
+            const std::int64_t i = step > 0 ? k0 + m : k1 - m;
+            if (i >= skip_lo && i <= skip_hi) continue;
+            if (!straddling(i - first)) continue;
+            const double t_in = t_at(step > 0 ? i : i + 1), t_out = t_at(step > 0 ? i + 1 : i);
+            if (whole) {
+              if (t_out > t_in) solve(i, t_in, t_out, true, true);
+              continue;
+            }
+            const Stretch st = stretch_of(i);
+            if (!(st.t0 < st.t1)) continue;  // the Embree binding skips the brick
+            const double ta = std::max(st.t0, t_in), tb = std::min(st.t1, t_out);
+            if (tb > ta) solve(i, ta, tb, t_in == ta, t_out <= st.t1);
           }
-          const Stretch st = stretch_of(i);
-          if (!(st.t0 < st.t1)) continue;  // the Embree binding skips the brick
-          const double ta = std::max(st.t0, t_in), tb = std::min(st.t1, t_out);
-          if (tb > ta) solve(i, ta, tb, t_in == ta, t_out <= st.t1);
         }
       }
     }
-    flush();
+  };
+
+  void cast_ray(int a, glm::dvec3 dir, const AxisRay& ray, std::vector<RayHit>& hits) const {
+    ColumnCast cast(*this, a, dir, ray, hits);
+    const std::uint64_t* column = cast.column();
+    if (!column) return;
+    cast.prepare();
+    std::int64_t start_lo, start_hi;
+    cast.start_brick(start_lo, start_hi);
+    cast.straddling_cells(column, start_lo, start_hi);
+    cast.flush();
   }
 
   // The Embree binding's walk through the cells of one brick's stretch of the ray, step by
