@@ -321,25 +321,32 @@ class HexAxisCaster final : public AxisCaster {
     std::vector<curved::RayRef> batch;    // the pixel rays through a curved element's piece
   };
 
-  // The pixels of the lattice query `rays` whose centres element e's box covers,
-  // in the order that keeps the staged restriction's first stages: rows of the image axis
-  // whose world axis maps to the lower of the two reference axes across the ray.
-  void cast_element(std::uint32_t e, const AxisRays& rays, AxisHits& out, Scratch& scratch) const {
-    with_order(active_.order, [&](auto p) { cast_element_order<p>(e, rays, out, scratch); });
-  }
+  // One element's pixels in a lattice query: the rectangle of pixels its box covers, which image
+  // axis the loops take outside, and where the hits go.
+  struct ElementPixels {
+    const AxisRays& rays;
+    const View& view;
+    const ActiveElement& el;
+    AxisHits& out;
+    int ua, va, wa, rows;
+    int i0 = 0, i1 = -1, j0 = 0, j1 = -1;
+    bool columns_outer = false;
+    int outer0 = 0, outer1 = -1, inner0 = 0, inner1 = -1;
+    glm::dmat3 to_world_gradient{1.0};
 
-  template <int P>
-  void cast_element_order(std::uint32_t e, const AxisRays& rays, AxisHits& out,
-                          Scratch& scratch) const {
-    const View& view = *rays.lattice;
-    const ActiveElement& el = active_.elements[e];
-    const int ua = exact_axis(view.u), va = exact_axis(view.v), wa = rays.axis;
-    const int rows = int(rays.rays.size() / std::size_t(view.width));
-    // Pixels whose centres lie in the box (an affine element lies in its box), with a margin
-    // far above rounding: the exact test is the clip below.
+    ElementPixels(const AxisRays& r, const ActiveElement& element, AxisHits& hits)
+        : rays(r),
+          view(*r.lattice),
+          el(element),
+          out(hits),
+          ua(exact_axis(view.u)),
+          va(exact_axis(view.v)),
+          wa(r.axis),
+          rows(int(r.rays.size() / std::size_t(view.width))) {}
+
     // The pixels whose centres lie in the box [lo, hi] (with a margin far above rounding: the
-    // exact tests come later), in this query's rows; false if none.
-    const auto pixels_of = [&](glm::dvec3 lo, glm::dvec3 hi, int& i0, int& i1, int& j0, int& j1) {
+    // exact tests come later), in this query's rows, as [i0, i1] × [j0, j1]; false if none.
+    bool cover(glm::dvec3 lo, glm::dvec3 hi) {
       const auto range = [&](int axis, double sign, int count, int& first, int& last) {
         const double x0 = (lo[axis] - view.origin[axis]) / (view.spacing * sign),
                      x1 = (hi[axis] - view.origin[axis]) / (view.spacing * sign);
@@ -351,74 +358,98 @@ class HexAxisCaster final : public AxisCaster {
       j0 = std::max(j0, rays.row_begin);
       j1 = std::min(j1, rays.row_begin + rows - 1);
       return i0 <= i1 && j0 <= j1;
-    };
-    int i0, i1, j0, j1;
-    if (!pixels_of(el.lo, el.hi, i0, i1, j0, j1)) return;  // an affine element lies in its box
-    const auto index = [&](int i, int j) {
-      return std::size_t(j - rays.row_begin) * std::size_t(view.width) + std::size_t(i);
-    };
-    if (el.curved != ActiveElement::kAffine) {
-      // Each piece of the element that may hold the isosurface, with the pixel rays of its box
-      // at once (they share the search's boxes).
-      std::vector<curved::RayRef>& batch = scratch.batch;
-      const curved::Pieces& pieces = *pieces_[e];
-      for (std::size_t piece = 0; piece < pieces.pieces().size(); ++piece) {
-        const curved::Piece& box = pieces.pieces()[piece];
-        if (!pixels_of(box.world_lo, box.world_hi, i0, i1, j0, j1)) continue;
-        batch.clear();
-        for (int j = j0; j <= j1; ++j)
-          for (int i = i0; i <= i1; ++i) {
-            const std::size_t k = index(i, j);
-            const AxisRay& ray = rays.rays[k];
-            if (ray.t0 <= ray.t1) batch.push_back({std::uint32_t(k), ray.org, ray.t0, ray.t1});
-          }
-        if (!batch.empty()) pieces.intersect(piece, batch, rays.dir, out);
-      }
-      return;
     }
+    // The image axis whose reference axis is the lower of the two across the ray (ru, rv) goes
+    // in the outer loop, so that the first stage of the restriction is kept along the inner one.
+    void orient(int ru, int rv) {
+      columns_outer = ru >= 0 && ru < 3 && rv >= 0 && rv < 3 && ru < rv;
+      outer0 = columns_outer ? i0 : j0, outer1 = columns_outer ? i1 : j1;
+      inner0 = columns_outer ? j0 : i0, inner1 = columns_outer ? j1 : i1;
+      to_world_gradient = glm::transpose(el.to_reference);
+    }
+    [[gnu::always_inline]] std::size_t index(int i, int j) const {
+      return std::size_t(j - rays.row_begin) * std::size_t(view.width) + std::size_t(i);
+    }
+    [[gnu::always_inline]] std::size_t pixel(int outer, int inner) const {
+      return columns_outer ? index(outer, inner) : index(inner, outer);
+    }
+    // The hit at parameter s of pixel k's clipped stretch [t0, t1], with reference gradient g.
+    [[gnu::always_inline]] void hit_at(std::size_t k, double s, double t0, double t1,
+                                       glm::dvec3 g) const {
+      out.push_back(
+          {std::uint32_t(k),
+           {segment_point(t0, t1, s), unit_normal(to_world_gradient * g, rays.dir), 0.0f}});
+    }
+  };
+
+  // The pixels of the lattice query `rays` whose centres element e's box covers,
+  // in the order that keeps the staged restriction's first stages: rows of the image axis
+  // whose world axis maps to the lower of the two reference axes across the ray.
+  void cast_element(std::uint32_t e, const AxisRays& rays, AxisHits& out, Scratch& scratch) const {
+    with_order(active_.order, [&](auto p) { cast_element_order<p>(e, rays, out, scratch); });
+  }
+
+  template <int P>
+  void cast_element_order(std::uint32_t e, const AxisRays& rays, AxisHits& out,
+                          Scratch& scratch) const {
+    ElementPixels px(rays, active_.elements[e], out);
+    if (!px.cover(px.el.lo, px.el.hi)) return;  // an affine element lies in its box
+    if (px.el.curved != ActiveElement::kAffine) return cast_curved(e, px, scratch);
 
     // The reference axis each world axis maps to (−1: none, 3: several).
-    const glm::dmat3& m = el.to_reference;
+    const glm::dmat3& m = px.el.to_reference;
     const auto reference_of = [&](int world) {
       int r = -1;
       for (int k = 0; k < 3; ++k)
         if (m[world][k] != 0.0) r = r < 0 ? k : 3;
       return r;
     };
-    const int ru = reference_of(ua), rv = reference_of(va), rw = reference_of(wa);
-    // The image axis whose reference axis is the lower of the two across the ray goes in the
-    // outer loop, so that the first stage of the restriction is kept along the inner one.
-    const bool columns_outer = ru >= 0 && ru < 3 && rv >= 0 && rv < 3 && ru < rv;
-    const int outer0 = columns_outer ? i0 : j0, outer1 = columns_outer ? i1 : j1;
-    const int inner0 = columns_outer ? j0 : i0, inner1 = columns_outer ? j1 : i1;
-    const auto pixel = [&](int outer, int inner) {
-      return columns_outer ? index(outer, inner) : index(inner, outer);
-    };
-
+    const int ru = reference_of(px.ua), rv = reference_of(px.va), rw = reference_of(px.wa);
+    px.orient(ru, rv);
     const double* c = active_.coefficients_of(e);
-    const glm::dvec3 rd = m * rays.dir;
-    const glm::dmat3 to_world_gradient = glm::transpose(m);
-    // The hit at parameter s of pixel k's clipped stretch [t0, t1], with reference gradient g.
-    const auto hit_at = [&](std::size_t k, double s, double t0, double t1, glm::dvec3 g) {
-      out.push_back(
-          {std::uint32_t(k),
-           {segment_point(t0, t1, s), unit_normal(to_world_gradient * g, rays.dir), 0.0f}});
-    };
+    const bool separable = ru >= 0 && ru < 3 && rv >= 0 && rv < 3 && rw >= 0 && rw < 3 &&
+                           ru != rv && ru != rw && rv != rw;
+    if (!separable || !scratch.regular) return cast_pixels<P>(px, c);
+    cast_separable<P>(px, c, AxisSplit{std::min(ru, rv), std::max(ru, rv), rw}, scratch);
+  }
+
+  // A curved element: each piece that may hold the isosurface, with the pixel rays of its box
+  // at once (they share the search's boxes).
+  void cast_curved(std::uint32_t e, ElementPixels& px, Scratch& scratch) const {
+    std::vector<curved::RayRef>& batch = scratch.batch;
+    const curved::Pieces& pieces = *pieces_[e];
+    for (std::size_t piece = 0; piece < pieces.pieces().size(); ++piece) {
+      const curved::Piece& box = pieces.pieces()[piece];
+      if (!px.cover(box.world_lo, box.world_hi)) continue;
+      batch.clear();
+      for (int j = px.j0; j <= px.j1; ++j)
+        for (int i = px.i0; i <= px.i1; ++i) {
+          const std::size_t k = px.index(i, j);
+          const AxisRay& ray = px.rays.rays[k];
+          if (ray.t0 <= ray.t1) batch.push_back({std::uint32_t(k), ray.org, ray.t0, ray.t1});
+        }
+      if (!batch.empty()) pieces.intersect(piece, batch, px.rays.dir, px.out);
+    }
+  }
+
+  // An affine element's pixels each on its own, as intersect_element does it (the clip, the
+  // restriction and the roots), with the staged restriction keeping the stages that rows of
+  // pixels share.
+  template <int P>
+  void cast_pixels(const ElementPixels& px, const double* c) const {
+    const AxisRays& rays = px.rays;
     // The roots of f[0..n] along the clipped stretch [t0, t1] of pixel k's ray, with the
     // reference gradient at parameter s from `gradient`.
     const auto emit = [&]<int n>(std::integral_constant<int, n>, std::size_t k, const double* f,
                                  double t0, double t1, auto gradient) {
-      bernstein_roots<n>(f, [&](double s) { hit_at(k, s, t0, t1, gradient(s)); });
+      bernstein_roots<n>(f, [&](double s) { px.hit_at(k, s, t0, t1, gradient(s)); });
     };
-
-    // Any pixel on its own, as intersect_element does it (the clip, the restriction and the
-    // roots), with the staged restriction keeping the stages that rows of pixels share.
     StagedRestriction<P> staged(c);
     const auto cast_pixel = [&](std::size_t k) {
       const AxisRay& ray = rays.rays[k];
       double t0 = ray.t0, t1 = ray.t1;
       glm::dvec3 a, b;
-      if (!clip_to_element(el, ray.org, rays.dir, t0, t1, a, b)) return;
+      if (!clip_to_element(px.el, ray.org, rays.dir, t0, t1, a, b)) return;
       const auto tensor_gradient = [&](double s) {
         return evaluate_tensor<P>(c, a + s * (b - a)).gradient;
       };
@@ -439,59 +470,65 @@ class HexAxisCaster final : public AxisCaster {
           });
       });
     };
+    for (int outer = px.outer0; outer <= px.outer1; ++outer)
+      for (int inner = px.inner0; inner <= px.inner1; ++inner)
+        if (const std::size_t k = px.pixel(outer, inner); rays.rays[k].t0 <= rays.rays[k].t1)
+          cast_pixel(k);
+  }
 
-    const bool separable = ru >= 0 && ru < 3 && rv >= 0 && rv < 3 && rw >= 0 && rw < 3 &&
-                           ru != rv && ru != rw && rv != rw;
-    if (!separable || !scratch.regular) {
-      for (int outer = outer0; outer <= outer1; ++outer)
-        for (int inner = inner0; inner <= inner1; ++inner)
-          if (const std::size_t k = pixel(outer, inner); rays.rays[k].t0 <= rays.rays[k].t1)
-            cast_pixel(k);
-      return;
-    }
+  // The segment every pixel of a separable element shares: its reference coordinates along the
+  // ray at its ends (a_w, b_w), its stretch [t0, t1], its matrix.
+  struct SharedSegment {
+    double t0, t1, a_w, b_w;
+    SegmentMatrix matrix;
+  };
 
-    // An element whose edges lie along the world axes (each world axis maps to one reference
-    // axis) in a regular lattice: every pixel's segment is parallel to reference axis rw, and
-    // the clip separates. A pixel's reference coordinate across the ray depends on its column
-    // alone along ru and on its row alone along rv (the other terms of the product are exact
-    // zeros); its stretch along the ray on neither. So the clip is done once per column, row
-    // and element, the bases once per column and row, the u contraction once per outer line
-    // and the segment's matrix once: the same operations as restrict_axis_parallel on each
-    // pixel, so the same bits.
-    const AxisSplit axes{std::min(ru, rv), std::max(ru, rv), rw};
+  // An element whose edges lie along the world axes (each world axis maps to one reference
+  // axis) in a regular lattice: every pixel's segment is parallel to reference axis rw, and
+  // the clip separates. A pixel's reference coordinate across the ray depends on its column
+  // alone along ru and on its row alone along rv (the other terms of the product are exact
+  // zeros); its stretch along the ray on neither. So the clip is done once per column, row
+  // and element, the bases once per column and row, the u contraction once per outer line
+  // and the segment's matrix once: the same operations as restrict_axis_parallel on each
+  // pixel, so the same bits.
+  template <int P>
+  void cast_separable(const ElementPixels& px, const double* c, const AxisSplit& axes,
+                      Scratch& scratch) const {
+    const glm::dmat3& m = px.el.to_reference;
+    const glm::dvec3 rd = m * px.rays.dir;
+    const int rw = axes.w;
     const auto origin_of = [&](int i, int j) {  // the ray origin of pixel (i, j), as a ray has it
       glm::dvec3 org;
-      org[ua] = scratch.column_org[i];
-      org[va] = scratch.row_org[j - rays.row_begin];
-      org[wa] = scratch.depth_org;
-      return m * (org - el.origin);
+      org[px.ua] = scratch.column_org[i];
+      org[px.va] = scratch.row_org[j - px.rays.row_begin];
+      org[px.wa] = scratch.depth_org;
+      return m * (org - px.el.origin);
     };
-    const glm::dvec3 ro0 = origin_of(i0, j0);
+    const glm::dvec3 ro0 = origin_of(px.i0, px.j0);
     const double inv = 1.0 / rd[rw];
     double ta = (0.0 - ro0[rw]) * inv, tb = (1.0 - ro0[rw]) * inv;
     if (ta > tb) std::swap(ta, tb);
-    const double t0 = std::max(scratch.t0, ta), t1 = std::min(scratch.t1, tb);
-    if (!(t0 < t1)) return;
-    const double a_w = std::clamp(ro0[rw] + t0 * rd[rw], 0.0, 1.0);
-    const double b_w = std::clamp(ro0[rw] + t1 * rd[rw], 0.0, 1.0);
-    SegmentMatrix segment;
-    segment_matrix<P>(a_w, b_w, segment);
+    SharedSegment seg;
+    seg.t0 = std::max(scratch.t0, ta), seg.t1 = std::min(scratch.t1, tb);
+    if (!(seg.t0 < seg.t1)) return;
+    seg.a_w = std::clamp(ro0[rw] + seg.t0 * rd[rw], 0.0, 1.0);
+    seg.b_w = std::clamp(ro0[rw] + seg.t1 * rd[rw], 0.0, 1.0);
+    segment_matrix<P>(seg.a_w, seg.b_w, seg.matrix);
     const auto fill = [&](std::vector<Scratch::Line>& lines, int r, int lo, int hi, bool outer) {
       lines.resize(std::size_t(hi - lo + 1));
       for (int q = lo; q <= hi; ++q) {
-        const double x = (outer == columns_outer ? origin_of(q, j0) : origin_of(i0, q))[r];
+        const double x = (outer == px.columns_outer ? origin_of(q, px.j0) : origin_of(px.i0, q))[r];
         Scratch::Line& line = lines[q - lo];
         line.inside = !(x < 0.0 || x > 1.0);
-        bernstein_basis<P>(std::clamp(x + t0 * rd[r], 0.0, 1.0), line.basis.value,
+        bernstein_basis<P>(std::clamp(x + seg.t0 * rd[r], 0.0, 1.0), line.basis.value,
                            line.basis.derivative);
       }
     };
-    fill(scratch.outer, axes.u, outer0, outer1, true);
-    fill(scratch.inner, axes.v, inner0, inner1, false);
+    fill(scratch.outer, axes.u, px.outer0, px.outer1, true);
+    fill(scratch.inner, axes.v, px.inner0, px.inner1, false);
 
     constexpr int n = P + 1;
-    const int count = inner1 - inner0 + 1;
-    const std::size_t inner_step = columns_outer ? std::size_t(view.width) : 1;
+    const int count = px.inner1 - px.inner0 + 1;
     // The inner bases' values as rows (B_j at every inner pixel), so that a line's polynomials
     // are computed with the pixels in the vector lanes.
     scratch.inner_values.resize(std::size_t(n) * count);
@@ -500,93 +537,102 @@ class HexAxisCaster final : public AxisCaster {
     for (int j = 0; j < n; ++j)
       for (int q = 0; q < count; ++q)
         scratch.inner_values[std::size_t(j) * count + q] = scratch.inner[q].basis.value[j];
-    for (int outer = outer0; outer <= outer1; ++outer) {
-      const Scratch::Line& o = scratch.outer[outer - outer0];
-      if (!o.inside) continue;
-      FixedStage g, dg;
-      contract_fixed_u<P>(c, axes, o.basis.value, g);
-      // One strict sign over the line: the bases that follow are nonnegative and sum to one,
-      // so no pixel of the line has a root.
-      if (one_sign(&g[0][0], n, 1, kMaxNodes, 0, n)) continue;
-      // The v contraction of every pixel of the line, h[l][q] = Σ_j g[j][l] · B_j(x_v(q)), in
-      // the order contract_fixed_v takes (the same bits); then the pixels whose h does not
-      // have one strict sign, without a branch on it.
-      double* h = scratch.h.data();
-      const double* bv = scratch.inner_values.data();
+    for (int outer = px.outer0; outer <= px.outer1; ++outer)
+      if (scratch.outer[outer - px.outer0].inside) cast_line<P>(px, c, axes, seg, outer, scratch);
+  }
+
+  // The pixels of one outer line of a separable element (cast_separable).
+  template <int P>
+  [[gnu::always_inline]] void cast_line(const ElementPixels& px, const double* c,
+                                        const AxisSplit& axes, const SharedSegment& seg, int outer,
+                                        Scratch& scratch) const {
+    constexpr int n = P + 1;
+    const int count = px.inner1 - px.inner0 + 1;
+    const std::size_t inner_step = px.columns_outer ? std::size_t(px.view.width) : 1;
+    const Scratch::Line& o = scratch.outer[outer - px.outer0];
+    FixedStage g, dg;
+    contract_fixed_u<P>(c, axes, o.basis.value, g);
+    // One strict sign over the line: the bases that follow are nonnegative and sum to one,
+    // so no pixel of the line has a root.
+    if (one_sign(&g[0][0], n, 1, kMaxNodes, 0, n)) return;
+    // The v contraction of every pixel of the line, h[l][q] = Σ_j g[j][l] · B_j(x_v(q)), in
+    // the order contract_fixed_v takes (the same bits); then the pixels whose h does not
+    // have one strict sign, without a branch on it.
+    double* h = scratch.h.data();
+    const double* bv = scratch.inner_values.data();
+    for (int l = 0; l < n; ++l) {
+      double* hl = h + std::size_t(l) * count;
+      std::fill(hl, hl + count, 0.0);
+      for (int j = 0; j < n; ++j) {
+        const double gjl = g[j][l], *bj = bv + std::size_t(j) * count;
+        for (int q = 0; q < count; ++q)
+          hl[q] += gjl * bj[q];
+      }
+    }
+    int candidates = 0;
+    std::size_t k = px.pixel(outer, px.inner0);
+    for (int q = 0; q < count; ++q, k += inner_step) {
+      double lo = h[q], hi = h[q];
+      for (int l = 1; l < n; ++l)
+        lo = std::min(lo, h[std::size_t(l) * count + q]),
+        hi = std::max(hi, h[std::size_t(l) * count + q]);
+      const bool keep = scratch.inner[q].inside && px.rays.rays[k].t0 <= px.rays.rays[k].t1 &&
+                        !(lo > kTinyCoefficient || hi < -kTinyCoefficient);
+      scratch.candidates[candidates] = q;
+      candidates += keep;
+    }
+    // Every candidate's roots isolated first, then converged four at a time (their chains of
+    // divisions are independent and overlap, where one root after the other each waits on its
+    // own), then appended in the order found: pixel by pixel, along each ray — the same hits,
+    // to the bit, as emit on each pixel.
+    std::vector<LineRoot<P>>& roots = line_roots<P>();
+    roots.clear();
+    for (int m = 0; m < candidates; ++m) {
+      const int q = scratch.candidates[m];
+      double hq[kMaxNodes], f[kMaxNodes];
+      for (int l = 0; l < n; ++l)
+        hq[l] = h[std::size_t(l) * count + q];
+      along_segment<P>(hq, seg.matrix, f);
+      isolate_roots<P>(
+          f,
+          [&](double s) {
+            LineRoot<P>& root = roots.emplace_back();
+            root.q = q, root.exact = true, root.s = s;
+          },
+          [&](const double* piece, double s0, double s1) {
+            LineRoot<P>& root = roots.emplace_back();
+            root.q = q, root.exact = false, root.s0 = s0, root.s1 = s1;
+            std::copy(piece, piece + P + 1, root.c);
+          });
+    }
+    converge_roots<P>(roots);
+    bool dg_valid = false;
+    for (const LineRoot<P>& root : roots) {
+      const int q = root.q;
+      const PointBasis& bq = scratch.inner[q].basis;
+      // ∂/∂w from h, ∂/∂v from g with B_j'(x_v), ∂/∂u from the u contraction with B_i'(x_u)
+      // (once per line, at its first hit), all at the hit's x_w.
+      if (!dg_valid) {
+        contract_fixed_u<P>(c, axes, o.basis.derivative, dg);
+        dg_valid = true;
+      }
+      const double s = root.s;
+      double bw[kMaxNodes], dbw[kMaxNodes];
+      bernstein_basis<P>(seg.a_w + s * (seg.b_w - seg.a_w), bw, dbw);
+      double gu = 0.0, gv = 0.0, gw = 0.0;  // in registers: the axes are known at run time
       for (int l = 0; l < n; ++l) {
-        double* hl = h + std::size_t(l) * count;
-        std::fill(hl, hl + count, 0.0);
+        double du = 0.0, dv = 0.0;
         for (int j = 0; j < n; ++j) {
-          const double gjl = g[j][l], *bj = bv + std::size_t(j) * count;
-          for (int q = 0; q < count; ++q)
-            hl[q] += gjl * bj[q];
+          du += dg[j][l] * bq.value[j];
+          dv += g[j][l] * bq.derivative[j];
         }
+        gu += du * bw[l];
+        gv += dv * bw[l];
+        gw += h[std::size_t(l) * count + q] * dbw[l];
       }
-      int candidates = 0;
-      std::size_t k = pixel(outer, inner0);
-      for (int q = 0; q < count; ++q, k += inner_step) {
-        double lo = h[q], hi = h[q];
-        for (int l = 1; l < n; ++l)
-          lo = std::min(lo, h[std::size_t(l) * count + q]),
-          hi = std::max(hi, h[std::size_t(l) * count + q]);
-        const bool keep = scratch.inner[q].inside && rays.rays[k].t0 <= rays.rays[k].t1 &&
-                          !(lo > kTinyCoefficient || hi < -kTinyCoefficient);
-        scratch.candidates[candidates] = q;
-        candidates += keep;
-      }
-      // Every candidate's roots isolated first, then converged four at a time (their chains of
-      // divisions are independent and overlap, where one root after the other each waits on its
-      // own), then appended in the order found: pixel by pixel, along each ray — the same hits,
-      // to the bit, as emit on each pixel.
-      std::vector<LineRoot<P>>& roots = line_roots<P>();
-      roots.clear();
-      for (int m = 0; m < candidates; ++m) {
-        const int q = scratch.candidates[m];
-        double hq[kMaxNodes], f[kMaxNodes];
-        for (int l = 0; l < n; ++l)
-          hq[l] = h[std::size_t(l) * count + q];
-        along_segment<P>(hq, segment, f);
-        isolate_roots<P>(
-            f,
-            [&](double s) {
-              LineRoot<P>& root = roots.emplace_back();
-              root.q = q, root.exact = true, root.s = s;
-            },
-            [&](const double* piece, double s0, double s1) {
-              LineRoot<P>& root = roots.emplace_back();
-              root.q = q, root.exact = false, root.s0 = s0, root.s1 = s1;
-              std::copy(piece, piece + P + 1, root.c);
-            });
-      }
-      converge_roots<P>(roots);
-      bool dg_valid = false;
-      for (const LineRoot<P>& root : roots) {
-        const int q = root.q;
-        const PointBasis& bq = scratch.inner[q].basis;
-        // ∂/∂w from h, ∂/∂v from g with B_j'(x_v), ∂/∂u from the u contraction with B_i'(x_u)
-        // (once per line, at its first hit), all at the hit's x_w.
-        if (!dg_valid) {
-          contract_fixed_u<P>(c, axes, o.basis.derivative, dg);
-          dg_valid = true;
-        }
-        const double s = root.s;
-        double bw[kMaxNodes], dbw[kMaxNodes];
-        bernstein_basis<P>(a_w + s * (b_w - a_w), bw, dbw);
-        double gu = 0.0, gv = 0.0, gw = 0.0;  // in registers: the axes are known at run time
-        for (int l = 0; l < n; ++l) {
-          double du = 0.0, dv = 0.0;
-          for (int j = 0; j < n; ++j) {
-            du += dg[j][l] * bq.value[j];
-            dv += g[j][l] * bq.derivative[j];
-          }
-          gu += du * bw[l];
-          gv += dv * bw[l];
-          gw += h[std::size_t(l) * count + q] * dbw[l];
-        }
-        glm::dvec3 grad;
-        grad[axes.u] = gu, grad[axes.v] = gv, grad[axes.w] = gw;
-        hit_at(pixel(outer, inner0 + q), s, t0, t1, grad);
-      }
+      glm::dvec3 grad;
+      grad[axes.u] = gu, grad[axes.v] = gv, grad[axes.w] = gw;
+      px.hit_at(px.pixel(outer, px.inner0 + q), s, seg.t0, seg.t1, grad);
     }
   }
 
