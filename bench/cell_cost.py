@@ -17,7 +17,7 @@ cost of one pair, a pair being a pixel ray and a cell whose box (of its nodes) h
     /usr/bin/python3 bench/cell_cost.py [--build build] [--n 12] [--res 128] [--repeats 3]
                                         [--steps 3]
 
-Figures: docs/benchmarks.md, "Cells of every shape: the cost of a ray–element pair".
+Figures: docs/performance.md, "Cell shapes: the cost of a ray–cell pair".
 """
 import argparse
 import json

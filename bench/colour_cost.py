@@ -18,7 +18,7 @@ with the field, _SCALAR) in bytes per triangle. Runs alternate; every figure is 
 
     /usr/bin/python3 bench/colour_cost.py [--build build] [--repeats 5] [--threads 2] [--steps 4]
 
-Prints a Markdown table (docs/benchmarks.md, "Colouring by a second field").
+Prints a Markdown table (docs/performance.md, "Colouring by a second field").
 """
 import argparse
 import json

@@ -17,7 +17,8 @@ element's box is a little larger, so the curved rows' figures are slight overest
     /usr/bin/python3 bench/curved_cost.py [--build build] [--elements 8] [--res 128]
         [--orders 2,4,8] [--geometry 0,1,2,4]
 
-Figures: docs/benchmarks.md, "Curved elements".
+Figures: docs/performance.md, "High-order elements: affine and curved hexahedra"; tables by
+p and q: docs/history/benchmarks-log.md, "Curved elements".
 """
 import argparse
 import json

@@ -723,7 +723,9 @@ class Evaluation:
         w("")
         w("- **Ours**: `ldimesh mesh --surface S --res R --views xyz --r 0.5 --lossless` "
           "(§3: matching and trimming; refinement (§4) only where a section says so, with "
-          "`--refine N`; no bridging or hole filling (§5) — not implemented). `--lossless` so "
+          "`--refine N`; §5 merging — bridging, hole filling, enhancement — is implemented "
+          "(`--merge`, docs/method.md) but not used in these comparisons unless a section "
+          "says so). `--lossless` so "
           "that the mesh is the method's, without the "
           "transport's 20-bit depth quantization (which moves vertices by at most "
           "2.4·10⁻⁴ pixel). Times are the median of "
@@ -960,11 +962,11 @@ class Evaluation:
           "casting of refinement's extension samples, and in parentheses the same without it "
           "(`refinement.sample_seconds` subtracted), the figure comparable to the paper's "
           "(whose timings exclude ray casting). Each run is a fresh process (cold caches and "
-          "allocator); `ldimesh_bench_refine` (docs/benchmarks.md) "
+          "allocator); `ldimesh_bench_refine` (docs/performance.md) "
           "reports warm medians within one process, which are lower. "
           "Rows the paper shows that we cannot run: "
           "Coulomb and Shock Channel (not among our data sets; `ldimesh_bench_refine` times a "
-          "stand-in for the Shock Channel, docs/benchmarks.md).")
+          "stand-in for the Shock Channel, docs/performance.md).")
         w("")
         w("| data set | LDI | Fig. | paper Mesh. | Ref. | Bridge | Sew | Qual. | paper Tot. | "
           "ours scene + ray cast | ours Mesh. (match + trim) | ours arrays | "

@@ -28,7 +28,7 @@ sides without the setting (the peer then looks slower than it is).
 coherent grid cases, interleaved with this one's, and prints its rows beside them: a change's
 cost measured in one run, against the same Flying Edges.
 
-Prints a Markdown table (docs/benchmarks.md, "Ray casting beside Flying Edges") and, with
+Prints a Markdown table (docs/performance.md, "Ray casting grids beside Flying Edges") and, with
 --json FILE, writes the figures there.
 """
 import argparse

@@ -7,7 +7,7 @@
 # the first setting (the reference: 16 and 16 bits): the share of pixels that differ and the
 # mean, 99th percentile and largest difference in 8-bit levels (of R, G, B; right of the side
 # panel and above the legend, where the surface is). Also prints each
-# setting's GLB bytes per triangle. Prints Markdown for docs/benchmarks.md; keeps the PNGs in
+# setting's GLB bytes per triangle. Prints Markdown for docs/performance.md; keeps the PNGs in
 # OUT (default /tmp/glb_bits_picture).
 # Usage: bench/glb_bits_picture.sh [SIZE=192] [SUBSTEPS=60] [STEPS=20] [RESOLUTION=256] [OUT]
 # Settings: $SETTINGS, default "16/16 10/10 8/10 8/8" (normal bits / scalar bits).

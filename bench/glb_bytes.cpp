@@ -1,7 +1,8 @@
 // Where a GLB's bytes go: each GLB given (a published step, `ldimesh mesh --out .glb`) is decoded
 // and its mesh re-encoded with Draco's ExpertEncoder, one attribute set or prediction scheme at
 // a time, as GltfEncoder encodes it (the same speed, quantization and attribute types); printed
-// in bytes per triangle (docs/benchmarks.md, "The colour field as a generic attribute").
+// in bytes per triangle (docs/history/benchmarks-log.md, "The colour field as a generic
+// attribute").
 //   ldimesh_bench_glb_bytes [--position-bits 11] [--normal-bits 8] [--scalar-bits 8]
 //                           [--level 7] STEP.glb...
 // The position bits are not in the file: give those it was written with (the published steps':

@@ -8,7 +8,7 @@
 # rank's compute time, the time the solver was blocked inside execute()
 # (StepReport::max_blocked_seconds, from --report), and the root's background stages (the
 # published step's JSON "seconds"); then the three runs side by side. Prints Markdown for
-# docs/benchmarks.md.
+# docs/performance.md ("In situ cost on Gray–Scott").
 # Usage: bench/grayscott_bench.sh [SIZE=192] [SUBSTEPS=60] [STEPS=20] [RESOLUTION=256]
 # (binaries from build/bin, or from $LDIMESH_BIN; COLOUR_BY=U colours the V isosurface by U,
 # option "colour_by"; MERGING=false|true|auto sets option "merging", default the adaptor's)

@@ -24,7 +24,7 @@ Methods, each on one thread, each time the median of --repeats runs:
     /usr/bin/python3 bench/highorder_cells_contour.py [--build build] [--n 8] [--res 64 128 256]
                                                       [--levels 1 2 3] [--repeats 3]
 
-Figures: docs/benchmarks.md, "High-order tetrahedra and wedges beside VTK's contour".
+Figures: docs/performance.md, "High-order cells beside VTK".
 """
 import argparse
 import json

@@ -1,6 +1,6 @@
 // Times the single-process pipeline on the paper's Table 1 cases (Barth at 64²…512², Klein
 // bottle at 128², three views, r = 0.5): ray casting separately from mesh + trim, which is what
-// Table 1 reports. Prints a Markdown table for docs/benchmarks.md.
+// Table 1 reports. Prints a Markdown table for docs/performance.md.
 //
 //   build/bin/ldimesh_bench_mesh [--repeat 5] [--threads N] [--clip-sweep]
 //

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The distributed pipeline for 1, 2, 4 and 8 (oversubscribed) ranks; Markdown rows for
-# docs/benchmarks.md. Usage: bench/mpi_bench.sh [--surface barth] [--res 512] [...]
+# docs/performance.md ("Fragment codec and the MPI reduction").
+# Usage: bench/mpi_bench.sh [--surface barth] [--res 512] [...]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1

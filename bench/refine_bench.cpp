@@ -3,7 +3,7 @@
 // levels 1–3, r = 0.5, one process (mesh_ldis with a LocalSampleSource). Casting the LDIs is
 // outside every meshing figure (Table 1 excludes ray casting); refinement's own extension samples
 // are cast inside it and are reported apart ("sampling"), so it can be compared both ways.
-// Prints two Markdown tables for docs/benchmarks.md: the timings, and rays, hits per ray and time
+// Prints two Markdown tables for docs/performance.md: the timings, and rays, hits per ray and time
 // per ray of the LDIs' pixel-centre rays and of the extension samples.
 //
 //   build/bin/ldimesh_bench_refine [--repeat 7] [--threads N] [--only DATASET] [--out DIR]

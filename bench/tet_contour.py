@@ -15,7 +15,7 @@ bench/flying_edges.py explains.
     /usr/bin/python3 bench/tet_contour.py [--build build] [--n 55] [--res 256 512]
                                           [--repeats 5] [--threads 2] [--steps 4]
 
-Prints a Markdown table (docs/benchmarks.md, "Linear tetrahedra beside vtkContour3DLinearGrid").
+Prints a Markdown table (docs/performance.md, "Linear tetrahedra beside vtkContour3DLinearGrid").
 """
 import argparse
 import json

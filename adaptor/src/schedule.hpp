@@ -29,8 +29,8 @@ class Schedule {
   // merging. Each merged step counts once, as slow when it is still being merged at a due step
   // (with "busy": "coalesce" the solver would wait for it) or when its merge took more than
   // kAutoMergeShare of the solver's time between due steps: the merge runs on the root's cores
-  // beside the solver, which it slows (docs/benchmarks.md, the Gray–Scott bench). After two
-  // slow merged steps in a row (one can be a cold start) merging stops for good, and the log
+  // beside the solver, which it slows (docs/performance.md, "In situ cost on Gray–Scott"). After
+  // two slow merged steps in a row (one can be a cold start) merging stops for good, and the log
   // says so once.
   bool merge_stopped(std::uint64_t step);
   static constexpr double kAutoMergeShare = 0.25;

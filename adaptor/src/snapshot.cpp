@@ -117,8 +117,8 @@ void begin_copy(CopyPlan& plan, BlockCopy& copy) {
 // the pages of `dst` they lie in (plan_grid): the copy holds those pages whole, so where the
 // solver's rows are contiguous (x fastest) it fills them whole, a row's part at a time, from the
 // solver's strides. A copy per needed stretch (11 points of a row for a lone brick of 8 cells)
-// took twice as long on Gray–Scott: 4.3 against 2.2 ms per rank and step, medians
-// (docs/benchmarks.md). Where the surface is sparse a page holds few needed points, but the
+// took twice as long on Gray–Scott (docs/history/benchmarks-log.md, "The copy in the solver's
+// layout"). Where the surface is sparse a page holds few needed points, but the
 // page is held (and zeroed by the system at its first write) anyway. As the pass that chose the
 // bricks (GridSource::needed_bricks): on the calling thread up to 8 Mi points, else in tasks
 // on all cores.

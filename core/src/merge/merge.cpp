@@ -80,7 +80,7 @@ Mesh output(MergeState& ms, FaceType faces, Mesh* in_place) {
   UnionFind pieces(vertices);
   std::size_t quads = 0;
   // Corners one by one: a range insert of three or four numbers was a memmove call per face
-  // (a twentieth of merging on Marschner–Lobb 512²).
+  // (docs/history/benchmarks-log.md, "Less fresh memory, fewer passes").
   auto emit_face = [&](std::span<const std::uint32_t> c, std::uint8_t view) {
     for (std::size_t k = 1; k < c.size(); ++k)
       pieces.join(c[0], c[k]);

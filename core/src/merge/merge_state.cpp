@@ -157,7 +157,7 @@ std::size_t MergeState::count_loops() const {
 std::vector<HH> MergeState::region_edges() {
   std::erase_if(region_faces_, [&](FH f) { return mesh_.status(f).deleted(); });
   // Marks instead of sorting: a scan over the marks is ordered and far cheaper than sorting
-  // the region's half-edges (which made this a tenth of the merge on ML 512²).
+  // the region's half-edges (docs/history/benchmarks-log.md, "Merging (§5)").
   edge_mark_.assign(mesh_.n_edges(), 0);
   for (FH f : region_faces_)
     mark_edges(f);

@@ -90,8 +90,8 @@ struct MergeState {
   bool reached_region_edge() const { return cut_touched_ > 0; }
 
   glm::dvec3 point(VH v) const { return to_glm(mesh_.point(v)); }
-  // Three steps along the face instead of OpenMesh's circulator (valence() was a tenth of the
-  // merge on ML 512²: the split and flip passes ask it for every edge of the sewing region).
+  // Three steps along the face instead of OpenMesh's circulator: the split and flip passes ask
+  // it for every edge of the sewing region.
   bool is_triangle(FH f) const;
   double length(HH h) const;
 

@@ -189,9 +189,9 @@ void smooth(QuadState& qs, const SurfaceProjection& project);
 
 // The whole mesh, written over the input mesh `m` (the one the region was selected from): the
 // quads outside the region as they were, then the region's faces. In place, so that the
-// output takes no fresh memory (on Marschner–Lobb 512² the fresh arrays' first touch was most
-// of the output's time): every vertex and outside quad moves to the same or a lower place, so
-// an entry is read before anything is written over it.
+// output takes no fresh memory (fresh pages are costly to touch on these VMs:
+// docs/history/benchmarks-log.md, "Less fresh memory, fewer passes"): every vertex and outside quad
+// moves to the same or a lower place, so an entry is read before anything is written over it.
 void output(QuadState& qs, Mesh& m);
 
 }  // namespace ldimesh::quad_detail

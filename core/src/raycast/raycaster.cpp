@@ -395,8 +395,8 @@ std::vector<RayCaster::HitRun> RayCaster::cast_rows(const View& view, Segment se
     const int tasks = (span + per_task - 1) / per_task;
     std::vector<RayCaster::HitRun> runs(tasks);
     // One task at a time to the threads (simple partitioner): the tasks' work is uneven (where
-    // the surface lies), and the default partitioner's halves left a thread idle at 3 × 256²
-    // (ML 256³ on two threads 0.100–0.116 → 0.081–0.101 s).
+    // the surface lies), and the default partitioner's halves left a thread idle
+    // (docs/history/benchmarks-log.md, "Ray casting beside Flying Edges").
     const auto cast_task = [&](int task) {
       int i0 = 0, i1 = view.width, j0 = 0, j1 = view.height;
       (by_columns ? i0 : j0) = task * per_task;

@@ -181,7 +181,8 @@ Status build_draco_mesh(const Mesh& m, const std::vector<std::uint32_t>& tris,
     // The scalar as the custom attribute _SCALAR, one float per vertex (GltfEncoder writes a
     // GENERIC attribute under the name its metadata gives). Draco predicts a GENERIC attribute
     // from its neighbours (parallelogram): as TEXCOORD_0 it took the texture-coordinate
-    // predictor, made for 2-D maps, and cost about half as much again (docs/benchmarks.md).
+    // predictor, made for 2-D maps, and cost more bytes (docs/history/benchmarks-log.md, "The
+    // colour field as a generic attribute").
     draco::PointAttribute* scalar =
         add(draco::GeometryAttribute::GENERIC, 1, draco::DT_FLOAT32, false);
     if (!scalar) return Status::internal("glb: Draco could not add an attribute");

@@ -251,10 +251,9 @@ class GridAxisCaster final : public AxisCaster {
     index_pixels(
         va, n / width, [&](std::size_t j) { return ray[j * width].org[va]; }, x.rows);
     // Object order pays where the rays are about as dense as the cells or denser: it streams the
-    // block, while each ray's walk of its column misses the cache on most faces (measured on
-    // Marschner–Lobb 256³ in alternating runs: 20–40 % faster at 2 × 2 rays per cell, 3–8 % at
-    // one ray per cell, 3–6 % slower at 0.75 × 0.75): below 0.75 rays per column of cells on
-    // average the rays walk their columns.
+    // block, while each ray's walk of its column misses the cache on most faces; below 0.75 rays
+    // per column of cells on average the walks win (measured in alternating runs:
+    // docs/history/benchmarks-log.md, "Ray casting beside Flying Edges").
     if (x.columns.density() * x.rows.density() < 0.75) return false;
     x.whole.assign(n, 0);
     for (std::size_t k = 0; k < n; ++k) {

@@ -32,8 +32,8 @@ namespace ldimesh::grid {
 // The functions have internal linkage (unnamed namespaces; the types, which the bindings'
 // signatures name, do not): each caster's file gets its own copies, which GCC specialises and
 // inlines as it did when all of this was one file. As inline functions of external linkage the
-// Embree binding ran 10 % slower (ldimesh_bench_sources --only grid --grid-points 256 --res 512
-// --embree, one thread: 1.12 s against 1.01 s).
+// Embree binding ran slower: GCC specialised them less (ldimesh_bench_sources --only grid
+// --embree against the previous build).
 namespace {
 
 constexpr const char* kAxis[3] = {"x", "y", "z"};
@@ -114,7 +114,8 @@ namespace {
 
 // Bit i: v[i] ≥ threshold (false for NaN); bit i of `finite`: v[i] is neither NaN nor ±Inf.
 // The axis caster's bind pass (classify_cells) classifies every point so; with SSE2 (every x86-64)
-// four floats or two doubles per comparison — the portable loop took about three cycles per point.
+// four floats or two doubles per comparison (the portable loop, one point per comparison, is
+// the fallback).
 template <class T>
 std::uint64_t sign_bits(const T* v, T threshold, std::uint64_t& finite) {
 #if defined(__SSE2__)
@@ -352,8 +353,8 @@ void solve_cell(const GridView<T>& g, double iso, glm::dvec3 org, glm::dvec3 dir
 // Folds points i0 … i1 (at least two) of row (j, k) into the running minimum and maximum
 // (NaNs left out; ±Inf in) and clears `finite` where one of them is NaN or ±Inf (v − v is 0
 // exactly for the finite ones). A row in memory order goes two doubles or four floats per
-// instruction with SSE2 (every x86-64): 2.3 times faster than the scalar loop over the Gray–Scott
-// block's bricks (6.5 → 2.8 ms for 194 × 194 × 98 doubles, needed_bricks' pass). The scalar loop
+// instruction with SSE2 (every x86-64), at memory speed where the scalar loop was not
+// (docs/history/benchmarks-log.md, "The solver waits 8 ms"). The scalar loop
 // keeps two points per step in separate accumulators, so that no chain of dependent operations
 // bounds it.
 template <class T>

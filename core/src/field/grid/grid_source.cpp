@@ -315,9 +315,9 @@ GridView<T> make_view(const GridBlock& block, const T* values,
 // where they hold at most 8 Mi points, else in tasks of a layer or more on all cores. The
 // snapshot's scan and copies (needed_bricks, for_each_needed_run) run on the solver's thread;
 // where ranks share cores (the Gray–Scott bench: 2 ranks on 2 cores), waiting there for TBB's
-// workers, which another rank's threads can hold off a core, cost more than they saved: the scan
-// of a 194 × 194 × 98 block (3.7 M points) took 2.1–8 ms (median 4.3) in tasks, 3.8–4.0 ms on
-// the solver's thread. A larger block (a rank with many cores to itself) is still spread.
+// workers, which another rank's threads can hold off a core, cost more than they saved
+// (docs/history/benchmarks-log.md, "The solver waits 8 ms"). A larger block (a rank with many
+// cores to itself) is still spread.
 template <class F>
 void for_layers(std::int64_t n, std::int64_t layer_points, F&& f) {
   if (n <= 0) return;
@@ -339,7 +339,8 @@ std::vector<std::uint8_t> GridSource::needed_bricks(std::span<const double> isov
 std::vector<std::uint8_t> GridSource::needed_bricks_by_isovalue(
     std::span<const double> isovalues) const {
   // The bricks' ranges from the rows of points in memory order (a brick at a time would jump
-  // between rows and pages: three times slower on the Gray–Scott block), layers of bricks along
+  // between rows and pages, much slower: docs/history/benchmarks-log.md, "The snapshot holds what
+  // the step reads"), layers of bricks along
   // z (for_layers). A brick with a NaN or ±Inf is needed whatever its range: a superset of the
   // bricks a bind keeps or finds non-finite values in, which is all the snapshot needs.
   const std::size_t count = brick_count();

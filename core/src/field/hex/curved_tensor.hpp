@@ -64,7 +64,7 @@ class Quads {
 
 // lo = min(lo, v), hi = max(hi, v) per component. `wide`: as one 32-byte select (the AVX2
 // copy); else as two 16-byte ones (GCC splits a 32-byte select into scalars through memory
-// where AVX is off: 15× slower). Finite values: the same result either way.
+// where AVX is off). Finite values: the same result either way.
 template <bool wide>
 [[gnu::always_inline]] inline void min_max(const Quad& v, Quad& lo, Quad& hi) {
   if constexpr (wide) {

@@ -640,9 +640,10 @@ class HexAxisCaster final : public AxisCaster {
   mutable std::array<AxisBins, 3> bins_;
   mutable std::array<std::once_flag, 3> bins_once_;
   // A curved element's pieces (the pixel rays share the search's first levels): boxes of a
-  // quarter of the reference cube's width per axis (an eighth measured slower since the search is
-  // preconditioned, and takes 8× the memory), only those where the field allows the isovalue;
-  // the pixel rays through a piece are searched together (they share its boxes).
+  // quarter of the reference cube's width per axis (the fastest width measured, and an eighth takes
+  // 8× the memory: docs/history/benchmarks-log.md, "Curved elements"), only those where the field
+  // allows the isovalue; the pixel rays through a piece are searched together (they share its
+  // boxes).
   mutable std::vector<std::optional<curved::Pieces>> pieces_;
   mutable std::once_flag pieces_once_;
 };

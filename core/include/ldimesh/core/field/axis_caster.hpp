@@ -40,8 +40,8 @@ struct AxisHit {
 };
 
 // The hits of a query: growable arrays whose append inlines into the casters' kernels, which
-// are large enough that the compiler left std::vector's push_back a call per hit (3–4 % of a
-// grid cast's samples, beside 13 % for solving its cells). The rays' indices are kept apart
+// are large enough that the compiler left std::vector's push_back a call per hit, a visible
+// share of a grid cast's profile. The rays' indices are kept apart
 // from the hits, so that grouping the hits by ray reads 4 bytes per hit, not 32. Growth is the
 // out-of-line part.
 class AxisHits {

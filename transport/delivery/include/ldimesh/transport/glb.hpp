@@ -94,8 +94,9 @@ struct GlbInfo {
 // the CLI's --glb-* flags): Draco's compression level and the bits of the normals and of the
 // colour field's _SCALAR. The defaults are draco_encoder's own (-cl 7, -qn 8, -qg 8): normals
 // within 0.96°, the scalar within 1/510 of its range, half an entry of the viewer's 256-entry
-// colour map. Against 10 and 10 bits they cost 19 % fewer bytes on Gray–Scott coloured by U and
-// change the viewer's picture by at most 6 of 255 levels (docs/benchmarks.md, "Eight bits").
+// colour map. What they save against 10 and 10 bits, and how little they change the viewer's
+// picture: docs/history/benchmarks-log.md, "Eight bits for the published normals and colour
+// field".
 struct StepGlbSettings {
   int compression_level = 7;
   int normal_bits = 8;
@@ -182,9 +183,8 @@ Status decode_glb_isolated(std::span<const std::uint8_t> glb, Mesh& out, GlbInfo
                            double cpu_seconds = 0.0);
 
 // The automatic CPU limit of decode_glb_isolated, in whole seconds: 2 s + 5 s per MiB of GLB
-// (rounded down). Draco decodes the benchmark meshes' GLBs at 1.3–1.6 MiB per second on one
-// core here (docs/benchmarks.md: 3.9 M triangles, 2.6 MB in 1.6 s; 1.3 M, 0.73 MB in 0.54 s), so
-// a real file has 6× its time or more.
+// (rounded down): several times what Draco takes to decode a real file of that size on one core
+// (docs/performance.md, "GLB delivery against PLY").
 double glb_decode_cpu_limit(std::size_t glb_bytes);
 
 }  // namespace ldimesh
