@@ -151,23 +151,17 @@ Status cast_and_reduce(MPI_Comm comm, const StepBlocks& blocks, std::span<const 
   return Status::ok();
 }
 
-Status mesh_step(MPI_Comm comm, const StepBlocks& blocks, std::span<const View> views,
-                 double tolerance, const MeshingOptions& options, CastStep& step,
-                 std::vector<MeshingResult>& results, std::vector<std::vector<Ldi>>* ldis) {
-  results.clear();
-  if (ldis) ldis->clear();
+namespace {
+
+// The root's half of a step (mesh_step, mesh_on_root): what a deferred reduction left, then each
+// isovalue's LDIs and mesh. `open_samples(i, samples)` gives isovalue i its sample source, or
+// leaves `samples` empty where meshing asks for none. Makes no MPI call of its own.
+template <class OpenSamples>
+Status mesh_isovalues(std::size_t isovalues, std::span<const View> views,
+                      const MeshingOptions& options, CastStep& step,
+                      std::vector<MeshingResult>& results, std::vector<std::vector<Ldi>>* ldis,
+                      OpenSamples&& open_samples) {
   const std::size_t nv = views.size();
-  const bool collective = meshing_samples(options);
-  int rank = 0;  // without samples only the root calls, and no MPI call is made
-  if (collective) MPI_Comm_rank(comm, &rank);
-  if (rank != 0) {
-    if (!collective) return Status::ok();
-    // Answer the root's requests, isovalue after isovalue, as it meshes them.
-    for (const std::vector<CastBlock>& mine : blocks)
-      MpiSampleSource(comm, mine, std::vector<View>(views.begin(), views.end()), tolerance).serve();
-    return root_status(comm, Status::ok());
-  }
-  // The root: what a deferred reduction left, then each isovalue's LDIs and mesh.
   Status status = Status::ok();
   if (!step.pending.messages.empty()) {
     const auto start = std::chrono::steady_clock::now();
@@ -175,14 +169,13 @@ Status mesh_step(MPI_Comm comm, const StepBlocks& blocks, std::span<const View> 
     status = finish_reduction(step.pending, step.fragments, stats);
     step.seconds.decode += seconds_since(start);
   }
-  if (status && step.fragments.size() != blocks.size() * nv)
+  if (status && step.fragments.size() != isovalues * nv)
     status = Status::internal("the step has " + std::to_string(step.fragments.size()) +
-                              " fragments for " + std::to_string(blocks.size()) + " isovalues of " +
+                              " fragments for " + std::to_string(isovalues) + " isovalues of " +
                               std::to_string(nv) + " views");
-  for (std::size_t i = 0; i < blocks.size(); ++i) {
+  for (std::size_t i = 0; i < isovalues; ++i) {
     std::optional<MpiSampleSource> samples;
-    if (collective)
-      samples.emplace(comm, blocks[i], std::vector<View>(views.begin(), views.end()), tolerance);
+    open_samples(i, samples);
     if (status) {
       try {
         auto start = std::chrono::steady_clock::now();
@@ -205,6 +198,33 @@ Status mesh_step(MPI_Comm comm, const StepBlocks& blocks, std::span<const View> 
     results.clear();
     if (ldis) ldis->clear();
   }
+  return status;
+}
+
+}  // namespace
+
+Status mesh_step(MPI_Comm comm, const StepBlocks& blocks, std::span<const View> views,
+                 double tolerance, const MeshingOptions& options, CastStep& step,
+                 std::vector<MeshingResult>& results, std::vector<std::vector<Ldi>>* ldis) {
+  results.clear();
+  if (ldis) ldis->clear();
+  const bool collective = meshing_samples(options);
+  int rank = 0;  // without samples only the root calls, and no MPI call is made
+  if (collective) MPI_Comm_rank(comm, &rank);
+  if (rank != 0) {
+    if (!collective) return Status::ok();
+    // Answer the root's requests, isovalue after isovalue, as it meshes them.
+    for (const std::vector<CastBlock>& mine : blocks)
+      MpiSampleSource(comm, mine, std::vector<View>(views.begin(), views.end()), tolerance).serve();
+    return root_status(comm, Status::ok());
+  }
+  const Status status =
+      mesh_isovalues(blocks.size(), views, options, step, results, ldis,
+                     [&](std::size_t i, std::optional<MpiSampleSource>& samples) {
+                       if (collective)
+                         samples.emplace(comm, blocks[i],
+                                         std::vector<View>(views.begin(), views.end()), tolerance);
+                     });
   return collective ? root_status(comm, status) : status;
 }
 
@@ -214,8 +234,9 @@ Status mesh_on_root(std::size_t isovalues, std::span<const View> views,
   if (meshing_samples(options))
     return Status::invalid_argument(
         "mesh_on_root: refinement or projecting merging asks every rank for samples (mesh_step)");
-  // Without samples mesh_step reads of its blocks only their count, and no communicator.
-  return mesh_step(MPI_COMM_NULL, StepBlocks(isovalues), views, 0.0, options, step, results);
+  results.clear();
+  return mesh_isovalues(isovalues, views, options, step, results, nullptr,
+                        [](std::size_t, std::optional<MpiSampleSource>&) {});
 }
 
 Status mesh_distributed(MPI_Comm comm, const RayCaster& caster, const Subdomain& sub,

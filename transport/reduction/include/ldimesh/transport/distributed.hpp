@@ -114,9 +114,10 @@ Status mesh_step(MPI_Comm comm, const StepBlocks& blocks, std::span<const View> 
                  std::vector<MeshingResult>& results,
                  std::vector<std::vector<Ldi>>* ldis = nullptr);
 
-// The root half where meshing asks no rank for samples (meshing_samples(options) false): mesh_step
-// on the root alone for `isovalues` isovalues — not collective, no MPI call, any one thread.
-// invalid_argument where the options need samples.
+// The root half where meshing asks no rank for samples (meshing_samples(options) false): the
+// root's meshing of mesh_step (the same code) for `isovalues` isovalues, with neither a
+// communicator nor blocks — not collective, no MPI call, any one thread. invalid_argument where
+// the options need samples.
 Status mesh_on_root(std::size_t isovalues, std::span<const View> views,
                     const MeshingOptions& options, CastStep& step,
                     std::vector<MeshingResult>& results);
