@@ -181,6 +181,27 @@ for name in grayscott analytic dg "${heat[@]}"; do
 done
 echo "invalid options: named, exit 2, for every mini-app"
 
+# An unstable or oscillating Gray–Scott time step (the finest grid mode's factor 1 − 12 D dt
+# below 0: dt = 1 with Du = 0.16 speckles U) is refused with one line naming the limit, exit 1,
+# before anything is simulated; the largest allowed step runs.
+for dt in 1 0.6 3 -0.1; do
+  set +e
+  "$mpiexec" -n 2 --oversubscribe "$bin/ldimesh-grayscott" --size 16 --steps 1 --dt $dt \
+    --options "$(options "$tmp/dt" false)" >"$tmp/dt-$dt.log" 2>&1
+  rc=$?
+  set -e
+  [ "$rc" -eq 1 ] || { cat "$tmp/dt-$dt.log" >&2; fail "grayscott --dt $dt: exit $rc, not 1"; }
+  [ "$(grep -c 'ldimesh-grayscott: ' "$tmp/dt-$dt.log")" -eq 1 ] ||
+    { cat "$tmp/dt-$dt.log" >&2; fail "grayscott --dt $dt: not one line"; }
+  grep -q -- "--dt" "$tmp/dt-$dt.log" ||
+    { cat "$tmp/dt-$dt.log" >&2; fail "grayscott --dt $dt: the option is not named"; }
+  [ ! -e "$tmp/dt/step_000001.glb" ] || fail "grayscott --dt $dt: a step was published"
+done
+grep -q -- "use --dt 0.52 or less" "$tmp/dt-1.log" || { cat "$tmp/dt-1.log" >&2; fail "no limit"; }
+grep -q "blows up" "$tmp/dt-3.log" || { cat "$tmp/dt-3.log" >&2; fail "dt 3: not unstable"; }
+run grayscott 1 "$tmp/dt-ok" --size 16 --steps 1 --dt 0.52
+echo "Gray-Scott time step: an oscillating or unstable one refused on one line, 0.52 runs"
+
 # No surface (the isovalue is above V's range): every step is published empty, the adaptor's
 # log line reports 0 triangles, and the simulation runs to the end.
 run grayscott 2 "$tmp/nosurface" --size 24 --steps $steps --isovalue 5
