@@ -160,7 +160,7 @@ class AdaptorImpl final : public Adaptor {
           std::printf("ldimesh: step %llu skipped: still processing an earlier step\n",
                       (unsigned long long)step);
       }
-      finish_report(start);
+      finish_report(start, /*executed=*/false);
       return Status::ok();
     }
     if (rank_ == 0) schedule_.run();
@@ -351,11 +351,12 @@ class AdaptorImpl final : public Adaptor {
   Status fail(Status failure) { return failures_.api(std::move(failure)); }
   Status fail_if(Status s) { return s ? s : fail(std::move(s)); }
 
-  void finish_report(Clock::time_point start) {
+  // The report's times; `executed`: the step was due and not skipped (it ran, or failed).
+  void finish_report(Clock::time_point start, bool executed = true) {
     report_.blocked_seconds = seconds_since(start);
     MPI_Reduce(&report_.blocked_seconds, &report_.max_blocked_seconds, 1, MPI_DOUBLE, MPI_MAX, 0,
                comm_);
-    report_.executed = !report_.skipped_busy && report_.blocked_seconds > 0.0;
+    report_.executed = executed;
   }
 
   MPI_Comm comm_;

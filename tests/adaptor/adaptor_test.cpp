@@ -130,8 +130,18 @@ TEST(Adaptor, DueStepsArePublishedAndWrittenOffTheSolversPath) {
                     "cadence": {"every_steps": 2}, "output_dir": ")" +
            dir + R"("})");
   if (!a) return;
-  for (std::uint64_t step = 0; step < 6; ++step)
+  for (std::uint64_t step = 0; step < 6; ++step) {
     EXPECT_TRUE(a->execute(step, 0.1 * double(step)));
+    // The report says which steps ran: the odd ones were not due (every rank's report).
+    const StepReport& report = a->last_report();
+    if (step % 2 == 1) {
+      EXPECT_FALSE(report.executed) << "step " << step;
+      EXPECT_FALSE(report.skipped_busy) << "step " << step;
+    }
+    if (step == 0) {
+      EXPECT_TRUE(report.executed);
+    }
+  }
   EXPECT_TRUE(a->finalize());
   if (rank_of() == 0) {
     EXPECT_GE(a->published_steps(), 1u);
