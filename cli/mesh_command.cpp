@@ -67,14 +67,13 @@ void write_outputs(const MeshArgs& args, MeshRun& run) {
   if (!args.out.empty()) {
     const auto start = std::chrono::steady_clock::now();
     const std::vector<std::uint8_t>& glb = packaged.glb;
-    if (has_extension(args.out, ".glb")) {
-      std::FILE* f = std::fopen(args.out.c_str(), "wb");
-      const bool ok = f && std::fwrite(glb.data(), 1, glb.size(), f) == glb.size();
-      if (f && std::fclose(f) != 0) throw std::runtime_error("writing '" + args.out + "' failed");
-      if (!ok) throw std::runtime_error("cannot write '" + args.out + "'");
-    } else if (const Status s = write_mesh(args.out, result.mesh); !s) {
-      throw std::runtime_error(s.message());
-    }
+    write_atomically(args.out, [&](const std::string& temporary) {
+      if (!has_extension(args.out, ".glb")) return write_mesh(temporary, result.mesh);
+      std::FILE* f = std::fopen(temporary.c_str(), "wb");
+      bool ok = f && std::fwrite(glb.data(), 1, glb.size(), f) == glb.size();
+      if (f && std::fclose(f) != 0) ok = false;
+      return ok ? Status::ok() : Status::io("cannot write '" + args.out + "'");
+    });
     run.write_seconds = seconds_since(start);
   }
   if (!args.steps_dir.empty()) {

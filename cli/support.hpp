@@ -2,6 +2,7 @@
 // failures that reach every rank.
 #pragma once
 
+#include <functional>
 #include <stdexcept>
 #include <string>
 
@@ -11,8 +12,18 @@
 
 namespace ldimesh::cli {
 
-// Fails early, before any work, if `path` cannot be written (creating missing parent folders).
+// Fails early, before any work, if `path` could not be written: it is a folder, or not
+// writable, or the nearest existing folder above it is not writable (missing folders are made
+// when the file is written). Creates nothing: a run that fails leaves the file system as it
+// found it.
 void check_writable(const std::string& path);
+
+// Writes `path` through `write(temporary)`: the missing folders made, the file written beside it
+// under a hidden temporary name with the same extension, and renamed over `path` once complete. A
+// failure (a Status, or an exception from `write`) removes the temporary file and throws
+// runtime_error; `path` is then as it was.
+void write_atomically(const std::string& path,
+                      const std::function<Status(const std::string& temporary)>& write);
 
 // Whether `path` ends in `ext` (".ply"), in any letter case.
 bool has_extension(const std::string& path, const std::string& ext);

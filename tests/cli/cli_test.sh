@@ -26,6 +26,23 @@ expect_error "r above 1" mesh --surface sphere --res 16 --r 1.5
 expect_error "r below 0" mesh --surface sphere --res 16 --r -0.1
 expect_error "unwritable output" mesh --surface sphere --res 16 --out /proc/version/x.ply
 expect_error "unknown format" mesh --surface sphere --res 16 --out "$tmp/x.stl"
+expect_error "output is a folder" mesh --surface sphere --res 16 --out "$tmp/folder.ply/"
+mkdir -p "$tmp/folder.ply"
+expect_error "output is a folder" mesh --surface sphere --res 16 --out "$tmp/folder.ply"
+
+# A run that fails leaves the file system as it found it: no empty output file, no folder made
+# for it, and an existing file keeps its bytes.
+expect_error "unknown surface, new output" mesh --surface teapot --res 16 --out "$tmp/new/sub/t.ply"
+[ ! -e "$tmp/new" ] || fail "a failed run made '$tmp/new'"
+echo "kept" >"$tmp/kept.glb"
+expect_error "unknown surface, existing output" mesh --surface teapot --res 16 --out "$tmp/kept.glb"
+[ "$(cat "$tmp/kept.glb")" = kept ] || fail "a failed run changed an existing output"
+expect_error "missing VTU" mesh --vtu "$tmp/none.vtu" --field u --iso 1 --out "$tmp/none.glb"
+[ ! -e "$tmp/none.glb" ] || fail "a failed run left '$tmp/none.glb'"
+# A run that succeeds makes the missing folders and leaves no temporary file beside its output.
+"$ldimesh" mesh --surface sphere --res 16 --out "$tmp/made/sub/s.glb" >/dev/null 2>&1 ||
+  fail "writing into new folders"
+[ "$(ls -A "$tmp/made/sub")" = s.glb ] || fail "beside the output: $(ls -A "$tmp/made/sub")"
 expect_error "bad views" mesh --surface sphere --res 16 --views xq
 expect_error "no subcommand"
 expect_error "tri and quad" mesh --surface sphere --res 16 --tri --quad
