@@ -121,7 +121,8 @@ try {
       '--disable-background-networking', '--disable-component-update', '--no-first-run'],
   });
   const page = await browser.newPage({ viewport: { width: 960, height: 640 } });
-  page.on('pageerror', (e) => console.log(`page error: ${e.message}`));
+  const pageErrors = [];
+  page.on('pageerror', (e) => { pageErrors.push(e.message); console.log(`page error: ${e.message}`); });
   const consoleMessages = [], httpErrors = [], meshRequests = [];
   page.on('console', (m) => {
     consoleMessages.push(`${m.type()}: ${m.text()}`);
@@ -471,6 +472,9 @@ try {
   const failedLoads = consoleMessages.filter((m) => m.includes('Failed to load resource'));
   check(httpErrors.length === 0 && failedLoads.length === 0,
     `no request answered with an error, favicon included (${[...httpErrors, ...failedLoads].join(', ') || 'none'})`);
+
+  // An uncaught script error anywhere above fails the test, even where the page still drew.
+  check(pageErrors.length === 0, `no uncaught script errors on the page (${pageErrors.join('; ') || 'none'})`);
 
   // Without the token the page says so instead of showing anything.
   const bare = await browser.newPage();

@@ -5,6 +5,7 @@
 
 #include <mpi.h>
 
+#include <cstdio>
 #include <filesystem>
 #include <string>
 
@@ -47,6 +48,14 @@ int run_mpi_tests(int argc, char** argv, Setup before_tests) {
   int provided = 0;
   const bool multiple = argc > 1 && std::string(argv[1]) == "--thread-multiple";
   MPI_Init_thread(&argc, &argv, multiple ? MPI_THREAD_MULTIPLE : MPI_THREAD_FUNNELED, &provided);
+  // Asked for MPI_THREAD_MULTIPLE and not granted, the background-path tests would quietly test
+  // the synchronous path: fail instead.
+  if (multiple && provided < MPI_THREAD_MULTIPLE) {
+    std::fprintf(stderr, "FAIL: --thread-multiple, but MPI granted thread level %d only\n",
+                 provided);
+    MPI_Finalize();
+    return 1;
+  }
   ::testing::InitGoogleTest(&argc, argv);
   if (rank_of() != 0) {
     auto& listeners = ::testing::UnitTest::GetInstance()->listeners();
