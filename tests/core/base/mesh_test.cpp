@@ -1,9 +1,13 @@
 // check_mesh: the one check of the meshes merging, the quad conversion and the GLB encoder are
-// given — each defect found with its message, the optional checks only when asked for.
+// given — each defect found with its message, the optional checks only when asked for; and the
+// helpers that join a step's surfaces (append_mesh, replace_nonfinite_scalars).
 #include "ldimesh/core/base/mesh.hpp"
 
 #include <cmath>
+#include <cstdint>
+#include <span>
 #include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -70,6 +74,68 @@ TEST(CheckMesh, RepeatedCornersAndNonFiniteValuesOnlyWhenAsked) {
   m.scalars.assign(5, 0.0f);
   m.scalars[3] = INFINITY;
   expect_error(m, {.finite = true}, "scalar is not finite");
+}
+
+// append_mesh: b's vertices after a's, its faces renumbered by a's vertex count with their views,
+// scalars appended, a's view directions kept (b's taken where a has none).
+TEST(AppendMesh, RenumbersTheFacesAndKeepsEveryArrayPerElement) {
+  Mesh a = small_mesh();
+  a.scalars = {1, 2, 3, 4, 5};
+  Mesh b;
+  b.positions = {{5, 5, 5}, {6, 5, 5}, {6, 6, 5}, {5, 6, 5}};
+  b.normals.assign(4, {1, 0, 0});
+  b.scalars = {-1, -2, -3, -4};
+  b.triangles = {0, 1, 2};
+  b.quads = {3, 2, 1, 0};
+  b.triangle_view = {7};
+  b.quad_view = {6};
+  b.view_dirs = {{1, 0, 0}};
+  append_mesh(a, b);
+  ASSERT_EQ(a.vertex_count(), 9u);
+  EXPECT_EQ(a.positions[5], glm::vec3(5, 5, 5));
+  EXPECT_EQ(a.normals[8], glm::vec3(1, 0, 0));
+  EXPECT_EQ(a.scalars, (std::vector<float>{1, 2, 3, 4, 5, -1, -2, -3, -4}));
+  EXPECT_EQ(a.triangles, (std::vector<std::uint32_t>{1, 4, 2, 0, 2, 3, 5, 6, 7}));
+  EXPECT_EQ(a.quads, (std::vector<std::uint32_t>{0, 1, 2, 3, 8, 7, 6, 5}));
+  EXPECT_EQ(a.triangle_view, (std::vector<std::uint8_t>{1, 2, 7}));
+  EXPECT_EQ(a.quad_view, (std::vector<std::uint8_t>{0, 6}));
+  EXPECT_EQ(a.view_dirs, b.view_dirs);  // a had none
+  EXPECT_TRUE(check_mesh(a, {.views_per_face = true, .distinct_corners = true}));
+
+  Mesh c = b;
+  c.view_dirs = {{0, 0, 1}};
+  append_mesh(c, a);  // c keeps its own view directions
+  EXPECT_EQ(c.view_dirs, (std::vector<glm::dvec3>{{0, 0, 1}}));
+  EXPECT_EQ(c.vertex_count(), 13u);
+  EXPECT_EQ(c.triangles[3], 4u + 1u);  // a's first triangle after c's 4 vertices
+
+  Mesh empty;
+  append_mesh(empty, b);  // into an empty mesh: b itself
+  EXPECT_EQ(empty.triangles, b.triangles);
+  EXPECT_EQ(empty.quads, b.quads);
+}
+
+// replace_nonfinite_scalars: NaN and ±Inf take the smallest finite value (over all parts
+// together), 0 where there is none; the count replaced; finite values untouched.
+TEST(ReplaceNonfiniteScalars, TakeTheSmallestFiniteValueOfAllParts) {
+  Mesh m;
+  m.scalars = {3.0f, NAN, -2.5f, INFINITY, -INFINITY, 7.0f};
+  EXPECT_EQ(replace_nonfinite_scalars(m), 3u);
+  EXPECT_EQ(m.scalars, (std::vector<float>{3.0f, -2.5f, -2.5f, -2.5f, -2.5f, 7.0f}));
+  EXPECT_EQ(replace_nonfinite_scalars(m), 0u);  // nothing left to replace
+
+  std::vector<float> first = {NAN, 4.0f}, second = {1.5f, INFINITY};
+  const std::span<float> parts[] = {first, second};
+  EXPECT_EQ(replace_nonfinite_scalars(parts), 2u);
+  EXPECT_EQ(first, (std::vector<float>{1.5f, 4.0f}));  // the other part's 1.5 is the smallest
+  EXPECT_EQ(second, (std::vector<float>{1.5f, 1.5f}));
+
+  Mesh none;
+  none.scalars = {NAN, -INFINITY};
+  EXPECT_EQ(replace_nonfinite_scalars(none), 2u);
+  EXPECT_EQ(none.scalars, (std::vector<float>{0.0f, 0.0f}));
+  Mesh empty;
+  EXPECT_EQ(replace_nonfinite_scalars(empty), 0u);
 }
 
 }  // namespace
