@@ -64,20 +64,10 @@ void write_outputs(const MeshArgs& args, MeshRun& run) {
                  "ldimesh: warning: %zu vertices without a finite colour value (NaN/Inf in the "
                  "--colour-by field), given the lowest colour\n",
                  run.uncoloured);
-  if (!args.out.empty()) {
-    const auto start = std::chrono::steady_clock::now();
-    const std::vector<std::uint8_t>& glb = packaged.glb;
-    write_atomically(args.out, [&](const std::string& temporary) {
-      if (!has_extension(args.out, ".glb")) return write_mesh(temporary, result.mesh);
-      std::FILE* f = std::fopen(temporary.c_str(), "wb");
-      bool ok = f && std::fwrite(glb.data(), 1, glb.size(), f) == glb.size();
-      if (f && std::fclose(f) != 0) ok = false;
-      return ok ? Status::ok() : Status::io("cannot write '" + args.out + "'");
-    });
-    run.write_seconds = seconds_since(start);
-  }
-  if (!args.steps_dir.empty()) {
-    // A step as the job's server would publish it, for `ldimesh-serve --dir`.
+  // The step folder's files (a step as the job's server would publish it, for `ldimesh-serve
+  // --dir`); a folder this made is removed again if they fail.
+  const auto write_steps = [&] {
+    if (args.steps_dir.empty()) return;
     const DistributedTimes& t = run.step.seconds;
     StepMetadata meta = std::move(packaged.metadata);
     meta.seconds.insert({{"cast", t.cast},
@@ -86,10 +76,37 @@ void write_outputs(const MeshArgs& args, MeshRun& run) {
                          {"decode", t.decode},
                          {"mesh", t.mesh}});
     const Snapshot snapshot = make_snapshot(std::move(meta), std::move(packaged.glb));
-    std::filesystem::create_directories(args.steps_dir);
-    if (const Status s = write_step_files(args.steps_dir, snapshot); !s)
+    std::error_code ec;
+    const bool existed = std::filesystem::exists(args.steps_dir, ec);
+    std::filesystem::create_directories(args.steps_dir, ec);
+    const Status s =
+        ec ? Status::io("cannot create folder '" + args.steps_dir + "': " + ec.message())
+           : write_step_files(args.steps_dir, snapshot);
+    if (!s) {
+      if (!existed) std::filesystem::remove(args.steps_dir, ec);  // only if still empty
       throw std::runtime_error(s.message());
-  }
+    }
+  };
+  if (args.out.empty()) return write_steps();
+  // --out last, once the step folder is written: a failure leaves it as it was.
+  write_atomically(
+      args.out,
+      [&](const std::string& temporary) {
+        const auto start = std::chrono::steady_clock::now();
+        Status s = Status::ok();
+        if (!has_extension(args.out, ".glb")) {
+          s = write_mesh(temporary, result.mesh);
+        } else {
+          const std::vector<std::uint8_t>& glb = packaged.glb;
+          std::FILE* f = std::fopen(temporary.c_str(), "wb");
+          bool ok = f && std::fwrite(glb.data(), 1, glb.size(), f) == glb.size();
+          if (f && std::fclose(f) != 0) ok = false;
+          if (!ok) s = Status::io("cannot write '" + args.out + "'");
+        }
+        run.write_seconds = seconds_since(start);
+        return s;
+      },
+      write_steps);
 }
 
 }  // namespace
@@ -218,12 +235,15 @@ int run_mesh(const MeshArgs& args) {
   const bool root = rank == 0;
 
   on_all_ranks(comm, [&] {
-    if (!root || args.out.empty()) return;
-    if (!has_extension(args.out, ".ply") && !has_extension(args.out, ".obj") &&
-        !has_extension(args.out, ".glb"))
-      throw std::runtime_error("cannot tell the format of '" + args.out +
-                               "': use a .ply, .obj or .glb file name");
-    check_writable(args.out);
+    if (!root) return;
+    if (!args.out.empty()) {
+      if (!has_extension(args.out, ".ply") && !has_extension(args.out, ".obj") &&
+          !has_extension(args.out, ".glb"))
+        throw std::runtime_error("cannot tell the format of '" + args.out +
+                                 "': use a .ply, .obj or .glb file name");
+      check_writable(args.out);
+    }
+    if (!args.steps_dir.empty()) check_writable_folder(args.steps_dir);
   });
 
   run.threads = args.threads > 0 ? args.threads : tbb::info::default_concurrency();

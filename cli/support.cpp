@@ -3,6 +3,7 @@
 #include <cctype>
 #include <cerrno>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 
@@ -10,20 +11,46 @@
 
 namespace ldimesh::cli {
 
-void check_writable(const std::string& path) {
-  namespace fs = std::filesystem;
+namespace {
+
+namespace fs = std::filesystem;
+
+// The file a write of `path` lands in: a symbolic link's target (the link stays a link).
+fs::path write_target(const std::string& path) {
   std::error_code ec;
-  const fs::path p = fs::absolute(fs::path(path), ec);
-  if (ec) throw std::runtime_error("cannot write '" + path + "': " + ec.message());
+  const fs::path p(path);
+  if (fs::is_symlink(p, ec)) {
+    const fs::path target = fs::weakly_canonical(p, ec);
+    if (!ec) return target;
+  }
+  return p;
+}
+
+// The nearest folder at or above `folder` that exists ("." for a relative path's start).
+fs::path existing_folder(fs::path folder) {
+  std::error_code ec;
+  if (folder.empty()) return ".";
+  while (!fs::exists(folder, ec)) {
+    if (!folder.has_parent_path() || folder == folder.parent_path()) return ".";
+    folder = folder.parent_path();
+    if (folder.empty()) return ".";
+  }
+  return folder;
+}
+
+}  // namespace
+
+void check_writable(const std::string& path) {
+  std::error_code ec;
+  const fs::path p = write_target(path);
   if (fs::exists(p, ec)) {
     if (fs::is_directory(p, ec)) throw std::runtime_error("cannot write '" + path + "': a folder");
     if (::access(p.c_str(), W_OK) != 0)
       throw std::runtime_error("cannot write '" + path + "': " + std::strerror(errno));
-    return;
   }
-  fs::path folder = p.parent_path();
-  while (folder.has_parent_path() && folder != folder.parent_path() && !fs::exists(folder, ec))
-    folder = folder.parent_path();
+  // The file is written beside itself and renamed into place: its folder (or the nearest one
+  // that exists, where the missing ones will be made) must be writable too.
+  const fs::path folder = existing_folder(p.parent_path());
   if (!fs::is_directory(folder, ec))
     throw std::runtime_error("cannot write '" + path + "': '" + folder.string() +
                              "' is not a folder");
@@ -32,34 +59,72 @@ void check_writable(const std::string& path) {
                              "': " + std::strerror(errno));
 }
 
-void write_atomically(const std::string& path,
-                      const std::function<Status(const std::string& temporary)>& write) {
-  namespace fs = std::filesystem;
-  const fs::path p(path);
+void check_writable_folder(const std::string& path) {
   std::error_code ec;
+  const fs::path p(path);
+  if (fs::exists(p, ec) && !fs::is_directory(p, ec))
+    throw std::runtime_error("cannot write into '" + path + "': not a folder");
+  const fs::path folder = existing_folder(p);
+  if (!fs::is_directory(folder, ec))
+    throw std::runtime_error("cannot write into '" + path + "': '" + folder.string() +
+                             "' is not a folder");
+  if (::access(folder.c_str(), W_OK | X_OK) != 0)
+    throw std::runtime_error("cannot write into '" + path + "': folder '" + folder.string() +
+                             "': " + std::strerror(errno));
+}
+
+void write_atomically(const std::string& path,
+                      const std::function<Status(const std::string& temporary)>& write,
+                      const std::function<void()>& before_rename) {
+  const fs::path p = write_target(path);
+  std::error_code ec;
+  // The folders this write makes, removed again (those still empty) if it fails.
+  const fs::path made_from = existing_folder(p.parent_path());
+  const auto remove_made = [&] {
+    std::error_code ignored;
+    for (fs::path f = p.parent_path(); !f.empty() && f != made_from && f != f.parent_path();
+         f = f.parent_path())
+      if (!fs::remove(f, ignored)) break;  // not empty, or not ours
+  };
   if (p.has_parent_path()) fs::create_directories(p.parent_path(), ec);
-  if (ec)
+  if (ec) {
+    remove_made();
     throw std::runtime_error("cannot create folder '" + p.parent_path().string() +
                              "': " + ec.message());
-  // Hidden, beside it, with its extension (write_mesh tells the format by it).
+  }
+  // Hidden, beside it, with its extension (write_mesh tells the format by it), made with a
+  // unique name by mkstemps (the name's stem capped so that it stays within a file name's limit).
+  const std::string extension = p.extension().string();
   std::string name = ".";
-  name += p.stem().string();
-  name += ".part";
-  name += std::to_string(::getpid());
-  name += p.extension().string();
-  const std::string temporary = (p.parent_path() / name).string();
+  name += p.stem().string().substr(0, 100);
+  name += ".partXXXXXX";
+  name += extension;
+  std::string temporary = (p.parent_path() / name).string();
+  const int fd = ::mkstemps(temporary.data(), int(extension.size()));
+  if (fd < 0) {
+    const std::string why = std::strerror(errno);
+    remove_made();
+    throw std::runtime_error("cannot write '" + path + "': " + why);
+  }
+  ::close(fd);
   Status s = Status::ok();
   try {
     s = write(temporary);
+    if (s && before_rename) before_rename();
   } catch (const std::exception& e) {
     s = Status::io(e.what());
   }
   if (s) {
+    // An existing file's permissions carry over to its replacement.
+    const fs::file_status old = fs::status(p, ec);
+    if (!ec && fs::exists(old)) fs::permissions(temporary, old.permissions(), ec);
+    ec.clear();
     fs::rename(temporary, p, ec);
     if (ec) s = Status::io("cannot write '" + path + "': " + ec.message());
   }
   if (!s) {
     fs::remove(temporary, ec);
+    remove_made();
     throw std::runtime_error(s.message());
   }
 }

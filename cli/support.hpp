@@ -13,17 +13,22 @@
 namespace ldimesh::cli {
 
 // Fails early, before any work, if `path` could not be written: it is a folder, or not
-// writable, or the nearest existing folder above it is not writable (missing folders are made
-// when the file is written). Creates nothing: a run that fails leaves the file system as it
-// found it.
+// writable, or the folder it is in (the nearest existing one above it, where the missing ones
+// are made when the file is written) is not writable. A symbolic link is checked, and written,
+// as its target. Creates nothing: a run that fails leaves the file system as it found it.
 void check_writable(const std::string& path);
+// The same for a folder files are written into (made when they are written).
+void check_writable_folder(const std::string& path);
 
-// Writes `path` through `write(temporary)`: the missing folders made, the file written beside it
-// under a hidden temporary name with the same extension, and renamed over `path` once complete. A
-// failure (a Status, or an exception from `write`) removes the temporary file and throws
-// runtime_error; `path` is then as it was.
+// Writes `path` (a symbolic link's target) through `write(temporary)`: the missing folders made,
+// the file written beside it under a unique hidden name with the same extension, then renamed
+// over `path` once complete, with the permissions of the file it replaces. A failure (a Status,
+// or an exception from `write`) removes the temporary file and the folders it made and throws
+// runtime_error; `path` is then as it was. `before_rename` (if any) runs once the temporary is
+// complete: what else the run writes, so that its failure leaves `path` untouched too.
 void write_atomically(const std::string& path,
-                      const std::function<Status(const std::string& temporary)>& write);
+                      const std::function<Status(const std::string& temporary)>& write,
+                      const std::function<void()>& before_rename = {});
 
 // Whether `path` ends in `ext` (".ply"), in any letter case.
 bool has_extension(const std::string& path, const std::string& ext);

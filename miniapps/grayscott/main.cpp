@@ -70,15 +70,18 @@ ldimesh::Status check_time_step(const Parameters& p) {
         "--dt, --Du and --Dv: dt must be positive and the "
         "diffusion coefficients not negative");
   if (p.dt * 12.0 * d > 1.0) {
+    // The limit rounded down to three significant digits, so that the step it names is taken.
+    const double limit = 1.0 / (12.0 * d);
+    const double unit = std::pow(10.0, std::floor(std::log10(limit)) - 2.0);
     char text[320];
     std::snprintf(
         text, sizeof text,
         "--dt %g is too large for explicit Euler with D = %g: the finest grid mode's "
-        "factor 1 - 12 D dt = %.2f is below 0 (%s); use --dt %.3g or less "
+        "factor 1 - 12 D dt = %.3g is below 0 (%s); use --dt %.3g or less "
         "(1/(12 max(Du, Dv)))",
         p.dt, d, 1.0 - 12.0 * d * p.dt,
         1.0 - 12.0 * d * p.dt < -1.0 ? "the solution blows up" : "it oscillates at the grid scale",
-        std::floor(1000.0 / (12.0 * d)) / 1000.0);
+        std::floor(limit / unit) * unit);
     return ldimesh::Status::invalid_argument(text);
   }
   return ldimesh::Status::ok();

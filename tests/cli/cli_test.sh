@@ -26,7 +26,6 @@ expect_error "r above 1" mesh --surface sphere --res 16 --r 1.5
 expect_error "r below 0" mesh --surface sphere --res 16 --r -0.1
 expect_error "unwritable output" mesh --surface sphere --res 16 --out /proc/version/x.ply
 expect_error "unknown format" mesh --surface sphere --res 16 --out "$tmp/x.stl"
-expect_error "output is a folder" mesh --surface sphere --res 16 --out "$tmp/folder.ply/"
 mkdir -p "$tmp/folder.ply"
 expect_error "output is a folder" mesh --surface sphere --res 16 --out "$tmp/folder.ply"
 
@@ -39,6 +38,17 @@ expect_error "unknown surface, existing output" mesh --surface teapot --res 16 -
 [ "$(cat "$tmp/kept.glb")" = kept ] || fail "a failed run changed an existing output"
 expect_error "missing VTU" mesh --vtu "$tmp/none.vtu" --field u --iso 1 --out "$tmp/none.glb"
 [ ! -e "$tmp/none.glb" ] || fail "a failed run left '$tmp/none.glb'"
+# A step folder that cannot be written is refused before any work, and --out is not touched.
+echo "a file" >"$tmp/not-a-folder"
+expect_error "steps-dir is a file" mesh --surface sphere --res 16 --out "$tmp/kept.glb" \
+  --steps-dir "$tmp/not-a-folder/steps"
+[ "$(cat "$tmp/kept.glb")" = kept ] || fail "a refused --steps-dir changed --out"
+# Through a symbolic link the output is written to the link's target, and the link stays.
+echo old >"$tmp/target.ply"
+ln -s target.ply "$tmp/link.ply"
+"$ldimesh" mesh --surface sphere --res 16 --out "$tmp/link.ply" >/dev/null 2>&1 || fail "via a link"
+[ -L "$tmp/link.ply" ] && [ "$(head -c 3 "$tmp/target.ply")" = ply ] ||
+  fail "the link was replaced, or its target not written"
 # A run that succeeds makes the missing folders and leaves no temporary file beside its output.
 "$ldimesh" mesh --surface sphere --res 16 --out "$tmp/made/sub/s.glb" >/dev/null 2>&1 ||
   fail "writing into new folders"
