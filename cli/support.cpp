@@ -7,6 +7,7 @@
 #include <cstring>
 #include <filesystem>
 
+#include <sys/stat.h>
 #include <unistd.h>
 
 namespace ldimesh::cli {
@@ -38,6 +39,15 @@ fs::path existing_folder(fs::path folder) {
   return folder;
 }
 
+// Throws `what` and why unless `folder` is a folder this process can write in.
+void require_writable_folder(const std::string& what, const fs::path& folder) {
+  std::error_code ec;
+  if (!fs::is_directory(folder, ec))
+    throw std::runtime_error(what + ": '" + folder.string() + "' is not a folder");
+  if (::access(folder.c_str(), W_OK | X_OK) != 0)
+    throw std::runtime_error(what + ": folder '" + folder.string() + "': " + std::strerror(errno));
+}
+
 }  // namespace
 
 void check_writable(const std::string& path) {
@@ -50,13 +60,7 @@ void check_writable(const std::string& path) {
   }
   // The file is written beside itself and renamed into place: its folder (or the nearest one
   // that exists, where the missing ones will be made) must be writable too.
-  const fs::path folder = existing_folder(p.parent_path());
-  if (!fs::is_directory(folder, ec))
-    throw std::runtime_error("cannot write '" + path + "': '" + folder.string() +
-                             "' is not a folder");
-  if (::access(folder.c_str(), W_OK | X_OK) != 0)
-    throw std::runtime_error("cannot write '" + path + "': folder '" + folder.string() +
-                             "': " + std::strerror(errno));
+  require_writable_folder("cannot write '" + path + "'", existing_folder(p.parent_path()));
 }
 
 void check_writable_folder(const std::string& path) {
@@ -64,13 +68,7 @@ void check_writable_folder(const std::string& path) {
   const fs::path p(path);
   if (fs::exists(p, ec) && !fs::is_directory(p, ec))
     throw std::runtime_error("cannot write into '" + path + "': not a folder");
-  const fs::path folder = existing_folder(p);
-  if (!fs::is_directory(folder, ec))
-    throw std::runtime_error("cannot write into '" + path + "': '" + folder.string() +
-                             "' is not a folder");
-  if (::access(folder.c_str(), W_OK | X_OK) != 0)
-    throw std::runtime_error("cannot write into '" + path + "': folder '" + folder.string() +
-                             "': " + std::strerror(errno));
+  require_writable_folder("cannot write into '" + path + "'", existing_folder(p));
 }
 
 void write_atomically(const std::string& path,
@@ -115,9 +113,16 @@ void write_atomically(const std::string& path,
     s = Status::io(e.what());
   }
   if (s) {
-    // An existing file's permissions carry over to its replacement.
+    // An existing file's permissions carry over to its replacement; a new file gets those of
+    // any new file (0666 less the umask), not mkstemps' 0600.
     const fs::file_status old = fs::status(p, ec);
-    if (!ec && fs::exists(old)) fs::permissions(temporary, old.permissions(), ec);
+    if (!ec && fs::exists(old)) {
+      fs::permissions(temporary, old.permissions(), ec);
+    } else {
+      const mode_t mask = ::umask(0);
+      ::umask(mask);
+      fs::permissions(temporary, fs::perms(0666 & ~mask), ec);
+    }
     ec.clear();
     fs::rename(temporary, p, ec);
     if (ec) s = Status::io("cannot write '" + path + "': " + ec.message());

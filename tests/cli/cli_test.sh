@@ -53,6 +53,10 @@ ln -s target.ply "$tmp/link.ply"
 "$ldimesh" mesh --surface sphere --res 16 --out "$tmp/made/sub/s.glb" >/dev/null 2>&1 ||
   fail "writing into new folders"
 [ "$(ls -A "$tmp/made/sub")" = s.glb ] || fail "beside the output: $(ls -A "$tmp/made/sub")"
+# A new output gets the permissions of any new file (0666 less the umask), not the temporary's.
+(umask 022 && "$ldimesh" mesh --surface sphere --res 16 --out "$tmp/made/perm.ply" >/dev/null 2>&1)
+[ "$(stat -c %a "$tmp/made/perm.ply")" = 644 ] ||
+  fail "a new output has mode $(stat -c %a "$tmp/made/perm.ply"), not 644"
 expect_error "bad views" mesh --surface sphere --res 16 --views xq
 expect_error "no subcommand"
 expect_error "tri and quad" mesh --surface sphere --res 16 --tri --quad
